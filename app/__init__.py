@@ -1,0 +1,1 @@
+"""webrtc-autopilot: pilot a ROS turtle from OpenCV.js analysis of its own WebRTC video."""

@@ -1,0 +1,48 @@
+"""The ``autopilot`` command: one entry point, one subcommand per job.
+
+Each subcommand lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``;
+modules are imported only when their subcommand runs, so ``autopilot serve`` never loads aiortc.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "serve": ("app.serve", "run the signaling server, role pages and simulated turtle"),
+    "relay": ("app.relay_service", "run the relay page in headless Chromium"),
+    "vehicle": ("vehicle_agent.cli", "run the Python vehicle agent (aiortc)"),
+    "demo": ("app.demo", "run the whole system on an embedded default"),
+    "parity": ("app.parity", "compare OpenCV.js detections with Python OpenCV"),
+    "bench": ("bench.cli", "measure the running system and write a report"),
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse the command line and run one subcommand; returns the process exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(prog="autopilot", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at DEBUG level")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    # Only the chosen subcommand's module is imported; the others are listed by name.
+    chosen = next((a for a in argv if a in SUBCOMMANDS), None)
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if name == chosen:
+            importlib.import_module(module_name).add_arguments(p)
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    module = importlib.import_module(SUBCOMMANDS[args.command][0])
+    status: int = module.run(args)
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
