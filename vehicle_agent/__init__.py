@@ -1,0 +1,1 @@
+"""The Python vehicle: streams video to the relay with aiortc and drives a turtle from goals."""
