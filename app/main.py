@@ -9,6 +9,8 @@ from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
 from app.config import PACKAGE_DIR, Settings
+from app.signaling.routes import Switchboard
+from app.signaling.routes import router as signaling_router
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -21,6 +23,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app = FastAPI(title="webrtc-autopilot", lifespan=lifespan)
     app.state.settings = settings
+    app.state.signaling = Switchboard.from_settings(settings)
+    app.include_router(signaling_router)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:
