@@ -9,6 +9,7 @@ from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
 from app.config import PACKAGE_DIR, Settings
+from app.pages import router as pages_router
 from app.signaling.routes import Switchboard
 from app.signaling.routes import router as signaling_router
 
@@ -25,6 +26,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.signaling = Switchboard.from_settings(settings)
     app.include_router(signaling_router)
+    app.include_router(pages_router)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:

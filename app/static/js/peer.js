@@ -1,0 +1,187 @@
+// One RTCPeerConnection per remote peer, negotiated with the "perfect negotiation" pattern of
+// webrtc/samples (peerconnection/perfect-negotiation), plus the JSON data-channel plumbing every
+// role shares.
+//
+// The signaling server lets only vehicles and clients send `offer` and only the relay send
+// `answer` (DESIGN §2), so the relay is the polite side and never offers: it forwards video by
+// replacing the track of the client's recvonly transceiver, which needs no renegotiation.
+
+/**
+ * Events: `track` (detail: RTCTrackEvent), `datachannel` (detail: RTCDataChannel),
+ * `state` (detail: connectionState).
+ */
+export class Peer extends EventTarget {
+  #makingOffer = false;
+  #ignoreOffer = false;
+  #settingRemoteAnswer = false;
+
+  /**
+   * @param {object} options
+   * @param {string} options.remote name of the remote peer (signaling `to`)
+   * @param {boolean} options.polite the polite side yields on offer collisions
+   * @param {boolean} options.mayOffer false on the relay: the server refuses its offers
+   * @param {RTCIceServer[]} options.iceServers from the page config only
+   * @param {(msg: object) => void} options.send sends a signaling message
+   * @param {import('./ui.js').Log} options.log
+   * @param {(pc: RTCPeerConnection) => Promise<void>} [options.beforeAnswer] runs between
+   *   applying a remote offer and creating the answer (the relay sets its send tracks there)
+   */
+  constructor({ remote, polite, mayOffer, iceServers, send, log, beforeAnswer }) {
+    super();
+    this.remote = remote;
+    this.polite = polite;
+    this.mayOffer = mayOffer;
+    this.send = send;
+    this.log = log;
+    this.beforeAnswer = beforeAnswer;
+    this.pc = new RTCPeerConnection({ iceServers });
+    this.pc.addEventListener('icecandidate', ({ candidate }) => {
+      // The end-of-candidates null is not needed by the other side and not worth a message.
+      if (candidate) this.#signal({ type: 'candidate', to: remote, candidate: candidate.toJSON() });
+    });
+    this.pc.addEventListener('negotiationneeded', () => this.#offer());
+    this.pc.addEventListener('track', (event) => this.dispatchEvent(new CustomEvent('track', { detail: event })));
+    this.pc.addEventListener('datachannel', ({ channel }) =>
+      this.dispatchEvent(new CustomEvent('datachannel', { detail: channel })),
+    );
+    this.pc.addEventListener('connectionstatechange', () => {
+      this.log.info(`connection with ${remote}: ${this.pc.connectionState}`);
+      this.dispatchEvent(new CustomEvent('state', { detail: this.pc.connectionState }));
+    });
+  }
+
+  get closed() {
+    return this.pc.connectionState === 'closed' || this.pc.signalingState === 'closed';
+  }
+
+  /** Apply an `offer`, `answer` or `candidate` message from the remote peer (may reject). */
+  async handle(msg) {
+    if (msg.type === 'offer' || msg.type === 'answer') {
+      const sdp = typeof msg.sdp === 'string' ? msg.sdp : msg.sdp?.sdp;
+      await this.#description({ type: msg.type, sdp });
+    } else if (msg.type === 'candidate') {
+      await this.#candidate(msg.candidate);
+    }
+  }
+
+  close() {
+    this.pc.close();
+    this.dispatchEvent(new CustomEvent('state', { detail: 'closed' }));
+  }
+
+  async #offer() {
+    if (!this.mayOffer) {
+      this.log.warn(`renegotiation with ${this.remote} needed, but this side never offers`);
+      return;
+    }
+    try {
+      this.#makingOffer = true;
+      await this.pc.setLocalDescription();
+      this.#signal({ type: 'offer', to: this.remote, sdp: this.pc.localDescription.sdp });
+    } catch (err) {
+      this.log.error(`could not make an offer to ${this.remote}: ${err.message}`);
+    } finally {
+      this.#makingOffer = false;
+    }
+  }
+
+  async #description(description) {
+    const pc = this.pc;
+    const readyForOffer =
+      !this.#makingOffer && (pc.signalingState === 'stable' || this.#settingRemoteAnswer);
+    const offerCollision = description.type === 'offer' && !readyForOffer;
+    this.#ignoreOffer = !this.polite && offerCollision;
+    if (this.#ignoreOffer) {
+      this.log.warn(`ignored a colliding offer from ${this.remote}`);
+      return;
+    }
+    this.#settingRemoteAnswer = description.type === 'answer';
+    try {
+      await pc.setRemoteDescription(description);
+    } finally {
+      this.#settingRemoteAnswer = false;
+    }
+    if (description.type === 'offer') {
+      if (this.beforeAnswer) await this.beforeAnswer(pc);
+      await pc.setLocalDescription();
+      this.#signal({ type: 'answer', to: this.remote, sdp: pc.localDescription.sdp });
+    }
+  }
+
+  async #candidate(candidate) {
+    if (!candidate) return;
+    try {
+      await this.pc.addIceCandidate(candidate);
+    } catch (err) {
+      // Candidates of an offer we ignored are expected to fail; anything else is news.
+      if (!this.#ignoreOffer) throw err;
+    }
+  }
+
+  #signal(msg) {
+    try {
+      this.send(msg);
+    } catch (err) {
+      this.log.warn(`could not send ${msg.type} to ${this.remote}: ${err.message}`);
+    }
+  }
+}
+
+/** A malformed or unexpected data-channel message; the reason is sent back to the sender. */
+export class BadMessage extends Error {}
+
+/** Send one JSON message if the channel is open; returns whether it was sent. */
+export function sendJson(channel, msg) {
+  if (channel === null || channel === undefined || channel.readyState !== 'open') return false;
+  channel.send(JSON.stringify(msg));
+  return true;
+}
+
+/**
+ * Dispatch a data channel's JSON messages through `handlers` (one per `type`). Malformed JSON,
+ * a missing type, an unknown type or a handler's BadMessage is logged and answered with
+ * `{"type":"error","reason","ref"}`, never thrown; an `error` from the other side is logged.
+ */
+export function serveChannel(channel, handlers, log) {
+  const refuse = (reason, ref) => {
+    log.warn(`${channel.label}: ${reason}`);
+    sendJson(channel, { type: 'error', reason, ref });
+  };
+  channel.addEventListener('message', (event) => {
+    let msg;
+    try {
+      msg = JSON.parse(event.data);
+    } catch {
+      refuse(`malformed JSON: ${String(event.data).slice(0, 60)}`, null);
+      return;
+    }
+    if (msg === null || typeof msg !== 'object' || typeof msg.type !== 'string') {
+      refuse('message has no string "type"', null);
+      return;
+    }
+    if (msg.type === 'error') {
+      log.error(`${channel.label}: the other side says: ${msg.reason}${msg.ref ? ` (about ${msg.ref})` : ''}`);
+      return;
+    }
+    const handler = handlers[msg.type];
+    if (handler === undefined) {
+      refuse(`unknown message type "${msg.type}"`, msg.type);
+      return;
+    }
+    try {
+      handler(msg);
+    } catch (err) {
+      if (!(err instanceof BadMessage)) throw err;
+      refuse(err.message, msg.type);
+    }
+  });
+}
+
+/** Require `msg[field]` to be a finite number (throws BadMessage naming the field). */
+export function requireNumber(msg, field) {
+  const value = msg[field];
+  if (typeof value !== 'number' || !Number.isFinite(value)) {
+    throw new BadMessage(`"${msg.type}" needs a number "${field}"`);
+  }
+  return value;
+}
