@@ -1,0 +1,138 @@
+"""Video sources: the synthetic scene (face where it says, frame tag readable) and files."""
+
+from __future__ import annotations
+
+import fractions
+from pathlib import Path
+
+import av
+import cv2
+import numpy as np
+import pytest
+
+from vehicle_agent.video import (
+    FileVideo,
+    FixedPath,
+    FrameInfo,
+    SweepPath,
+    SyntheticVideo,
+    VideoSourceError,
+    draw_frame_tag,
+    open_source,
+    read_frame_tag,
+)
+
+CASCADE = cv2.CascadeClassifier(
+    str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")
+)
+
+
+def detect_faces(rgb: np.ndarray) -> list[tuple[int, int, int, int]]:
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    found = CASCADE.detectMultiScale(gray, scaleFactor=1.1, minNeighbors=5, minSize=(30, 30))
+    return [tuple(int(v) for v in f) for f in found]
+
+
+@pytest.mark.parametrize("frame", [0, 1, 2, 255, 4096, 123_456, 2**24 - 1])
+@pytest.mark.parametrize("width", [320, 640, 1280])
+def test_frame_tag_round_trip(frame: int, width: int) -> None:
+    rgb = np.full((width * 3 // 4, width, 3), 90, np.uint8)
+    draw_frame_tag(rgb, frame)
+    assert read_frame_tag(rgb) == frame
+
+
+def test_untagged_frame_reads_as_none() -> None:
+    assert read_frame_tag(np.full((480, 640, 3), 200, np.uint8)) is None
+    assert read_frame_tag(np.zeros((480, 640, 3), np.uint8)) is None
+
+
+def test_synthetic_face_is_found_by_the_cascade_where_the_source_says() -> None:
+    video = SyntheticVideo(640, 480, fps=15)
+    try:
+        for frame in (0, 60, 75, 90, 150, 170):  # left hold, glide, right hold, glide back
+            rgb = video.render(frame)
+            assert read_frame_tag(rgb) == frame
+            faces = detect_faces(rgb)
+            assert len(faces) == 1, f"frame {frame}: {faces}"
+            x, y, w, h = faces[0]
+            cx, cy = video.face_centre(frame)
+            # The cascade's box is centred on the true position within a tenth of the face.
+            assert abs(x + w / 2 - cx) < 0.1 * w and abs(y + h / 2 - cy) < 0.1 * h
+    finally:
+        video.stop()
+
+
+def test_sweep_path_visits_both_sides() -> None:
+    path = SweepPath()
+    assert path(1.0)[0] < 0.3 and path(7.0)[0] > 0.7 and path(13.0)[0] < 0.3
+    assert path(5.0)[0] == pytest.approx(0.5)  # halfway through the glide
+
+
+async def test_synthetic_track_paces_tags_and_reports_frames() -> None:
+    infos: list[FrameInfo] = []
+    video = SyntheticVideo(320, 240, fps=50, path=FixedPath(0.3, 0.5), on_frame=infos.append)
+    try:
+        frames = [await video.recv() for _ in range(10)]
+    finally:
+        video.stop()
+    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    assert tags == list(range(10))
+    assert [f.pts for f in frames] == [round(i * 90_000 / 50) for i in range(10)]
+    assert frames[0].time_base == fractions.Fraction(1, 90_000)
+    assert [i.frame for i in infos] == list(range(10))
+    assert infos[0].face_x == pytest.approx(0.3 * 320)
+    # 9 frame periods at 50 fps take about 180 ms.
+    assert infos[-1].sent_at - infos[0].sent_at == pytest.approx(0.18, abs=0.1)
+
+
+def write_tagged_clip(path: Path, codec: str, frames: int, size: tuple[int, int]) -> None:
+    """A short clip whose frames carry their own numbers as tags."""
+    video = SyntheticVideo(*size, fps=25, path=FixedPath(0.5, 0.5))
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream(codec, rate=25)
+        stream.width, stream.height = size
+        stream.pix_fmt = "yuv420p"
+        if codec == "mpeg4":
+            stream.options = {"qscale": "2"}
+        for i in range(frames):
+            frame = av.VideoFrame.from_ndarray(video.render(i), format="rgb24")
+            for packet in stream.encode(frame):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    video.stop()
+
+
+@pytest.mark.parametrize(("suffix", "codec"), [(".y4m", "rawvideo"), (".mp4", "mpeg4")])
+async def test_file_source_loops(tmp_path: Path, suffix: str, codec: str) -> None:
+    clip = tmp_path / f"clip{suffix}"
+    write_tagged_clip(clip, codec, frames=5, size=(320, 240))
+    track = open_source(str(clip), fps=200)
+    try:
+        frames = [await track.recv() for _ in range(12)]
+    finally:
+        track.stop()
+    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    assert tags == [0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 0, 1]
+
+
+async def test_file_source_rescales(tmp_path: Path) -> None:
+    clip = tmp_path / "clip.y4m"
+    write_tagged_clip(clip, "rawvideo", frames=2, size=(320, 240))
+    track = FileVideo(clip, size=(160, 120), fps=100)
+    try:
+        frame = await track.recv()
+    finally:
+        track.stop()
+    assert (frame.width, frame.height) == (160, 120)
+
+
+def test_bad_sources_name_the_problem(tmp_path: Path) -> None:
+    with pytest.raises(VideoSourceError, match="no such video file: .*missing.mp4"):
+        open_source(str(tmp_path / "missing.mp4"))
+    junk = tmp_path / "junk.mp4"
+    junk.write_bytes(b"this is not a video")
+    with pytest.raises(VideoSourceError, match="junk.mp4"):
+        open_source(str(junk))
+    with pytest.raises(VideoSourceError, match="no such video device: /dev/video99"):
+        open_source("/dev/video99")

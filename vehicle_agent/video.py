@@ -1,0 +1,411 @@
+"""Video sources for the agent, as aiortc ``MediaStreamTrack`` subclasses.
+
+* :class:`SyntheticVideo` -- a generated scene in which a real face photo moves along a known
+  path; each frame carries its number as the frame tag of docs/contracts.md, so the relay can
+  read it back and echo it in its goals (latency measurement), and
+  :meth:`SyntheticVideo.face_centre` tells tests and benchmarks where the face truly is.
+* :class:`FileVideo` -- anything PyAV opens (``.y4m``, ``.mp4``, ...), looped forever.
+* a V4L2 device (``/dev/videoN``) through aiortc's ``MediaPlayer``.
+
+:func:`open_source` picks one from the command line's ``--video`` value.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import fractions
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import av
+import cv2
+import cv2.data
+import numpy as np
+import numpy.typing as npt
+from aiortc import MediaStreamTrack
+from aiortc.contrib.media import MediaPlayer
+from aiortc.mediastreams import MediaStreamError
+
+log = logging.getLogger(__name__)
+
+ASSETS = Path(__file__).resolve().parent / "assets"
+DEFAULT_FACE = ASSETS / "obama.jpg"
+CLOCK_RATE = 90_000
+TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
+
+Image = npt.NDArray[np.uint8]
+
+# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge.
+TAG_BLOCKS_PER_WIDTH = 40
+TAG_BITS = 24
+TAG_FIRST_BIT_BLOCK = 2
+
+
+class VideoSourceError(RuntimeError):
+    """A video source could not be opened; the message names the source and the problem."""
+
+
+# --- frame tag -----------------------------------------------------------------------------
+
+
+def tag_block_size(width: int) -> int:
+    """Side of one tag block in pixels for a frame ``width`` pixels wide."""
+    return width // TAG_BLOCKS_PER_WIDTH
+
+
+def draw_frame_tag(rgb: Image, frame: int) -> None:
+    """Write ``frame`` (mod 2**24) into the top row of ``rgb`` in place."""
+    b = tag_block_size(rgb.shape[1])
+    values = [255, 0] + [255 if (frame >> (TAG_BITS - 1 - i)) & 1 else 0 for i in range(TAG_BITS)]
+    for i, value in enumerate(values):
+        rgb[0:b, i * b : (i + 1) * b] = value
+
+
+def read_frame_tag(rgb: Image) -> int | None:
+    """The frame number written by :func:`draw_frame_tag`, or None when there is no tag."""
+    b = tag_block_size(rgb.shape[1])
+    if b < 2:
+        return None
+    luma = rgb[0:b, : (TAG_FIRST_BIT_BLOCK + TAG_BITS) * b].astype(np.float32).mean(axis=2)
+    lo, hi = b // 4, b // 4 + max(1, b // 2)
+
+    def bit(i: int) -> bool:
+        return bool(luma[lo:hi, i * b + lo : i * b + hi].mean() >= 128)
+
+    if not bit(0) or bit(1):
+        return None
+    value = 0
+    for i in range(TAG_BITS):
+        value = (value << 1) | int(bit(TAG_FIRST_BIT_BLOCK + i))
+    return value
+
+
+# --- synthetic scene ---------------------------------------------------------------------
+
+
+class FacePath(Protocol):
+    """Where the face centre is at a given time, as fractions (0..1) of width and height."""
+
+    def __call__(self, t: float) -> tuple[float, float]: ...
+
+
+@dataclass(frozen=True)
+class SweepPath:
+    """Hold on the left, glide right, hold on the right, glide back; repeats every cycle.
+
+    The face sits a little above the middle row so that, seen from the terrain centre, "left"
+    and "right" are clearly ≈170° and ≈10° rather than a coin toss across ±180°.
+    """
+
+    left: float = 0.22
+    right: float = 0.78
+    y: float = 0.42
+    hold_s: float = 4.0
+    glide_s: float = 2.0
+
+    def __call__(self, t: float) -> tuple[float, float]:
+        cycle = 2 * (self.hold_s + self.glide_s)
+        phase = t % cycle
+        span = self.right - self.left
+        if phase < self.hold_s:
+            x = self.left
+        elif phase < self.hold_s + self.glide_s:
+            x = self.left + span * _ease((phase - self.hold_s) / self.glide_s)
+        elif phase < 2 * self.hold_s + self.glide_s:
+            x = self.right
+        else:
+            x = self.right - span * _ease((phase - 2 * self.hold_s - self.glide_s) / self.glide_s)
+        return x, self.y
+
+
+@dataclass
+class FixedPath:
+    """A face that stays where a test puts it (``x``, ``y`` may be changed at any time)."""
+
+    x: float
+    y: float
+
+    def __call__(self, t: float) -> tuple[float, float]:
+        return self.x, self.y
+
+
+def _ease(u: float) -> float:
+    return 0.5 - 0.5 * math.cos(math.pi * u)
+
+
+@dataclass(frozen=True)
+class FrameInfo:
+    """What the synthetic source put into one frame, and when it handed the frame over."""
+
+    frame: int
+    sent_at: float  # time.monotonic()
+    face_x: float  # true face centre, pixels
+    face_y: float
+
+
+class _FaceSprite:
+    """A face photo cropped around its face and scaled so the face box is ``face_px`` high."""
+
+    def __init__(self, photo: Path, face_px: int) -> None:
+        loaded = cv2.imread(str(photo))
+        if loaded is None:
+            raise VideoSourceError(f"cannot read face photo {photo}")
+        bgr: Image = np.asarray(loaded, dtype=np.uint8)
+        x, y, w, h = _find_face(bgr, photo)
+        # Keep some hair and chin around the box so the cascade sees a whole face.
+        margin = 0.35
+        x0, y0 = max(0, int(x - margin * w)), max(0, int(y - margin * h))
+        x1 = min(bgr.shape[1], int(x + (1 + margin) * w))
+        y1 = min(bgr.shape[0], int(y + (1 + margin) * h))
+        scale = face_px / h
+        crop = cv2.cvtColor(bgr[y0:y1, x0:x1], cv2.COLOR_BGR2RGB)
+        size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
+        self.image: Image = np.asarray(
+            cv2.resize(crop, size, interpolation=cv2.INTER_AREA), dtype=np.uint8
+        )
+        # Face-box centre inside the sprite.
+        self.cx = (x + w / 2 - x0) * scale
+        self.cy = (y + h / 2 - y0) * scale
+
+
+def _find_face(bgr: Image, photo: Path) -> tuple[int, int, int, int]:
+    """The largest frontal face of the photo, found once at load time on a reduced copy."""
+    reduce = max(1.0, bgr.shape[0] / 600)
+    small = cv2.resize(bgr, None, fx=1 / reduce, fy=1 / reduce, interpolation=cv2.INTER_AREA)
+    gray = cv2.cvtColor(small, cv2.COLOR_BGR2GRAY)
+    cascade = cv2.CascadeClassifier(
+        str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")
+    )
+    faces = cascade.detectMultiScale(gray, scaleFactor=1.1, minNeighbors=5, minSize=(40, 40))
+    if len(faces) == 0:
+        raise VideoSourceError(f"no face found in {photo}")
+    x, y, w, h = max(faces, key=lambda f: int(f[2]) * int(f[3]))
+    return (round(x * reduce), round(y * reduce), round(w * reduce), round(h * reduce))
+
+
+def _background(width: int, height: int) -> Image:
+    """A calm room-like scene: wall gradient, floor, a few shapes; no texture to compress."""
+    rows = np.linspace(0.0, 1.0, height, dtype=np.float32)[:, None]
+    wall = np.array([150, 170, 190], np.float32)
+    floor = np.array([110, 95, 80], np.float32)
+    horizon = int(height * 0.78)
+    img = np.empty((height, width, 3), np.float32)
+    img[:horizon] = wall * (0.85 + 0.15 * rows[:horizon, :, None])
+    img[horizon:] = floor
+    out = img.astype(np.uint8)
+    cv2.rectangle(
+        out,
+        (int(width * 0.05), int(height * 0.2)),
+        (int(width * 0.12), int(height * 0.78)),
+        (90, 70, 60),
+        -1,
+    )
+    cv2.rectangle(
+        out,
+        (int(width * 0.86), int(height * 0.25)),
+        (int(width * 0.97), int(height * 0.5)),
+        (200, 210, 225),
+        -1,
+    )
+    cv2.line(out, (0, horizon), (width, horizon), (70, 60, 50), 2)
+    return out
+
+
+class PacedVideoTrack(MediaStreamTrack):
+    """A video track paced at ``fps`` (aiortc's ``VideoStreamTrack.next_timestamp`` is fixed
+    at 30 fps); subclasses implement :meth:`make_frame`."""
+
+    kind = "video"
+
+    def __init__(self, fps: float) -> None:
+        super().__init__()
+        if fps <= 0:
+            raise VideoSourceError(f"frame rate must be positive, not {fps}")
+        self.fps = fps
+        self._start: float | None = None
+        self._index = 0
+
+    async def next_timestamp(self) -> tuple[int, int]:
+        """Wait until the next frame is due; returns (pts in 1/90000 s, frame index)."""
+        if self.readyState != "live":
+            raise MediaStreamError
+        now = time.monotonic()
+        if self._start is None:
+            self._start = now
+        else:
+            self._index += 1
+            due = self._start + self._index / self.fps
+            if due > now:
+                await asyncio.sleep(due - now)
+            elif now - due > 1.0:
+                # Far behind (a stalled loop): restart the schedule rather than burst frames.
+                self._start = now - self._index / self.fps
+        return round(self._index * CLOCK_RATE / self.fps), self._index
+
+    async def recv(self) -> av.VideoFrame:
+        """The next frame, when it is due."""
+        pts, index = await self.next_timestamp()
+        frame = await self.make_frame(index)
+        frame.pts = pts
+        frame.time_base = TIME_BASE
+        return frame
+
+    async def make_frame(self, index: int) -> av.VideoFrame:
+        """Produce frame number ``index``."""
+        raise NotImplementedError
+
+
+class SyntheticVideo(PacedVideoTrack):
+    """A face photo moving over a still scene along ``path``; every frame carries its tag."""
+
+    def __init__(
+        self,
+        width: int = 640,
+        height: int = 480,
+        fps: float = 15.0,
+        path: FacePath | None = None,
+        photo: Path = DEFAULT_FACE,
+        on_frame: Callable[[FrameInfo], None] | None = None,
+    ) -> None:
+        super().__init__(fps)
+        if width < 2 * TAG_BLOCKS_PER_WIDTH or height < 48:
+            raise VideoSourceError(
+                f"synthetic video needs at least 80x48 pixels, not {width}x{height}"
+            )
+        self.width, self.height = width, height
+        self.path: FacePath = path or SweepPath()
+        self.on_frame = on_frame
+        self._sprite = _FaceSprite(photo, face_px=max(24, height // 4))
+        self._background = _background(width, height)
+
+    def face_centre(self, frame: int) -> tuple[float, float]:
+        """True centre (pixels) of the face box in frame number ``frame``."""
+        fx, fy = self.path(frame / self.fps)
+        return fx * self.width, fy * self.height
+
+    def render(self, frame: int) -> Image:
+        """Frame number ``frame`` as an RGB array (H×W×3)."""
+        img = self._background.copy()
+        cx, cy = self.face_centre(frame)
+        sprite = self._sprite
+        x0 = round(cx - sprite.cx)
+        y0 = round(cy - sprite.cy)
+        sh, sw = sprite.image.shape[:2]
+        # Clip the sprite to the frame (a path may take the face partly out of view).
+        ix0, iy0 = max(0, x0), max(0, y0)
+        ix1, iy1 = min(self.width, x0 + sw), min(self.height, y0 + sh)
+        if ix1 > ix0 and iy1 > iy0:
+            img[iy0:iy1, ix0:ix1] = sprite.image[iy0 - y0 : iy1 - y0, ix0 - x0 : ix1 - x0]
+        draw_frame_tag(img, frame)
+        return img
+
+    async def make_frame(self, index: int) -> av.VideoFrame:
+        """Render frame ``index`` and report it to ``on_frame``."""
+        frame = av.VideoFrame.from_ndarray(self.render(index), format="rgb24")
+        if self.on_frame is not None:
+            cx, cy = self.face_centre(index)
+            self.on_frame(FrameInfo(index, time.monotonic(), cx, cy))
+        return frame
+
+
+class FileVideo(PacedVideoTrack):
+    """Frames of a video file (anything PyAV opens), looped, optionally rescaled."""
+
+    def __init__(
+        self, path: Path, size: tuple[int, int] | None = None, fps: float | None = None
+    ) -> None:
+        self.path = path
+        self.size = size
+        self._container = self._open()
+        stream = self._container.streams.video[0]
+        rate = float(stream.average_rate) if stream.average_rate else 30.0
+        super().__init__(fps or rate)
+        self._frames = self._container.decode(video=0)
+        # Fail now, not in the middle of a session, if the file has no decodable frame.
+        try:
+            self._first: av.VideoFrame | None = next(self._frames)
+        except (StopIteration, av.FFmpegError) as exc:
+            raise VideoSourceError(
+                f"cannot decode video file {path}: {exc or 'no frames'}"
+            ) from exc
+
+    def _open(self) -> av.container.InputContainer:
+        try:
+            container = av.open(str(self.path))
+        except (OSError, av.FFmpegError) as exc:
+            raise VideoSourceError(f"cannot open video file {self.path}: {exc}") from exc
+        if not container.streams.video:
+            container.close()
+            raise VideoSourceError(f"video file {self.path} has no video stream")
+        return container
+
+    def _next_decoded(self) -> av.VideoFrame:
+        if self._first is not None:
+            frame, self._first = self._first, None
+            return frame
+        try:
+            return next(self._frames)
+        except StopIteration:
+            # End of file: start again from the beginning (reopening works for every format,
+            # seeking does not, e.g. for .y4m pipes).
+            self._container.close()
+            self._container = self._open()
+            self._frames = self._container.decode(video=0)
+            return next(self._frames)
+
+    def _next_frame(self) -> av.VideoFrame:
+        frame = self._next_decoded()
+        if self.size is not None and (frame.width, frame.height) != self.size:
+            frame = frame.reformat(width=self.size[0], height=self.size[1])
+        return frame
+
+    async def make_frame(self, index: int) -> av.VideoFrame:
+        """Decode the next frame off the event loop."""
+        return await asyncio.to_thread(self._next_frame)
+
+    def stop(self) -> None:
+        """Stop the track and close the file."""
+        super().stop()
+        self._container.close()
+
+
+def open_device(device: str, size: tuple[int, int] | None, fps: float | None) -> MediaStreamTrack:
+    """A V4L2 camera through aiortc's ``MediaPlayer``."""
+    if not Path(device).exists():
+        raise VideoSourceError(f"no such video device: {device}")
+    options: dict[str, str] = {}
+    if size is not None:
+        options["video_size"] = f"{size[0]}x{size[1]}"
+    if fps is not None:
+        options["framerate"] = f"{fps:g}"
+    try:
+        player = MediaPlayer(device, format="v4l2", options=options)
+    except (OSError, av.FFmpegError) as exc:
+        raise VideoSourceError(f"cannot open video device {device}: {exc}") from exc
+    if player.video is None:
+        raise VideoSourceError(f"video device {device} gives no video")
+    track: MediaStreamTrack = player.video
+    return track
+
+
+def open_source(
+    source: str,
+    size: tuple[int, int] | None = None,
+    fps: float | None = None,
+    on_frame: Callable[[FrameInfo], None] | None = None,
+) -> MediaStreamTrack:
+    """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path."""
+    if source == "synthetic":
+        width, height = size or (640, 480)
+        return SyntheticVideo(width, height, fps or 15.0, on_frame=on_frame)
+    if source.startswith("/dev/video"):
+        return open_device(source, size, fps)
+    path = Path(source)
+    if not path.is_file():
+        raise VideoSourceError(f"no such video file: {source}")
+    return FileVideo(path, size, fps)
