@@ -12,6 +12,8 @@ from app.config import PACKAGE_DIR, Settings
 from app.pages import router as pages_router
 from app.signaling.routes import Switchboard
 from app.signaling.routes import router as signaling_router
+from app.turtlesim.routes import Simulator
+from app.turtlesim.routes import router as turtlesim_router
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -20,13 +22,20 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        yield
+        app.state.simulator.start()
+        try:
+            yield
+        finally:
+            await app.state.simulator.stop()
 
     app = FastAPI(title="webrtc-autopilot", lifespan=lifespan)
     app.state.settings = settings
     app.state.signaling = Switchboard.from_settings(settings)
     app.include_router(signaling_router)
     app.include_router(pages_router)
+    app.state.simulator = Simulator(settings.sim_tick_s, settings.max_message_bytes)
+    app.state.turtlesim = app.state.simulator.sim
+    app.include_router(turtlesim_router)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:
