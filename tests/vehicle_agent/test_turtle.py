@@ -1,0 +1,86 @@
+"""Turtle backends: the in-process simulator and roslibpy against this server's /rosbridge."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Iterator
+
+import pytest
+
+from app.serve import RunningServer, start_in_thread
+from vehicle_agent.control import Pose, Twist
+from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
+
+
+class PoseWatch:
+    """Collects pose updates and lets a test await a condition on them."""
+
+    def __init__(self) -> None:
+        self.poses: list[Pose] = []
+        self._changed = asyncio.Event()
+
+    def __call__(self, pose: Pose) -> None:
+        self.poses.append(pose)
+        self._changed.set()
+
+    async def until(self, condition: object, timeout: float = 10.0) -> Pose:
+        assert callable(condition)
+        async with asyncio.timeout(timeout):
+            while True:
+                if self.poses and condition(self.poses[-1]):
+                    return self.poses[-1]
+                self._changed.clear()
+                await self._changed.wait()
+
+
+async def turn_and_stop(turtle: Turtle) -> None:
+    watch = PoseWatch()
+    await turtle.start(watch)
+    try:
+        first = await watch.until(lambda p: True)
+        assert first.theta == pytest.approx(0.0)
+        # Keep commanding (turtlesim drops a command after 1 s) until the turtle faces up.
+        async with asyncio.timeout(20):
+            while watch.poses[-1].theta < math.pi / 4:
+                turtle.publish(Twist(0.0, 1.5))
+                await asyncio.sleep(0.1)
+        turtle.publish(Twist(0.0, 0.0))
+        await asyncio.sleep(0.3)  # let the zero Twist reach the turtle
+        stopped = watch.poses[-1].theta
+        await asyncio.sleep(0.5)
+        assert watch.poses[-1].theta == pytest.approx(stopped, abs=1e-6)
+        assert watch.poses[-1].x == pytest.approx(first.x)  # turning in place
+    finally:
+        await turtle.close()
+
+
+async def test_sim_turtle_turns_and_stops() -> None:
+    turtle = SimTurtle()
+    await turn_and_stop(turtle)
+    # Pose updates come on turtlesim's 16 ms tick.
+    assert turtle.sim.pose("turtle1").theta > math.pi / 4
+
+
+@pytest.fixture
+def server() -> Iterator[RunningServer]:
+    running = start_in_thread(host="127.0.0.1")
+    yield running
+    running.stop()
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+async def test_rosbridge_turtle_against_our_server(server: RunningServer, ros_version: int) -> None:
+    url = server.url.replace("http", "ws", 1) + "/rosbridge"
+    await turn_and_stop(RosbridgeTurtle(url, ros_version=ros_version))
+
+
+async def test_dead_rosbridge_is_named() -> None:
+    turtle = RosbridgeTurtle("ws://127.0.0.1:9/rosbridge")
+    with pytest.raises(TurtleError, match=r"cannot connect to rosbridge at ws://127\.0\.0\.1:9"):
+        await turtle.start(lambda pose: None)
+
+
+def test_rosbridge_url_must_be_a_websocket() -> None:
+    with pytest.raises(TurtleError, match="ws://"):
+        RosbridgeTurtle("http://robot:9090")

@@ -1,0 +1,155 @@
+"""Turtle backends: where the agent's Twists go and where its pose feedback comes from.
+
+* :class:`SimTurtle` -- an in-process :class:`app.turtlesim.sim.TurtleSim` stepped by an asyncio
+  task on turtlesim's fixed 16 ms tick (the agent's default: no server, no ROS).
+* :class:`RosbridgeTurtle` -- any rosbridge v2 server through roslibpy: this project's
+  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server`` (ROS 1 or ROS 2 type names).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import roslibpy
+from twisted.internet import reactor
+
+from app.turtlesim.sim import TurtleSim
+from vehicle_agent.control import Pose, Twist
+
+log = logging.getLogger(__name__)
+
+PoseCallback = Callable[[Pose], None]
+
+# Message type names differ between ROS 1 and ROS 2 rosbridge servers.
+TYPE_NAMES: dict[int, dict[str, str]] = {
+    1: {"twist": "geometry_msgs/Twist", "pose": "turtlesim/Pose"},
+    2: {"twist": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"},
+}
+CONNECT_TIMEOUT_S = 5.0
+
+
+class TurtleError(RuntimeError):
+    """A turtle backend could not be reached; the message names it and the problem."""
+
+
+class Turtle(Protocol):
+    """What the agent needs from a turtle."""
+
+    async def start(self, on_pose: PoseCallback) -> None:
+        """Connect; ``on_pose`` is then called on the event loop for every pose update."""
+
+    def publish(self, twist: Twist) -> None:
+        """Send a velocity command (``cmd_vel``)."""
+
+    async def close(self) -> None:
+        """Disconnect and stop calling ``on_pose``."""
+
+
+def twist_message(twist: Twist) -> dict[str, Any]:
+    """``geometry_msgs/Twist`` as rosbridge JSON."""
+    return {
+        "linear": {"x": twist.linear_x, "y": 0.0, "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": twist.angular_z},
+    }
+
+
+class SimTurtle:
+    """An in-process turtlesim stepped by an asyncio task, one fixed tick every 16 ms."""
+
+    def __init__(self, sim: TurtleSim | None = None, name: str = "turtle1") -> None:
+        self.sim = sim or TurtleSim()
+        self.name = name
+        self._task: asyncio.Task[None] | None = None
+
+    async def start(self, on_pose: PoseCallback) -> None:
+        """Start ticking; every tick publishes the pose, as turtlesim_node does."""
+        self.sim.pose(self.name)  # KeyError now rather than in the tick task
+        self._task = asyncio.create_task(self._run(on_pose), name="turtlesim-tick")
+
+    async def _run(self, on_pose: PoseCallback) -> None:
+        start = time.monotonic()
+        ticks = 0
+        while True:
+            self.sim.step()
+            pose = self.sim.pose(self.name)
+            on_pose(Pose(pose.x, pose.y, pose.theta))
+            ticks += 1
+            delay = start + ticks * self.sim.TICK_S - time.monotonic()
+            if delay < -1.0:
+                # Far behind (the loop stalled): do not replay a burst of ticks.
+                start, ticks = time.monotonic(), 0
+            await asyncio.sleep(max(0.0, delay))
+
+    def publish(self, twist: Twist) -> None:
+        """Command the simulated turtle."""
+        self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
+
+    async def close(self) -> None:
+        """Stop ticking."""
+        if self._task is not None:
+            self._task.cancel()
+            await asyncio.gather(self._task, return_exceptions=True)
+            self._task = None
+
+
+class RosbridgeTurtle:
+    """A turtle behind a rosbridge v2 server, driven with roslibpy.
+
+    roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
+    """
+
+    def __init__(self, url: str, ros_version: int = 1, name: str = "turtle1") -> None:
+        if not url.startswith(("ws://", "wss://")):
+            raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
+        if ros_version not in TYPE_NAMES:
+            raise TurtleError(f"ROS version must be 1 or 2, not {ros_version}")
+        self.url = url
+        self.name = name
+        self.types = TYPE_NAMES[ros_version]
+        self._ros: roslibpy.Ros | None = None
+        self._cmd_vel: roslibpy.Topic | None = None
+        self._pose: roslibpy.Topic | None = None
+
+    async def start(self, on_pose: PoseCallback) -> None:
+        """Connect, advertise ``cmd_vel`` and subscribe to ``pose``."""
+        loop = asyncio.get_running_loop()
+        ros = roslibpy.Ros(host=self.url, transport="twisted")
+        try:
+            await asyncio.to_thread(ros.run, CONNECT_TIMEOUT_S)
+        except TimeoutError as exc:
+            # Twisted would keep retrying in the background; we give up and say so.
+            reactor.callFromThread(ros.factory.stopTrying)
+            reason = f"no answer within {CONNECT_TIMEOUT_S:g} s"
+            raise TurtleError(f"cannot connect to rosbridge at {self.url}: {reason}") from exc
+        self._ros = ros
+        ros.on("close", lambda *_: log.warning("rosbridge connection to %s lost", self.url))
+        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", self.types["twist"])
+        self._cmd_vel.advertise()
+
+        def received(message: dict[str, Any]) -> None:
+            pose = Pose(float(message["x"]), float(message["y"]), float(message["theta"]))
+            loop.call_soon_threadsafe(on_pose, pose)
+
+        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", self.types["pose"])
+        self._pose.subscribe(received)
+        log.info("driving /%s through rosbridge at %s", self.name, self.url)
+
+    def publish(self, twist: Twist) -> None:
+        """Publish on ``/turtleN/cmd_vel`` (roslibpy hands it to its network thread)."""
+        if self._cmd_vel is not None:
+            self._cmd_vel.publish(roslibpy.Message(twist_message(twist)))
+
+    async def close(self) -> None:
+        """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""
+        ros, self._ros = self._ros, None
+        if ros is None:
+            return
+        if self._pose is not None:
+            self._pose.unsubscribe()
+        if self._cmd_vel is not None:
+            self._cmd_vel.unadvertise()
+        await asyncio.to_thread(ros.close)
