@@ -1,0 +1,505 @@
+"""The sans-I/O rosbridge v2 session over TurtleSim: every op and every error case."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import pytest
+
+from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.turtlesim.sim import TurtleSim
+
+CENTRE = TurtleSim.WORLD_SIZE / 2
+
+
+class World:
+    """A hub over a simulator whose clock the test moves, one 16 ms tick at a time."""
+
+    def __init__(self) -> None:
+        self.now = 10.0
+        self.sim = TurtleSim(clock=lambda: self.now)
+        self.hub = RosbridgeHub(self.sim)
+
+    def tick(self, count: int = 1) -> None:
+        for _ in range(count):
+            self.now += TurtleSim.TICK_S
+            self.sim.step()
+            self.hub.tick(self.now)
+
+
+@pytest.fixture
+def world() -> World:
+    return World()
+
+
+@pytest.fixture
+def session(world: World) -> RosbridgeSession:
+    return world.hub.open_session()
+
+
+def send(session: RosbridgeSession, **message: Any) -> list[dict[str, Any]]:
+    return session.receive(json.dumps(message))
+
+
+def only_error(replies: list[dict[str, Any]]) -> dict[str, Any]:
+    """The single status error among the replies."""
+    errors = [r for r in replies if r["op"] == "status"]
+    assert len(errors) == 1, replies
+    assert errors[0]["level"] == "error"
+    return errors[0]
+
+
+def service_call(session: RosbridgeSession, service: str, **args: Any) -> dict[str, Any]:
+    """Call a service and return its service_response."""
+    replies = send(session, op="call_service", id="c1", service=service, args=args)
+    (response,) = [r for r in replies if r["op"] == "service_response"]
+    assert response["id"] == "c1"
+    assert response["service"] == service
+    return response
+
+
+def poses(publications: list[dict[str, Any]], topic: str) -> list[dict[str, Any]]:
+    return [p["msg"] for p in publications if p["op"] == "publish" and p["topic"] == topic]
+
+
+# -- malformed frames and unknown ops --------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("frame", "words"),
+    [
+        ("{not json", "malformed JSON"),
+        ('{"op": "publish", "topic": "/turtle1/cmd_vel", "msg": {"linear": {"x": NaN}}}', "NaN"),
+        # A number too large for a float parses as infinity: refused as message content.
+        ('{"op": "publish", "topic": "turtle1/cmd_vel", "msg": {"linear": {"x": 1e999}}}',)
+        + ("linear.x",),
+        ("[1, 2]", "JSON object"),
+        ('"publish"', "JSON object"),
+        ('{"topic": "/turtle1/pose"}', "'op'"),
+        ('{"op": 7}', "'op'"),
+    ],
+)
+def test_malformed_frames_get_a_status_error(
+    session: RosbridgeSession, frame: str, words: str
+) -> None:
+    error = only_error(session.receive(frame))
+    assert words in error["msg"]
+
+
+def test_unknown_op_names_it_and_echoes_the_id(session: RosbridgeSession) -> None:
+    error = only_error(send(session, op="fly", id="f1"))
+    assert "fly" in error["msg"]
+    assert error["id"] == "f1"
+
+
+def test_integer_ids_are_echoed_too(session: RosbridgeSession) -> None:
+    assert only_error(send(session, op="fly", id=42))["id"] == 42
+
+
+def test_an_id_of_the_wrong_type_is_reported_and_not_echoed(session: RosbridgeSession) -> None:
+    error = only_error(send(session, op="subscribe", id=[1], topic="/turtle1/pose"))
+    assert "id" in error["msg"]
+    assert "id" not in error
+
+
+@pytest.mark.parametrize(
+    ("message", "field"),
+    [
+        ({"op": "advertise"}, "topic"),
+        ({"op": "unadvertise"}, "topic"),
+        ({"op": "publish", "topic": "/turtle1/cmd_vel"}, "msg"),
+        ({"op": "publish", "msg": {}}, "topic"),
+        ({"op": "subscribe"}, "topic"),
+        ({"op": "unsubscribe"}, "topic"),
+        ({"op": "call_service"}, "service"),
+        ({"op": "set_level"}, "level"),
+        ({"op": "subscribe", "topic": 5}, "topic"),
+        ({"op": "publish", "topic": "/turtle1/cmd_vel", "msg": [1, 2]}, "msg"),
+        ({"op": "subscribe", "topic": "/turtle1/pose", "throttle_rate": -1}, "throttle_rate"),
+        ({"op": "subscribe", "topic": "/turtle1/pose", "throttle_rate": "10"}, "throttle_rate"),
+        ({"op": "subscribe", "topic": "/turtle1/pose", "queue_length": 1.5}, "queue_length"),
+        ({"op": "subscribe", "topic": "/turtle1/pose", "compression": "png"}, "compression"),
+        ({"op": "call_service", "service": "/spawn", "args": [1, 2]}, "args"),
+        ({"op": "set_level", "level": "loud"}, "level"),
+    ],
+)
+def test_missing_and_mistyped_fields_are_named(
+    session: RosbridgeSession, message: dict[str, Any], field: str
+) -> None:
+    error = only_error(send(session, id="m1", **message))
+    assert field in error["msg"]
+    assert error["msg"].startswith(message["op"])
+    assert error["id"] == "m1"
+
+
+# -- subscribe / unsubscribe ------------------------------------------------------------------
+
+
+def test_subscribed_pose_arrives_every_tick(world: World, session: RosbridgeSession) -> None:
+    assert send(session, op="subscribe", id="s1", topic="/turtle1/pose") == []
+    world.tick(3)
+    msgs = poses(session.take_publications(), "/turtle1/pose")
+    assert len(msgs) == 3
+    assert msgs[0] == {
+        "x": pytest.approx(CENTRE),
+        "y": pytest.approx(CENTRE),
+        "theta": 0.0,
+        "linear_velocity": 0.0,
+        "angular_velocity": 0.0,
+    }
+    assert session.take_publications() == []
+
+
+def test_no_publications_without_a_subscription(world: World, session: RosbridgeSession) -> None:
+    world.tick(5)
+    assert session.take_publications() == []
+
+
+def test_topic_spelling_is_echoed_and_types_of_ros1_and_ros2_accepted(
+    world: World, session: RosbridgeSession
+) -> None:
+    assert send(session, op="subscribe", topic="turtle1/pose", type="turtlesim/Pose") == []
+    assert send(session, op="subscribe", topic="/turtle1/pose", type="turtlesim/msg/Pose") == []
+    world.tick()
+    publications = session.take_publications()
+    assert sorted(p["topic"] for p in publications) == ["/turtle1/pose", "turtle1/pose"]
+
+
+def test_throttle_rate_spaces_publications(world: World, session: RosbridgeSession) -> None:
+    send(session, op="subscribe", topic="/turtle1/pose", throttle_rate=100)
+    world.tick(63)  # about one second
+    count = len(session.take_publications())
+    # One per 100 ms, rounded up to whole 16 ms ticks (112 ms): 9 to 10 in a second.
+    assert 8 <= count <= 11
+
+
+def test_throttle_with_queue_sends_the_queued_messages_oldest_first(
+    world: World, session: RosbridgeSession
+) -> None:
+    send(session, op="call_service", service="/turtle1/teleport_absolute", args={"x": 1.0})
+    send(session, op="publish", topic="/turtle1/cmd_vel", msg={"linear": {"x": 2.0}})
+    send(session, op="subscribe", topic="/turtle1/pose", throttle_rate=1000, queue_length=3)
+    world.tick()  # first message goes out at once: nothing sent before
+    first = poses(session.take_publications(), "/turtle1/pose")
+    assert len(first) == 1
+    world.tick(20)  # throttled: the latest 3 wait in the queue
+    assert session.take_publications() == []
+    world.tick(45)  # past one second: the oldest queued message leaves
+    (second,) = poses(session.take_publications(), "/turtle1/pose")
+    assert first[0]["x"] < second["x"]
+    # Only the last 3 of the ticks were kept, so the one sent is from the end of the first
+    # second, not from the tick right after the first publication.
+    assert second["x"] > first[0]["x"] + 2.0 * TurtleSim.TICK_S * 50
+
+
+def test_several_ids_on_one_topic_share_one_stream_with_the_smallest_throttle(
+    world: World, session: RosbridgeSession
+) -> None:
+    send(session, op="subscribe", id="slow", topic="/turtle1/pose", throttle_rate=1000)
+    send(session, op="subscribe", id="fast", topic="/turtle1/pose")
+    world.tick(4)
+    assert len(session.take_publications()) == 4
+    assert send(session, op="unsubscribe", id="fast", topic="/turtle1/pose") == []
+    world.tick(4)
+    assert len(session.take_publications()) <= 1
+
+
+def test_unsubscribe_stops_publications(world: World, session: RosbridgeSession) -> None:
+    send(session, op="subscribe", id="s1", topic="/turtle1/pose")
+    assert send(session, op="unsubscribe", id="s1", topic="/turtle1/pose") == []
+    world.tick(3)
+    assert session.take_publications() == []
+    assert session.subscribed_topics() == []
+
+
+def test_unsubscribe_without_id_drops_every_subscription_on_the_topic(
+    world: World, session: RosbridgeSession
+) -> None:
+    send(session, op="subscribe", id="a", topic="/turtle1/pose")
+    send(session, op="subscribe", id="b", topic="/turtle1/pose")
+    assert send(session, op="unsubscribe", topic="/turtle1/pose") == []
+    world.tick()
+    assert session.take_publications() == []
+
+
+def test_unsubscribe_of_what_was_not_subscribed_is_a_warning(session: RosbridgeSession) -> None:
+    assert send(session, op="unsubscribe", id="u", topic="/turtle1/pose") == []
+    send(session, op="set_level", level="warning")
+    (warning,) = send(session, op="unsubscribe", id="u", topic="/turtle1/pose")
+    assert warning["level"] == "warning"
+    assert warning["id"] == "u"
+
+
+@pytest.mark.parametrize(
+    ("message", "words"),
+    [
+        ({"topic": "/chatter"}, "unknown topic"),
+        ({"topic": "/turtle1/odom"}, "unknown topic"),
+        ({"topic": "/turtle9/pose"}, "turtle9"),
+        ({"topic": "/turtle1/pose", "type": "geometry_msgs/Twist"}, "turtlesim/Pose"),
+    ],
+)
+def test_subscribe_to_what_does_not_exist_is_an_error(
+    session: RosbridgeSession, message: dict[str, Any], words: str
+) -> None:
+    error = only_error(send(session, op="subscribe", id="s9", **message))
+    assert words in error["msg"]
+    assert error["id"] == "s9"
+    assert session.subscribed_topics() == []
+
+
+def test_subscription_survives_reset(world: World, session: RosbridgeSession) -> None:
+    send(session, op="call_service", service="/turtle1/teleport_absolute", args={"x": 1.0})
+    send(session, op="subscribe", topic="/turtle1/pose")
+    assert service_call(session, "/reset")["result"] is True
+    world.tick()
+    (pose,) = poses(session.take_publications(), "/turtle1/pose")
+    assert pose["x"] == pytest.approx(CENTRE)
+
+
+def test_closed_session_gets_nothing_more(world: World, session: RosbridgeSession) -> None:
+    send(session, op="subscribe", topic="/turtle1/pose")
+    session.close()
+    world.tick(2)
+    assert session.take_publications() == []
+    assert session not in world.hub.sessions
+
+
+# -- advertise / publish ---------------------------------------------------------------------
+
+
+def test_publish_cmd_vel_drives_the_turtle(world: World, session: RosbridgeSession) -> None:
+    twist = {"linear": {"x": 1.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0, "y": 0, "z": 0.5}}
+    assert send(session, op="publish", topic="/turtle1/cmd_vel", msg=twist) == []
+    world.tick(10)
+    pose = world.sim.pose("turtle1")
+    assert pose.linear_velocity == 1.0
+    assert pose.angular_velocity == 0.5
+    assert pose.x > CENTRE
+    assert pose.theta > 0
+
+
+def test_publish_without_leading_slash_and_missing_fields_default_to_zero(
+    world: World, session: RosbridgeSession
+) -> None:
+    assert send(session, op="publish", topic="turtle1/cmd_vel", msg={"angular": {"z": 1}}) == []
+    world.tick(5)
+    pose = world.sim.pose("turtle1")
+    assert pose.theta == pytest.approx(5 * 0.016)
+    assert pose.x == pytest.approx(CENTRE)
+
+
+def test_advertise_then_publish_then_unadvertise(world: World, session: RosbridgeSession) -> None:
+    for type_name in ("geometry_msgs/Twist", "geometry_msgs/msg/Twist", None):
+        message: dict[str, Any] = {"op": "advertise", "id": "a1", "topic": "/turtle1/cmd_vel"}
+        if type_name is not None:
+            message["type"] = type_name
+        assert send(session, **message) == []
+    assert send(session, op="publish", topic="/turtle1/cmd_vel", msg={"linear": {"x": 1}}) == []
+    send(session, op="set_level", level="warning")
+    assert send(session, op="unadvertise", id="a1", topic="/turtle1/cmd_vel") == []
+    (warning,) = send(session, op="unadvertise", id="a2", topic="/turtle1/cmd_vel")
+    assert warning["level"] == "warning"
+
+
+@pytest.mark.parametrize(
+    ("message", "words"),
+    [
+        ({"topic": "/turtle1/cmd_vel", "type": "std_msgs/String"}, "geometry_msgs/Twist"),
+        ({"topic": "/turtle1/pose"}, "simulator only"),
+        ({"topic": "/chatter", "type": "std_msgs/String"}, "unknown topic"),
+    ],
+)
+def test_bad_advertise_is_an_error(
+    session: RosbridgeSession, message: dict[str, Any], words: str
+) -> None:
+    error = only_error(send(session, op="advertise", id="a3", **message))
+    assert words in error["msg"]
+    assert error["id"] == "a3"
+
+
+@pytest.mark.parametrize(
+    ("message", "words"),
+    [
+        ({"topic": "/turtle9/cmd_vel", "msg": {"linear": {"x": 1}}}, "turtle9"),
+        ({"topic": "/turtle1/pose", "msg": {"x": 1}}, "simulator only"),
+        ({"topic": "/chatter", "msg": {"data": "hi"}}, "unknown topic"),
+        ({"topic": "/turtle1/cmd_vel", "msg": {"linear": {"x": "fast"}}}, "linear.x"),
+        ({"topic": "/turtle1/cmd_vel", "msg": {"linear": {"x": True}}}, "linear.x"),
+        ({"topic": "/turtle1/cmd_vel", "msg": {"speed": 1}}, "speed"),
+        ({"topic": "/turtle1/cmd_vel", "msg": {"linear": 5}}, "linear"),
+    ],
+)
+def test_bad_publish_is_an_error_and_changes_nothing(
+    world: World, session: RosbridgeSession, message: dict[str, Any], words: str
+) -> None:
+    error = only_error(send(session, op="publish", id="p1", **message))
+    assert words in error["msg"]
+    assert error["id"] == "p1"
+    world.tick(5)
+    pose = world.sim.pose("turtle1")
+    assert (pose.x, pose.theta, pose.linear_velocity) == (pytest.approx(CENTRE), 0.0, 0.0)
+    # The session keeps working after the error.
+    assert send(session, op="publish", topic="/turtle1/cmd_vel", msg={"linear": {"x": 1}}) == []
+
+
+def test_cmd_vel_is_delivered_to_its_subscribers_in_every_session(world: World) -> None:
+    driver = world.hub.open_session()
+    watcher = world.hub.open_session()
+    assert send(watcher, op="subscribe", topic="/turtle1/cmd_vel", type="geometry_msgs/Twist") == []
+    send(driver, op="publish", topic="/turtle1/cmd_vel", msg={"angular": {"z": 0.25}})
+    world.tick()
+    (twist,) = poses(watcher.take_publications(), "/turtle1/cmd_vel")
+    assert twist == {
+        "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": 0.25},
+    }
+    assert driver.take_publications() == []
+
+
+# -- services ----------------------------------------------------------------------------------
+
+
+def test_spawn_returns_the_new_name_and_its_pose_topic_exists(
+    world: World, session: RosbridgeSession
+) -> None:
+    response = service_call(session, "/spawn", x=2.0, y=3.0, theta=0.5)
+    assert response == {
+        "op": "service_response",
+        "service": "/spawn",
+        "id": "c1",
+        "values": {"name": "turtle2"},
+        "result": True,
+    }
+    assert service_call(session, "spawn", x=1.0, y=1.0, name="leo")["values"] == {"name": "leo"}
+    assert send(session, op="subscribe", topic="/turtle2/pose") == []
+    world.tick()
+    (pose,) = poses(session.take_publications(), "/turtle2/pose")
+    assert (pose["x"], pose["y"], pose["theta"]) == pytest.approx((2.0, 3.0, 0.5))
+
+
+def test_kill_removes_the_turtle(world: World, session: RosbridgeSession) -> None:
+    service_call(session, "/spawn", name="leo")
+    assert service_call(session, "/kill", name="leo") == {
+        "op": "service_response",
+        "service": "/kill",
+        "id": "c1",
+        "values": {},
+        "result": True,
+    }
+    assert world.sim.names() == ["turtle1"]
+
+
+def test_reset_and_clear(world: World, session: RosbridgeSession) -> None:
+    service_call(session, "/spawn")
+    service_call(session, "/turtle1/teleport_absolute", x=1.0, y=1.0)
+    assert service_call(session, "/clear")["result"] is True
+    assert [len(s.points) for s in world.sim.strokes()] == [1, 1]
+    assert world.sim.pose("turtle1").x == 1.0
+    assert service_call(session, "/reset")["result"] is True
+    assert world.sim.names() == ["turtle1"]
+    assert world.sim.pose("turtle1").x == pytest.approx(CENTRE)
+
+
+def test_teleports_move_the_turtle(world: World, session: RosbridgeSession) -> None:
+    response = service_call(session, "/turtle1/teleport_absolute", x=2.0, y=3.0, theta=1.0)
+    assert (response["result"], response["values"]) == (True, {})
+    pose = world.sim.pose("turtle1")
+    assert (pose.x, pose.y, pose.theta) == pytest.approx((2.0, 3.0, 1.0))
+    assert service_call(session, "turtle1/teleport_relative", linear=1.0, angular=-1.0)["result"]
+    pose = world.sim.pose("turtle1")
+    assert (pose.x, pose.y, pose.theta) == pytest.approx((3.0, 3.0, 0.0))
+
+
+def test_set_pen(world: World, session: RosbridgeSession) -> None:
+    assert service_call(session, "/turtle1/set_pen", r=255, g=0, b=0, width=4, off=0)["result"]
+    assert world.sim.pen("turtle1").r == 255
+    assert service_call(session, "/turtle1/set_pen", r=1, g=2, b=3, width=1, off=True)["result"]
+    assert world.sim.pen("turtle1").off is True
+
+
+@pytest.mark.parametrize(
+    ("service", "type_name"),
+    [
+        ("/spawn", "turtlesim/Spawn"),
+        ("/spawn", "turtlesim/srv/Spawn"),
+        ("/clear", "std_srvs/Empty"),
+        ("/clear", "std_srvs/srv/Empty"),
+        ("/turtle1/set_pen", "turtlesim/srv/SetPen"),
+    ],
+)
+def test_ros1_and_ros2_service_types_are_accepted(
+    session: RosbridgeSession, service: str, type_name: str
+) -> None:
+    replies = send(session, op="call_service", id=1, service=service, type=type_name, args={})
+    (response,) = replies
+    assert response["result"] is True
+
+
+@pytest.mark.parametrize(
+    ("service", "args", "type_name", "words"),
+    [
+        ("/teleport", {}, None, "unknown service"),
+        ("/turtle1/fly", {}, None, "unknown service"),
+        ("/turtle9/teleport_absolute", {"x": 1.0}, None, "turtle9"),
+        ("/kill", {"name": "turtle9"}, None, "turtle9"),
+        ("/spawn", {"name": "turtle1"}, None, "already exists"),
+        ("/spawn", {"name": "bad name"}, None, "invalid"),
+        ("/spawn", {"x": "left"}, None, "x"),
+        ("/spawn", {"colour": "green"}, None, "colour"),
+        ("/reset", {"now": True}, None, "now"),
+        ("/turtle1/set_pen", {"r": 300}, None, "r"),
+        ("/spawn", {}, "turtlesim/Kill", "turtlesim/Spawn"),
+    ],
+)
+def test_failed_calls_answer_result_false_and_a_status_error(
+    world: World,
+    session: RosbridgeSession,
+    service: str,
+    args: dict[str, Any],
+    type_name: str | None,
+    words: str,
+) -> None:
+    message: dict[str, Any] = {"op": "call_service", "id": "c7", "service": service, "args": args}
+    if type_name is not None:
+        message["type"] = type_name
+    replies = send(session, **message)
+    error = only_error(replies)
+    assert error["id"] == "c7"
+    assert words in error["msg"]
+    (response,) = [r for r in replies if r["op"] == "service_response"]
+    assert response["result"] is False
+    assert response["id"] == "c7"
+    assert words in response["values"]
+    assert world.sim.names() == ["turtle1"]
+
+
+# -- status level -------------------------------------------------------------------------------
+
+
+def test_set_level_none_silences_errors_but_not_service_responses(
+    session: RosbridgeSession,
+) -> None:
+    assert send(session, op="set_level", level="none") == []
+    assert send(session, op="fly") == []
+    (response,) = send(session, op="call_service", id="c", service="/nowhere")
+    assert response["result"] is False
+
+
+def test_adapter_errors_respect_the_level(session: RosbridgeSession) -> None:
+    assert only_error(session.error("binary frames are not supported"))["msg"].startswith("binary")
+    send(session, op="set_level", level="none")
+    assert session.error("too big") == []
+
+
+def test_many_sessions_with_their_own_subscriptions(world: World) -> None:
+    sessions = [world.hub.open_session() for _ in range(20)]
+    for i, s in enumerate(sessions):
+        if i % 2 == 0:
+            send(s, op="subscribe", topic="/turtle1/pose")
+    world.tick(2)
+    counts = [len(s.take_publications()) for s in sessions]
+    assert counts == [2 if i % 2 == 0 else 0 for i in range(20)]
+    assert math.isfinite(world.sim.pose("turtle1").x)
