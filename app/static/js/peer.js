@@ -185,3 +185,89 @@ export function requireNumber(msg, field) {
   }
   return value;
 }
+
+/**
+ * The offering side's connection to the room's relay (vehicle and client pages): follows the
+ * roster, so whichever joins first, a relay that arrives, leaves or is reloaded gets a fresh
+ * connection. `setup(peer)` adds the tracks and data channels before the first offer.
+ * Events: `peer` (detail: the new Peer), `lost` (detail: reason, the old connection is gone).
+ */
+export class RelayLink extends EventTarget {
+  #syncing = false;
+  #again = false;
+
+  constructor(room, { iceServers, log, setup }) {
+    super();
+    this.room = room;
+    this.iceServers = iceServers;
+    this.log = log;
+    this.setup = setup;
+    this.peer = null;
+    room.addEventListener('roster', () => this.sync());
+    room.addEventListener('peerleft', (event) => {
+      if (this.peer !== null && event.detail === this.peer.remote) this.#drop(`relay ${event.detail} left`);
+    });
+    room.addEventListener('signal', (event) => this.#onSignal(event.detail));
+  }
+
+  /** Bring the connection in line with the roster (idempotent; safe to call at any time). */
+  sync() {
+    if (this.#syncing) {
+      this.#again = true;
+      return;
+    }
+    this.#syncing = true;
+    try {
+      do {
+        this.#again = false;
+        this.#syncOnce();
+      } while (this.#again);
+    } finally {
+      this.#syncing = false;
+    }
+  }
+
+  #syncOnce() {
+    const relay = this.room.relay;
+    const current = this.peer;
+    if (current !== null && relay !== undefined && current.remote === relay.name && !current.closed) return;
+    if (current !== null) this.#drop(relay === undefined ? 'no relay in the room' : 'relay changed');
+    if (relay === undefined) return;
+    this.log.info(`connecting to relay ${relay.name}`);
+    const peer = new Peer({
+      remote: relay.name,
+      polite: false,
+      mayOffer: true,
+      iceServers: this.iceServers,
+      send: (msg) => this.room.send(msg),
+      log: this.log,
+    });
+    peer.addEventListener('state', (event) => {
+      if (event.detail === 'failed' && this.peer === peer) {
+        this.#drop(`connection to ${peer.remote} failed`);
+        this.sync();
+      }
+    });
+    this.peer = peer;
+    this.dispatchEvent(new CustomEvent('peer', { detail: peer }));
+    this.setup(peer);
+  }
+
+  #drop(reason) {
+    const peer = this.peer;
+    if (peer === null) return;
+    this.peer = null;
+    peer.close();
+    this.log.info(`connection to ${peer.remote} closed: ${reason}`);
+    this.dispatchEvent(new CustomEvent('lost', { detail: reason }));
+  }
+
+  #onSignal(msg) {
+    if (!['offer', 'answer', 'candidate'].includes(msg.type)) return;
+    if (this.peer === null || msg.from !== this.peer.remote) {
+      this.log.warn(`ignored ${msg.type} from ${msg.from}: not the relay this page is connected to`);
+      return;
+    }
+    this.peer.handle(msg).catch((err) => this.log.error(`negotiation with ${msg.from} failed: ${err.message}`));
+  }
+}

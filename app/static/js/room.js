@@ -59,8 +59,9 @@ export class RoomSession extends EventTarget {
     this.name = name;
     this.room = reply.room || room;
     this.log.info(`joined room ${this.room} as ${this.role} ${name}`);
-    this.#setPhase('joined');
+    // Roster first, so that listeners of the `joined` phase already see who is there.
     this.#setRoster(reply.peers || []);
+    this.#setPhase('joined');
   }
 
   /** Leave the room on purpose: tell the others, close the socket, stop rejoining. */

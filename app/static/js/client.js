@@ -1,0 +1,197 @@
+// The client page: watches the relayed video (with detection boxes) and the turtle's route,
+// lists the relay's operations, sets one, starts and stops piloting.
+import { pixelToTerrain } from './control.js';
+import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RoomSession } from './room.js';
+import { TurtleView } from './turtleview.js';
+import { button, byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
+
+const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
+
+const config = readConfig();
+const log = new Log(byTestId('log'));
+const room = new RoomSession(config, log);
+const video = byTestId('video');
+const overlay = byTestId('overlay');
+const select = byTestId('operation');
+const turtleView = new TurtleView(byTestId('turtle-view'));
+
+/** The page's one session object, read-only for tests. */
+const status = {
+  controlOpen: false,
+  relay: null, // the relay's last `state`: {piloting, op, vehicle}
+  ops: [],
+  detections: 0,
+  lastDetections: null,
+  pose: null,
+  poses: 0,
+  videoTracks: 0, // how many times a (new) relayed video track arrived
+};
+window.autopilotStatus = status;
+
+let control = null;
+const recentMs = [];
+
+// ---------------------------------------------------------------- relay messages
+
+function onOps(msg) {
+  if (!Array.isArray(msg.ops)) throw new BadMessage('"ops" needs an array "ops"');
+  status.ops = msg.ops;
+  select.replaceChildren(
+    ...msg.ops.map((op) => {
+      const option = new Option(op.label || op.id, op.id);
+      option.title = op.description || '';
+      return option;
+    }),
+  );
+  if (typeof msg.current === 'string') select.value = msg.current;
+  showDescription();
+  log.info(`operations offered by the relay: ${msg.ops.map((op) => op.id).join(', ')}`);
+  updateControls();
+}
+
+function onState(msg) {
+  const previous = status.relay;
+  status.relay = { piloting: Boolean(msg.piloting), op: msg.op ?? null, vehicle: msg.vehicle ?? null };
+  if (previous?.op !== status.relay.op && status.relay.op) log.info(`operation is now ${status.relay.op}`);
+  if (previous !== null && previous.piloting !== status.relay.piloting) {
+    log.info(status.relay.piloting ? 'piloting started' : 'piloting stopped');
+  }
+  if (!status.relay.piloting) clearDetections();
+  show('active-op', status.relay.op ?? '–');
+  showState();
+  updateControls();
+}
+
+function onDetections(msg) {
+  if (!Array.isArray(msg.boxes)) throw new BadMessage('"detections" needs an array "boxes"');
+  status.detections += 1;
+  status.lastDetections = msg;
+  drawDetections(overlay, msg);
+  if (typeof msg.ms === 'number') {
+    recentMs.push(msg.ms);
+    if (recentMs.length > MS_SMOOTHING) recentMs.shift();
+    show('ms-per-snapshot', fmt(median(recentMs)));
+  }
+  if (typeof msg.goalsPerS === 'number') show('goals-per-s', fmt(msg.goalsPerS));
+  const target = msg.target && msg.w && msg.h ? pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
+  turtleView.setTarget(target);
+}
+
+function onPose(msg) {
+  const pose = { x: requireNumber(msg, 'x'), y: requireNumber(msg, 'y'), theta: requireNumber(msg, 'theta') };
+  status.pose = pose;
+  status.poses += 1;
+  turtleView.addPose(pose);
+  show('pose', `x ${fmt(pose.x, 2)} m   y ${fmt(pose.y, 2)} m   θ ${fmt(pose.theta, 3)} rad`);
+}
+
+function median(values) {
+  const sorted = [...values].sort((a, b) => a - b);
+  const mid = Math.floor(sorted.length / 2);
+  return sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
+}
+
+function clearDetections() {
+  drawDetections(overlay, null);
+  turtleView.setTarget(null);
+}
+
+// ---------------------------------------------------------------- connection to the relay
+
+function setupPeer(peer) {
+  // Receive-only video from the start: the relay can then send the vehicle's track whenever
+  // it has one, with no renegotiation.
+  peer.pc.addTransceiver('video', { direction: 'recvonly' });
+  peer.addEventListener('track', (event) => {
+    status.videoTracks += 1;
+    video.srcObject = new MediaStream([event.detail.track]);
+    log.info('relayed video track received');
+  });
+  const dc = peer.pc.createDataChannel('control');
+  serveChannel(dc, { ops: onOps, state: onState, detections: onDetections, pose: onPose }, log);
+  dc.addEventListener('open', () => {
+    control = dc;
+    status.controlOpen = true;
+    log.info(`control channel to relay ${peer.remote} open`);
+    sendJson(dc, { type: 'getOps' });
+    showState();
+    updateControls();
+  });
+  dc.addEventListener('close', () => {
+    if (control !== dc) return;
+    control = null;
+    status.controlOpen = false;
+    showState();
+    updateControls();
+  });
+}
+
+/** start/stop go through signaling as in the thesis, or on the control channel without it. */
+function askRelay(type) {
+  if (room.phase === 'joined' && room.relay !== undefined) room.send({ type });
+  else if (!sendJson(control, { type })) throw new Error(`cannot send ${type}: no relay connection`);
+  log.info(`asked the relay to ${type === 'start' ? 'start' : 'stop'} piloting`);
+}
+
+// ---------------------------------------------------------------- page
+
+function showDescription() {
+  const op = status.ops.find((candidate) => candidate.id === select.value);
+  show('op-description', op?.description ?? '');
+}
+
+function updateControls() {
+  const reachable = control !== null;
+  const piloting = status.relay?.piloting ?? false;
+  select.disabled = !reachable || status.ops.length === 0;
+  button('set-op').disabled = select.disabled;
+  button('start').disabled = !reachable || piloting;
+  button('stop').disabled = !reachable || !piloting;
+}
+
+function showState() {
+  const parts = [room.describe()];
+  if (room.phase === 'joined') {
+    parts.push(control !== null ? 'relay connected' : room.relay ? 'connecting to the relay' : 'waiting for a relay');
+  }
+  if (status.relay !== null && control !== null) {
+    parts.push(status.relay.vehicle ? `vehicle ${status.relay.vehicle}` : 'no vehicle yet');
+    parts.push(status.relay.piloting ? `piloting with ${status.relay.op}` : 'not piloting');
+  }
+  show('state', parts.join(' · '));
+}
+
+select.addEventListener('change', showDescription);
+button('set-op').addEventListener('click', () => {
+  if (sendJson(control, { type: 'setOp', op: select.value })) log.info(`asked the relay to use ${select.value}`);
+  else log.error('cannot set the operation: no relay connection');
+});
+for (const type of ['start', 'stop']) {
+  button(type).addEventListener('click', () => {
+    try {
+      askRelay(type);
+    } catch (err) {
+      log.error(err.message);
+    }
+  });
+}
+
+room.bindControls();
+room.addEventListener('phase', (event) => {
+  showState();
+  // As in the thesis, ask for the operations on joining (the answer comes on the data channel).
+  if (event.detail === 'joined' && room.relay !== undefined) room.send({ type: 'getOps' });
+});
+room.addEventListener('roster', showState);
+const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: setupPeer });
+link.addEventListener('lost', () => {
+  status.relay = null;
+  clearDetections();
+  showState();
+  updateControls();
+});
+link.addEventListener('peer', showState);
+updateControls();
+showState();
+if (config.auto) room.autoJoin();

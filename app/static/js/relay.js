@@ -1,0 +1,416 @@
+// The relay page (the thesis's "intermediate server"): answers the vehicle's and the clients'
+// offers, forwards the vehicle's video to every client, runs the selected OpenCV.js operation
+// on snapshots while piloting and sends goals to the vehicle on the `autopilot` channel.
+import { BadMessage, Peer, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RoomSession } from './room.js';
+import { byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
+import { createAnalyzer } from './vision.js';
+
+const THESIS_PERIOD_MS = 1500;
+const RATE_WINDOW_MS = 2000;
+const MS_SAMPLES = 2000;
+
+const config = readConfig();
+const log = new Log(byTestId('log'));
+const room = new RoomSession(config, log);
+const video = byTestId('video');
+const overlay = byTestId('overlay');
+
+/** The page's one session object, read-only for tests and benchmarks. */
+const status = {
+  profile: config.profile,
+  analyzerReady: false,
+  op: null,
+  piloting: false,
+  vehicle: null, // name of the connected vehicle
+  clients: [], // names of connected clients
+  snapshots: 0,
+  goalsSent: 0,
+  lastGoal: null,
+  lastDetections: null,
+  processingMs: [], // snapshot taken -> goal sent (or analysis done when nothing was found)
+  goalTimes: [], // performance.now() of recent goals, for goals per second
+};
+window.autopilotStatus = status;
+
+const peers = new Map(); // remote name -> {peer, role, channel}
+const signalQueues = new Map(); // remote name -> promise of its last signaling message handled
+let vehicleTrack = null;
+let analyzer = null;
+let lastError = null;
+
+const analyzerReady = createAnalyzer().then(
+  (created) => {
+    analyzer = created;
+    status.analyzerReady = true;
+    status.op = created.defaultOp;
+    show('operation', status.op);
+    log.info(`OpenCV.js ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
+    broadcastState();
+    return created;
+  },
+  (err) => {
+    log.error(`OpenCV.js analyzer could not start: ${err.message}`);
+    show('operation', 'unavailable');
+    return null;
+  },
+);
+
+// ---------------------------------------------------------------- connections
+
+function roleOf(name) {
+  return room.roster.find((peer) => peer.name === name)?.role;
+}
+
+function clientEntries() {
+  return [...peers.values()].filter((entry) => entry.role === 'client');
+}
+
+function vehicleEntry() {
+  return [...peers.values()].find((entry) => entry.role === 'vehicle');
+}
+
+function createPeer(name, role) {
+  const peer = new Peer({
+    remote: name,
+    polite: true,
+    mayOffer: false,
+    iceServers: config.iceServers,
+    send: (msg) => room.send(msg),
+    log,
+    beforeAnswer: role === 'client' ? (pc) => sendVideoOn(pc) : undefined,
+  });
+  const entry = { peer, role, channel: null };
+  peer.addEventListener('track', (event) => {
+    if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail.track);
+  });
+  peer.addEventListener('datachannel', (event) => onDataChannel(entry, event.detail));
+  peer.addEventListener('state', (event) => {
+    if (event.detail === 'failed' && peers.get(name) === entry) closePeer(name, 'connection failed');
+    updatePeers();
+  });
+  peers.set(name, entry);
+  updatePeers();
+  return entry;
+}
+
+function closePeer(name, reason) {
+  const entry = peers.get(name);
+  if (entry === undefined) return;
+  peers.delete(name);
+  entry.peer.close();
+  log.info(`connection with ${name} closed: ${reason}`);
+  if (entry.role === 'vehicle') {
+    vehicleTrack = null;
+    video.srcObject = null;
+    for (const client of clientEntries()) {
+      sendVideoOn(client.peer.pc).catch((err) => log.error(`could not stop forwarding video: ${err.message}`));
+    }
+    status.vehicle = null;
+    broadcastState();
+  }
+  updatePeers();
+}
+
+async function onOffer(msg) {
+  const role = roleOf(msg.from);
+  if (role !== 'vehicle' && role !== 'client') {
+    log.warn(`ignored an offer from ${msg.from}: not a vehicle or client of this room`);
+    return;
+  }
+  let entry = peers.get(msg.from);
+  if (entry === undefined || entry.peer.closed) entry = createPeer(msg.from, role);
+  try {
+    await entry.peer.handle(msg);
+  } catch (err) {
+    // A peer that reloaded offers a new DTLS identity to our old connection: start afresh.
+    log.warn(`offer from ${msg.from} does not fit the old connection (${err.message}); starting a new one`);
+    closePeer(msg.from, 'replaced');
+    entry = createPeer(msg.from, role);
+    await entry.peer.handle(msg);
+  }
+}
+
+/** Queue a signaling message per sender, so an offer is applied before its candidates. */
+function onPeerSignal(msg) {
+  const run = async () => {
+    if (msg.type === 'offer') await onOffer(msg);
+    else await peers.get(msg.from)?.peer.handle(msg);
+  };
+  const previous = signalQueues.get(msg.from) ?? Promise.resolve();
+  const next = previous.then(run).catch((err) => log.error(`negotiation with ${msg.from} failed: ${err.message}`));
+  signalQueues.set(msg.from, next);
+}
+
+/** Send the vehicle's video (or nothing yet) on every video transceiver of a client's connection. */
+async function sendVideoOn(pc) {
+  for (const transceiver of pc.getTransceivers()) {
+    if (transceiver.stopped || transceiver.receiver.track.kind !== 'video') continue;
+    // The client offers recvonly; answering sendonly lets the track change later with no
+    // renegotiation, which this side could not start anyway.
+    if (pc.signalingState === 'have-remote-offer') transceiver.direction = 'sendonly';
+    await transceiver.sender.replaceTrack(vehicleTrack);
+  }
+}
+
+function onVehicleTrack(track) {
+  vehicleTrack = track;
+  video.srcObject = new MediaStream([track]);
+  log.info('vehicle video arrived; forwarding it to the clients');
+  for (const client of clientEntries()) {
+    sendVideoOn(client.peer.pc).catch((err) => log.error(`could not forward video: ${err.message}`));
+  }
+}
+
+function onDataChannel(entry, channel) {
+  const name = entry.peer.remote;
+  if (entry.role === 'vehicle' && channel.label === 'autopilot') {
+    serveChannel(channel, { pose: (msg) => onPose(msg) }, log);
+    channel.addEventListener('open', () => {
+      entry.channel = channel;
+      status.vehicle = name;
+      log.info(`autopilot channel to vehicle ${name} open`);
+      broadcastState();
+      updatePeers();
+    });
+  } else if (entry.role === 'client' && channel.label === 'control') {
+    serveChannel(
+      channel,
+      {
+        getOps: () => sendOps(entry),
+        setOp: (msg) => setOp(msg, name),
+        start: () => setPiloting(true, name),
+        stop: () => setPiloting(false, name),
+      },
+      log,
+    );
+    channel.addEventListener('open', () => {
+      entry.channel = channel;
+      log.info(`control channel to client ${name} open`);
+      sendOps(entry);
+      updatePeers();
+    });
+  } else {
+    log.warn(`${entry.role} ${name} opened an unexpected data channel "${channel.label}"`);
+    return;
+  }
+  channel.addEventListener('close', () => {
+    if (entry.channel === channel) entry.channel = null;
+    if (entry.role === 'vehicle' && status.vehicle === name) {
+      status.vehicle = null;
+      broadcastState();
+    }
+    updatePeers();
+  });
+}
+
+// ---------------------------------------------------------------- control
+
+function stateMessage() {
+  return { type: 'state', piloting: status.piloting, op: status.op, vehicle: status.vehicle };
+}
+
+function broadcast(msg) {
+  for (const client of clientEntries()) sendJson(client.channel, msg);
+}
+
+function broadcastState() {
+  show('piloting', status.piloting ? 'yes' : 'no');
+  if (status.op !== null) show('operation', status.op);
+  showState();
+  broadcast(stateMessage());
+}
+
+async function sendOps(entry) {
+  const ready = await analyzerReady;
+  if (ready === null) {
+    sendJson(entry.channel, { type: 'error', reason: 'the relay has no OpenCV.js analyzer (see its log)', ref: 'getOps' });
+    return;
+  }
+  sendJson(entry.channel, { type: 'ops', ops: ready.ops, current: status.op });
+  sendJson(entry.channel, stateMessage());
+}
+
+function setOp(msg, from) {
+  if (typeof msg.op !== 'string') throw new BadMessage('"setOp" needs a string "op"');
+  if (analyzer === null) throw new BadMessage('operations are still loading; try again');
+  if (!analyzer.ops.some((op) => op.id === msg.op)) {
+    throw new BadMessage(`unknown operation "${msg.op}"; the current one stays "${status.op}"`);
+  }
+  if (msg.op !== status.op) log.info(`operation ${status.op} → ${msg.op} (asked by ${from})`);
+  status.op = msg.op;
+  broadcastState();
+}
+
+function setPiloting(on, from) {
+  if (on === status.piloting) {
+    broadcastState();
+    return;
+  }
+  status.piloting = on;
+  log.info(`${on ? 'piloting started' : 'piloting stopped'} by ${from}`);
+  if (on) {
+    startLoop();
+  } else {
+    stopLoop();
+    sendJson(vehicleEntry()?.channel, { type: 'stop' });
+  }
+  broadcastState();
+}
+
+function onPose(msg) {
+  const pose = {
+    type: 'pose',
+    x: requireNumber(msg, 'x'),
+    y: requireNumber(msg, 'y'),
+    theta: requireNumber(msg, 'theta'),
+    t: typeof msg.t === 'number' ? msg.t : Date.now(),
+  };
+  broadcast(pose);
+}
+
+// ---------------------------------------------------------------- snapshot loop
+
+let busy = false;
+let timer = null;
+let frameCallback = null;
+
+function startLoop() {
+  if (config.profile === 'thesis') {
+    timer = setInterval(snapshot, THESIS_PERIOD_MS);
+    return;
+  }
+  const onFrame = () => {
+    if (!status.piloting) return;
+    frameCallback = video.requestVideoFrameCallback(onFrame);
+    snapshot();
+  };
+  frameCallback = video.requestVideoFrameCallback(onFrame);
+}
+
+function stopLoop() {
+  if (timer !== null) clearInterval(timer);
+  if (frameCallback !== null) video.cancelVideoFrameCallback(frameCallback);
+  timer = null;
+  frameCallback = null;
+}
+
+/** One snapshot → analysis → goal, unless one is already in flight. */
+async function snapshot() {
+  if (busy || analyzer === null || video.videoWidth === 0) return;
+  busy = true;
+  try {
+    await analyzeOnce();
+    lastError = null;
+  } catch (err) {
+    // Every frame would repeat it: log a failure once until something succeeds again.
+    if (err.message !== lastError) log.error(`snapshot failed: ${err.message}`);
+    lastError = err.message;
+  } finally {
+    busy = false;
+  }
+}
+
+async function analyzeOnce() {
+  const started = performance.now();
+  const bitmap = await createImageBitmap(video);
+  const result = await analyzer.analyze(bitmap, status.op, { profile: config.profile });
+  if (!status.piloting) return;
+  status.snapshots += 1;
+  if (result.target) {
+    const goal = {
+      type: 'goal',
+      seq: status.goalsSent + 1,
+      op: result.op,
+      x: result.target.x,
+      y: result.target.y,
+      w: result.w,
+      h: result.h,
+      t: Date.now(),
+    };
+    if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
+    if (sendJson(vehicleEntry()?.channel, goal)) {
+      status.goalsSent += 1;
+      status.lastGoal = goal;
+      status.goalTimes.push(performance.now());
+    }
+  }
+  const ms = performance.now() - started;
+  status.processingMs.push(ms);
+  if (status.processingMs.length > MS_SAMPLES) status.processingMs.shift();
+  const now = performance.now();
+  while (status.goalTimes.length && now - status.goalTimes[0] > RATE_WINDOW_MS) status.goalTimes.shift();
+  const goalsPerS = status.goalTimes.length / (RATE_WINDOW_MS / 1000);
+  const detections = {
+    type: 'detections',
+    op: result.op,
+    boxes: result.boxes,
+    target: result.target,
+    w: result.w,
+    h: result.h,
+    ms,
+    goalsPerS,
+  };
+  status.lastDetections = detections;
+  broadcast(detections);
+  drawDetections(overlay, detections);
+  show('goals-sent', String(status.goalsSent));
+  show('ms-per-snapshot', fmt(ms));
+  show('goals-per-s', fmt(goalsPerS));
+}
+
+// ---------------------------------------------------------------- page
+
+function updatePeers() {
+  status.clients = clientEntries().map((entry) => entry.peer.remote);
+  const lines = [...peers.entries()].map(
+    ([name, entry]) => `${entry.role} ${name} (${entry.peer.pc.connectionState}${entry.channel ? ', channel open' : ''})`,
+  );
+  show('peers', lines.join('; ') || 'none');
+}
+
+function showState() {
+  const piloting = status.piloting ? ` · piloting with ${status.op}` : '';
+  show('state', `${room.describe()}${piloting}`);
+}
+
+room.bindControls();
+room.addEventListener('phase', (event) => {
+  showState();
+  if (event.detail === 'disconnected') {
+    for (const name of [...peers.keys()]) closePeer(name, 'left the room');
+    if (status.piloting) setPiloting(false, 'this relay leaving');
+  }
+});
+room.addEventListener('roster', showState);
+room.addEventListener('peerleft', (event) => {
+  closePeer(event.detail, 'left the room');
+  signalQueues.delete(event.detail);
+});
+room.addEventListener('signal', (event) => {
+  const msg = event.detail;
+  switch (msg.type) {
+    case 'offer':
+    case 'candidate':
+      onPeerSignal(msg);
+      break;
+    case 'answer':
+      log.warn(`ignored an answer from ${msg.from}: the relay never offers`);
+      break;
+    case 'start':
+      setPiloting(true, msg.from);
+      break;
+    case 'stop':
+      setPiloting(false, msg.from);
+      break;
+    case 'getOps': {
+      const entry = peers.get(msg.from);
+      // Without an open control channel yet, the ops go out when it opens.
+      if (entry?.channel) sendOps(entry);
+      break;
+    }
+    default:
+      log.warn(`unexpected signaling message "${msg.type}" from ${msg.from}`);
+  }
+});
+if (config.auto) room.autoJoin();

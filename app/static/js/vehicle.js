@@ -1,0 +1,208 @@
+// The vehicle page: camera to the relay, goals from the `autopilot` data channel turned into
+// Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to the relay.
+import { Controller, PROFILES } from './control.js';
+import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RoomSession } from './room.js';
+import { byTestId, fmt, Log, readConfig, show } from './ui.js';
+
+const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
+const TICK_MS = 50;
+const ROS_RETRY_MS = 2000;
+
+const config = readConfig();
+const log = new Log(byTestId('log'));
+const room = new RoomSession(config, log);
+const profile = PROFILES[config.profile];
+const controller = new Controller(profile);
+
+/** The page's one session object, read-only for tests and benchmarks. */
+const status = {
+  goalsReceived: 0,
+  lastGoal: null,
+  twistsPublished: 0,
+  lastTwist: null,
+  pose: null,
+  rosConnected: false,
+  relayChannelOpen: false,
+};
+window.autopilotStatus = status;
+
+/** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
+class Turtle {
+  constructor(url, rosVersion) {
+    this.url = url;
+    const ros2 = rosVersion === '2';
+    this.types = {
+      twist: ros2 ? 'geometry_msgs/msg/Twist' : 'geometry_msgs/Twist',
+      pose: ros2 ? 'turtlesim/msg/Pose' : 'turtlesim/Pose',
+      teleport: ros2 ? 'turtlesim/srv/TeleportAbsolute' : 'turtlesim/TeleportAbsolute',
+    };
+    this.ros = null;
+    this.cmdVel = null;
+    this.spawnDone = false;
+    this.onPose = () => {};
+  }
+
+  connect() {
+    const ros = new ROSLIB.Ros({ url: this.url });
+    this.ros = ros;
+    ros.on('connection', () => {
+      log.info(`rosbridge connected: ${this.url}`);
+      status.rosConnected = true;
+      show('ros-state', 'connected');
+      this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: this.types.twist });
+      const pose = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: this.types.pose });
+      pose.subscribe((msg) => this.#pose(msg));
+    });
+    ros.on('error', () => log.error(`rosbridge ${this.url}: connection error`));
+    ros.on('close', () => {
+      if (this.ros !== ros) return;
+      status.rosConnected = false;
+      this.cmdVel = null;
+      show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
+      setTimeout(() => this.connect(), ROS_RETRY_MS);
+    });
+  }
+
+  publish(twist) {
+    if (this.cmdVel === null) return false;
+    this.cmdVel.publish({ linear: { x: twist.linear, y: 0, z: 0 }, angular: { x: 0, y: 0, z: twist.angular } });
+    return true;
+  }
+
+  #pose(msg) {
+    if (!this.spawnDone) {
+      this.spawnDone = true;
+      this.#spawnStep(msg);
+    }
+    this.onPose({ x: msg.x, y: msg.y, theta: msg.theta });
+  }
+
+  // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
+  #spawnStep(pose) {
+    const service = new ROSLIB.Service({ ros: this.ros, name: '/turtle1/teleport_absolute', serviceType: this.types.teleport });
+    service.callService(
+      { x: pose.x, y: pose.y, theta: Math.PI / 2 },
+      () => log.info('spawn step: turtle1 turned to π/2'),
+      (err) => log.error(`spawn step failed: ${err}`),
+    );
+  }
+}
+
+const turtle = new Turtle(config.rosbridge, config.ros);
+let channel = null;
+let lastPoseSent = 0;
+let rosWarned = false;
+
+function publish(twist, why) {
+  if (twist === null) return;
+  if (!turtle.publish(twist)) {
+    // Once per outage: goals keep coming at frame rate and would flood the log.
+    if (!rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
+    rosWarned = true;
+    return;
+  }
+  rosWarned = false;
+  status.twistsPublished += 1;
+  status.lastTwist = { ...twist, t: Date.now() };
+  show('twist', `angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
+  if (twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
+}
+
+function halt(reason) {
+  publish(controller.stop(), reason);
+}
+
+/** Run one controller step; a goal timeout inside it shows up as `active` turning false. */
+function drive(step) {
+  const wasActive = controller.active;
+  const twist = step();
+  publish(twist, wasActive && !controller.active ? 'goals stopped coming' : 'goal');
+}
+
+turtle.onPose = (pose) => {
+  status.pose = pose;
+  show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
+  drive(() => controller.pose(pose));
+  const now = performance.now();
+  if (now - lastPoseSent >= POSE_FORWARD_MS && sendJson(channel, { type: 'pose', ...pose, t: Date.now() })) {
+    lastPoseSent = now;
+  }
+};
+
+setInterval(() => drive(() => controller.tick()), TICK_MS);
+
+function onGoal(msg) {
+  const goal = {
+    x: requireNumber(msg, 'x'),
+    y: requireNumber(msg, 'y'),
+    w: requireNumber(msg, 'w'),
+    h: requireNumber(msg, 'h'),
+    seq: typeof msg.seq === 'number' ? msg.seq : null,
+    frame: typeof msg.frame === 'number' ? msg.frame : null,
+    op: typeof msg.op === 'string' ? msg.op : null,
+  };
+  if (goal.w <= 0 || goal.h <= 0) throw new BadMessage('"goal" needs a positive frame size w, h');
+  if (!controller.active) log.info(`piloting: first goal${goal.op ? ` (${goal.op})` : ''}`);
+  status.goalsReceived += 1;
+  status.lastGoal = { ...goal, t: msg.t ?? null };
+  show('goals-received', String(status.goalsReceived));
+  drive(() => controller.goal(goal));
+}
+
+function setupPeer(peer, stream) {
+  if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
+  const dc = peer.pc.createDataChannel('autopilot');
+  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log);
+  dc.addEventListener('open', () => {
+    channel = dc;
+    status.relayChannelOpen = true;
+    log.info(`autopilot channel to ${peer.remote} open`);
+    showState();
+  });
+  dc.addEventListener('close', () => {
+    if (channel !== dc) return;
+    channel = null;
+    status.relayChannelOpen = false;
+    halt('relay channel closed');
+    showState();
+  });
+}
+
+function showState() {
+  const link = status.relayChannelOpen ? ' · relay channel open' : '';
+  show('state', `${room.describe()}${link}`);
+}
+
+async function startCamera() {
+  try {
+    const stream = await navigator.mediaDevices.getUserMedia({
+      video: { width: { ideal: 640 }, height: { ideal: 480 } },
+      audio: false,
+    });
+    byTestId('camera').srcObject = stream;
+    const settings = stream.getVideoTracks()[0].getSettings();
+    log.info(`camera on: ${settings.width}×${settings.height}`);
+    return stream;
+  } catch (err) {
+    log.error(`camera unavailable (${err.name}: ${err.message}); connecting without video`);
+    return null;
+  }
+}
+
+room.bindControls();
+room.addEventListener('phase', showState);
+room.addEventListener('roster', showState);
+room.addEventListener('phase', (event) => {
+  if (event.detail === 'disconnected') halt('left the room');
+});
+turtle.connect();
+const stream = await startCamera();
+const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: (peer) => setupPeer(peer, stream) });
+link.addEventListener('lost', (event) => {
+  halt(event.detail);
+  showState();
+});
+link.addEventListener('peer', showState);
+link.sync();
+if (config.auto) room.autoJoin();
