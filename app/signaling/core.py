@@ -106,6 +106,10 @@ class Hub:
         self._connections[conn] = _Connection(conn)
         return conn
 
+    def rooms(self) -> list[str]:
+        """Names of the rooms that have anyone in them."""
+        return list(self._rooms)
+
     def roster(self, room: str) -> list[PeerInfo]:
         """Who is in ``room`` now, in join order."""
         return [peer.info() for peer in self._rooms.get(room, {}).values()]
@@ -179,8 +183,9 @@ class Hub:
         if self.token is not None and not hmac.compare_digest(
             (login.token or "").encode(), self.token.encode()
         ):
-            return self._refuse_login(connection, "bad token")
-        room = self._rooms.setdefault(login.room, {})
+            return self._refuse_login(connection, "bad or missing token")
+        # Only a successful login creates a room: refused ones must not leave empty rooms behind.
+        room = self._rooms.get(login.room, {})
         if login.name in room:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
@@ -192,7 +197,7 @@ class Hub:
             )
         others = list(room.values())
         peer = _Peer(connection.id, login.name, login.role, login.room)
-        room[peer.name] = peer
+        self._rooms.setdefault(login.room, room)[peer.name] = peer
         connection.peer = peer
         connection.errors_in_a_row = 0
         log.info("%s %r joined room %r", peer.role, peer.name, peer.room)

@@ -327,9 +327,18 @@ def test_same_name_and_relay_slot_are_free_again_after_leaving(h: Harness, how: 
 
 def test_last_peer_leaving_empties_the_room(h: Harness) -> None:
     conn = h.login("a", "client", room="brief")
+    assert h.hub.rooms() == ["brief"]
     h.hub.disconnect(conn)
-    assert h.hub.roster("brief") == []
+    assert h.hub.rooms() == []
     h.login("a", "relay", room="brief")
+
+
+def test_refused_logins_leave_no_rooms_behind() -> None:
+    h = Harness(Hub(token="t"))
+    for n in range(5):
+        conn = h.hub.connect()
+        h.send(conn, {"type": "login", "name": "x", "role": "client", "room": f"r{n}"})
+    assert h.hub.rooms() == []
 
 
 # -- rooms ------------------------------------------------------------------------------------
