@@ -80,6 +80,8 @@ class Switchboard:
                 while not outbox.empty():
                     outbox.get_nowait()
                 outbox.put_nowait(_Shut(CLOSE_TRY_AGAIN_LATER, "too many unread messages"))
+                # Nothing more for it: its writer closes the socket, its reader then leaves.
+                del self._outboxes[action.conn]
 
 
 @router.websocket("/ws")

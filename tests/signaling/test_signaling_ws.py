@@ -254,3 +254,5 @@ async def test_a_peer_that_does_not_read_is_closed_instead_of_buffered_without_b
     assert outbox.qsize() == 1
     shut = outbox.get_nowait()
     assert getattr(shut, "code", None) == 1013
+    board.dispatch([Outgoing(conn, {"type": "peers"})])
+    assert outbox.empty(), "nothing is queued behind the close"
