@@ -292,11 +292,6 @@ class Topic:
     leaf: Literal["cmd_vel", "pose"]
 
     @property
-    def canonical(self) -> str:
-        """The topic's name with its leading slash."""
-        return f"/{self.turtle}/{self.leaf}"
-
-    @property
     def types(self) -> frozenset[str]:
         """Type names a client may give for this topic."""
         return _TOPIC_TYPES[self.leaf]
@@ -403,8 +398,10 @@ class RosbridgeSession:
         """Handle one text frame; returns the replies to send back, in order."""
         try:
             message = json.loads(text, parse_constant=_reject_constant)
-        except (json.JSONDecodeError, ValueError) as exc:
+        except ValueError as exc:
             return self._status("error", f"malformed JSON: {exc}", None)
+        except RecursionError:
+            return self._status("error", "malformed JSON: nested too deeply", None)
         if not isinstance(message, dict):
             return self._status("error", "a rosbridge message must be a JSON object", None)
         raw_id = message.get("id")

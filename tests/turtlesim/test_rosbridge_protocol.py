@@ -75,6 +75,7 @@ def poses(publications: list[dict[str, Any]], topic: str) -> list[dict[str, Any]
         ("{not json", "malformed JSON"),
         ('{"op": "publish", "topic": "/turtle1/cmd_vel", "msg": {"linear": {"x": NaN}}}', "NaN"),
         (INFINITE_TWIST, "linear.x"),
+        ("[" * 50_000, "nested too deeply"),
         ("[1, 2]", "JSON object"),
         ('"publish"', "JSON object"),
         ('{"topic": "/turtle1/pose"}', "'op'"),
