@@ -52,7 +52,8 @@ _TOPIC_TYPES = {"cmd_vel": TWIST_TYPES, "pose": POSE_TYPES}
 _TOPIC_RE = re.compile(r"/?(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<leaf>cmd_vel|pose)\Z")
 _SERVICE_RE = re.compile(
     r"/?(?:(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<turtle_service>teleport_absolute|"
-    r"teleport_relative|set_pen)|(?P<global_service>spawn|kill|reset|clear))\Z"
+    r"teleport_relative|set_pen)|(?P<global_service>spawn|kill|reset|clear|"
+    r"rosapi/topics|rosapi/services|rosapi/topic_type))\Z"
 )
 
 
@@ -265,6 +266,46 @@ def _set_pen(sim: TurtleSim, turtle: str, args: Json) -> Json:
     return {}
 
 
+class TopicTypeArgs(_Payload):
+    """``rosapi/TopicType`` request."""
+
+    topic: StrictStr = ""
+
+
+# What ``rosapi`` reports; ROS 2 names, as a ROS 2 rosbridge would.
+_REPORTED_TOPIC_TYPES = {"cmd_vel": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"}
+_TURTLE_SERVICES = ("teleport_absolute", "teleport_relative", "set_pen")
+
+
+def _rosapi_topics(sim: TurtleSim, _turtle: str, args: Json) -> Json:
+    _parse(EmptyArgs, args, "args")
+    pairs = [
+        (f"/{name}/{leaf}", kind)
+        for name in sim.names()
+        for leaf, kind in _REPORTED_TOPIC_TYPES.items()
+    ]
+    return {"topics": [t for t, _ in pairs], "types": [k for _, k in pairs]}
+
+
+def _rosapi_services(sim: TurtleSim, _turtle: str, args: Json) -> Json:
+    _parse(EmptyArgs, args, "args")
+    names = [f"/{name}" for name in SERVICES if name not in _TURTLE_SERVICES]
+    names += [f"/{turtle}/{name}" for turtle in sim.names() for name in _TURTLE_SERVICES]
+    return {"services": names}
+
+
+def _rosapi_topic_type(sim: TurtleSim, _turtle: str, args: Json) -> Json:
+    name = _parse(TopicTypeArgs, args, "args").topic
+    match = _TOPIC_RE.match(name)
+    if match is None or match["turtle"] not in sim.names():
+        return {"type": ""}  # rosapi's answer for a topic nobody publishes
+    return {"type": _REPORTED_TOPIC_TYPES[match["leaf"]]}
+
+
+def _rosapi_types(name: str) -> frozenset[str]:
+    return _ros_types("rosapi", name, "srv") | _ros_types("rosapi_msgs", name, "srv")
+
+
 _EMPTY_TYPES = _ros_types("std_srvs", "Empty", "srv")
 SERVICES: dict[str, _Service] = {
     "spawn": _Service(_ros_types("turtlesim", "Spawn", "srv"), _spawn),
@@ -278,6 +319,10 @@ SERVICES: dict[str, _Service] = {
         _ros_types("turtlesim", "TeleportRelative", "srv"), _teleport_relative
     ),
     "set_pen": _Service(_ros_types("turtlesim", "SetPen", "srv"), _set_pen),
+    # The discovery services of rosbridge_suite's rosapi node, which clients' get_topics() use.
+    "rosapi/topics": _Service(_rosapi_types("Topics"), _rosapi_topics),
+    "rosapi/services": _Service(_rosapi_types("Services"), _rosapi_services),
+    "rosapi/topic_type": _Service(_rosapi_types("TopicType"), _rosapi_topic_type),
 }
 
 

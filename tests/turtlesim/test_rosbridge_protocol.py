@@ -477,6 +477,34 @@ def test_failed_calls_answer_result_false_and_a_status_error(
     assert world.sim.names() == ["turtle1"]
 
 
+def test_rosapi_lists_topics_and_services_of_living_turtles(session: RosbridgeSession) -> None:
+    service_call(session, "/spawn", name="leo")
+    topics = service_call(session, "/rosapi/topics")["values"]
+    listed = dict(zip(topics["topics"], topics["types"], strict=True))
+    assert listed == {
+        "/turtle1/cmd_vel": "geometry_msgs/msg/Twist",
+        "/turtle1/pose": "turtlesim/msg/Pose",
+        "/leo/cmd_vel": "geometry_msgs/msg/Twist",
+        "/leo/pose": "turtlesim/msg/Pose",
+    }
+    services = set(service_call(session, "/rosapi/services")["values"]["services"])
+    assert {"/spawn", "/kill", "/reset", "/clear", "/leo/set_pen"} <= services
+    assert "/turtle2/set_pen" not in services
+    # Every listed service can be called (the empty request is valid for these).
+    for name in ("/clear", "/turtle1/set_pen", "/leo/teleport_relative"):
+        assert name in services
+        assert service_call(session, name)["result"] is True
+
+
+def test_rosapi_topic_type(session: RosbridgeSession) -> None:
+    assert service_call(session, "/rosapi/topic_type", topic="/turtle1/pose")["values"] == {
+        "type": "turtlesim/msg/Pose"
+    }
+    assert service_call(session, "/rosapi/topic_type", topic="/turtle9/pose")["values"] == {
+        "type": ""
+    }
+
+
 # -- status level -------------------------------------------------------------------------------
 
 

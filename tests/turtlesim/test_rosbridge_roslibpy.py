@@ -188,6 +188,20 @@ def test_a_failing_service_call_raises_in_roslibpy(ros: roslibpy.Ros) -> None:
     assert spawn.call(roslibpy.ServiceRequest({"name": "leo"}), timeout=WAIT_S)["name"] == "leo"
 
 
+def test_discovery_through_rosapi(ros: roslibpy.Ros) -> None:
+    roslibpy.Service(ros, "/spawn", "turtlesim/Spawn").call(
+        roslibpy.ServiceRequest({"name": "leo"}), timeout=WAIT_S
+    )
+    assert set(ros.get_topics()) == {
+        "/turtle1/cmd_vel",
+        "/turtle1/pose",
+        "/leo/cmd_vel",
+        "/leo/pose",
+    }
+    assert "/leo/teleport_absolute" in ros.get_services()
+    assert ros.get_topic_type("/leo/pose") == "turtlesim/msg/Pose"
+
+
 # -- raw sockets: errors, many clients, cleanup ---------------------------------------------------
 
 
@@ -230,7 +244,7 @@ async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) 
 
 
 async def test_unknown_service_gets_status_and_failed_response(rosbridge_url: str) -> None:
-    call = json.dumps({"op": "call_service", "id": "c1", "service": "/rosapi/topics"})
+    call = json.dumps({"op": "call_service", "id": "c1", "service": "/rosapi/nodes"})
     status, response = await exchange(rosbridge_url, call, replies=2)
     assert status["op"] == "status"
     assert status["id"] == "c1"
