@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
+from app import operations
 from app.config import PACKAGE_DIR, Settings
 from app.pages import router as pages_router
 from app.signaling.routes import Switchboard
@@ -30,6 +31,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app = FastAPI(title="webrtc-autopilot", lifespan=lifespan)
     app.state.settings = settings
+    # Validated here so that a bad operations spec stops the server before it serves anything.
+    app.state.operations = operations.load_spec(settings.operations_spec)
+    app.include_router(operations.router)
     app.state.signaling = Switchboard.from_settings(settings)
     app.include_router(signaling_router)
     app.include_router(pages_router)

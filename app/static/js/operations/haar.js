@@ -1,0 +1,82 @@
+// Shared Haar-cascade pipeline for the cascade operations (face.js, body.js).
+//
+// The steps match app/operations.py (_detect_cascade) call for call, so Python OpenCV on the
+// same RGBA pixels finds the same rectangles: RGBA -> gray, reduce to detectWidth with
+// INTER_AREA, detectMultiScale per cascade, boxes scaled back to full-frame pixels.
+
+/** Size of the detection image, or null when the frame is used as it is (see _reduction). */
+export function reduction(width, height, detectWidth) {
+  if (detectWidth == null || width <= detectWidth) return null;
+  return { width: detectWidth, height: Math.floor((height * detectWidth) / width + 0.5) };
+}
+
+/** Scale a detection-image box back to the full frame, rounding halves up as Python does. */
+export function scaleBox([x, y, w, h], factor) {
+  const r = (v) => Math.floor(v * factor + 0.5);
+  return [r(x), r(y), r(w), r(h)];
+}
+
+/** Boxes in the order Python's list.sort() gives tuples. */
+export function sortBoxes(boxes) {
+  return boxes.sort((a, b) => a[0] - b[0] || a[1] - b[1] || a[2] - b[2] || a[3] - b[3]);
+}
+
+/** Centre of the largest box (first of equal areas), or null. */
+export function centreOfLargest(boxes) {
+  let best = null;
+  for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
+  return best === null ? null : { x: best[0] + best[2] / 2, y: best[1] + best[3] / 2 };
+}
+
+/**
+ * An operation over every cascade of `spec.params`: the union of their boxes, and the centre of
+ * the largest box as the target. Mats are reused across frames and freed by delete().
+ */
+export function createCascadeOperation(cv, spec, files) {
+  const p = spec.params;
+  const classifiers = p.cascades.map((name) => {
+    if (!files.includes(name)) throw new Error(`cascade ${name} was not loaded`);
+    const c = new cv.CascadeClassifier();
+    if (!c.load(name)) {
+      c.delete();
+      throw new Error(`cascade ${name} failed to load`);
+    }
+    return c;
+  });
+  const gray = new cv.Mat();
+  const small = new cv.Mat();
+  const rects = new cv.RectVector();
+  const minSize = new cv.Size(p.minSize[0], p.minSize[1]);
+  const maxSize = new cv.Size(p.maxSize[0], p.maxSize[1]);
+
+  return {
+    /** Boxes [x, y, w, h] in full-frame pixels, sorted, and the target point or null. */
+    detect(rgba) {
+      cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
+      const size = reduction(rgba.cols, rgba.rows, p.detectWidth);
+      let input = gray;
+      let factor = 1;
+      if (size !== null) {
+        cv.resize(gray, small, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
+        input = small;
+        factor = rgba.cols / size.width;
+      }
+      const boxes = [];
+      for (const c of classifiers) {
+        c.detectMultiScale(input, rects, p.scaleFactor, p.minNeighbors, 0, minSize, maxSize);
+        for (let i = 0; i < rects.size(); i += 1) {
+          const r = rects.get(i);
+          boxes.push(scaleBox([r.x, r.y, r.width, r.height], factor));
+        }
+      }
+      sortBoxes(boxes);
+      return { boxes, target: centreOfLargest(boxes) };
+    },
+    delete() {
+      for (const c of classifiers) c.delete();
+      gray.delete();
+      small.delete();
+      rects.delete();
+    },
+  };
+}

@@ -1,0 +1,215 @@
+// The relay's image pipeline, off the main thread. A classic worker, because opencv.js is a UMD
+// script (importScripts), while operation modules are ES modules loaded with import().
+//
+// Protocol (vision.js is the only other side):
+//   worker -> page  {type: 'ready', ops, defaultOp} | {type: 'failed', error}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels}
+//                   {type: 'memory', id}
+//   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
+'use strict';
+
+importScripts('/static/opencv.js');
+
+const FRAME_TAG_BITS = 24;
+const FRAME_TAG_BLOCKS = 2 + FRAME_TAG_BITS;
+
+/** Everything the worker holds, in one place. */
+const session = {
+  cv: null,
+  spec: null,
+  modules: new Map(), // module file -> imported ES module
+  instances: new Map(), // `${opId}:${profile}` -> operation instance
+  files: [], // cascade files written to the Emscripten FS
+  canvas: null,
+  ctx: null,
+  frame: null, // cv.Mat CV_8UC4 reused while the frame size stays the same
+};
+
+/**
+ * Wait for the OpenCV.js runtime. `self.cv` is a Promise in some builds and an Emscripten
+ * module with its own `then` in others; the latter must never be returned from an async
+ * function or resolved as a value, or the promise machinery follows its `then` forever.
+ */
+async function loadOpenCv() {
+  if (self.cv instanceof Promise) {
+    session.cv = await self.cv;
+    return;
+  }
+  if (!self.cv.Mat) {
+    await new Promise((resolve) => {
+      self.cv.onRuntimeInitialized = resolve;
+    });
+  }
+  session.cv = self.cv;
+}
+
+async function fetchOk(url) {
+  const response = await fetch(url);
+  if (!response.ok) throw new Error(`${url}: HTTP ${response.status}`);
+  return response;
+}
+
+async function init() {
+  await loadOpenCv();
+  session.spec = await (await fetchOk('/operations.json')).json();
+  const cascades = new Set();
+  for (const op of session.spec.operations) {
+    for (const params of [op.params, { ...op.params, ...op.thesis }]) {
+      for (const name of params.cascades ?? []) cascades.add(name);
+    }
+  }
+  for (const name of cascades) {
+    const bytes = new Uint8Array(await (await fetchOk(`/cascades/${name}`)).arrayBuffer());
+    session.cv.FS_createDataFile('/', name, bytes, true, false, false);
+    session.files.push(name);
+  }
+  for (const op of session.spec.operations) {
+    if (!session.modules.has(op.module)) {
+      session.modules.set(op.module, await import(`./operations/${op.module}`));
+    }
+  }
+  // Build every default-profile instance now so a broken module fails at start, not mid-flight.
+  for (const op of session.spec.operations) instanceFor(op.id, 'default');
+  return {
+    ops: session.spec.operations.map(({ id, label, description }) => ({ id, label, description })),
+    defaultOp: session.spec.default,
+  };
+}
+
+function instanceFor(opId, profile) {
+  const key = `${opId}:${profile}`;
+  let instance = session.instances.get(key);
+  if (instance) return instance;
+  const op = session.spec.operations.find((o) => o.id === opId);
+  if (!op) throw new Error(`unknown operation "${opId}"`);
+  if (profile !== 'default' && profile !== 'thesis') throw new Error(`unknown profile "${profile}"`);
+  const spec = profile === 'thesis' ? { ...op, params: { ...op.params, ...op.thesis } } : op;
+  instance = session.modules.get(op.module).create(session.cv, spec, session.files);
+  session.instances.set(key, instance);
+  return instance;
+}
+
+/** RGBA pixels of the source; ImageBitmap and VideoFrame are drawn and then closed. */
+function readPixels(source) {
+  if (source.data) return new ImageData(source.data, source.width, source.height);
+  const width = source.displayWidth ?? source.width;
+  const height = source.displayHeight ?? source.height;
+  try {
+    if (!session.canvas) {
+      session.canvas = new OffscreenCanvas(width, height);
+      session.ctx = session.canvas.getContext('2d', { willReadFrequently: true });
+    } else if (session.canvas.width !== width || session.canvas.height !== height) {
+      session.canvas.width = width;
+      session.canvas.height = height;
+    }
+    session.ctx.drawImage(source, 0, 0, width, height);
+    return session.ctx.getImageData(0, 0, width, height);
+  } finally {
+    source.close();
+  }
+}
+
+/**
+ * The frame number the synthetic video writes into the top row of blocks (docs/contracts.md,
+ * "Frame tag"), or null when the marker blocks do not read white, black.
+ */
+function decodeFrameTag(image) {
+  const { width, height, data } = image;
+  const b = Math.floor(width / 40);
+  if (b < 2 || height < b) return null;
+  const lo = Math.floor(b / 4);
+  const hi = lo + Math.max(1, Math.floor(b / 2));
+  const bit = (i) => {
+    let sum = 0;
+    let n = 0;
+    for (let y = lo; y < hi; y += 1) {
+      for (let x = i * b + lo; x < i * b + hi; x += 1) {
+        const k = (y * width + x) * 4;
+        sum += 0.299 * data[k] + 0.587 * data[k + 1] + 0.114 * data[k + 2];
+        n += 1;
+      }
+    }
+    return sum / n >= 128 ? 1 : 0;
+  };
+  if (bit(0) !== 1 || bit(1) !== 0) return null;
+  let value = 0;
+  for (let i = 2; i < FRAME_TAG_BLOCKS; i += 1) value = value * 2 + bit(i);
+  return value;
+}
+
+/** Words for an error; OpenCV's C++ exceptions reach JS as bare pointers. */
+function describe(error) {
+  if (typeof error === 'number' && session.cv?.exceptionFromPtr) {
+    return `OpenCV: ${session.cv.exceptionFromPtr(error).msg}`;
+  }
+  return String(error?.message ?? error);
+}
+
+function analyze({ source, opId, profile = 'default', returnPixels = false }) {
+  const started = performance.now();
+  let instance;
+  try {
+    instance = instanceFor(opId, profile);
+  } catch (error) {
+    source.close?.();
+    throw error;
+  }
+  const image = readPixels(source);
+  const { cv } = session;
+  if (!session.frame || session.frame.cols !== image.width || session.frame.rows !== image.height) {
+    session.frame?.delete();
+    session.frame = new cv.Mat(image.height, image.width, cv.CV_8UC4);
+  }
+  session.frame.data.set(image.data);
+  const detectStarted = performance.now();
+  const { boxes, target } = instance.detect(session.frame);
+  const done = performance.now();
+  const result = {
+    op: opId,
+    boxes,
+    target,
+    w: image.width,
+    h: image.height,
+    ms: done - detectStarted,
+    workMs: done - started,
+    frame: decodeFrameTag(image),
+  };
+  if (returnPixels) result.rgba = image.data;
+  return result;
+}
+
+self.onmessage = ({ data: message }) => {
+  switch (message.type) {
+    case 'analyze': {
+      try {
+        const result = analyze(message);
+        const transfer = result.rgba ? [result.rgba.buffer] : [];
+        self.postMessage({ type: 'result', id: message.id, result }, transfer);
+      } catch (error) {
+        self.postMessage({ type: 'error', id: message.id, error: describe(error) });
+      }
+      break;
+    }
+    case 'memory':
+      self.postMessage({
+        type: 'result',
+        id: message.id,
+        result: { wasmHeapBytes: session.cv.HEAPU8.length },
+      });
+      break;
+    case 'close':
+      for (const instance of session.instances.values()) instance.delete();
+      session.instances.clear();
+      session.frame?.delete();
+      session.frame = null;
+      self.close();
+      break;
+    default:
+      self.postMessage({ type: 'error', id: message.id, error: `unknown message ${message.type}` });
+  }
+};
+
+init().then(
+  (ready) => self.postMessage({ type: 'ready', ...ready }),
+  (error) => self.postMessage({ type: 'failed', error: describe(error) }),
+);

@@ -1,0 +1,83 @@
+// The relay's image pipeline: OpenCV.js and every operation of the spec, in a Web Worker.
+// The relay page and the parity page both use it, so parity checks the code path live frames
+// take. Interface: docs/contracts.md, "The analyzer".
+
+const WORKER_URL = '/static/js/vision-worker.js';
+
+/**
+ * Start the worker and wait until OpenCV.js, the cascades and every operation module are loaded.
+ * Resolves to {ops, defaultOp, analyze(source, opId, options), memory(), close()}.
+ */
+export async function createAnalyzer() {
+  const worker = new Worker(WORKER_URL);
+  const pending = new Map();
+  let nextId = 1;
+  let closed = false;
+
+  const ready = await new Promise((resolve, reject) => {
+    worker.onerror = (event) => reject(new Error(`vision worker failed: ${event.message}`));
+    worker.onmessage = ({ data }) => {
+      if (data.type === 'ready') resolve(data);
+      else reject(new Error(`vision worker failed to start: ${data.error}`));
+    };
+  }).catch((error) => {
+    worker.terminate();
+    throw error;
+  });
+
+  worker.onmessage = ({ data }) => {
+    const request = pending.get(data.id);
+    if (!request) return;
+    pending.delete(data.id);
+    if (data.type === 'result') request.resolve(data.result);
+    else request.reject(new Error(data.error));
+  };
+  worker.onerror = (event) => {
+    const error = new Error(`vision worker crashed: ${event.message}`);
+    for (const request of pending.values()) request.reject(error);
+    pending.clear();
+  };
+
+  function call(message, transfer = []) {
+    if (closed) return Promise.reject(new Error('analyzer is closed'));
+    const id = nextId;
+    nextId += 1;
+    return new Promise((resolve, reject) => {
+      pending.set(id, { resolve, reject });
+      worker.postMessage({ ...message, id }, transfer);
+    });
+  }
+
+  return {
+    /** [{id, label, description}] in spec order. */
+    ops: ready.ops,
+    /** The spec's default operation id. */
+    defaultOp: ready.defaultOp,
+
+    /**
+     * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so
+     * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
+     * Options: profile 'default' | 'thesis'; returnPixels adds `rgba` (the pixels analysed).
+     * Resolves to {op, boxes, target, w, h, ms, workMs, frame[, rgba]}.
+     */
+    analyze(source, opId, { profile = 'default', returnPixels = false } = {}) {
+      const transfer = source.data ? [] : [source];
+      return call({ type: 'analyze', source, opId, profile, returnPixels }, transfer);
+    },
+
+    /** {wasmHeapBytes}: size of the OpenCV WASM heap, for leak checks and benchmarks. */
+    memory() {
+      return call({ type: 'memory' });
+    },
+
+    /** Free every OpenCV object and stop the worker. */
+    close() {
+      if (closed) return;
+      closed = true;
+      worker.postMessage({ type: 'close' });
+      const error = new Error('analyzer is closed');
+      for (const request of pending.values()) request.reject(error);
+      pending.clear();
+    },
+  };
+}
