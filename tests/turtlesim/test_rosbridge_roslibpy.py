@@ -155,8 +155,9 @@ def test_throttled_subscription(ros: roslibpy.Ros) -> None:
         for _ in range(5):
             poses.next()
         elapsed = time.monotonic() - first
-        # Five 200 ms gaps; every-tick delivery would take about 80 ms.
-        assert elapsed > 0.8
+        # Five gaps of at least 200 ms at the server (every-tick delivery would take about
+        # 80 ms); arrival jitter on a loaded machine can shorten what the client sees a little.
+        assert elapsed > 0.6
     finally:
         topic.unsubscribe()
 
