@@ -187,7 +187,7 @@ function onDataChannel(entry, channel) {
     channel.addEventListener('open', () => {
       entry.channel = channel;
       log.info(`control channel to client ${name} open`);
-      sendOps(entry);
+      sendJson(channel, stateMessage());
       updatePeers();
     });
   } else {
@@ -404,8 +404,9 @@ room.addEventListener('signal', (event) => {
       setPiloting(false, msg.from);
       break;
     case 'getOps': {
+      // The answer rides the control channel; a client whose channel is not open yet asks
+      // again on it once it opens.
       const entry = peers.get(msg.from);
-      // Without an open control channel yet, the ops go out when it opens.
       if (entry?.channel) sendOps(entry);
       break;
     }

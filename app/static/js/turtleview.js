@@ -85,7 +85,7 @@ export class TurtleView {
 
 /** A top-down turtle heading along +x before rotation; canvas y points down, hence −theta. */
 function drawTurtle(ctx, x, y, theta, scale) {
-  const s = scale * 0.45; // about a turtlesim sprite: half a metre long
+  const s = scale * 0.8; // about the size of turtlesim's sprite
   ctx.save();
   ctx.translate(x, y);
   ctx.rotate(-theta);

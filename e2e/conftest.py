@@ -1,0 +1,124 @@
+"""Fixtures for the end-to-end tests: the server, headless Chromium, a fake camera video.
+
+Pages run in Debian's Chromium through Playwright (``app.browser``). The vehicle gets its own
+browser because the fake-camera file is a per-browser flag. Every page's screenshot and console
+are kept under ``artifacts/<test>/`` whether the test passes or fails.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlencode
+
+import pytest
+from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, sync_playwright
+
+from app.browser import chromium_args, chromium_path
+from app.config import Settings
+from app.serve import RunningServer, start_in_thread
+from e2e.helpers import FACES, FPS, face_frame, write_y4m
+
+REPO = Path(__file__).resolve().parents[1]
+ARTIFACTS = REPO / "artifacts"
+
+
+@pytest.fixture(scope="session")
+def face_left_video(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The fake camera: obama.jpg's face on the LEFT third of the frame, two seconds looped."""
+    path = tmp_path_factory.getbasetemp() / "face-left.y4m"
+    if not path.exists():
+        write_y4m(path, face_frame(FACES / "obama.jpg", "left"), frames=2 * FPS)
+    return path
+
+
+@pytest.fixture
+def server() -> Iterator[RunningServer]:
+    """A fresh server (and simulated turtle) per test, on a free port."""
+    running = start_in_thread(Settings())
+    yield running
+    running.stop()
+
+
+@pytest.fixture(scope="session")
+def playwright() -> Iterator[Playwright]:
+    with sync_playwright() as pw:
+        yield pw
+
+
+def _launch(playwright: Playwright, fake_video: Path | None = None) -> Browser:
+    return playwright.chromium.launch(
+        executable_path=chromium_path(), args=chromium_args(fake_video), headless=True
+    )
+
+
+@pytest.fixture(scope="session")
+def browser(playwright: Playwright) -> Iterator[Browser]:
+    """Chromium for the relay and client pages (default fake camera, unused)."""
+    launched = _launch(playwright)
+    yield launched
+    launched.close()
+
+
+@pytest.fixture(scope="session")
+def vehicle_browser(playwright: Playwright, face_left_video: Path) -> Iterator[Browser]:
+    """Chromium whose camera shows the face on the left."""
+    launched = _launch(playwright, face_left_video)
+    yield launched
+    launched.close()
+
+
+@dataclass
+class OpenedPage:
+    role: str
+    page: Page
+    console: list[str] = field(default_factory=list)
+
+
+OpenRole = Callable[..., Page]
+
+
+@pytest.fixture
+def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
+    """``open_role(role, browser, **query)`` opens a role page in its own browser context.
+
+    At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
+    """
+    opened: list[OpenedPage] = []
+
+    def open_page(role: str, browser: Browser, **query: str) -> Page:
+        context = browser.new_context(viewport={"width": 1280, "height": 960})
+        context.set_default_timeout(60_000)
+        page = context.new_page()
+        entry = OpenedPage(role, page)
+
+        def keep(message: ConsoleMessage) -> None:
+            entry.console.append(f"{message.type}: {message.text}")
+
+        page.on("console", keep)
+        # The relay's OpenCV.js runs in a Web Worker, whose console is separate.
+        page.on("worker", lambda worker: worker.on("console", keep))
+        page.on("pageerror", lambda error: entry.console.append(f"pageerror: {error}"))
+        opened.append(entry)
+        page.goto(f"{server.url}/{role}?{urlencode(query)}")
+        return page
+
+    yield open_page
+
+    folder = artifacts_dir(request)
+    # Every screenshot before any page closes, so each shows the session as it ended.
+    for entry in opened:
+        if not entry.page.is_closed():
+            entry.page.screenshot(path=str(folder / f"{entry.role}.png"), full_page=True)
+    for entry in opened:
+        (folder / f"{entry.role}.console.log").write_text("\n".join(entry.console) + "\n")
+        entry.page.context.close()
+
+
+def artifacts_dir(request: pytest.FixtureRequest) -> Path:
+    """``artifacts/<test name>/``, created on demand."""
+    folder = ARTIFACTS / re.sub(r"[^\w.-]+", "_", request.node.name)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder

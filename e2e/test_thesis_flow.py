@@ -1,0 +1,81 @@
+"""The thesis flow: a face on the left of the vehicle's camera turns the turtle to the left."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+from playwright.sync_api import Browser, expect
+
+from app.serve import RunningServer
+from e2e.conftest import OpenRole, artifacts_dir
+from e2e.helpers import status, turtle_state, wait_until
+
+pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
+
+
+def heading_error(theta: float, goal: float) -> float:
+    """Absolute angle between two headings, in [0, π]."""
+    return abs(math.atan2(math.sin(theta - goal), math.cos(theta - goal)))
+
+
+def test_face_on_the_left_turns_the_turtle_left_and_stop_stops_it(
+    request: pytest.FixtureRequest,
+    server: RunningServer,
+    open_role: OpenRole,
+    browser: Browser,
+    vehicle_browser: Browser,
+) -> None:
+    room = "thesis"
+    vehicle = open_role("vehicle", vehicle_browser, room=room, name="vehicle", auto="1")
+    open_role("relay", browser, room=room, name="relay", auto="1")
+    client = open_role("client", browser, room=room, name="client")
+
+    # The vehicle's spawn step: the turtle starts at the centre, facing up (θ = π/2).
+    wait_until(
+        lambda: heading_error(turtle_state(server)["theta"], math.pi / 2) < 0.01,
+        60,
+        "the spawn step to turn the turtle to π/2",
+    )
+
+    client.get_by_role("button", name="Connect").click()
+    client.get_by_role("button", name="Join Room").click()
+    operation = client.get_by_label("Select Operation")
+    expect(operation).to_be_enabled(timeout=120_000)  # filled from the relay's `ops`
+    operation.select_option("face")
+    client.get_by_role("button", name="Set Operation").click()
+    expect(client.get_by_test_id("active-op")).to_have_text("face")
+    client.get_by_role("button", name="Start Piloting").click()
+
+    expect(vehicle.get_by_test_id("goals-received")).not_to_have_text("0", timeout=60_000)
+    # The face sits in the left third of the frame, level with the turtle: the target lies
+    # straight to the turtle's left on the terrain, so the heading goes from π/2 to about π.
+    wait_until(
+        lambda: heading_error(turtle_state(server)["theta"], math.pi) < 0.3,
+        60,
+        "the turtle to turn toward the face on the left (θ ≈ π)",
+    )
+    # The client's turtle view follows the same route from pose telemetry.
+    wait_until(
+        lambda: heading_error(status(client)["pose"]["theta"], math.pi) < 0.3,
+        20,
+        "the client's route to show the turtle facing left",
+    )
+    expect(client.get_by_test_id("goals-per-s")).not_to_have_text("–")
+    client.screenshot(path=str(artifacts_dir(request) / "client-piloting.png"), full_page=True)
+
+    client.get_by_role("button", name="Stop Piloting").click()
+    expect(client.get_by_role("button", name="Start Piloting")).to_be_enabled(timeout=30_000)
+    # Let goals and Twists already on the wire land, then nothing more may come.
+    time.sleep(1.5)
+    before = status(vehicle)
+    theta_before = turtle_state(server)["theta"]
+    time.sleep(2.5)
+    after = status(vehicle)
+    turtle = turtle_state(server)
+    assert after["goalsReceived"] == before["goalsReceived"], "goals kept coming after Stop"
+    assert after["twistsPublished"] == before["twistsPublished"], "Twists kept coming after Stop"
+    assert after["lastTwist"]["angular"] == 0, "the last Twist was not a stop"
+    assert turtle["angular_velocity"] == 0 and turtle["linear_velocity"] == 0
+    assert abs(turtle["theta"] - theta_before) < 1e-9, "the turtle kept moving after Stop"
