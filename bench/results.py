@@ -81,8 +81,6 @@ class ProfileRun:
     profile: str
     # (time, ms) per snapshot that produced a goal, snapshot taken -> goal sent, in the relay.
     processing: list[tuple[float, float]] = field(default_factory=list)
-    # Detection time inside the analyzer for the same snapshots (part of ``processing``).
-    detection_ms: list[float] = field(default_factory=list)
     # Goals received by the vehicle, with the frame tag they echo (None when untagged).
     goals: list[tuple[float, int | None]] = field(default_factory=list)
     # Window over which goals were counted, while the face was in view.
@@ -204,7 +202,6 @@ def details(run: ProfileRun) -> dict[str, Any]:
     last = run.memory[-1] if run.memory else None
     return {
         "processing_ms": summary([ms for _, ms in run.processing]),
-        "detection_ms": summary(run.detection_ms),
         "glass_to_command_ms": summary(run.glass_ms()),
         "frame_to_goal_ms": summary(run.frame_to_goal_ms()),
         "goal_to_command_ms": summary(run.goal_to_command_ms()),
