@@ -1,0 +1,73 @@
+"""``autopilot bench --quick`` as a user runs it: every figure measured, the report written.
+
+Timings are never asserted against the targets here (that is the report's job); the test checks
+that each figure exists, is a finite number in a physically possible range, and that the files a
+person looks at were written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
+
+KEYS = (
+    "processing_ms_p50",
+    "processing_ms_p95",
+    "goals_per_s",
+    "glass_to_command_ms_p50",
+    "glass_to_command_ms_p95",
+    "heading_error_deg_median",
+    "js_over_native_ratio",
+    "memory_growth_pct",
+)
+PLOTS = ("processing_delay.png", "heading.png", "glass_to_command.png", "js_vs_native.png")
+
+
+def check_plausible(figures: dict[str, object], profile: str) -> None:
+    values: dict[str, float] = {}
+    for key in KEYS:
+        value = figures[key]
+        assert isinstance(value, int | float), f"{profile} {key} is {value!r}"
+        assert math.isfinite(value), f"{profile} {key} is {value!r}"
+        values[key] = float(value)
+    assert 0 < values["processing_ms_p50"] <= values["processing_ms_p95"] < 60_000
+    assert 0 < values["glass_to_command_ms_p50"] <= values["glass_to_command_ms_p95"] < 60_000
+    # A goal per decoded frame at most: the synthetic video runs at 30 frames/s.
+    assert 0 < values["goals_per_s"] <= 31
+    assert 0 <= values["heading_error_deg_median"] <= 180
+    assert 0 < values["js_over_native_ratio"] < 100
+    assert -100 < values["memory_growth_pct"] < 1000
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Debian's chromium")
+def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    done = subprocess.run(
+        [sys.executable, "-m", "app.cli", "bench", "--quick", "--json", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=280,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-4000:]
+    printed = json.loads(done.stdout)
+
+    check_plausible(printed, "default")
+    check_plausible(printed["thesis"], "thesis")
+    # The thesis profile snapshots every 1.5 s: far fewer goals than the default profile.
+    assert printed["thesis"]["goals_per_s"] < printed["goals_per_s"]
+
+    assert json.loads((out / "results.json").read_text()) == printed
+    report = (out / "report.md").read_text()
+    assert "683 ms" in report
+    for name in PLOTS:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert f"({name})" in report
