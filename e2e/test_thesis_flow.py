@@ -20,7 +20,9 @@ def heading_error(theta: float, goal: float) -> float:
     return abs(math.atan2(math.sin(theta - goal), math.cos(theta - goal)))
 
 
+@pytest.mark.parametrize("profile", ["default", "thesis"])
 def test_face_on_the_left_turns_the_turtle_left_and_stop_stops_it(
+    profile: str,
     request: pytest.FixtureRequest,
     server: RunningServer,
     open_role: OpenRole,
@@ -28,9 +30,10 @@ def test_face_on_the_left_turns_the_turtle_left_and_stop_stops_it(
     vehicle_browser: Browser,
 ) -> None:
     room = "thesis"
-    vehicle = open_role("vehicle", vehicle_browser, room=room, name="vehicle", auto="1")
-    open_role("relay", browser, room=room, name="relay", auto="1")
-    client = open_role("client", browser, room=room, name="client")
+    query = {"room": room, "profile": profile}
+    vehicle = open_role("vehicle", vehicle_browser, name="vehicle", auto="1", **query)
+    open_role("relay", browser, name="relay", auto="1", **query)
+    client = open_role("client", browser, name="client", room=room)
 
     # The vehicle's spawn step: the turtle starts at the centre, facing up (θ = π/2).
     wait_until(
@@ -79,3 +82,22 @@ def test_face_on_the_left_turns_the_turtle_left_and_stop_stops_it(
     assert after["lastTwist"]["angular"] == 0, "the last Twist was not a stop"
     assert turtle["angular_velocity"] == 0 and turtle["linear_velocity"] == 0
     assert abs(turtle["theta"] - theta_before) < 1e-9, "the turtle kept moving after Stop"
+
+
+def test_an_unknown_operation_is_refused_and_the_current_one_stays(
+    open_role: OpenRole, browser: Browser
+) -> None:
+    relay = open_role("relay", browser, room="ops", name="relay", auto="1")
+    client = open_role("client", browser, room="ops", name="client", auto="1")
+    operation = client.get_by_label("Select Operation")
+    expect(operation).to_be_enabled(timeout=120_000)
+    expect(client.get_by_test_id("active-op")).to_have_text("face")
+
+    # A client offering an operation the relay does not have (an older or tampered page).
+    operation.evaluate("select => select.add(new Option('No such thing', 'no-such-op'))")
+    operation.select_option("no-such-op")
+    client.get_by_role("button", name="Set Operation").click()
+
+    expect(client.get_by_test_id("log")).to_contain_text('unknown operation "no-such-op"')
+    expect(client.get_by_test_id("active-op")).to_have_text("face")
+    assert status(relay)["op"] == "face"

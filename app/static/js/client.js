@@ -151,9 +151,11 @@ function updateControls() {
 }
 
 function showState() {
-  const parts = [room.describe()];
+  const parts = [room.describe({ withRoster: false })];
   if (room.phase === 'joined') {
-    parts.push(control !== null ? 'relay connected' : room.relay ? 'connecting to the relay' : 'waiting for a relay');
+    const relay = room.relay;
+    if (relay === undefined) parts.push('waiting for a relay');
+    else parts.push(control !== null ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
   }
   if (status.relay !== null && control !== null) {
     parts.push(status.relay.vehicle ? `vehicle ${status.relay.vehicle}` : 'no vehicle yet');

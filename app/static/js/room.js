@@ -117,10 +117,10 @@ export class RoomSession extends EventTarget {
   }
 
   /** A one-line description of where this page stands, for the state line. */
-  describe() {
+  describe({ withRoster = true } = {}) {
     if (this.phase === 'joined') {
       const others = this.roster.map((peer) => `${peer.role} ${peer.name}`).join(', ') || 'nobody else yet';
-      return `joined room ${this.room} as ${this.name} · with ${others}`;
+      return `joined room ${this.room} as ${this.name}${withRoster ? ` · with ${others}` : ''}`;
     }
     return this.phase === 'connected' ? 'connected, not in a room' : this.phase;
   }

@@ -170,8 +170,13 @@ function setupPeer(peer, stream) {
 }
 
 function showState() {
-  const link = status.relayChannelOpen ? ' · relay channel open' : '';
-  show('state', `${room.describe()}${link}`);
+  const parts = [room.describe({ withRoster: false })];
+  if (room.phase === 'joined') {
+    const relay = room.relay;
+    if (relay === undefined) parts.push('waiting for a relay');
+    else parts.push(status.relayChannelOpen ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
+  }
+  show('state', parts.join(' · '));
 }
 
 async function startCamera() {
