@@ -112,6 +112,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     plan = QUICK if args.quick else FULL
     default_s = args.soak * 60.0 if args.soak else plan["default_s"]
     started = datetime.datetime.now(datetime.UTC)
+    load_before = os.getloadavg()[0]
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
@@ -122,7 +123,9 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                 runs: dict[str, ProfileRun] = {}
                 with tempfile.TemporaryDirectory(prefix="autopilot-bench-") as tmp:
                     for profile, seconds in (("default", default_s), ("thesis", plan["thesis_s"])):
-                        options = StackOptions(profile, seconds, fps=args.fps)
+                        # A soak samples memory every 30 s; short runs every 10 s.
+                        every = 30.0 if seconds >= 300 else 10.0
+                        options = StackOptions(profile, seconds, fps=args.fps, memory_every_s=every)
                         try:
                             runs[profile] = await run_profile(
                                 browser, server.url, options, Path(tmp)
@@ -157,6 +160,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
         "size": "640x480",
         "default_s": default_s,
         "thesis_s": plan["thesis_s"],
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s",
     }
     obj = results(runs["default"], runs["thesis"], run_info)

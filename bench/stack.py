@@ -36,6 +36,9 @@ FIRST_GOAL_TIMEOUT_S = 90.0
 AGENT_EXIT_TIMEOUT_S = 15.0
 SETTLE_S = 1.0
 POLL_S = 2.0
+# Memory is first sampled this long after goals start: caches, JIT code and the relay's bounded
+# sample rings fill up first, and that is not a leak.
+MEMORY_WARMUP_S = 5.0
 
 # New processing samples since the last poll (the relay keeps a bounded ring of them).
 _POLL_JS = """(seen) => {
@@ -115,7 +118,7 @@ async def run_profile(
         )
         wasm_worker = _vision_worker(relay)
         seen = (await relay.evaluate(_POLL_JS, 0))["snapshots"]
-        next_memory = begin
+        next_memory = begin + MEMORY_WARMUP_S
         while (now := time.monotonic()) < begin + options.duration_s:
             if now >= next_memory:
                 run.memory.append(await _memory(relay, wasm_worker, run))
