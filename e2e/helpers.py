@@ -74,11 +74,17 @@ VIDEO = "document.querySelector('[data-testid=video]')"
 
 
 def wait_for_live_video(page: Page, timeout_ms: float = 90_000) -> None:
-    """The page's video shows frames (videoWidth > 0) and keeps playing (currentTime advances)."""
+    """The page's video shows frames (videoWidth > 0) and keeps playing: currentTime advances
+    and new frames are presented (a frozen picture would keep the frame count still)."""
     page.wait_for_function(f"() => {VIDEO}.videoWidth > 0", timeout=timeout_ms)
-    start = page.evaluate(f"() => {VIDEO}.currentTime")
+    start = page.evaluate(
+        f"() => [{VIDEO}.currentTime, {VIDEO}.getVideoPlaybackQuality().totalVideoFrames]"
+    )
     page.wait_for_function(
-        f"start => {VIDEO}.currentTime > start + 0.5", arg=start, timeout=timeout_ms
+        f"""([time, frames]) => {VIDEO}.currentTime > time + 0.5
+              && {VIDEO}.getVideoPlaybackQuality().totalVideoFrames >= frames + 5""",
+        arg=start,
+        timeout=timeout_ms,
     )
 
 

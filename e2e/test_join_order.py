@@ -56,3 +56,19 @@ def test_relay_reloaded_mid_session_reconnects_everyone(
     # The new relay page gets the vehicle's video and its data channel, ready for goals.
     wait_for_live_video(relay)
     relay.wait_for_function("() => window.autopilotStatus.vehicle === 'vehicle'", timeout=60_000)
+
+
+def test_vehicle_reloaded_mid_session_brings_video_back_to_the_client(
+    open_role: OpenRole, browser: Browser, vehicle_browser: Browser
+) -> None:
+    relay = open_joined(open_role, "relay", browser)
+    client = open_joined(open_role, "client", browser)
+    vehicle = open_joined(open_role, "vehicle", vehicle_browser)
+    wait_for_live_video(client)
+
+    vehicle.reload()
+
+    # The relay receives the returning vehicle's new track and forwards it on the client's
+    # existing connection; frames presented from then on come from the new vehicle session.
+    relay.wait_for_function("() => window.autopilotStatus.vehicleTracks >= 2", timeout=90_000)
+    wait_for_live_video(client)

@@ -24,6 +24,7 @@ const status = {
   piloting: false,
   vehicle: null, // name of the connected vehicle
   clients: [], // names of connected clients
+  vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
   snapshots: 0,
   goalsSent: 0,
   lastGoal: null,
@@ -155,6 +156,7 @@ async function sendVideoOn(pc) {
 
 function onVehicleTrack(track) {
   vehicleTrack = track;
+  status.vehicleTracks += 1;
   video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
