@@ -15,6 +15,7 @@ import logging
 import signal
 import sys
 import time
+from collections.abc import Awaitable
 from contextlib import AsyncExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -100,38 +101,72 @@ async def run_profile(
         client = await _open_page(stack, browser, "client")
         await client.goto(f"{server_url}/client?room={room}&name=client&auto=1")
         start = client.get_by_role("button", name="Start Piloting")
-        try:
-            await start.click(timeout=CONNECT_TIMEOUT_S * 1000)
-        except PlaywrightTimeout as exc:
-            raise StackError(
-                "the client never reached the relay (Start Piloting disabled)"
-            ) from exc
-        await _wait(
-            relay,
-            "window.autopilotStatus.goalsSent > 0",
-            FIRST_GOAL_TIMEOUT_S,
-            "piloting started but the relay sent no goal",
+        await _unless_agent_exits(
+            agent,
+            agent_log,
+            _step(
+                start.click(timeout=CONNECT_TIMEOUT_S * 1000),
+                "the client never reached the relay (Start Piloting stayed disabled)",
+            ),
         )
-        begin = time.monotonic()
+        await _unless_agent_exits(
+            agent,
+            agent_log,
+            _wait(
+                relay,
+                "window.autopilotStatus.goalsSent > 0",
+                FIRST_GOAL_TIMEOUT_S,
+                "piloting started but the relay sent no goal",
+            ),
+        )
         log.info(
             "%s profile: goals flowing, measuring for %.0f s", options.profile, options.duration_s
         )
-        wasm_worker = _vision_worker(relay)
-        seen = (await relay.evaluate(_POLL_JS, 0))["snapshots"]
-        next_memory = begin + MEMORY_WARMUP_S
-        while (now := time.monotonic()) < begin + options.duration_s:
-            if now >= next_memory:
-                run.memory.append(await _memory(relay, wasm_worker, run))
-                next_memory += options.memory_every_s
-            await asyncio.sleep(POLL_S)
-            seen = await _collect(relay, seen, run)
-        seen = await _collect(relay, seen, run)
-        run.memory.append(await _memory(relay, wasm_worker, run))
-        end = time.monotonic()
+        run.window = await _measure(relay, options, run)
         await client.get_by_role("button", name="Stop Piloting").click()
-        run.window = (begin, end)
     _read_events(run, events_path, options)
     return run
+
+
+async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple[float, float]:
+    """Poll the relay's samples and memory for ``duration_s``; returns the window measured."""
+    begin = time.monotonic()
+    wasm_worker = _vision_worker(relay)
+    seen = (await relay.evaluate(_POLL_JS, 0))["snapshots"]
+    next_memory = begin + MEMORY_WARMUP_S
+    while (now := time.monotonic()) < begin + options.duration_s:
+        if now >= next_memory:
+            run.memory.append(await _memory(relay, wasm_worker, run))
+            next_memory += options.memory_every_s
+        await asyncio.sleep(POLL_S)
+        seen = await _collect(relay, seen, run)
+    await _collect(relay, seen, run)
+    run.memory.append(await _memory(relay, wasm_worker, run))
+    return begin, time.monotonic()
+
+
+async def _step(action: Awaitable[Any], failure: str) -> None:
+    try:
+        await action
+    except PlaywrightTimeout as exc:
+        raise StackError(failure) from exc
+
+
+async def _unless_agent_exits(
+    agent: asyncio.subprocess.Process, log_path: Path, step: Awaitable[None]
+) -> None:
+    """Run ``step``, failing at once with the agent's last words if the agent dies meanwhile."""
+    step_task = asyncio.ensure_future(step)
+    exit_task = asyncio.ensure_future(agent.wait())
+    await asyncio.wait({step_task, exit_task}, return_when=asyncio.FIRST_COMPLETED)
+    if step_task.done():
+        exit_task.cancel()
+        step_task.result()
+        return
+    step_task.cancel()
+    await asyncio.gather(step_task, return_exceptions=True)
+    tail = " | ".join(log_path.read_text(errors="replace").splitlines()[-5:])
+    raise StackError(f"the vehicle agent exited with status {agent.returncode}: {tail}")
 
 
 async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page:
