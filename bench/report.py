@@ -307,6 +307,12 @@ def markdown(results: dict[str, Any]) -> str:
             f" {proc['n']} snapshots, {THESIS_PROCESSING_MEAN_MS / proc['mean']:.0f}x less"
             " than the thesis."
         )
+    snapshots = d["default"].get("relay_snapshots")
+    if snapshots:
+        lines.append(
+            f"{d['default']['relay_goals_sent']} of its {snapshots} snapshots found the face and"
+            " sent a goal (a snapshot without a face counts up to the end of its analysis)."
+        )
     if results["goals_per_s"] is not None:
         lines.append(
             f"It sends {results['goals_per_s']:.1f} goals/s against the thesis's"

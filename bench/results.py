@@ -81,6 +81,9 @@ class ProfileRun:
     profile: str
     # (time, ms) per snapshot that produced a goal, snapshot taken -> goal sent, in the relay.
     processing: list[tuple[float, float]] = field(default_factory=list)
+    # Snapshots the relay analysed and goals it sent over the window (its own counters).
+    snapshots: int = 0
+    relay_goals: int = 0
     # Goals received by the vehicle, with the frame tag they echo (None when untagged).
     goals: list[tuple[float, int | None]] = field(default_factory=list)
     # Window over which goals were counted, while the face was in view.
@@ -205,6 +208,8 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "glass_to_command_ms": summary(run.glass_ms()),
         "frame_to_goal_ms": summary(run.frame_to_goal_ms()),
         "goal_to_command_ms": summary(run.goal_to_command_ms()),
+        "relay_snapshots": run.snapshots,
+        "relay_goals_sent": run.relay_goals,
         "goals_received": len(run.goals),
         "goal_window_s": (run.window[1] - run.window[0]) if run.window else None,
         "js_detect_ms": summary(run.js_ms),

@@ -132,15 +132,18 @@ async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple
     """Poll the relay's samples and memory for ``duration_s``; returns the window measured."""
     begin = time.monotonic()
     wasm_worker = _vision_worker(relay)
-    seen = (await relay.evaluate(_POLL_JS, 0))["snapshots"]
+    first = await relay.evaluate(_POLL_JS, 0)
+    seen = first["snapshots"]
     next_memory = begin + MEMORY_WARMUP_S
     while (now := time.monotonic()) < begin + options.duration_s:
         if now >= next_memory:
             run.memory.append(await _memory(relay, wasm_worker, run))
             next_memory += options.memory_every_s
         await asyncio.sleep(POLL_S)
-        seen = await _collect(relay, seen, run)
-    await _collect(relay, seen, run)
+        seen = (await _collect(relay, seen, run))["snapshots"]
+    last = await _collect(relay, seen, run)
+    run.snapshots = last["snapshots"] - first["snapshots"]
+    run.relay_goals = last["goalsSent"] - first["goalsSent"]
     run.memory.append(await _memory(relay, wasm_worker, run))
     return begin, time.monotonic()
 
@@ -227,12 +230,12 @@ def _vision_worker(page: Page) -> Worker | None:
     return next((w for w in page.workers if w.url.endswith("vision-worker.js")), None)
 
 
-async def _collect(relay: Page, seen: int, run: ProfileRun) -> int:
+async def _collect(relay: Page, seen: int, run: ProfileRun) -> dict[str, Any]:
+    """Append the processing samples taken since snapshot ``seen``; returns the relay's counters."""
     polled: dict[str, Any] = await relay.evaluate(_POLL_JS, seen)
     now = time.monotonic()
     run.processing.extend((now, float(ms)) for ms in polled["ms"])
-    snapshots: int = polled["snapshots"]
-    return snapshots
+    return polled
 
 
 async def _memory(relay: Page, worker: Worker | None, run: ProfileRun) -> MemorySample:
