@@ -8,8 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import cv2.data
 import httpx
 import numpy as np
+import numpy.typing as npt
 from playwright.sync_api import Page
 
 from app.serve import RunningServer
@@ -18,11 +20,15 @@ FACES = Path(__file__).resolve().parents[2] / "shared" / "data" / "faces"
 
 WIDTH, HEIGHT, FPS = 640, 480, 15
 
+Image = npt.NDArray[np.uint8]
 
-def face_crop(image: np.ndarray) -> np.ndarray:
+
+def face_crop(image: Image) -> Image:
     """The largest frontal face of ``image`` with a margin, so the pasted face is big enough."""
     gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    cascade = cv2.CascadeClassifier(cv2.data.haarcascades + "haarcascade_frontalface_default.xml")
+    cascade = cv2.CascadeClassifier(
+        str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")
+    )
     faces = cascade.detectMultiScale(gray, scaleFactor=1.1, minNeighbors=5)
     assert len(faces) > 0, "the source image has no detectable face"
     x, y, w, h = max(faces, key=lambda f: int(f[2]) * int(f[3]))
@@ -31,12 +37,14 @@ def face_crop(image: np.ndarray) -> np.ndarray:
     return image[top : y + h + m, left : x + w + m]
 
 
-def face_frame(face_image: Path, side: str) -> np.ndarray:
+def face_frame(face_image: Path, side: str) -> Image:
     """A plain grey 640×480 frame with the face centred in the ``side`` third."""
     frame = np.full((HEIGHT, WIDTH, 3), 110, np.uint8)
-    face = face_crop(cv2.imread(str(face_image)))
+    source = cv2.imread(str(face_image))
+    assert source is not None, f"cannot read {face_image}"
+    face = face_crop(np.asarray(source, np.uint8))
     size = 200
-    face = cv2.resize(face, (size, size * face.shape[0] // face.shape[1]))
+    face = np.asarray(cv2.resize(face, (size, size * face.shape[0] // face.shape[1])), np.uint8)
     fh, fw = face.shape[:2]
     cx = {"left": WIDTH // 6, "right": WIDTH * 5 // 6}[side]
     x0, y0 = cx - fw // 2, HEIGHT // 2 - fh // 2
@@ -44,7 +52,7 @@ def face_frame(face_image: Path, side: str) -> np.ndarray:
     return frame
 
 
-def write_y4m(path: Path, frame_bgr: np.ndarray, frames: int) -> None:
+def write_y4m(path: Path, frame_bgr: Image, frames: int) -> None:
     """A 4:2:0 YUV4MPEG2 file of ``frames`` copies of one frame (Chromium loops it)."""
     yuv = cv2.cvtColor(frame_bgr, cv2.COLOR_BGR2YUV_I420)
     with path.open("wb") as out:

@@ -33,7 +33,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
 
 
 def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
-    cases = [
+    cases: list[dict[str, dict[str, float]]] = [
         {"goal": {"x": x, "y": y, "w": W, "h": H}, "pose": {"x": px, "y": py, "theta": th}}
         for (x, y), (px, py, th) in itertools.product(GOAL_PIXELS, POSES)
     ]
@@ -50,8 +50,9 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
         cases,
     )
     for case, got in zip(cases, js, strict=True):
-        goal = control.Goal(**case["goal"])
-        pose = control.Pose(**case["pose"])
+        g, p = case["goal"], case["pose"]
+        goal = control.Goal(g["x"], g["y"], int(g["w"]), int(g["h"]))
+        pose = control.Pose(p["x"], p["y"], p["theta"])
         tx, ty = control.pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
         assert got["terrain"]["x"] == pytest.approx(tx) and got["terrain"]["y"] == pytest.approx(ty)
         error = control.steering_error(goal, pose)

@@ -40,7 +40,12 @@ let vehicleTrack = null;
 let analyzer = null;
 let lastError = null;
 
-const analyzerReady = createAnalyzer().then(
+const ANALYZER_SLOW_MS = 30000;
+const slowAnalyzer = setTimeout(
+  () => log.warn(`OpenCV.js is still loading after ${ANALYZER_SLOW_MS / 1000} s`),
+  ANALYZER_SLOW_MS,
+);
+const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer)).then(
   (created) => {
     analyzer = created;
     status.analyzerReady = true;
@@ -380,8 +385,9 @@ room.bindControls();
 room.addEventListener('phase', (event) => {
   showState();
   if (event.detail === 'disconnected') {
-    for (const name of [...peers.keys()]) closePeer(name, 'left the room');
+    // Stop first, while the vehicle's channel is still there to hear it.
     if (status.piloting) setPiloting(false, 'this relay leaving');
+    for (const name of [...peers.keys()]) closePeer(name, 'left the room');
   }
 });
 room.addEventListener('roster', showState);

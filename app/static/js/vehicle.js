@@ -40,6 +40,7 @@ class Turtle {
     this.ros = null;
     this.cmdVel = null;
     this.spawnDone = false;
+    this.reported = false; // an outage has been logged
     this.onPose = () => {};
   }
 
@@ -48,15 +49,22 @@ class Turtle {
     this.ros = ros;
     ros.on('connection', () => {
       log.info(`rosbridge connected: ${this.url}`);
+      this.reported = false;
       status.rosConnected = true;
       show('ros-state', 'connected');
       this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: this.types.twist });
       const pose = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: this.types.pose });
       pose.subscribe((msg) => this.#pose(msg));
     });
-    ros.on('error', () => log.error(`rosbridge ${this.url}: connection error`));
+    // roslib throws on an 'error' nobody listens to; the 'close' that follows is what we report.
+    ros.on('error', () => {});
     ros.on('close', () => {
       if (this.ros !== ros) return;
+      // Said once per outage, not on every retry.
+      if (status.rosConnected || !this.reported) {
+        log.error(`rosbridge ${this.url} unreachable; retrying every ${ROS_RETRY_MS / 1000} s`);
+      }
+      this.reported = true;
       status.rosConnected = false;
       this.cmdVel = null;
       show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
