@@ -120,3 +120,13 @@ def test_cli_usage_errors() -> None:
     assert done.returncode == 2 and "PATH" in done.stderr
     done = run_cli(str(SHARED / "obama.jpg"), "--op", "dance")
     assert done.returncode == 2 and "'dance'" in done.stderr
+
+
+def test_cli_text_output_lists_both_box_lists() -> None:
+    done = run_cli(str(SHARED / "two_people.jpg"), "--op", "face")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == f"{SHARED / 'two_people.jpg'} face: agree"
+    js, python = lines[1].split(), lines[2].split()
+    assert js[0] == "js" and python[0] == "python" and js[1:] == python[1:] != ["[]"]
+    assert lines[-1] == "1 images, 1 pairs: 1 agree, 0 disagree"
