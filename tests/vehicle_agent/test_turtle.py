@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Iterator
 
 import pytest
 
-from app.serve import RunningServer, start_in_thread
+from app.serve import RunningServer
 from vehicle_agent.control import Pose, Twist
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 
@@ -60,13 +59,6 @@ async def test_sim_turtle_turns_and_stops() -> None:
     await turn_and_stop(turtle)
     # Pose updates come on turtlesim's 16 ms tick.
     assert turtle.sim.pose("turtle1").theta > math.pi / 4
-
-
-@pytest.fixture
-def server() -> Iterator[RunningServer]:
-    running = start_in_thread(host="127.0.0.1")
-    yield running
-    running.stop()
 
 
 @pytest.mark.parametrize("ros_version", [1, 2])

@@ -1,0 +1,245 @@
+"""The agent over real signaling and a real WebRTC link to a relay peer written with aiortc.
+
+Run inside the private network namespace: ``scripts/in-netns python -m pytest tests/vehicle_agent``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import socket
+import threading
+from collections.abc import AsyncIterator, Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+import uvicorn
+
+from app.config import Settings
+from app.main import create_app
+from app.serve import RunningServer
+from vehicle_agent.agent import Agent, AgentConfig
+from vehicle_agent.events import Event, EventLog
+from vehicle_agent.turtle import SimTurtle
+from vehicle_agent.video import FixedPath, SyntheticVideo
+
+from .pyrelay import PyRelay
+
+W, H = 320, 240
+LEFT = (0.2 * W, 0.42 * H)  # a face left of centre, a little above the middle
+RIGHT = (0.8 * W, 0.42 * H)
+
+
+@dataclass
+class Running:
+    agent: Agent
+    turtle: SimTurtle
+    events: list[Event]
+
+    def heading_deg(self) -> float:
+        return math.degrees(self.turtle.sim.pose("turtle1").theta)
+
+    def twists(self) -> list[Event]:
+        return [e for e in self.events if e["ev"] == "twist"]
+
+
+@contextlib.asynccontextmanager
+async def running_agent(server_url: str, **config: Any) -> AsyncIterator[Running]:
+    events: list[Event] = []
+    log = EventLog()
+    log.listeners.append(events.append)
+    video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5))
+    turtle = SimTurtle()
+    agent = Agent(AgentConfig(server=server_url, **config), video, turtle, log)
+    task = asyncio.create_task(agent.run())
+    try:
+        async with asyncio.timeout(10):
+            await agent.logged_in.wait()
+        yield Running(agent, turtle, events)
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+
+@contextlib.asynccontextmanager
+async def relay_in(server: RunningServer) -> AsyncIterator[PyRelay]:
+    relay = PyRelay(server.ws_url)
+    await relay.start()
+    try:
+        yield relay
+    finally:
+        await relay.leave()
+
+
+async def connected(relay: PyRelay) -> None:
+    """Video frames are decoded at the relay and the data channel is open."""
+    await relay.until(
+        lambda: (
+            len(relay.tags) >= 3
+            and relay.channel is not None
+            and relay.channel.readyState == "open"
+        )
+    )
+
+
+async def pilot_until(
+    relay: PyRelay, target: tuple[float, float], done: Callable[[], bool], timeout: float = 20
+) -> int:
+    """Send goals at 20 Hz (like the relay's snapshot loop) until ``done()``; returns last seq."""
+    seq = 0
+    async with asyncio.timeout(timeout):
+        while not done():
+            seq += 1
+            relay.send(
+                {
+                    "type": "goal",
+                    "seq": seq,
+                    "op": "face",
+                    "x": target[0],
+                    "y": target[1],
+                    "w": W,
+                    "h": H,
+                    "t": 0,
+                    "frame": relay.tags[-1] if relay.tags else None,
+                }
+            )
+            await asyncio.sleep(0.05)
+    return seq
+
+
+async def eventually(condition: Callable[[], bool], timeout: float = 10.0) -> None:
+    async with asyncio.timeout(timeout):
+        while not condition():
+            await asyncio.sleep(0.02)
+
+
+async def test_agent_streams_tagged_video_and_pose_telemetry(server: RunningServer) -> None:
+    async with running_agent(server.url), relay_in(server) as relay:
+        await connected(relay)
+        # Tags decoded after VP8/H264 come in order: the frame number survives the codec.
+        assert relay.tags == sorted(relay.tags)
+        await relay.until(lambda: any(m["type"] == "pose" for m in relay.messages))
+        pose = next(m for m in relay.messages if m["type"] == "pose")
+        assert pose["x"] == pytest.approx(5.544445, abs=1e-3)
+        assert {"y", "theta", "t"} <= pose.keys()
+
+
+async def test_goals_turn_the_turtle_to_the_face_and_stop_zeroes(server: RunningServer) -> None:
+    async with running_agent(server.url) as run, relay_in(server) as relay:
+        await connected(relay)
+        assert run.heading_deg() == pytest.approx(0.0)
+        # Face on the left, a little above the middle: the turtle turns to look left-up.
+        await pilot_until(relay, LEFT, lambda: 150 < run.heading_deg() <= 180)
+        # The face moves to the right: the turtle follows, the short way back.
+        await pilot_until(relay, RIGHT, lambda: 0 < run.heading_deg() < 30)
+        # Each Twist names the goal (and so the video frame) that caused it.
+        last = run.twists()[-1]
+        assert last["seq"] is not None and last["frame"] in relay.tags
+        relay.send({"type": "stop"})
+        await eventually(
+            lambda: run.twists()[-1]["angular"] == 0.0 and run.twists()[-1]["seq"] is None
+        )
+        settled = run.heading_deg()
+        await asyncio.sleep(0.5)
+        assert run.heading_deg() == pytest.approx(settled, abs=0.01)
+
+
+async def test_goal_timeout_stops_the_turtle(server: RunningServer) -> None:
+    async with running_agent(server.url) as run, relay_in(server) as relay:
+        await connected(relay)
+        # Keep the face far from where the turtle looks, so it is still turning when goals stop.
+        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 60)
+        last_goal = asyncio.get_running_loop().time()
+        await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+        stopped_after = asyncio.get_running_loop().time() - last_goal
+        # Default timeout 0.75 s, checked every 50 ms; generous margin for a loaded machine.
+        assert 0.6 < stopped_after < 1.5
+        settled = run.heading_deg()
+        await asyncio.sleep(0.5)
+        assert run.heading_deg() == pytest.approx(settled, abs=0.01)
+
+
+async def test_malformed_channel_messages_get_an_error_and_are_dropped(
+    server: RunningServer,
+) -> None:
+    async with running_agent(server.url) as run, relay_in(server) as relay:
+        await connected(relay)
+        relay.channel.send("{not json")
+        relay.send({"type": "dance"})
+        relay.send(
+            {"type": "goal", "seq": 1, "op": "face", "x": "left", "y": 1, "w": W, "h": H, "t": 0}
+        )
+        relay.send({"type": "goal", "seq": 2, "op": "face", "x": 1, "y": 1, "w": 0, "h": H, "t": 0})
+        await relay.until(lambda: sum(m["type"] == "error" for m in relay.messages) >= 4)
+        errors = [m for m in relay.messages if m["type"] == "error"]
+        assert "malformed JSON" in errors[0]["reason"]
+        assert errors[1]["ref"] == "dance" and "dance" in errors[1]["reason"]
+        assert errors[2]["ref"] == "goal" and "x" in errors[2]["reason"]
+        assert errors[3]["ref"] == "goal" and "w" in errors[3]["reason"]
+        assert run.twists() == []
+        # The link survives bad input: a good goal still turns the turtle.
+        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+
+
+async def test_relay_leaving_stops_the_turtle_and_a_new_relay_pilots_again(
+    server: RunningServer,
+) -> None:
+    async with running_agent(server.url) as run:
+        async with relay_in(server) as relay:
+            await connected(relay)
+            await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+            left_at = asyncio.get_running_loop().time()
+        # The relay left while goals were flowing: zero Twist at once, not after the timeout.
+        await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+        assert asyncio.get_running_loop().time() - left_at < 0.6
+        async with relay_in(server) as relay:
+            await connected(relay)
+            await pilot_until(relay, RIGHT, lambda: 0 < run.heading_deg() < 30)
+
+
+def serve_on(port: int) -> RunningServer:
+    """The app on a given port (a restart must come back where the agent expects it)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", port))
+    config = uvicorn.Config(create_app(Settings()), log_level="warning", lifespan="on")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True)
+    thread.start()
+    while not server.started:
+        threading.Event().wait(0.01)
+    return RunningServer(url=f"http://127.0.0.1:{port}", server=server, thread=thread)
+
+
+@pytest.fixture
+def free_port() -> Iterator[int]:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    yield port
+
+
+async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None:
+    first = await asyncio.to_thread(serve_on, free_port)
+    try:
+        async with running_agent(first.url) as run:
+            async with relay_in(first) as relay:
+                await connected(relay)
+                await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+                await asyncio.to_thread(first.stop)
+                await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+                await eventually(lambda: not run.agent.logged_in.is_set(), timeout=5)
+            second = await asyncio.to_thread(serve_on, free_port)
+            try:
+                async with asyncio.timeout(30):
+                    await run.agent.logged_in.wait()
+                async with relay_in(second) as relay:
+                    await connected(relay)
+                    await pilot_until(relay, RIGHT, lambda: 0 < run.heading_deg() < 30)
+            finally:
+                await asyncio.to_thread(second.stop)
+    finally:
+        first.stop()

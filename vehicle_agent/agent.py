@@ -1,0 +1,398 @@
+"""The vehicle agent: signaling, the link to the relay, goals to Twists, pose telemetry.
+
+One :class:`Agent` runs until cancelled. It logs in as a vehicle, waits for a relay in the room,
+offers to it and keeps that link alive: when the relay leaves, the link fails or the signaling
+server goes away, the turtle gets a zero Twist and the agent reconnects with backoff, without
+restarting. Everything that happens is dispatched from one queue, one handler per event kind.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import random
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+from aiortc import MediaStreamTrack, RTCIceServer
+from aiortc.contrib.media import MediaRelay
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
+from vehicle_agent.events import EventLog
+from vehicle_agent.peer import RelayLink
+from vehicle_agent.signaling import SignalingClient, SignalingError
+from vehicle_agent.turtle import Turtle
+
+log = logging.getLogger(__name__)
+
+# The relay must answer and ICE must connect within this long, or the agent offers again.
+CONNECT_TIMEOUT_S = 20.0
+TELEMETRY_PERIOD_S = 0.1
+TICK_PERIOD_S = 0.05
+
+
+@dataclass
+class AgentConfig:
+    """What ``autopilot vehicle`` was asked to do."""
+
+    server: str
+    room: str = "default"
+    name: str = "vehicle"
+    profile: str = "default"
+    goal_timeout_s: float | None = None
+    ice_servers: list[RTCIceServer] = field(default_factory=list)
+
+
+class Backoff:
+    """Exponential backoff with jitter: 0.5 s, 1 s, 2 s ... up to ``cap``."""
+
+    def __init__(self, first: float = 0.5, cap: float = 8.0) -> None:
+        self.first, self.cap = first, cap
+        self._next = first
+
+    def next(self) -> float:
+        """The delay to wait now; the following one doubles."""
+        delay = self._next
+        self._next = min(self.cap, self._next * 2)
+        return delay * random.uniform(0.9, 1.1)
+
+    def reset(self) -> None:
+        """After a success, start again from the first delay."""
+        self._next = self.first
+
+
+class GoalMessage(BaseModel):
+    """relay→vehicle ``goal`` (DESIGN §3, docs/contracts.md)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    type: Literal["goal"]
+    seq: int
+    op: str
+    x: float
+    y: float
+    w: int = Field(gt=0)
+    h: int = Field(gt=0)
+    t: float
+    frame: int | None = None
+
+
+class Agent:
+    """The Python vehicle: streams ``video`` to the relay and drives ``turtle`` from goals."""
+
+    def __init__(
+        self,
+        config: AgentConfig,
+        video: MediaStreamTrack,
+        turtle: Turtle,
+        events: EventLog | None = None,
+    ) -> None:
+        if config.profile not in PROFILES:
+            raise ValueError(f"unknown profile {config.profile!r}; choose from {sorted(PROFILES)}")
+        profile = PROFILES[config.profile]
+        if config.goal_timeout_s is not None:
+            profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
+        self.config = config
+        self.video = video
+        self.turtle = turtle
+        self.events = events or EventLog()
+        self.controller = Controller(profile)
+        self.pose: Pose | None = None
+        self._media = MediaRelay()
+        self._link: RelayLink | None = None
+        self._relay: str | None = None
+        self._client: SignalingClient | None = None
+        self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
+        self._link_backoff = Backoff()
+        self._retry: asyncio.TimerHandle | None = None
+        self._last_telemetry = 0.0
+        self.logged_in = asyncio.Event()
+        self._handlers: dict[str, Callable[[Any], Awaitable[None]]] = {
+            "login": self._ignore,
+            "peers": self._on_peers,
+            "answer": self._on_answer,
+            "candidate": self._on_candidate,
+            "leave": self._on_leave,
+            "error": self._on_server_error,
+        }
+        self._channel_handlers: dict[str, Callable[[RelayLink, dict[str, Any]], None]] = {
+            "goal": self._on_goal,
+            "stop": self._on_stop,
+            "error": self._on_peer_error,
+        }
+
+    @property
+    def link(self) -> RelayLink | None:
+        """The current connection to the relay, if any."""
+        return self._link
+
+    async def run(self) -> None:
+        """Run until cancelled; raises :class:`SignalingError` if the first login fails."""
+        await self.turtle.start(self._on_pose)
+        ticker = asyncio.create_task(self._tick(), name="control-tick")
+        try:
+            await self._signaling_loop()
+        finally:
+            ticker.cancel()
+            await self._drop_link("agent stopping")
+            self._publish(self.controller.stop())
+            await self.turtle.close()
+            self.video.stop()
+
+    # --- signaling -----------------------------------------------------------------------
+
+    async def _signaling_loop(self) -> None:
+        backoff = Backoff()
+        first = True
+        while True:
+            client = SignalingClient(self.config.server, self.config.name, self.config.room)
+            try:
+                peers = await client.connect()
+            except SignalingError as exc:
+                # A wrong URL or a refused name at start-up is the operator's to fix; later
+                # the server may just be restarting.
+                if first:
+                    raise
+                delay = backoff.next()
+                log.warning("%s; retrying in %.1f s", exc, delay)
+                await asyncio.sleep(delay)
+                continue
+            first = False
+            backoff.reset()
+            log.info(
+                "logged in to %s as vehicle %r in room %r", client.url, client.name, client.room
+            )
+            self._client = client
+            self.logged_in.set()
+            try:
+                await self._session(client, peers)
+            finally:
+                self.logged_in.clear()
+                self._client = None
+                await self._drop_link("signaling connection lost")
+                self._relay = None
+                await client.close()
+            delay = backoff.next()
+            log.warning("signaling connection lost; reconnecting in %.1f s", delay)
+            await asyncio.sleep(delay)
+
+    async def _session(self, client: SignalingClient, peers: list[dict[str, Any]]) -> None:
+        self._queue = asyncio.Queue()
+        reader = asyncio.create_task(self._read(client), name="signaling-reader")
+        try:
+            await self._on_peers({"peers": peers})
+            while True:
+                kind, payload = await self._queue.get()
+                if kind == "closed":
+                    return
+                if kind == "signal":
+                    handler = self._handlers.get(payload["type"])
+                    if handler is None:
+                        log.debug("ignoring signaling message %s", payload["type"])
+                    else:
+                        await handler(payload)
+                elif kind == "link_down":
+                    link, reason = payload
+                    await self._on_link_down(link, reason)
+                elif kind == "retry":
+                    self._retry = None
+                    await self._ensure_link()
+        finally:
+            reader.cancel()
+            await asyncio.gather(reader, return_exceptions=True)
+            if self._retry is not None:
+                self._retry.cancel()
+                self._retry = None
+
+    async def _read(self, client: SignalingClient) -> None:
+        async for message in client.messages():
+            self._queue.put_nowait(("signal", message))
+        self._queue.put_nowait(("closed", None))
+
+    async def _ignore(self, message: dict[str, Any]) -> None:
+        return None
+
+    async def _on_peers(self, message: dict[str, Any]) -> None:
+        relays = [p.get("name") for p in message.get("peers", []) if p.get("role") == "relay"]
+        relay = relays[0] if relays and isinstance(relays[0], str) else None
+        if relay == self._relay:
+            return
+        if self._relay is not None:
+            log.info("relay %s left the room", self._relay)
+            await self._drop_link("relay left")
+        self._relay = relay
+        self._link_backoff.reset()
+        if relay is None:
+            log.info("waiting for a relay in room %r", self.config.room)
+        else:
+            log.info("relay %s is in the room", relay)
+            await self._ensure_link()
+
+    async def _on_answer(self, message: dict[str, Any]) -> None:
+        link = self._link
+        if (
+            link is None
+            or message.get("from") != link.relay
+            or not isinstance(message.get("sdp"), str)
+        ):
+            log.warning("ignoring an answer from %s", message.get("from"))
+            return
+        await link.on_answer(message["sdp"])
+
+    async def _on_candidate(self, message: dict[str, Any]) -> None:
+        link = self._link
+        candidate = message.get("candidate")
+        if link is None or message.get("from") != link.relay:
+            log.debug("ignoring a candidate from %s", message.get("from"))
+            return
+        if candidate is not None and not isinstance(candidate, dict):
+            log.warning("ignoring a malformed candidate from %s", message.get("from"))
+            return
+        await link.on_candidate(candidate)
+
+    async def _on_leave(self, message: dict[str, Any]) -> None:
+        if message.get("from") == self._relay:
+            log.info("relay %s left", self._relay)
+            await self._drop_link("relay left")
+            self._relay = None
+
+    async def _on_server_error(self, message: dict[str, Any]) -> None:
+        log.warning("signaling server refused %s: %s", message.get("ref"), message.get("reason"))
+
+    # --- the link to the relay -------------------------------------------------------------
+
+    async def _ensure_link(self) -> None:
+        if self._relay is None or self._link is not None or self._retry is not None:
+            return
+        client = self._client
+        if client is None:
+            return
+        link = RelayLink(
+            self._relay,
+            self._media.subscribe(self.video, buffered=False),
+            client.send,
+            self._on_channel_message,
+            self._link_failed,
+            self.config.ice_servers,
+        )
+        self._link = link
+        await link.start()
+        asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
+
+    def _check_connected(self, link: RelayLink) -> None:
+        if link is self._link and not link.connected.is_set():
+            self._link_failed(link, f"no connection within {CONNECT_TIMEOUT_S:g} s")
+
+    def _link_failed(self, link: RelayLink, reason: str) -> None:
+        self._queue.put_nowait(("link_down", (link, reason)))
+
+    async def _on_link_down(self, link: RelayLink, reason: str) -> None:
+        if link is not self._link:
+            return  # an old link we already replaced
+        await self._drop_link(reason)
+        if self._relay is not None:
+            delay = self._link_backoff.next()
+            log.info("offering to %s again in %.1f s", self._relay, delay)
+            self._retry = asyncio.get_running_loop().call_later(
+                delay, self._queue.put_nowait, ("retry", None)
+            )
+
+    async def _drop_link(self, reason: str) -> None:
+        link, self._link = self._link, None
+        self._publish(self.controller.stop())
+        if link is None:
+            return
+        log.info("link to %s down: %s", link.relay, reason)
+        self.events.emit("link", state="down", relay=link.relay, reason=reason)
+        await link.close()
+
+    # --- data channel ----------------------------------------------------------------------
+
+    def _on_channel_message(self, link: RelayLink, text: str) -> None:
+        if link is not self._link:
+            return
+        if not link.connected.is_set():
+            link.connected.set()
+        try:
+            message = json.loads(text)
+        except json.JSONDecodeError as exc:
+            self._reject(link, f"malformed JSON: {exc.msg}", None)
+            return
+        kind = message.get("type") if isinstance(message, dict) else None
+        if not isinstance(kind, str):
+            self._reject(link, "expected a JSON object with a string 'type'", None)
+            return
+        handler = self._channel_handlers.get(kind)
+        if handler is None:
+            self._reject(link, f"unknown message type {kind!r}", kind)
+            return
+        handler(link, message)
+
+    def _reject(self, link: RelayLink, reason: str, ref: str | None) -> None:
+        log.warning("dropped a data-channel message from %s: %s", link.relay, reason)
+        link.send({"type": "error", "reason": reason, "ref": ref})
+
+    def _on_goal(self, link: RelayLink, message: dict[str, Any]) -> None:
+        try:
+            goal = GoalMessage.model_validate(message)
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            where = ".".join(str(p) for p in first["loc"])
+            self._reject(link, f"bad goal: {where}: {first['msg']}", "goal")
+            return
+        self.events.emit(
+            "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
+        )
+        self._publish(
+            self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
+        )
+
+    def _on_stop(self, link: RelayLink, message: dict[str, Any]) -> None:
+        log.info("piloting stopped by %s", link.relay)
+        self._publish(self.controller.stop())
+
+    def _on_peer_error(self, link: RelayLink, message: dict[str, Any]) -> None:
+        log.warning("%s reported an error: %s", link.relay, message.get("reason"))
+
+    # --- turtle ------------------------------------------------------------------------------
+
+    def _on_pose(self, pose: Pose) -> None:
+        self.pose = pose
+        self._publish(self.controller.pose(pose))
+        now = time.monotonic()
+        if now - self._last_telemetry >= TELEMETRY_PERIOD_S:
+            self._last_telemetry = now
+            link = self._link
+            sent = link is not None and link.send(
+                {
+                    "type": "pose",
+                    "x": pose.x,
+                    "y": pose.y,
+                    "theta": pose.theta,
+                    "t": time.time() * 1000,
+                }
+            )
+            self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
+
+    async def _tick(self) -> None:
+        while True:
+            await asyncio.sleep(TICK_PERIOD_S)
+            self._publish(self.controller.tick())
+
+    def _publish(self, twist: Twist | None) -> None:
+        if twist is None:
+            return
+        self.turtle.publish(twist)
+        self.events.emit(
+            "twist",
+            seq=twist.seq,
+            frame=twist.frame,
+            linear=twist.linear_x,
+            angular=twist.angular_z,
+        )
+        if twist.is_zero and twist.seq is None:
+            log.info("turtle stopped")

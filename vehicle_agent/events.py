@@ -1,0 +1,45 @@
+"""An optional JSON-lines log of what the agent did and when, for benchmarks and tests.
+
+Each line is one object with ``ev`` and ``t`` (``time.monotonic()`` seconds, comparable across
+processes of one machine):
+
+* ``{"ev": "frame_sent", "frame", "face_x", "face_y", "t"}`` -- synthetic frame handed to the
+  encoder, with the true face centre in pixels;
+* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received;
+* ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
+  (``seq``/``frame`` of the goal that caused it, null for a stop);
+* ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;
+* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay up or down.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+Event = dict[str, Any]
+
+
+class EventLog:
+    """Writes events to a file (when given) and hands them to in-process listeners."""
+
+    def __init__(self, path: Path | None = None) -> None:
+        self._file: IO[str] | None = path.open("a", buffering=1) if path else None
+        self.listeners: list[Callable[[Event], None]] = []
+
+    def emit(self, ev: str, **fields: Any) -> None:
+        """Record one event, stamped now."""
+        event: Event = {"ev": ev, **fields, "t": time.monotonic()}
+        if self._file is not None:
+            self._file.write(json.dumps(event) + "\n")
+        for listener in self.listeners:
+            listener(event)
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None

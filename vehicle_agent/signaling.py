@@ -1,0 +1,113 @@
+"""WebSocket client for the signaling server (DESIGN §2), as a vehicle."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections.abc import AsyncIterator
+from typing import Any
+from urllib.parse import urlsplit, urlunsplit
+
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
+
+log = logging.getLogger(__name__)
+
+LOGIN_TIMEOUT_S = 10.0
+
+Message = dict[str, Any]
+
+
+class SignalingError(RuntimeError):
+    """The signaling server could not be reached or refused us; the message says why."""
+
+
+class LoginRefused(SignalingError):
+    """The server answered the login with ``success: false``."""
+
+
+def ws_url(server: str) -> str:
+    """The ``/ws`` endpoint for a server base URL (``http://host:port`` or ``ws://.../ws``)."""
+    parts = urlsplit(server)
+    scheme = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}.get(parts.scheme)
+    if scheme is None or not parts.netloc:
+        raise SignalingError(f"server URL must look like http://host:port, not {server!r}")
+    path = parts.path.rstrip("/")
+    if not path.endswith("/ws"):
+        path += "/ws"
+    return urlunsplit((scheme, parts.netloc, path, parts.query, ""))
+
+
+class SignalingClient:
+    """One logged-in signaling connection; iterate over it for the server's messages."""
+
+    def __init__(self, server: str, name: str, room: str, role: str = "vehicle") -> None:
+        self.url = ws_url(server)
+        self.name = name
+        self.room = room
+        self.role = role
+        self._ws: ClientConnection | None = None
+
+    async def connect(self) -> list[Message]:
+        """Open the socket and log in; returns the room's roster (``[{name, role}]``)."""
+        try:
+            self._ws = await connect(self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20)
+        except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
+            raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
+        await self.send({"type": "login", "name": self.name, "role": self.role, "room": self.room})
+        try:
+            async with asyncio.timeout(LOGIN_TIMEOUT_S):
+                reply = await self._receive()
+        except (ConnectionClosed, TimeoutError) as exc:
+            await self.close()
+            raise SignalingError(f"no login answer from {self.url}: {exc}") from exc
+        if reply.get("type") != "login":
+            await self.close()
+            raise SignalingError(f"unexpected answer to login from {self.url}: {reply}")
+        if not reply.get("success"):
+            await self.close()
+            raise LoginRefused(f"login refused by {self.url}: {reply.get('reason')}")
+        peers = reply.get("peers", [])
+        return [p for p in peers if isinstance(p, dict)]
+
+    async def send(self, message: Message) -> None:
+        """Send one message; a closed connection is left to the reader to notice."""
+        if self._ws is None:
+            raise SignalingError("not connected")
+        try:
+            await self._ws.send(json.dumps(message))
+        except ConnectionClosed:
+            log.debug("dropped %s: signaling connection closed", message.get("type"))
+
+    async def _receive(self) -> Message:
+        assert self._ws is not None
+        while True:
+            text = await self._ws.recv()
+            try:
+                message = json.loads(text)
+            except json.JSONDecodeError:
+                log.warning("signaling server sent malformed JSON: %.80r", text)
+                continue
+            if isinstance(message, dict) and isinstance(message.get("type"), str):
+                return message
+            log.warning("signaling server sent a message without a type: %.80r", text)
+
+    async def messages(self) -> AsyncIterator[Message]:
+        """The server's messages until the connection closes."""
+        try:
+            while True:
+                yield await self._receive()
+        except ConnectionClosed as exc:
+            log.info("signaling connection closed: %s", exc)
+
+    async def close(self) -> None:
+        """Say goodbye (``leave``) and close the socket."""
+        ws, self._ws = self._ws, None
+        if ws is None:
+            return
+        try:
+            await ws.send(json.dumps({"type": "leave"}))
+        except ConnectionClosed:
+            pass
+        await ws.close()
