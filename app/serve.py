@@ -10,9 +10,11 @@ import threading
 from dataclasses import dataclass
 
 import uvicorn
+from pydantic import ValidationError
 
 from app.config import Settings
 from app.main import create_app
+from app.operations import SpecError
 
 log = logging.getLogger(__name__)
 
@@ -29,14 +31,25 @@ def page_urls(base: str, room: str = "default") -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Serve until interrupted."""
-    settings = Settings()
+    """Serve until interrupted; a bad setting or operations spec is one line and exit 1."""
+    try:
+        settings = Settings()
+        app = create_app(settings)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(map(str, e['loc'])) or 'settings'}: {e['msg']}" for e in exc.errors()
+        )
+        log.error("cannot start: %s", problems)
+        return 1
+    except SpecError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
     host = args.host or settings.host
     port = args.port or settings.port
     base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
     for role, url in page_urls(base).items():
         log.info("%s page: %s", role, url)
-    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+    uvicorn.run(app, host=host, port=port, log_level="info")
     return 0
 
 
