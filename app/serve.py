@@ -72,13 +72,19 @@ class RunningServer:
         self.thread.join(timeout=10)
 
 
-def start_in_thread(settings: Settings | None = None, host: str = "127.0.0.1") -> RunningServer:
-    """Start the app on a free port in a daemon thread; returns once it accepts connections."""
+def start_in_thread(
+    settings: Settings | None = None,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    log_level: str = "warning",
+) -> RunningServer:
+    """Start the app in a daemon thread (``port=0``: a free one); returns once it accepts
+    connections. Raises ``OSError`` when the address cannot be bound."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind((host, 0))
+    sock.bind((host, port))
     port = sock.getsockname()[1]
-    config = uvicorn.Config(create_app(settings), log_level="warning", lifespan="on")
+    config = uvicorn.Config(create_app(settings), log_level=log_level, lifespan="on")
     server = uvicorn.Server(config)
     thread = threading.Thread(
         target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True, name="uvicorn"
