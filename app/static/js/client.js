@@ -29,8 +29,11 @@ const status = {
 };
 window.autopilotStatus = status;
 
-let control = null;
-const recentMs = [];
+/** Everything else this page holds, in one place. */
+const session = {
+  control: null, // the open `control` data channel
+  recentMs: [],
+};
 
 // ---------------------------------------------------------------- relay messages
 
@@ -69,9 +72,9 @@ function onDetections(msg) {
   status.lastDetections = msg;
   drawDetections(overlay, msg);
   if (typeof msg.ms === 'number') {
-    recentMs.push(msg.ms);
-    if (recentMs.length > MS_SMOOTHING) recentMs.shift();
-    show('ms-per-snapshot', fmt(median(recentMs)));
+    session.recentMs.push(msg.ms);
+    if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
+    show('ms-per-snapshot', fmt(median(session.recentMs)));
   }
   if (typeof msg.goalsPerS === 'number') show('goals-per-s', fmt(msg.goalsPerS));
   const target = msg.target && msg.w && msg.h ? pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
@@ -111,7 +114,7 @@ function setupPeer(peer) {
   const dc = peer.pc.createDataChannel('control');
   serveChannel(dc, { ops: onOps, state: onState, detections: onDetections, pose: onPose }, log);
   dc.addEventListener('open', () => {
-    control = dc;
+    session.control = dc;
     status.controlOpen = true;
     log.info(`control channel to relay ${peer.remote} open`);
     sendJson(dc, { type: 'getOps' });
@@ -119,8 +122,8 @@ function setupPeer(peer) {
     updateControls();
   });
   dc.addEventListener('close', () => {
-    if (control !== dc) return;
-    control = null;
+    if (session.control !== dc) return;
+    session.control = null;
     status.controlOpen = false;
     showState();
     updateControls();
@@ -130,7 +133,7 @@ function setupPeer(peer) {
 /** start/stop go through signaling as in the thesis, or on the control channel without it. */
 function askRelay(type) {
   if (room.phase === 'joined' && room.relay !== undefined) room.send({ type });
-  else if (!sendJson(control, { type })) throw new Error(`cannot send ${type}: no relay connection`);
+  else if (!sendJson(session.control, { type })) throw new Error(`cannot send ${type}: no relay connection`);
   log.info(`asked the relay to ${type === 'start' ? 'start' : 'stop'} piloting`);
 }
 
@@ -142,7 +145,7 @@ function showDescription() {
 }
 
 function updateControls() {
-  const reachable = control !== null;
+  const reachable = session.control !== null;
   const piloting = status.relay?.piloting ?? false;
   select.disabled = !reachable || status.ops.length === 0;
   button('set-op').disabled = select.disabled;
@@ -155,9 +158,9 @@ function showState() {
   if (room.phase === 'joined') {
     const relay = room.relay;
     if (relay === undefined) parts.push('waiting for a relay');
-    else parts.push(control !== null ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
+    else parts.push(session.control !== null ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
   }
-  if (status.relay !== null && control !== null) {
+  if (status.relay !== null && session.control !== null) {
     parts.push(status.relay.vehicle ? `vehicle ${status.relay.vehicle}` : 'no vehicle yet');
     parts.push(status.relay.piloting ? `piloting with ${status.relay.op}` : 'not piloting');
   }
@@ -166,7 +169,7 @@ function showState() {
 
 select.addEventListener('change', showDescription);
 button('set-op').addEventListener('click', () => {
-  if (sendJson(control, { type: 'setOp', op: select.value })) log.info(`asked the relay to use ${select.value}`);
+  if (sendJson(session.control, { type: 'setOp', op: select.value })) log.info(`asked the relay to use ${select.value}`);
   else log.error('cannot set the operation: no relay connection');
 });
 for (const type of ['start', 'stop']) {

@@ -34,11 +34,17 @@ const status = {
 };
 window.autopilotStatus = status;
 
-const peers = new Map(); // remote name -> {peer, role, channel}
-const signalQueues = new Map(); // remote name -> promise of its last signaling message handled
-let vehicleTrack = null;
-let analyzer = null;
-let lastError = null;
+/** Everything else this page holds, in one place. */
+const session = {
+  peers: new Map(), // remote name -> {peer, role, channel}
+  signalQueues: new Map(), // remote name -> promise of its last signaling message handled
+  vehicleTrack: null,
+  analyzer: null,
+  lastError: null, // the last snapshot failure, logged once
+  busy: false, // a snapshot is being analysed
+  timer: null, // thesis profile: the snapshot interval
+  frameCallback: null, // default profile: the pending requestVideoFrameCallback
+};
 
 const ANALYZER_SLOW_MS = 30000;
 const slowAnalyzer = setTimeout(
@@ -47,7 +53,7 @@ const slowAnalyzer = setTimeout(
 );
 const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer)).then(
   (created) => {
-    analyzer = created;
+    session.analyzer = created;
     status.analyzerReady = true;
     status.op = created.defaultOp;
     show('operation', status.op);
@@ -69,11 +75,11 @@ function roleOf(name) {
 }
 
 function clientEntries() {
-  return [...peers.values()].filter((entry) => entry.role === 'client');
+  return [...session.peers.values()].filter((entry) => entry.role === 'client');
 }
 
 function vehicleEntry() {
-  return [...peers.values()].find((entry) => entry.role === 'vehicle');
+  return [...session.peers.values()].find((entry) => entry.role === 'vehicle');
 }
 
 function createPeer(name, role) {
@@ -92,22 +98,22 @@ function createPeer(name, role) {
   });
   peer.addEventListener('datachannel', (event) => onDataChannel(entry, event.detail));
   peer.addEventListener('state', (event) => {
-    if (event.detail === 'failed' && peers.get(name) === entry) closePeer(name, 'connection failed');
+    if (event.detail === 'failed' && session.peers.get(name) === entry) closePeer(name, 'connection failed');
     updatePeers();
   });
-  peers.set(name, entry);
+  session.peers.set(name, entry);
   updatePeers();
   return entry;
 }
 
 function closePeer(name, reason) {
-  const entry = peers.get(name);
+  const entry = session.peers.get(name);
   if (entry === undefined) return;
-  peers.delete(name);
+  session.peers.delete(name);
   entry.peer.close();
   log.info(`connection with ${name} closed: ${reason}`);
   if (entry.role === 'vehicle') {
-    vehicleTrack = null;
+    session.vehicleTrack = null;
     video.srcObject = null;
     for (const client of clientEntries()) {
       sendVideoOn(client.peer.pc).catch((err) => log.error(`could not stop forwarding video: ${err.message}`));
@@ -124,7 +130,7 @@ async function onOffer(msg) {
     log.warn(`ignored an offer from ${msg.from}: not a vehicle or client of this room`);
     return;
   }
-  let entry = peers.get(msg.from);
+  let entry = session.peers.get(msg.from);
   if (entry === undefined || entry.peer.closed) entry = createPeer(msg.from, role);
   try {
     await entry.peer.handle(msg);
@@ -141,11 +147,11 @@ async function onOffer(msg) {
 function onPeerSignal(msg) {
   const run = async () => {
     if (msg.type === 'offer') await onOffer(msg);
-    else await peers.get(msg.from)?.peer.handle(msg);
+    else await session.peers.get(msg.from)?.peer.handle(msg);
   };
-  const previous = signalQueues.get(msg.from) ?? Promise.resolve();
+  const previous = session.signalQueues.get(msg.from) ?? Promise.resolve();
   const next = previous.then(run).catch((err) => log.error(`negotiation with ${msg.from} failed: ${err.message}`));
-  signalQueues.set(msg.from, next);
+  session.signalQueues.set(msg.from, next);
 }
 
 /** Send the vehicle's video (or nothing yet) on every video transceiver of a client's connection. */
@@ -155,12 +161,12 @@ async function sendVideoOn(pc) {
     // The client offers recvonly; answering sendonly lets the track change later with no
     // renegotiation, which this side could not start anyway.
     if (pc.signalingState === 'have-remote-offer') transceiver.direction = 'sendonly';
-    await transceiver.sender.replaceTrack(vehicleTrack);
+    await transceiver.sender.replaceTrack(session.vehicleTrack);
   }
 }
 
 function onVehicleTrack(track) {
-  vehicleTrack = track;
+  session.vehicleTrack = track;
   status.vehicleTracks += 1;
   video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
@@ -240,8 +246,8 @@ async function sendOps(entry) {
 
 function setOp(msg, from) {
   if (typeof msg.op !== 'string') throw new BadMessage('"setOp" needs a string "op"');
-  if (analyzer === null) throw new BadMessage('operations are still loading; try again');
-  if (!analyzer.ops.some((op) => op.id === msg.op)) {
+  if (session.analyzer === null) throw new BadMessage('operations are still loading; try again');
+  if (!session.analyzer.ops.some((op) => op.id === msg.op)) {
     throw new BadMessage(`unknown operation "${msg.op}"; the current one stays "${status.op}"`);
   }
   if (msg.op !== status.op) log.info(`operation ${status.op} → ${msg.op} (asked by ${from})`);
@@ -278,50 +284,47 @@ function onPose(msg) {
 
 // ---------------------------------------------------------------- snapshot loop
 
-let busy = false;
-let timer = null;
-let frameCallback = null;
 
 function startLoop() {
   if (config.profile === 'thesis') {
-    timer = setInterval(snapshot, THESIS_PERIOD_MS);
+    session.timer = setInterval(snapshot, THESIS_PERIOD_MS);
     return;
   }
   const onFrame = () => {
     if (!status.piloting) return;
-    frameCallback = video.requestVideoFrameCallback(onFrame);
+    session.frameCallback = video.requestVideoFrameCallback(onFrame);
     snapshot();
   };
-  frameCallback = video.requestVideoFrameCallback(onFrame);
+  session.frameCallback = video.requestVideoFrameCallback(onFrame);
 }
 
 function stopLoop() {
-  if (timer !== null) clearInterval(timer);
-  if (frameCallback !== null) video.cancelVideoFrameCallback(frameCallback);
-  timer = null;
-  frameCallback = null;
+  if (session.timer !== null) clearInterval(session.timer);
+  if (session.frameCallback !== null) video.cancelVideoFrameCallback(session.frameCallback);
+  session.timer = null;
+  session.frameCallback = null;
 }
 
 /** One snapshot → analysis → goal, unless one is already in flight. */
 async function snapshot() {
-  if (busy || analyzer === null || video.videoWidth === 0) return;
-  busy = true;
+  if (session.busy || session.analyzer === null || video.videoWidth === 0) return;
+  session.busy = true;
   try {
     await analyzeOnce();
-    lastError = null;
+    session.lastError = null;
   } catch (err) {
     // Every frame would repeat it: log a failure once until something succeeds again.
-    if (err.message !== lastError) log.error(`snapshot failed: ${err.message}`);
-    lastError = err.message;
+    if (err.message !== session.lastError) log.error(`snapshot failed: ${err.message}`);
+    session.lastError = err.message;
   } finally {
-    busy = false;
+    session.busy = false;
   }
 }
 
 async function analyzeOnce() {
   const started = performance.now();
   const bitmap = await createImageBitmap(video);
-  const result = await analyzer.analyze(bitmap, status.op, { profile: config.profile });
+  const result = await session.analyzer.analyze(bitmap, status.op, { profile: config.profile });
   if (!status.piloting) return;
   status.snapshots += 1;
   if (result.target) {
@@ -370,7 +373,7 @@ async function analyzeOnce() {
 
 function updatePeers() {
   status.clients = clientEntries().map((entry) => entry.peer.remote);
-  const lines = [...peers.entries()].map(
+  const lines = [...session.peers.entries()].map(
     ([name, entry]) => `${entry.role} ${name} (${entry.peer.pc.connectionState}${entry.channel ? ', channel open' : ''})`,
   );
   show('peers', lines.join('; ') || 'none');
@@ -387,13 +390,13 @@ room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') {
     // Stop first, while the vehicle's channel is still there to hear it.
     if (status.piloting) setPiloting(false, 'this relay leaving');
-    for (const name of [...peers.keys()]) closePeer(name, 'left the room');
+    for (const name of [...session.peers.keys()]) closePeer(name, 'left the room');
   }
 });
 room.addEventListener('roster', showState);
 room.addEventListener('peerleft', (event) => {
   closePeer(event.detail, 'left the room');
-  signalQueues.delete(event.detail);
+  session.signalQueues.delete(event.detail);
 });
 room.addEventListener('signal', (event) => {
   const msg = event.detail;
@@ -414,7 +417,7 @@ room.addEventListener('signal', (event) => {
     case 'getOps': {
       // The answer rides the control channel; a client whose channel is not open yet asks
       // again on it once it opens.
-      const entry = peers.get(msg.from);
+      const entry = session.peers.get(msg.from);
       if (entry?.channel) sendOps(entry);
       break;
     }

@@ -98,19 +98,22 @@ class Turtle {
 }
 
 const turtle = new Turtle(config.rosbridge, config.ros);
-let channel = null;
-let lastPoseSent = 0;
-let rosWarned = false;
+/** Everything else this page holds, in one place. */
+const session = {
+  channel: null, // the open `autopilot` data channel
+  lastPoseSent: 0,
+  rosWarned: false, // a lost Twist has been reported for this outage
+};
 
 function publish(twist, why) {
   if (twist === null) return;
   if (!turtle.publish(twist)) {
     // Once per outage: goals keep coming at frame rate and would flood the log.
-    if (!rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
-    rosWarned = true;
+    if (!session.rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
+    session.rosWarned = true;
     return;
   }
-  rosWarned = false;
+  session.rosWarned = false;
   status.twistsPublished += 1;
   status.lastTwist = { ...twist, t: Date.now() };
   show('twist', `angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
@@ -133,8 +136,8 @@ turtle.onPose = (pose) => {
   show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
   drive(() => controller.pose(pose));
   const now = performance.now();
-  if (now - lastPoseSent >= POSE_FORWARD_MS && sendJson(channel, { type: 'pose', ...pose, t: Date.now() })) {
-    lastPoseSent = now;
+  if (now - session.lastPoseSent >= POSE_FORWARD_MS && sendJson(session.channel, { type: 'pose', ...pose, t: Date.now() })) {
+    session.lastPoseSent = now;
   }
 };
 
@@ -163,14 +166,14 @@ function setupPeer(peer, stream) {
   const dc = peer.pc.createDataChannel('autopilot');
   serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log);
   dc.addEventListener('open', () => {
-    channel = dc;
+    session.channel = dc;
     status.relayChannelOpen = true;
     log.info(`autopilot channel to ${peer.remote} open`);
     showState();
   });
   dc.addEventListener('close', () => {
-    if (channel !== dc) return;
-    channel = null;
+    if (session.channel !== dc) return;
+    session.channel = null;
     status.relayChannelOpen = false;
     halt('relay channel closed');
     showState();
