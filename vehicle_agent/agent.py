@@ -30,7 +30,7 @@ from vehicle_agent.turtle import Turtle
 log = logging.getLogger(__name__)
 
 # The relay must answer and ICE must connect within this long, or the agent offers again.
-CONNECT_TIMEOUT_S = 20.0
+CONNECT_TIMEOUT_S = 10.0
 TELEMETRY_PERIOD_S = 0.1
 TICK_PERIOD_S = 0.05
 
