@@ -37,7 +37,8 @@ def face_left_video(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture
 def server() -> Iterator[RunningServer]:
     """A fresh server (and simulated turtle) per test, on a free port."""
-    running = start_in_thread(Settings())
+    # Independent of the environment the tests run in (no token, no ICE servers).
+    running = start_in_thread(Settings(environment="development", token=None, ice_servers=[]))
     yield running
     running.stop()
 
