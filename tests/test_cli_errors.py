@@ -74,3 +74,17 @@ def test_vehicle_refused_login_names_the_reason(server: RunningServer) -> None:
         finally:
             first.terminate()
             first.wait(timeout=20)
+
+
+def test_relay_unreachable_server() -> None:
+    result = autopilot("relay", "--server", "http://127.0.0.1:9")
+    assert_one_line_error(result, "cannot reach the server", "127.0.0.1:9")
+
+
+def test_relay_malformed_server_url() -> None:
+    assert_one_line_error(autopilot("relay", "--server", "localhost"), "server URL", "localhost")
+
+
+def test_demo_port_in_use(server: RunningServer) -> None:
+    port = server.url.rsplit(":", 1)[1]
+    assert_one_line_error(autopilot("demo", "--port", port), "cannot listen", port)

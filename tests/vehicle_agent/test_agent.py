@@ -9,17 +9,14 @@ import asyncio
 import contextlib
 import math
 import socket
-import threading
 from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import pytest
-import uvicorn
 
 from app.config import Settings
-from app.main import create_app
-from app.serve import RunningServer
+from app.serve import RunningServer, start_in_thread
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
@@ -201,17 +198,8 @@ async def test_relay_leaving_stops_the_turtle_and_a_new_relay_pilots_again(
 
 
 def serve_on(port: int) -> RunningServer:
-    """The app on a given port (a restart must come back where the agent expects it)."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", port))
-    config = uvicorn.Config(create_app(Settings()), log_level="warning", lifespan="on")
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True)
-    thread.start()
-    while not server.started:
-        threading.Event().wait(0.01)
-    return RunningServer(url=f"http://127.0.0.1:{port}", server=server, thread=thread)
+    """The app on a given port: a restarted server must come back where the agent expects it."""
+    return start_in_thread(Settings(), port=port)
 
 
 @pytest.fixture
