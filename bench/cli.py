@@ -18,10 +18,13 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench import report
 from bench.results import FIGURE_KEYS, ProfileRun, results
+
+if TYPE_CHECKING:
+    from playwright.async_api import Browser
 
 log = logging.getLogger(__name__)
 
@@ -106,8 +109,6 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
 
     from app.browser import chromium_args, chromium_path
     from app.serve import start_in_thread
-    from bench.jsnative import compare, synthetic_frames
-    from bench.stack import StackError, StackOptions, run_profile
 
     plan = QUICK if args.quick else FULL
     default_s = args.soak * 60.0 if args.soak else plan["default_s"]
@@ -120,31 +121,10 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                 executable_path=chromium_path(), args=chromium_args() + MEMORY_FLAGS
             )
             try:
-                runs: dict[str, ProfileRun] = {}
-                with tempfile.TemporaryDirectory(prefix="autopilot-bench-") as tmp:
-                    for profile, seconds in (("default", default_s), ("thesis", plan["thesis_s"])):
-                        # A soak samples memory every 30 s; short runs every 10 s.
-                        every = 30.0 if seconds >= 300 else 10.0
-                        options = StackOptions(profile, seconds, fps=args.fps, memory_every_s=every)
-                        try:
-                            runs[profile] = await run_profile(
-                                browser, server.url, options, Path(tmp)
-                            )
-                        except StackError as exc:
-                            log.error("%s profile: %s", profile, exc)
-                            runs[profile] = ProfileRun(profile, problems=_all(str(exc)))
+                durations = {"default": default_s, "thesis": plan["thesis_s"]}
+                runs = await _run_profiles(browser, server.url, durations, args.fps)
                 # After the stack is down, so that neither side shares its core with the video.
-                frames = synthetic_frames(int(plan["frames"]))
-                try:
-                    comparisons = await compare(browser, server.url, frames)
-                except RuntimeError as exc:
-                    log.error("OpenCV.js against Python: %s", exc)
-                    for run in runs.values():
-                        run.problems.setdefault("js_over_native_ratio", str(exc))
-                else:
-                    for profile, comparison in comparisons.items():
-                        runs[profile].js_ms = comparison.js_ms
-                        runs[profile].native_ms = comparison.native_ms
+                await _compare_detection(browser, server.url, runs, int(plan["frames"]))
                 browser_version = browser.version
             finally:
                 await browser.close()
@@ -166,6 +146,44 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     obj = results(runs["default"], runs["thesis"], run_info)
     report.write(args.out, obj, runs["default"], runs["thesis"])
     return obj
+
+
+async def _run_profiles(
+    browser: Browser, server_url: str, durations: dict[str, float], fps: float
+) -> dict[str, ProfileRun]:
+    """One stack run per profile; a profile whose stack fails keeps the reason, not numbers."""
+    from bench.stack import StackError, StackOptions, run_profile
+
+    runs: dict[str, ProfileRun] = {}
+    with tempfile.TemporaryDirectory(prefix="autopilot-bench-") as tmp:
+        for profile, seconds in durations.items():
+            # A soak samples memory every 30 s; short runs every 10 s.
+            every = 30.0 if seconds >= 300 else 10.0
+            options = StackOptions(profile, seconds, fps=fps, memory_every_s=every)
+            try:
+                runs[profile] = await run_profile(browser, server_url, options, Path(tmp))
+            except StackError as exc:
+                log.error("%s profile: %s", profile, exc)
+                runs[profile] = ProfileRun(profile, problems=_all(str(exc)))
+    return runs
+
+
+async def _compare_detection(
+    browser: Browser, server_url: str, runs: dict[str, ProfileRun], frames: int
+) -> None:
+    """OpenCV.js against Python on the same frames, per profile, into ``runs``."""
+    from bench.jsnative import compare, synthetic_frames
+
+    try:
+        comparisons = await compare(browser, server_url, synthetic_frames(frames), tuple(runs))
+    except RuntimeError as exc:
+        log.error("OpenCV.js against Python: %s", exc)
+        for run in runs.values():
+            run.problems.setdefault("js_over_native_ratio", str(exc))
+        return
+    for profile, comparison in comparisons.items():
+        runs[profile].js_ms = comparison.js_ms
+        runs[profile].native_ms = comparison.native_ms
 
 
 def _all(reason: str) -> dict[str, str]:
