@@ -14,7 +14,7 @@ from pathlib import Path
 from urllib.parse import urlencode
 
 import pytest
-from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, sync_playwright
+from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect, sync_playwright
 
 from app.browser import chromium_args, chromium_path
 from app.config import Settings
@@ -23,6 +23,10 @@ from e2e.helpers import FACES, FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
+
+# Generous waits: three Chromium pages and OpenCV.js share two loaded cores. Waits end as soon
+# as their condition holds, so this only costs time when something is really wrong.
+expect.set_options(timeout=60_000)
 
 
 @pytest.fixture(scope="session")
