@@ -169,8 +169,11 @@ function showState() {
 
 select.addEventListener('change', showDescription);
 button('set-op').addEventListener('click', () => {
-  if (sendJson(session.control, { type: 'setOp', op: select.value })) log.info(`asked the relay to use ${select.value}`);
-  else log.error('cannot set the operation: no relay connection');
+  if (sendJson(session.control, { type: 'setOp', op: select.value })) {
+    log.info(`asked the relay to use ${select.value}`);
+  } else {
+    log.error('cannot set the operation: no relay connection');
+  }
 });
 for (const type of ['start', 'stop']) {
   button(type).addEventListener('click', () => {

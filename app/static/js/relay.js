@@ -237,7 +237,8 @@ function broadcastState() {
 async function sendOps(entry) {
   const ready = await analyzerReady;
   if (ready === null) {
-    sendJson(entry.channel, { type: 'error', reason: 'the relay has no OpenCV.js analyzer (see its log)', ref: 'getOps' });
+    const reason = 'the relay has no OpenCV.js analyzer (see its log)';
+    sendJson(entry.channel, { type: 'error', reason, ref: 'getOps' });
     return;
   }
   sendJson(entry.channel, { type: 'ops', ops: ready.ops, current: status.op });
@@ -374,7 +375,8 @@ async function analyzeOnce() {
 function updatePeers() {
   status.clients = clientEntries().map((entry) => entry.peer.remote);
   const lines = [...session.peers.entries()].map(
-    ([name, entry]) => `${entry.role} ${name} (${entry.peer.pc.connectionState}${entry.channel ? ', channel open' : ''})`,
+    ([name, entry]) =>
+      `${entry.role} ${name} (${entry.peer.pc.connectionState}${entry.channel ? ', channel open' : ''})`,
   );
   show('peers', lines.join('; ') || 'none');
 }

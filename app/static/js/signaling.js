@@ -78,7 +78,8 @@ export class Signaling extends EventTarget {
     try {
       msg = JSON.parse(text);
     } catch {
-      this.dispatchEvent(new CustomEvent('protocolerror', { detail: `server sent malformed JSON: ${String(text).slice(0, 80)}` }));
+      const detail = `server sent malformed JSON: ${String(text).slice(0, 80)}`;
+      this.dispatchEvent(new CustomEvent('protocolerror', { detail }));
       return;
     }
     if (msg === null || typeof msg !== 'object' || typeof msg.type !== 'string') {

@@ -88,7 +88,11 @@ class Turtle {
 
   // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
   #spawnStep(pose) {
-    const service = new ROSLIB.Service({ ros: this.ros, name: '/turtle1/teleport_absolute', serviceType: this.types.teleport });
+    const service = new ROSLIB.Service({
+      ros: this.ros,
+      name: '/turtle1/teleport_absolute',
+      serviceType: this.types.teleport,
+    });
     service.callService(
       { x: pose.x, y: pose.y, theta: Math.PI / 2 },
       () => log.info('spawn step: turtle1 turned to π/2'),
@@ -136,9 +140,8 @@ turtle.onPose = (pose) => {
   show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
   drive(() => controller.pose(pose));
   const now = performance.now();
-  if (now - session.lastPoseSent >= POSE_FORWARD_MS && sendJson(session.channel, { type: 'pose', ...pose, t: Date.now() })) {
-    session.lastPoseSent = now;
-  }
+  if (now - session.lastPoseSent < POSE_FORWARD_MS) return;
+  if (sendJson(session.channel, { type: 'pose', ...pose, t: Date.now() })) session.lastPoseSent = now;
 };
 
 setInterval(() => drive(() => controller.tick()), TICK_MS);
