@@ -17,11 +17,6 @@ export class TurtleView {
     this.draw();
   }
 
-  /** The last pose drawn, or null. */
-  get pose() {
-    return this.#pose;
-  }
-
   /** Add a pose {x, y, theta} (terrain metres, radians) and redraw. */
   addPose(pose) {
     const last = this.#trail.at(-1);
@@ -37,14 +32,6 @@ export class TurtleView {
   /** Show where the current goal lies on the terrain ({x, y} metres), or hide it with null. */
   setTarget(target) {
     this.#target = target;
-    this.draw();
-  }
-
-  /** Forget the route (a new session). */
-  clear() {
-    this.#trail = [];
-    this.#pose = null;
-    this.#target = null;
     this.draw();
   }
 
