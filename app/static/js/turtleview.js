@@ -72,7 +72,7 @@ export class TurtleView {
 
 /** A top-down turtle heading along +x before rotation; canvas y points down, hence −theta. */
 function drawTurtle(ctx, x, y, theta, scale) {
-  const s = scale * 0.8; // about the size of turtlesim's sprite
+  const s = scale * 1.1; // about the size of turtlesim's 45 px sprite on its 500 px window
   ctx.save();
   ctx.translate(x, y);
   ctx.rotate(-theta);
