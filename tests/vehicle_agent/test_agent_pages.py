@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import statistics
 from collections.abc import AsyncIterator, Callable
 
 import pytest
@@ -83,17 +84,20 @@ class Scene:
 
 
 @contextlib.asynccontextmanager
-async def scene(server: RunningServer) -> AsyncIterator[Scene]:
+async def scene(server: RunningServer, profile: str = "default") -> AsyncIterator[Scene]:
     events: list[Event] = []
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
     turtle = SimTurtle()
     agent = Agent(
-        AgentConfig(server=server.url), SyntheticVideo(W, H, fps=15, path=path), turtle, log
+        AgentConfig(server=server.url, profile=profile),
+        SyntheticVideo(W, H, fps=15, path=path),
+        turtle,
+        log,
     )
     agent_task = asyncio.create_task(agent.run())
-    relay = RelayService(server.url)
+    relay = RelayService(server.url, profile=profile)
     stop_relay = asyncio.Event()
     relay_task = asyncio.create_task(relay.run(stop_relay))
     async with async_playwright() as pw:
@@ -106,7 +110,7 @@ async def scene(server: RunningServer) -> AsyncIterator[Scene]:
             yield Scene(agent, turtle, path, relay, client, events)
         finally:
             with contextlib.suppress(Exception):
-                await client.screenshot(path="artifacts/agent-pages-client.png")
+                await client.screenshot(path=f"artifacts/agent-pages-client-{profile}.png")
             await browser.close()
             stop_relay.set()
             await asyncio.wait_for(relay_task, 30)
@@ -166,3 +170,27 @@ async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) ->
         await s.start_piloting()
         await eventually(lambda: s.goals() > goals_before + 5, 60, "goals from the new relay")
         await eventually(lambda: 150 < s.heading_deg() <= 180, 30, "the turtle to face left again")
+
+
+async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
+    """Relay snapshots every 1.5 s, the agent publishes the latest goal every 1.1 s."""
+    async with scene(server, profile="thesis") as s:
+        await s.start_piloting()
+        await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
+
+        def moves() -> list[float]:
+            return [e["t"] for e in s.events if e["ev"] == "twist" and e["seq"] is not None]
+
+        # turtlesim runs a command for 1 s and angular.z = e, so one Twist turns the turtle by
+        # the whole error; keep watching for a few periods.
+        await eventually(lambda: len(moves()) >= 4, 30, "four thesis-profile Twists")
+        gaps = [b - a for a, b in zip(moves(), moves()[1:], strict=False)]
+        # One Twist per 1100 ms period on a fixed cadence: checked on a 50 ms tick, so a late
+        # tick stretches one gap and shortens the next, but the mean stays at 1.1 s.
+        assert all(gap > 0.9 for gap in gaps), gaps
+        assert statistics.mean(gaps) == pytest.approx(1.1, abs=0.1), gaps
+        goals = [e["t"] for e in s.events if e["ev"] == "goal"]
+        assert len(goals) >= 2
+        # Snapshots every 1.5 s; analysis time varies, so the goals' spacing jitters around it.
+        goal_gaps = [b - a for a, b in zip(goals, goals[1:], strict=False)]
+        assert statistics.median(goal_gaps) > 1.2, goal_gaps
