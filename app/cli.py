@@ -25,7 +25,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse the command line and run one subcommand; returns the process exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(prog="autopilot", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="autopilot",
+        description="Pilot a ROS turtle from OpenCV.js analysis of its own WebRTC video.",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log at DEBUG level")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     # Only the chosen subcommand's module is imported; the others are listed by name.
