@@ -66,7 +66,11 @@ class RelayService:
         delay = RESTART_FIRST_S
         async with async_playwright() as playwright:
             while not stop.is_set():
-                reason = await self._run_browser(playwright, stop)
+                try:
+                    reason = await self._run_browser(playwright, stop)
+                except PlaywrightError as exc:
+                    # Chromium failed to start or vanished mid-call: try again, like a crash.
+                    reason = exc.message.splitlines()[0]
                 if stop.is_set():
                     break
                 log.warning("relay page died (%s); restarting in %.0f s", reason, delay)
