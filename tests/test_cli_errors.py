@@ -41,6 +41,7 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
         (["--rosbridge", "ws://127.0.0.1:9"], ["rosbridge", "ws://127.0.0.1:9"]),
         (["--rosbridge", "robot:9090"], ["rosbridge URL", "robot:9090"]),
         (["--size", "big"], ["size", "big"]),
+        (["--size", "641x480"], ["size", "641x480"]),
         (["--profile", "fastest"], ["fastest"]),
     ],
 )
