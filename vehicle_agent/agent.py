@@ -119,6 +119,12 @@ class Agent:
             "leave": self._on_leave,
             "error": self._on_server_error,
         }
+        # What the session loop's queue carries (besides "closed", which ends the session).
+        self._events: dict[str, Callable[[Any], Awaitable[None]]] = {
+            "signal": self._on_signal,
+            "link_down": self._on_link_event,
+            "retry": self._on_retry,
+        }
         self._channel_handlers: dict[str, Callable[[RelayLink, dict[str, Any]], None]] = {
             "goal": self._on_goal,
             "stop": self._on_stop,
@@ -189,24 +195,28 @@ class Agent:
                 kind, payload = await self._queue.get()
                 if kind == "closed":
                     return
-                if kind == "signal":
-                    handler = self._handlers.get(payload["type"])
-                    if handler is None:
-                        log.debug("ignoring signaling message %s", payload["type"])
-                    else:
-                        await handler(payload)
-                elif kind == "link_down":
-                    link, reason = payload
-                    await self._on_link_down(link, reason)
-                elif kind == "retry":
-                    self._retry = None
-                    await self._ensure_link()
+                await self._events[kind](payload)
         finally:
             reader.cancel()
             await asyncio.gather(reader, return_exceptions=True)
             if self._retry is not None:
                 self._retry.cancel()
                 self._retry = None
+
+    async def _on_signal(self, message: dict[str, Any]) -> None:
+        handler = self._handlers.get(message["type"])
+        if handler is None:
+            log.debug("ignoring signaling message %s", message["type"])
+        else:
+            await handler(message)
+
+    async def _on_link_event(self, payload: tuple[RelayLink, str]) -> None:
+        link, reason = payload
+        await self._on_link_down(link, reason)
+
+    async def _on_retry(self, payload: None) -> None:
+        self._retry = None
+        await self._ensure_link()
 
     async def _read(self, client: SignalingClient) -> None:
         async for message in client.messages():
