@@ -127,6 +127,7 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
             while abs(math.remainder(turtle_theta(base) - before, math.tau)) < 0.3:
                 assert time.monotonic() - clicked < 30, "the turtle did not turn after Start"
                 time.sleep(0.1)
+            (REPO / "artifacts").mkdir(exist_ok=True)
             page.screenshot(path=str(REPO / "artifacts" / "demo-client.png"))
         finally:
             browser.close()

@@ -11,9 +11,12 @@ import contextlib
 import math
 import statistics
 from collections.abc import AsyncIterator, Callable
+from pathlib import Path
 
 import pytest
+from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import Page, async_playwright
+from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.browser import chromium_args, chromium_path
 from app.relay_service import RelayService
@@ -26,6 +29,7 @@ from vehicle_agent.video import FixedPath, SyntheticVideo
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
 W, H = 640, 480
+ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
 
 
 async def eventually(condition: Callable[[], bool], timeout: float, what: str) -> None:
@@ -40,7 +44,7 @@ async def eventually(condition: Callable[[], bool], timeout: float, what: str) -
 async def page_until(page: Page, expression: str, timeout: float, what: str) -> None:
     try:
         await page.wait_for_function(expression, timeout=timeout * 1000)
-    except Exception as exc:  # Playwright's TimeoutError: say what we were waiting for
+    except PlaywrightTimeout as exc:
         raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from exc
 
 
@@ -109,8 +113,9 @@ async def scene(server: RunningServer, profile: str = "default") -> AsyncIterato
             await client.goto(f"{server.url}/client?room=default&name=client&auto=1")
             yield Scene(agent, turtle, path, relay, client, events)
         finally:
-            with contextlib.suppress(Exception):
-                await client.screenshot(path=f"artifacts/agent-pages-client-{profile}.png")
+            # Kept whether the test passed or failed, for a person to look at.
+            ARTIFACTS.mkdir(exist_ok=True)
+            await client.screenshot(path=str(ARTIFACTS / f"agent-pages-client-{profile}.png"))
             await browser.close()
             stop_relay.set()
             await asyncio.wait_for(relay_task, 30)
@@ -150,7 +155,7 @@ async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) ->
         await eventually(lambda: s.heading_deg() > 60, 30, "the turtle to turn again")
         assert s.relay.page is not None
         starts = s.relay.starts
-        with contextlib.suppress(Exception):  # the crash itself makes the navigation fail
+        with contextlib.suppress(PlaywrightError):  # the crash itself fails the navigation
             await s.relay.page.goto("chrome://crash", timeout=5000)
         killed = asyncio.get_running_loop().time()
         await eventually(
