@@ -45,7 +45,9 @@ def _positive(text: str) -> float:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot vehicle``."""
     parser.add_argument(
-        "--server", default="http://127.0.0.1:8000", help="signaling server base URL"
+        "--server",
+        default="http://127.0.0.1:8000",
+        help="the server's base URL (default http://127.0.0.1:8000)",
     )
     parser.add_argument("--room", default="default", help="room to join (default: default)")
     parser.add_argument("--name", default="vehicle", help="peer name (default: vehicle)")
@@ -55,7 +57,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SOURCE",
         help="'synthetic' (a moving face with frame tags), a video file (looped) or /dev/videoN",
     )
-    parser.add_argument("--size", type=_size, metavar="WxH", help="frame size (default 640x480)")
+    parser.add_argument(
+        "--size",
+        type=_size,
+        metavar="WxH",
+        help="frame size (synthetic: 640x480; files, devices: their own)",
+    )
     parser.add_argument("--fps", type=_positive, help="frame rate (default 15, or the file's)")
     parser.add_argument(
         "--rosbridge",
