@@ -30,6 +30,8 @@ const status = {
   lastGoal: null,
   lastDetections: null,
   processingMs: [], // snapshot taken -> goal sent (or analysis done when nothing was found)
+  workMs: [], // of which in the vision worker: pixels read and detection
+  detectMs: [], // of which the operation's detect() alone
   goalTimes: [], // performance.now() of recent goals, for goals per second
 };
 window.autopilotStatus = status;
@@ -94,7 +96,7 @@ function createPeer(name, role) {
   });
   const entry = { peer, role, channel: null };
   peer.addEventListener('track', (event) => {
-    if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail.track);
+    if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail);
   });
   peer.addEventListener('datachannel', (event) => onDataChannel(entry, event.detail));
   peer.addEventListener('state', (event) => {
@@ -165,7 +167,10 @@ async function sendVideoOn(pc) {
   }
 }
 
-function onVehicleTrack(track) {
+function onVehicleTrack({ track, receiver }) {
+  // Goals are worth most when fresh: ask for the smallest jitter buffer WebRTC allows, so a
+  // decoded frame is shown (and analysed) as soon as it is complete.
+  receiver.jitterBufferTarget = 0;
   session.vehicleTrack = track;
   status.vehicleTracks += 1;
   video.srcObject = new MediaStream([track]);
@@ -322,10 +327,18 @@ async function snapshot() {
   }
 }
 
+/** Append to one of the bounded rings of per-snapshot timings. */
+function pushSample(ring, value) {
+  ring.push(value);
+  if (ring.length > MS_SAMPLES) ring.shift();
+}
+
 async function analyzeOnce() {
   const started = performance.now();
-  const bitmap = await createImageBitmap(video);
-  const result = await session.analyzer.analyze(bitmap, status.op, { profile: config.profile });
+  // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
+  // converts it to RGBA straight into OpenCV's memory.
+  const frame = new VideoFrame(video);
+  const result = await session.analyzer.analyze(frame, status.op, { profile: config.profile });
   if (!status.piloting) return;
   status.snapshots += 1;
   if (result.target) {
@@ -347,8 +360,9 @@ async function analyzeOnce() {
     }
   }
   const ms = performance.now() - started;
-  status.processingMs.push(ms);
-  if (status.processingMs.length > MS_SAMPLES) status.processingMs.shift();
+  pushSample(status.processingMs, ms);
+  pushSample(status.workMs, result.workMs);
+  pushSample(status.detectMs, result.ms);
   const now = performance.now();
   while (status.goalTimes.length && now - status.goalTimes[0] > RATE_WINDOW_MS) status.goalTimes.shift();
   const goalsPerS = status.goalTimes.length / (RATE_WINDOW_MS / 1000);

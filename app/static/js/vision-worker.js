@@ -89,12 +89,35 @@ function instanceFor(opId, profile) {
   return instance;
 }
 
-/** RGBA pixels of the source; ImageBitmap and VideoFrame are drawn and then closed. */
-function readPixels(source) {
-  if (source.data) return new ImageData(source.data, source.width, source.height);
-  const width = source.displayWidth ?? source.width;
-  const height = source.displayHeight ?? source.height;
+/** The reused RGBA frame Mat, reallocated only when the frame size changes. */
+function frameMat(width, height) {
+  const { cv } = session;
+  if (!session.frame || session.frame.cols !== width || session.frame.rows !== height) {
+    session.frame?.delete();
+    session.frame = new cv.Mat(height, width, cv.CV_8UC4);
+  }
+  return session.frame;
+}
+
+/**
+ * Put the source's RGBA pixels into the frame Mat and return it. A VideoFrame converts itself
+ * straight into the Mat's WASM memory (one copy, no canvas); an ImageBitmap is drawn on a
+ * canvas and read back; raw RGBA is copied as it is. Frames and bitmaps are closed.
+ */
+async function readPixels(source) {
+  if (source.data) {
+    const mat = frameMat(source.width, source.height);
+    mat.data.set(source.data);
+    return mat;
+  }
   try {
+    if (source instanceof VideoFrame) {
+      const { width, height } = source.visibleRect;
+      const mat = frameMat(width, height);
+      await source.copyTo(mat.data, { format: 'RGBA', colorSpace: 'srgb' });
+      return mat;
+    }
+    const { width, height } = source;
     if (!session.canvas) {
       session.canvas = new OffscreenCanvas(width, height);
       session.ctx = session.canvas.getContext('2d', { willReadFrequently: true });
@@ -103,7 +126,9 @@ function readPixels(source) {
       session.canvas.height = height;
     }
     session.ctx.drawImage(source, 0, 0, width, height);
-    return session.ctx.getImageData(0, 0, width, height);
+    const mat = frameMat(width, height);
+    mat.data.set(session.ctx.getImageData(0, 0, width, height).data);
+    return mat;
   } finally {
     source.close();
   }
@@ -113,8 +138,7 @@ function readPixels(source) {
  * The frame number the synthetic video writes into the top row of blocks (docs/contracts.md,
  * "Frame tag"), or null when the marker blocks do not read white, black.
  */
-function decodeFrameTag(image) {
-  const { width, height, data } = image;
+function decodeFrameTag(width, height, data) {
   const b = Math.floor(width / 40);
   if (b < 2 || height < b) return null;
   const lo = Math.floor(b / 4);
@@ -145,7 +169,7 @@ function describe(error) {
   return String(error?.message ?? error);
 }
 
-function analyze({ source, opId, profile = 'default', returnPixels = false }) {
+async function analyze({ source, opId, profile = 'default', returnPixels = false }) {
   const started = performance.now();
   let instance;
   try {
@@ -154,35 +178,30 @@ function analyze({ source, opId, profile = 'default', returnPixels = false }) {
     source.close?.();
     throw error;
   }
-  const image = readPixels(source);
-  const { cv } = session;
-  if (!session.frame || session.frame.cols !== image.width || session.frame.rows !== image.height) {
-    session.frame?.delete();
-    session.frame = new cv.Mat(image.height, image.width, cv.CV_8UC4);
-  }
-  session.frame.data.set(image.data);
+  const frame = await readPixels(source);
   const detectStarted = performance.now();
-  const { boxes, target } = instance.detect(session.frame);
+  const { boxes, target } = instance.detect(frame);
   const done = performance.now();
+  const { cols: width, rows: height } = frame;
   const result = {
     op: opId,
     boxes,
     target,
-    w: image.width,
-    h: image.height,
+    w: width,
+    h: height,
     ms: done - detectStarted,
     workMs: done - started,
-    frame: decodeFrameTag(image),
+    frame: decodeFrameTag(width, height, frame.data),
   };
-  if (returnPixels) result.rgba = image.data;
+  if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
 }
 
-self.onmessage = ({ data: message }) => {
+async function handle(message) {
   switch (message.type) {
     case 'analyze': {
       try {
-        const result = analyze(message);
+        const result = await analyze(message);
         const transfer = result.rgba ? [result.rgba.buffer] : [];
         self.postMessage({ type: 'result', id: message.id, result }, transfer);
       } catch (error) {
@@ -207,6 +226,13 @@ self.onmessage = ({ data: message }) => {
     default:
       self.postMessage({ type: 'error', id: message.id, error: `unknown message ${message.type}` });
   }
+}
+
+// Messages are handled one at a time, in order: an analysis awaits its pixel copy, and the
+// next one must not overwrite the shared frame Mat meanwhile.
+let queue = Promise.resolve();
+self.onmessage = ({ data: message }) => {
+  queue = queue.then(() => handle(message));
 };
 
 init().then(
