@@ -133,6 +133,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     run_info = {
         "started": started.isoformat(timespec="seconds"),
         "machine": _machine(),
+        "cores": os.cpu_count(),
         "command": _command(args),
         "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
         "chromium": browser_version,

@@ -208,6 +208,12 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "glass_to_command_ms": summary(run.glass_ms()),
         "frame_to_goal_ms": summary(run.frame_to_goal_ms()),
         "goal_to_command_ms": summary(run.goal_to_command_ms()),
+        "frames_sent_per_s": (
+            sum(1 for t in run.frame_sent.values() if run.window[0] <= t < run.window[1])
+            / (run.window[1] - run.window[0])
+            if run.window
+            else None
+        ),
         "relay_snapshots": run.snapshots,
         "relay_goals_sent": run.relay_goals,
         "goals_received": len(run.goals),
@@ -219,6 +225,12 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "memory_end": vars(last) if last else None,
         "memory_growth_pct": memory_growths(run),
         "memory_minutes": (last.t - first.t) / 60.0 if first and last else None,
+        # Minutes since the first sample, JS heap and WASM heap in bytes: the trend of a soak.
+        "memory_series": [
+            [round((m.t - first.t) / 60.0, 3), m.js_heap, m.wasm_heap] for m in run.memory
+        ]
+        if first
+        else [],
     }
 
 

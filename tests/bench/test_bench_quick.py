@@ -28,7 +28,13 @@ KEYS = (
     "js_over_native_ratio",
     "memory_growth_pct",
 )
-PLOTS = ("processing_delay.png", "heading.png", "glass_to_command.png", "js_vs_native.png")
+PLOTS = (
+    "processing_delay.png",
+    "heading.png",
+    "glass_to_command.png",
+    "js_vs_native.png",
+    "relay_memory.png",
+)
 
 
 def check_plausible(figures: dict[str, object], profile: str) -> None:
