@@ -63,7 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="WxH",
         help="frame size (synthetic: 640x480; files, devices: their own)",
     )
-    parser.add_argument("--fps", type=_positive, help="frame rate (default 15, or the file's)")
+    parser.add_argument("--fps", type=_positive, help="frame rate (default 30, or the file's)")
     parser.add_argument(
         "--rosbridge",
         metavar="URL",
