@@ -10,6 +10,29 @@ const THESIS_PERIOD_MS = 1500;
 const RATE_WINDOW_MS = 2000;
 const MS_SAMPLES = 2000;
 
+/**
+ * The latest `capacity` samples, in storage allocated once: a ring that fills up must not look
+ * like heap growth to a memory check. `toArray()` gives them oldest first.
+ */
+class SampleRing {
+  constructor(capacity) {
+    this.values = new Float64Array(capacity);
+    this.count = 0;
+    this.next = 0;
+  }
+
+  push(value) {
+    this.values[this.next] = value;
+    this.next = (this.next + 1) % this.values.length;
+    this.count = Math.min(this.count + 1, this.values.length);
+  }
+
+  toArray() {
+    const start = (this.next - this.count + this.values.length) % this.values.length;
+    return Array.from({ length: this.count }, (_, i) => this.values[(start + i) % this.values.length]);
+  }
+}
+
 const config = readConfig();
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
@@ -29,9 +52,18 @@ const status = {
   goalsSent: 0,
   lastGoal: null,
   lastDetections: null,
-  processingMs: [], // snapshot taken -> goal sent (or analysis done when nothing was found)
-  workMs: [], // of which in the vision worker: pixels read and detection
-  detectMs: [], // of which the operation's detect() alone
+  /** Snapshot taken -> goal sent (or analysis done when nothing was found), ms, oldest first. */
+  get processingMs() {
+    return session.samples.processing.toArray();
+  },
+  /** Of which in the vision worker: pixels read and detection. */
+  get workMs() {
+    return session.samples.work.toArray();
+  },
+  /** Of which the operation's detect() alone. */
+  get detectMs() {
+    return session.samples.detect.toArray();
+  },
   goalTimes: [], // performance.now() of recent goals, for goals per second
 };
 window.autopilotStatus = status;
@@ -46,6 +78,12 @@ const session = {
   busy: false, // a snapshot is being analysed
   timer: null, // thesis profile: the snapshot interval
   frameCallback: null, // default profile: the pending requestVideoFrameCallback
+  // Per-snapshot timings behind status.processingMs, workMs and detectMs.
+  samples: {
+    processing: new SampleRing(MS_SAMPLES),
+    work: new SampleRing(MS_SAMPLES),
+    detect: new SampleRing(MS_SAMPLES),
+  },
 };
 
 const ANALYZER_SLOW_MS = 30000;
@@ -327,12 +365,6 @@ async function snapshot() {
   }
 }
 
-/** Append to one of the bounded rings of per-snapshot timings. */
-function pushSample(ring, value) {
-  ring.push(value);
-  if (ring.length > MS_SAMPLES) ring.shift();
-}
-
 async function analyzeOnce() {
   const started = performance.now();
   // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
@@ -360,9 +392,9 @@ async function analyzeOnce() {
     }
   }
   const ms = performance.now() - started;
-  pushSample(status.processingMs, ms);
-  pushSample(status.workMs, result.workMs);
-  pushSample(status.detectMs, result.ms);
+  session.samples.processing.push(ms);
+  session.samples.work.push(result.workMs);
+  session.samples.detect.push(result.ms);
   const now = performance.now();
   while (status.goalTimes.length && now - status.goalTimes[0] > RATE_WINDOW_MS) status.goalTimes.shift();
   const goalsPerS = status.goalTimes.length / (RATE_WINDOW_MS / 1000);
