@@ -187,6 +187,11 @@ def _memory_plot(runs: tuple[ProfileRun, ...]) -> Figure:
             continue
         t0 = run.memory[0].t
         minutes = [(m.t - t0) / 60.0 for m in run.memory]
+        if run.profile == "default" and run.memory_baseline_at is not None:
+            for ax in (js_ax, wasm_ax):
+                ax.axvline(
+                    (run.memory_baseline_at - t0) / 60.0, color="grey", ls=":", label="growth from"
+                )
         for ax, attr in ((js_ax, "js_heap"), (wasm_ax, "wasm_heap")):
             points = [
                 (t, v / 2**20)
@@ -413,7 +418,9 @@ def markdown(results: dict[str, Any]) -> str:
         " the analyzer's Web Worker and `app.operations.detect` with `cv2.setNumThreads(1)`;"
         " ratio of medians.",
         "- Memory: the relay page's `performance.memory.usedJSHeapSize` after a garbage collection"
-        " and the OpenCV WASM heap size, at the start and end of piloting.",
+        " and the OpenCV WASM heap size, sampled while piloting; growth runs from the first sample"
+        " after a warm-up (a fifth of the run, at most 2 minutes, while the page's bounded buffers"
+        " fill) to the last.",
         "",
     ]
     return "\n".join(lines)

@@ -96,6 +96,8 @@ class ProfileRun:
     js_ms: list[float] = field(default_factory=list)
     native_ms: list[float] = field(default_factory=list)
     memory: list[MemorySample] = field(default_factory=list)
+    # Growth is measured from the first memory sample at or after this time.
+    memory_baseline_at: float | None = None
     # Why a measurement is missing, keyed by figure name; filled by the runner as it goes.
     problems: dict[str, str] = field(default_factory=dict)
 
@@ -122,19 +124,25 @@ class ProfileRun:
         )
 
 
-def _growth(memory: list[MemorySample], attr: str) -> float | None:
-    values = [getattr(m, attr) for m in memory if getattr(m, attr) is not None]
-    if len(values) < 2 or values[0] <= 0:
+def memory_baseline(run: ProfileRun) -> MemorySample | None:
+    """The sample growth is measured from: the first one at or after the baseline time."""
+    start = run.memory_baseline_at if run.memory_baseline_at is not None else float("-inf")
+    return next((m for m in run.memory if m.t >= start), None)
+
+
+def _growth(run: ProfileRun, attr: str) -> float | None:
+    baseline = memory_baseline(run)
+    if baseline is None or baseline is run.memory[-1]:
         return None
-    return growth_pct(values[0], values[-1])
+    first, last = getattr(baseline, attr), getattr(run.memory[-1], attr)
+    if first is None or last is None or first <= 0:
+        return None
+    return growth_pct(first, last)
 
 
 def memory_growths(run: ProfileRun) -> dict[str, float | None]:
-    """Growth in percent of the JS heap and of the WASM heap, first sample to last."""
-    return {
-        "js_heap": _growth(run.memory, "js_heap"),
-        "wasm_heap": _growth(run.memory, "wasm_heap"),
-    }
+    """Growth in percent of the JS heap and of the WASM heap, baseline sample to last."""
+    return {attr: _growth(run, attr) for attr in ("js_heap", "wasm_heap")}
 
 
 def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
@@ -182,7 +190,7 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
 
     growths = [g for g in memory_growths(run).values() if g is not None]
     if not growths:
-        why("memory_growth_pct", "fewer than two memory samples")
+        why("memory_growth_pct", "no memory samples after the warm-up and before the end")
     else:
         # The worse of the two heaps: a leak in either one is a leak.
         values["memory_growth_pct"] = max(growths)
@@ -201,7 +209,7 @@ def details(run: ProfileRun) -> dict[str, Any]:
         s = summarize(values)
         return s.as_dict() if s is not None else None
 
-    first = run.memory[0] if run.memory else None
+    first = memory_baseline(run)
     last = run.memory[-1] if run.memory else None
     return {
         "processing_ms": summary([ms for _, ms in run.processing]),
@@ -225,12 +233,10 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "memory_end": vars(last) if last else None,
         "memory_growth_pct": memory_growths(run),
         "memory_minutes": (last.t - first.t) / 60.0 if first and last else None,
-        # Minutes since the first sample, JS heap and WASM heap in bytes: the trend of a soak.
+        # Minutes since the first sample, JS heap and WASM heap in bytes: the whole trend.
         "memory_series": [
-            [round((m.t - first.t) / 60.0, 3), m.js_heap, m.wasm_heap] for m in run.memory
-        ]
-        if first
-        else [],
+            [round((m.t - run.memory[0].t) / 60.0, 3), m.js_heap, m.wasm_heap] for m in run.memory
+        ],
     }
 
 

@@ -43,6 +43,22 @@ def test_figures_of_a_known_run() -> None:
     assert values["memory_growth_pct"] == pytest.approx(2.0)  # the worse of the two heaps
 
 
+def test_memory_growth_starts_at_the_baseline() -> None:
+    run = synthetic_run("default", 8.0)
+    # A buffer filling before the baseline is not growth; what happens after it is.
+    run.memory = [
+        MemorySample(0.0, 50.0, 1000.0),
+        MemorySample(5.0, 100.0, 1000.0),
+        MemorySample(10.0, 104.0, 1000.0),
+    ]
+    run.memory_baseline_at = 4.0
+    values, _ = figures(run)
+    assert values["memory_growth_pct"] == pytest.approx(4.0)
+    run.memory_baseline_at = 11.0  # nothing left to compare with
+    values, missing = figures(run)
+    assert values["memory_growth_pct"] is None and "memory_growth_pct" in missing
+
+
 def test_an_empty_run_reports_reasons_not_numbers() -> None:
     run = ProfileRun("thesis")
     run.problems["js_over_native_ratio"] = "the analyzer never loaded"
