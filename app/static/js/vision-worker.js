@@ -23,6 +23,7 @@ const session = {
   canvas: null,
   ctx: null,
   frame: null, // cv.Mat CV_8UC4 reused while the frame size stays the same
+  queue: Promise.resolve(), // the message being handled; the next waits for it
 };
 
 /**
@@ -229,10 +230,12 @@ async function handle(message) {
 }
 
 // Messages are handled one at a time, in order: an analysis awaits its pixel copy, and the
-// next one must not overwrite the shared frame Mat meanwhile.
-let queue = Promise.resolve();
+// next one must not overwrite the shared frame Mat meanwhile. A failure is answered and the
+// queue goes on.
 self.onmessage = ({ data: message }) => {
-  queue = queue.then(() => handle(message));
+  session.queue = session.queue
+    .then(() => handle(message))
+    .catch((error) => self.postMessage({ type: 'error', id: message.id, error: describe(error) }));
 };
 
 init().then(
