@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from playwright.async_api import Browser, ConsoleMessage, Page, Worker
+from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from bench.results import MemorySample, ProfileRun
@@ -253,9 +254,15 @@ async def _memory(relay: Page, worker: Worker | None, run: ProfileRun) -> Memory
             "memory_growth_pct",
             "performance.memory is missing (needs --enable-precise-memory-info)",
         )
-    wasm_heap = await worker.evaluate(_WASM_HEAP_JS) if worker is not None else None
-    if wasm_heap is None:
+    wasm_heap = None
+    if worker is None:
         run.problems.setdefault("memory_growth_pct", "the relay's vision worker was not found")
+    else:
+        try:
+            wasm_heap = await worker.evaluate(_WASM_HEAP_JS)
+        except PlaywrightError as exc:
+            # The worker's internals changed: say so in the report rather than stop the run.
+            run.problems.setdefault("memory_growth_pct", f"cannot read the WASM heap: {exc}")
     return MemorySample(
         time.monotonic(),
         float(js_heap) if js_heap is not None else None,
