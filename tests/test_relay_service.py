@@ -43,6 +43,17 @@ async def eventually(condition: Callable[[], bool], timeout: float, what: str) -
         raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from None
 
 
+async def wait_for_relay_in(server: RunningServer, room: str, what: str) -> None:
+    """Poll the roster until the relay page has joined ``room`` (it joins after it loads)."""
+    relay = {"name": "relay", "role": "relay"}
+    try:
+        async with asyncio.timeout(30):
+            while relay not in await roster(server, room):
+                await asyncio.sleep(0.2)
+    except TimeoutError:
+        raise AssertionError(f"timed out after 30 s waiting for {what}") from None
+
+
 def browser_processes() -> set[int]:
     """Chromium's main processes started from this test process (not its helpers)."""
     return {
@@ -59,18 +70,12 @@ async def test_relay_page_comes_back_after_its_browser_is_killed(server: Running
     task = asyncio.create_task(service.run(stop))
     try:
         await eventually(lambda: service.starts == 1, 60, "the relay page")
-        assert {"name": "relay", "role": "relay"} in await roster(server, "r1")
+        await wait_for_relay_in(server, "r1", "the relay page to join its room")
         ours = browser_processes() - before
         assert len(ours) == 1
         os.kill(ours.pop(), signal.SIGKILL)
         await eventually(lambda: service.starts == 2, 60, "the relay page to come back")
-        relay_back = False
-        for _ in range(50):
-            if {"name": "relay", "role": "relay"} in await roster(server, "r1"):
-                relay_back = True
-                break
-            await asyncio.sleep(0.2)
-        assert relay_back, "the restarted relay page did not rejoin its room"
+        await wait_for_relay_in(server, "r1", "the restarted relay page to rejoin its room")
     finally:
         stop.set()
         await asyncio.wait_for(task, 30)
