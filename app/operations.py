@@ -18,6 +18,7 @@ from typing import Annotated, Any, Literal
 import cv2
 import numpy as np
 import numpy.typing as npt
+from cv2.typing import MatLike
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from fastapi.templating import Jinja2Templates
@@ -218,6 +219,16 @@ def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, 
     return detect_width, math.floor(height * detect_width / width + 0.5)
 
 
+def _reduce(image: MatLike, detect_width: int | None) -> tuple[MatLike, float]:
+    """The detection image (reduced with INTER_AREA when wider than ``detect_width``) and the
+    factor that scales its coordinates back to the full frame."""
+    height, width = image.shape[:2]
+    size = _reduction(width, height, detect_width)
+    if size is None:
+        return image, 1.0
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), width / size[0]
+
+
 def _scale_box(box: Box, factor: float) -> Box:
     x, y, w, h = box
     return (
@@ -249,13 +260,7 @@ def _classifier(name: str) -> cv2.CascadeClassifier:
 
 
 def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
-    height, width = rgba.shape[:2]
-    gray = cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY)
-    size = _reduction(width, height, params.detect_width)
-    factor = 1.0
-    if size is not None:
-        gray = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-        factor = width / size[0]
+    gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
     boxes: list[Box] = []
     for name in params.cascades:
         found = _classifier(name).detectMultiScale(
@@ -273,13 +278,7 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
 
 
 def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
-    height, width = rgba.shape[:2]
-    rgb = cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
-    size = _reduction(width, height, params.detect_width)
-    factor = 1.0
-    if size is not None:
-        rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
-        factor = width / size[0]
+    rgb, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), params.detect_width)
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
     mask = np.zeros(hsv.shape[:2], np.uint8)
     for r in params.hsv_ranges:

@@ -4,7 +4,7 @@
 // The steps match app/operations.py (_detect_colour) call for call: RGBA -> RGB, reduce to
 // detectWidth with INTER_AREA, RGB -> HSV, OR of inRange masks, open then close with an
 // elliptic kernel, connectedComponentsWithStats (8-connected), region scaled back.
-import { reduction, scaleBox } from './haar.js';
+import { reduce, scaleBox } from './haar.js';
 
 export function create(cv, spec) {
   const p = spec.params;
@@ -32,14 +32,7 @@ export function create(cv, spec) {
   return {
     detect(rgba) {
       cv.cvtColor(rgba, rgb, cv.COLOR_RGBA2RGB);
-      const size = reduction(rgba.cols, rgba.rows, p.detectWidth);
-      let input = rgb;
-      let factor = 1;
-      if (size !== null) {
-        cv.resize(rgb, small, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
-        input = small;
-        factor = rgba.cols / size.width;
-      }
+      const { input, factor } = reduce(cv, rgb, small, p.detectWidth);
       cv.cvtColor(input, hsv, cv.COLOR_RGB2HSV);
       bounds.forEach(([lower, upper], i) => {
         if (i === 0) {

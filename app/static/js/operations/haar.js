@@ -10,6 +10,17 @@ export function reduction(width, height, detectWidth) {
   return { width: detectWidth, height: Math.floor((height * detectWidth) / width + 0.5) };
 }
 
+/**
+ * Reduce `src` into `dst` (INTER_AREA) when it is wider than `detectWidth`: the detection image
+ * and the factor that scales its coordinates back to the full frame.
+ */
+export function reduce(cv, src, dst, detectWidth) {
+  const size = reduction(src.cols, src.rows, detectWidth);
+  if (size === null) return { input: src, factor: 1 };
+  cv.resize(src, dst, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
+  return { input: dst, factor: src.cols / size.width };
+}
+
 /** Scale a detection-image box back to the full frame, rounding halves up as Python does. */
 export function scaleBox([x, y, w, h], factor) {
   const r = (v) => Math.floor(v * factor + 0.5);
@@ -53,14 +64,7 @@ export function createCascadeOperation(cv, spec, files) {
     /** Boxes [x, y, w, h] in full-frame pixels, sorted, and the target point or null. */
     detect(rgba) {
       cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
-      const size = reduction(rgba.cols, rgba.rows, p.detectWidth);
-      let input = gray;
-      let factor = 1;
-      if (size !== null) {
-        cv.resize(gray, small, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
-        input = small;
-        factor = rgba.cols / size.width;
-      }
+      const { input, factor } = reduce(cv, gray, small, p.detectWidth);
       const boxes = [];
       for (const c of classifiers) {
         c.detectMultiScale(input, rects, p.scaleFactor, p.minNeighbors, 0, minSize, maxSize);
