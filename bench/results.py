@@ -153,13 +153,16 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
     def why(key: str, default: str) -> None:
         missing[key] = run.problems.get(key, default)
 
-    processing = run.processing_summary()
-    if processing is None:
-        why("processing_ms_p50", "the relay reported no processing samples")
-        why("processing_ms_p95", "the relay reported no processing samples")
-    else:
-        values["processing_ms_p50"] = processing.p50
-        values["processing_ms_p95"] = processing.p95
+    def percentiles(prefix: str, summary: Summary | None, reason: str) -> None:
+        for name in ("p50", "p95"):
+            if summary is None:
+                why(f"{prefix}_{name}", reason)
+            else:
+                values[f"{prefix}_{name}"] = getattr(summary, name)
+
+    percentiles(
+        "processing_ms", run.processing_summary(), "the relay reported no processing samples"
+    )
 
     if run.window is None or not run.goals:
         why("goals_per_s", "no goals reached the vehicle")
@@ -167,13 +170,11 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
         start, end = run.window
         values["goals_per_s"] = sum(1 for t, _ in run.goals if start <= t < end) / (end - start)
 
-    glass = summarize(run.glass_ms())
-    if glass is None:
-        why("glass_to_command_ms_p50", "no Twist could be traced back to a tagged frame")
-        why("glass_to_command_ms_p95", "no Twist could be traced back to a tagged frame")
-    else:
-        values["glass_to_command_ms_p50"] = glass.p50
-        values["glass_to_command_ms_p95"] = glass.p95
+    percentiles(
+        "glass_to_command_ms",
+        summarize(run.glass_ms()),
+        "no Twist could be traced back to a tagged frame",
+    )
 
     heading = (
         heading_error_deg_median(run.heading, run.settle_at) if run.settle_at is not None else None
