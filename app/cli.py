@@ -13,12 +13,12 @@ import sys
 from collections.abc import Sequence
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "serve": ("app.serve", "run the signaling server, role pages and simulated turtle"),
-    "relay": ("app.relay_service", "run the relay page in headless Chromium"),
+    "serve": ("app.server.serve", "run the signaling server, role pages and simulated turtle"),
+    "relay": ("app.tools.relay_service", "run the relay page in headless Chromium"),
     "vehicle": ("vehicle_agent.cli", "run the Python vehicle agent (aiortc)"),
-    "demo": ("app.demo", "run the whole system on an embedded default"),
-    "parity": ("app.parity", "compare OpenCV.js detections with Python OpenCV"),
-    "bench": ("bench.cli", "measure the running system and write a report"),
+    "demo": ("app.tools.demo", "run the whole system on an embedded default"),
+    "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
+    "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
 }
 
 

@@ -21,6 +21,7 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from app.protocol.errors import describe
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -350,9 +351,7 @@ class Agent:
         try:
             goal = GoalMessage.model_validate(message)
         except ValidationError as exc:
-            first = exc.errors()[0]
-            where = ".".join(str(p) for p in first["loc"])
-            self._reject(link, f"bad goal: {where}: {first['msg']}", "goal")
+            self._reject(link, f"bad goal: {describe(exc)}", "goal")
             return
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h

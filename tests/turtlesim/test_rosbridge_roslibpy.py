@@ -21,9 +21,9 @@ import pytest
 import roslibpy
 import websockets
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
-from app.turtlesim.routes import Simulator
+from app.server.config import Settings
+from app.server.rosbridge import Simulator
+from app.server.serve import RunningServer, start_in_thread
 from app.turtlesim.sim import TurtleSim
 
 pytestmark = pytest.mark.timeout(120)

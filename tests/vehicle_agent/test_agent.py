@@ -15,8 +15,8 @@ from typing import Any
 
 import pytest
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
+from app.server.config import Settings
+from app.server.serve import RunningServer, start_in_thread
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle

@@ -18,9 +18,9 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import Page, async_playwright
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
-from app.browser import chromium_args, chromium_path
-from app.relay_service import RelayService
-from app.serve import RunningServer
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
+from app.tools.relay_service import RelayService
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
