@@ -12,7 +12,9 @@ from dataclasses import dataclass
 import uvicorn
 from pydantic import ValidationError
 
+from app.protocol.constants import ROLES
 from app.protocol.errors import describe
+from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server.app import create_app
 from app.server.config import Settings
 from app.vision.spec import SpecError
@@ -28,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
     """The URLs a person opens, keyed by role."""
-    return {role: f"{base}/{role}?room={room}" for role in ("vehicle", "relay", "client")}
+    return {role: page_url(base, role, room) for role in ROLES}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     host = args.host or settings.host
     port = args.port or settings.port
-    base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
+    base = f"http://{reachable_host(host)}:{port}"
     for role, url in page_urls(base).items():
         log.info("%s page: %s", role, url)
     uvicorn.run(app, host=host, port=port, log_level="info")
@@ -62,7 +64,7 @@ class RunningServer:
     @property
     def ws_url(self) -> str:
         """The signaling endpoint."""
-        return self.url.replace("http", "ws", 1) + "/ws"
+        return ws_endpoint(self.url)
 
     def stop(self) -> None:
         """Ask uvicorn to exit and wait for its thread."""

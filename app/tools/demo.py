@@ -19,8 +19,10 @@ import sys
 from dataclasses import dataclass
 
 from app.protocol.constants import PROFILES
+from app.protocol.urls import page_url, reachable_host
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
+from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path
 
 log = logging.getLogger(__name__)
@@ -80,7 +82,7 @@ def children_for(base_url: str, room: str, profile: str) -> list[Child]:
 
 async def supervise(child: Child, stop: asyncio.Event) -> None:
     """Run ``child`` until ``stop``; restart it with backoff whenever it exits on its own."""
-    delay = RESTART_FIRST_S
+    backoff = Backoff(RESTART_FIRST_S, RESTART_CAP_S, jitter=0)
     loop = asyncio.get_running_loop()
     while not stop.is_set():
         started = loop.time()
@@ -99,11 +101,10 @@ async def supervise(child: Child, stop: asyncio.Event) -> None:
         code = waiting.result()
         _kill_group(child.process.pid)  # anything it left behind
         if loop.time() - started > HEALTHY_RUN_S:
-            delay = RESTART_FIRST_S
+            backoff.reset()
+        delay = backoff.next()
         log.warning("%s exited with status %s; restarting in %.0f s", child.name, code, delay)
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(stop.wait(), delay)
-        delay = min(RESTART_CAP_S, delay * 2)
+        await sleep_unless(stop, delay)
 
 
 async def terminate(child: Child) -> None:
@@ -148,19 +149,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _main(server: RunningServer, args: argparse.Namespace) -> None:
-    host = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     port = server.url.rsplit(":", 1)[1]
-    base = f"http://{host}:{port}"
+    base = f"http://{reachable_host(args.host)}:{port}"
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    on_stop_signals(stop.set)
     children = children_for(base, args.room, args.profile)
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
     # The one line a newcomer needs, on stdout rather than in the log.
     sys.stdout.write(
         f"\nwebrtc-autopilot demo is running. Open the client page:\n\n"
-        f"    {base}/client?room={args.room}\n\n"
+        f"    {page_url(base, 'client', args.room)}\n\n"
         f"then press Start Piloting. Ctrl-C stops everything.\n\n"
     )
     sys.stdout.flush()

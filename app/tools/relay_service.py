@@ -11,15 +11,15 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import signal
 import urllib.error
 import urllib.request
-from urllib.parse import urlencode, urlsplit
 
 from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
 from app.protocol.constants import PROFILES
+from app.protocol.urls import ServerUrlError, page_url, server_base
+from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
 
 log = logging.getLogger(__name__)
@@ -35,17 +35,17 @@ class RelayServiceError(RuntimeError):
 
 def relay_url(server: str, room: str, name: str, profile: str) -> str:
     """The relay page URL that joins ``room`` unattended."""
-    query = urlencode({"room": room, "name": name, "auto": 1, "profile": profile})
-    return f"{server.rstrip('/')}/relay?{query}"
+    return page_url(server, "relay", room, name=name, auto=1, profile=profile)
 
 
 def check_server(server: str) -> None:
     """Fail fast, with the reason, when ``server`` does not answer ``/healthz``."""
-    parts = urlsplit(server)
-    if parts.scheme not in ("http", "https") or not parts.netloc:
-        raise RelayServiceError(f"server URL must look like http://host:port, not {server!r}")
     try:
-        with urllib.request.urlopen(f"{server.rstrip('/')}/healthz", timeout=10) as response:
+        base = server_base(server)
+    except ServerUrlError as exc:
+        raise RelayServiceError(str(exc)) from None
+    try:
+        with urllib.request.urlopen(f"{base}/healthz", timeout=10) as response:
             response.read()
     except (urllib.error.URLError, OSError) as exc:
         raise RelayServiceError(f"cannot reach the server at {server}: {exc}") from exc
@@ -64,7 +64,7 @@ class RelayService:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Run until ``stop`` is set."""
-        delay = RESTART_FIRST_S
+        backoff = Backoff(RESTART_FIRST_S, RESTART_CAP_S, jitter=0)
         async with async_playwright() as playwright:
             while not stop.is_set():
                 try:
@@ -74,10 +74,9 @@ class RelayService:
                     reason = exc.message.splitlines()[0]
                 if stop.is_set():
                     break
+                delay = backoff.next()
                 log.warning("relay page died (%s); restarting in %.0f s", reason, delay)
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(stop.wait(), delay)
-                delay = min(RESTART_CAP_S, delay * 2)
+                await sleep_unless(stop, delay)
 
     async def _run_browser(self, playwright: Playwright, stop: asyncio.Event) -> str:
         browser = await playwright.chromium.launch(
@@ -153,7 +152,5 @@ def run(args: argparse.Namespace) -> int:
 
 async def _main(service: RelayService) -> None:
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    on_stop_signals(stop.set)
     await service.run(stop)

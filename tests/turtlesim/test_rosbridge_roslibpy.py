@@ -70,14 +70,6 @@ def fresh_world(ros: roslibpy.Ros) -> None:
     )
 
 
-def wait_for(condition: Callable[[], bool], what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
-
-
 def state(server: RunningServer) -> dict[str, Any]:
     response = httpx.get(server.url + "/turtlesim/state", timeout=WAIT_S)
     response.raise_for_status()
