@@ -8,6 +8,8 @@ from typing import Literal
 from pydantic import BaseModel, Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
+
 PACKAGE_DIR = Path(__file__).resolve().parent
 
 
@@ -34,6 +36,7 @@ class Settings(BaseSettings):
     max_message_bytes: int = 64 * 1024
     operations_spec: Path = PACKAGE_DIR / "operations.json"
     sim_tick_s: float = 0.016
+    ros: RosFlavour = DEFAULT_FLAVOUR
 
     @model_validator(mode="after")
     def _refuse_unsafe(self) -> Settings:
