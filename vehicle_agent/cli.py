@@ -11,6 +11,7 @@ from pathlib import Path
 
 from aiortc import RTCIceServer
 
+from app.protocol.ros import ROS_FLAVOURS
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -70,7 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
     )
     parser.add_argument(
-        "--ros", type=int, choices=(1, 2), default=1, help="ROS message type names (default 1)"
+        "--ros",
+        choices=ROS_FLAVOURS,
+        default="1",
+        help="ROS flavour of the robot's type names: 1, 2 (up to Iron) or jazzy (default 1)",
     )
     parser.add_argument(
         "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"

@@ -3,7 +3,8 @@
 * :class:`SimTurtle` -- an in-process :class:`app.turtlesim.sim.TurtleSim` stepped by an asyncio
   task on turtlesim's fixed 16 ms tick (the agent's default: no server, no ROS).
 * :class:`RosbridgeTurtle` -- any rosbridge v2 server through roslibpy: this project's
-  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server`` (ROS 1 or ROS 2 type names).
+  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server`` (type names of the ROS flavour
+  given, from :mod:`app.protocol.ros`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any, Protocol
 import roslibpy
 from twisted.internet import reactor
 
+from app.protocol.ros import TYPES, RosFlavour
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -24,11 +26,6 @@ log = logging.getLogger(__name__)
 
 PoseCallback = Callable[[Pose], None]
 
-# Message type names differ between ROS 1 and ROS 2 rosbridge servers.
-TYPE_NAMES: dict[int, dict[str, str]] = {
-    1: {"twist": "geometry_msgs/Twist", "pose": "turtlesim/Pose"},
-    2: {"twist": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"},
-}
 CONNECT_TIMEOUT_S = 5.0
 
 
@@ -102,14 +99,14 @@ class RosbridgeTurtle:
     roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
     """
 
-    def __init__(self, url: str, ros_version: int = 1, name: str = "turtle1") -> None:
+    def __init__(self, url: str, ros: RosFlavour = "1", name: str = "turtle1") -> None:
         if not url.startswith(("ws://", "wss://")):
             raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
-        if ros_version not in TYPE_NAMES:
-            raise TurtleError(f"ROS version must be 1 or 2, not {ros_version}")
+        if ros not in TYPES:
+            raise TurtleError(f"ROS flavour must be one of {', '.join(TYPES)}, not {ros!r}")
         self.url = url
         self.name = name
-        self.types = TYPE_NAMES[ros_version]
+        self.types = TYPES[ros]
         self._ros: roslibpy.Ros | None = None
         self._cmd_vel: roslibpy.Topic | None = None
         self._pose: roslibpy.Topic | None = None
@@ -127,14 +124,14 @@ class RosbridgeTurtle:
             raise TurtleError(f"cannot connect to rosbridge at {self.url}: {reason}") from exc
         self._ros = ros
         ros.on("close", lambda *_: log.warning("rosbridge connection to %s lost", self.url))
-        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", self.types["twist"])
+        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", self.types.twist)
         self._cmd_vel.advertise()
 
         def received(message: dict[str, Any]) -> None:
             pose = Pose(float(message["x"]), float(message["y"]), float(message["theta"]))
             loop.call_soon_threadsafe(on_pose, pose)
 
-        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", self.types["pose"])
+        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", self.types.pose)
         self._pose.subscribe(received)
         log.info("driving /%s through rosbridge at %s", self.name, self.url)
 

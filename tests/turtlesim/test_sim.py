@@ -261,3 +261,44 @@ def test_trail_length_is_bounded(sim: TurtleSim) -> None:
     # The oldest points went; the newest is where the turtle is now.
     pose = sim.pose("turtle1")
     assert sim.strokes()[-1].points[-1] == (pose.x, pose.y)
+
+
+def test_teleports_wait_for_the_next_tick(sim: TurtleSim) -> None:
+    # turtlesim queues teleport requests; its next update applies them (docs F5).
+    sim.teleport_absolute("turtle1", 1.0, 1.0, 0.0)
+    sim.teleport_relative("turtle1", 1.0, 0.0)
+    assert (sim.pose("turtle1").x, sim.pose("turtle1").y) == pytest.approx((CENTRE, CENTRE))
+    sim.step()
+    assert (sim.pose("turtle1").x, sim.pose("turtle1").y) == pytest.approx((2.0, 1.0))
+
+
+def test_spawn_outside_the_world_is_clamped_by_its_first_tick(sim: TurtleSim) -> None:
+    sim.spawn(-2.0, 30.0, 9.0, "leo")
+    assert (sim.pose("leo").x, sim.pose("leo").y, sim.pose("leo").theta) == (-2.0, 30.0, 9.0)
+    sim.step()
+    pose = sim.pose("leo")
+    assert (pose.x, pose.y) == (0.0, SIZE)
+    assert pose.theta == pytest.approx(9.0 - 2 * math.pi)
+
+
+def test_sideways_command_moves_a_holonomic_turtle_and_speed_is_a_magnitude(
+    sim: TurtleSim, clock: FakeClock
+) -> None:
+    sim.cmd_vel("turtle1", -0.6, 0.0, linear_y=0.8)
+    run(sim, clock, 0.16)  # 10 ticks
+    pose = sim.pose("turtle1")
+    assert (pose.x, pose.y) == pytest.approx((CENTRE - 0.096, CENTRE + 0.128))
+    assert pose.linear_velocity == pytest.approx(1.0)
+
+
+def test_sideways_command_is_ignored_unless_holonomic(sim: TurtleSim, clock: FakeClock) -> None:
+    sim.holonomic = False  # the turtlesim_msgs-era node without its ``holonomic`` parameter
+    sim.cmd_vel("turtle1", 0.0, 0.0, linear_y=1.0)
+    run(sim, clock, 0.16)
+    assert sim.pose("turtle1").y == pytest.approx(CENTRE)
+    assert sim.pose("turtle1").linear_velocity == 0.0
+
+
+def test_set_pen_width_zero_means_qt_default_width(sim: TurtleSim) -> None:
+    sim.set_pen("turtle1", 1, 2, 3, 0, False)
+    assert sim.pen("turtle1") == Pen(1, 2, 3, 1, False)

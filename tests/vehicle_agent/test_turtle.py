@@ -7,6 +7,7 @@ import math
 
 import pytest
 
+from app.protocol.ros import RosFlavour
 from app.serve import RunningServer
 from vehicle_agent.control import Pose, Twist
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
@@ -61,10 +62,10 @@ async def test_sim_turtle_turns_and_stops() -> None:
     assert turtle.sim.pose("turtle1").theta > math.pi / 4
 
 
-@pytest.mark.parametrize("ros_version", [1, 2])
-async def test_rosbridge_turtle_against_our_server(server: RunningServer, ros_version: int) -> None:
+@pytest.mark.parametrize("ros", ["1", "2"])
+async def test_rosbridge_turtle_against_our_server(server: RunningServer, ros: RosFlavour) -> None:
     url = server.url.replace("http", "ws", 1) + "/rosbridge"
-    await turn_and_stop(RosbridgeTurtle(url, ros_version=ros_version))
+    await turn_and_stop(RosbridgeTurtle(url, ros=ros))
 
 
 async def test_dead_rosbridge_is_named() -> None:
