@@ -35,8 +35,8 @@ class Robot:
     def send(self, **message: Any) -> list[dict[str, Any]]:
         return self.session.receive(json.dumps(message))
 
-    def call(self, name: str, **args: Any) -> dict[str, Any]:
-        (reply,) = self.send(op="call_service", id="r", service=name, args=args)
+    def call(self, service_name: str, /, **args: Any) -> dict[str, Any]:
+        (reply,) = self.send(op="call_service", id="r", service=service_name, args=args)
         assert reply["op"] == "service_response"
         assert reply["result"] is True, reply
         values: dict[str, Any] = reply["values"]
