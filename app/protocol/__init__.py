@@ -1,5 +1,6 @@
-"""Pure protocol definitions shared by the server, the simulator, the agent and the pages.
+"""The protocol core: everything two processes or two languages must agree on.
 
-Nothing here does I/O: constants, message models and ROS type names that more than one side
-needs, written once.
+Pure Python with no I/O: message models for the signaling socket and the data channels, and the
+constants the browser pages receive through their embedded config. Every other package imports
+from here; this package imports from none of them.
 """

@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, StrictStr, ValidationError
 
+from app.protocol.errors import describe
 from app.protocol.ros import TYPES, RosFlavour, RosTypes
 from app.turtlesim.sim import TurtleSim
 
@@ -399,15 +400,8 @@ def _loads_or_text(text: str) -> object:
         return text
 
 
-def describe_invalid(exc: ValidationError) -> str:
-    """Every bad field of a rejected message, named: ``x: Input should be a valid number``."""
-    return "; ".join(
-        f"{'.'.join(str(p) for p in err['loc']) or 'message'}: {err['msg']}" for err in exc.errors()
-    )
-
-
 def _parse(model: type[_Model], args: Json) -> _Model:
     try:
         return model.model_validate(args)
     except ValidationError as exc:
-        raise RosapiError(f"args: {describe_invalid(exc)}") from None
+        raise RosapiError(f"args: {describe(exc)}") from None

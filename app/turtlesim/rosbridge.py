@@ -40,13 +40,13 @@ from pydantic import (
     field_validator,
 )
 
+from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
 from app.turtlesim.rosapi import (
     GLOBAL_SERVICES,
     TURTLE_SERVICES,
     RosapiError,
     RosGraph,
-    describe_invalid,
 )
 from app.turtlesim.sim import TurtleSim, float32
 
@@ -209,7 +209,7 @@ def _parse(model: type[_Model], data: object, what: str = "") -> _Model:
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = describe_invalid(exc)
+        problems = describe(exc)
         raise ProtocolError(f"{what}: {problems}" if what else problems) from None
 
 

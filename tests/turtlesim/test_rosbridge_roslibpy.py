@@ -22,10 +22,11 @@ import pytest
 import roslibpy
 import websockets
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
-from app.turtlesim.routes import Simulator
+from app.server.config import Settings
+from app.server.rosbridge import Simulator
+from app.server.serve import RunningServer, start_in_thread
 from app.turtlesim.sim import TurtleSim
+from tests.helpers.waiting import wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -69,14 +70,6 @@ def fresh_world(ros: roslibpy.Ros) -> None:
     roslibpy.Service(ros, "/reset", "std_srvs/Empty").call(
         roslibpy.ServiceRequest({}), timeout=WAIT_S
     )
-
-
-def wait_for(condition: Callable[[], bool], what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 def state(server: RunningServer) -> dict[str, Any]:
@@ -172,7 +165,7 @@ def test_spawn_and_teleport_through_services(ros: roslibpy.Ros, server: RunningS
     teleport = roslibpy.Service(ros, "/turtle1/teleport_absolute", "turtlesim/TeleportAbsolute")
     teleport.call(roslibpy.ServiceRequest({"x": 1.0, "y": 9.0, "theta": 1.5}), timeout=WAIT_S)
     # As in turtlesim, the teleport is queued and happens on the next tick.
-    wait_for(lambda: turtle(server, "turtle1")["x"] == pytest.approx(1.0), "the teleport")
+    wait_until(lambda: turtle(server, "turtle1")["x"] == pytest.approx(1.0), WAIT_S, "the teleport")
     turtles = {t["name"]: t for t in state(server)["turtles"]}
     assert sorted(turtles) == ["turtle1", "turtle2"]
     assert (turtles["turtle2"]["x"], turtles["turtle2"]["y"]) == pytest.approx((2.0, 3.0))
