@@ -10,7 +10,7 @@ from pathlib import Path
 
 from aiortc import RTCIceServer
 
-from app.protocol.ros import ROS_FLAVOURS
+from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
@@ -72,9 +72,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--ros",
-        choices=ROS_FLAVOURS,
-        default="1",
-        help="ROS flavour of the robot's type names: 1, 2 (up to Iron) or jazzy (default 1)",
+        choices=ROS_SETTINGS,
+        default=AUTO,
+        help="ROS flavour of the robot's type names when its rosapi cannot tell: 1, 2 (up to "
+        "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
         "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"

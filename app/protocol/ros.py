@@ -18,11 +18,16 @@ learn a robot's flavour from rosapi ``topic_type`` and fall back to a setting.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Final, Literal, get_args
+from typing import Final, Literal, cast, get_args
 
 RosFlavour = Literal["1", "2", "jazzy"]
 ROS_FLAVOURS: Final[tuple[RosFlavour, ...]] = get_args(RosFlavour)
 DEFAULT_FLAVOUR: Final[RosFlavour] = "2"
+# What a client (vehicle page ``ros=``, agent ``--ros``) may be told: a flavour, or ``auto`` to
+# learn it from the robot's rosapi (the default).
+RosSetting = Literal["auto", "1", "2", "jazzy"]
+ROS_SETTINGS: Final[tuple[RosSetting, ...]] = get_args(RosSetting)
+AUTO: Final[RosSetting] = "auto"
 
 Kind = Literal["msg", "srv"]
 
@@ -116,3 +121,39 @@ def flavour_of_pose_type(reported: str) -> RosFlavour | None:
         if reported == types.pose:
             return flavour
     return None
+
+
+@dataclass(frozen=True)
+class Detected:
+    """The type names a client uses on one robot, and where they came from."""
+
+    flavour: RosFlavour
+    pose: str
+    twist: str
+    # True when the robot's rosapi named the pose type; False when the setting was used.
+    from_robot: bool
+
+
+def detect(pose_reported: str | None, twist_reported: str | None, setting: RosSetting) -> Detected:
+    """Pick the types from what rosapi ``topic_type`` answered for ``/turtleN/pose`` and
+    ``/turtleN/cmd_vel`` (None: no answer), falling back to ``setting`` (``auto``: the default
+    flavour). A reported cmd_vel type is used as reported, whatever the flavour."""
+    reported = flavour_of_pose_type(pose_reported or "")
+    flavour: RosFlavour
+    if reported is not None:
+        flavour = reported
+    elif setting == AUTO:
+        flavour = DEFAULT_FLAVOUR
+    else:
+        flavour = cast(RosFlavour, setting)  # every setting but auto is a flavour
+    types = TYPES[flavour]
+    return Detected(flavour, types.pose, twist_reported or types.twist, reported is not None)
+
+
+def page_config() -> dict[str, object]:
+    """What the vehicle page needs to pick its type names, for its embedded config."""
+    return {
+        "default": DEFAULT_FLAVOUR,
+        "settings": list(ROS_SETTINGS),
+        "types": {flavour: types.as_json() for flavour, types in TYPES.items()},
+    }
