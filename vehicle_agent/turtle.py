@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import roslibpy
 from twisted.internet import reactor
 
-from app.protocol.ros import AUTO, ROS_SETTINGS, Detected, RosSetting, detect
+from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, Detected, RosSetting, detect
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -28,8 +28,6 @@ log = logging.getLogger(__name__)
 PoseCallback = Callable[[Pose], None]
 
 CONNECT_TIMEOUT_S = 5.0
-# A robot without rosapi fails the call at once; one that never answers is given this long.
-DETECT_TIMEOUT_S = 3.0
 
 
 class TurtleError(RuntimeError):

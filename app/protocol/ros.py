@@ -28,6 +28,9 @@ DEFAULT_FLAVOUR: Final[RosFlavour] = "2"
 RosSetting = Literal["auto", "1", "2", "jazzy"]
 ROS_SETTINGS: Final[tuple[RosSetting, ...]] = get_args(RosSetting)
 AUTO: Final[RosSetting] = "auto"
+# How long a client waits for rosapi's topic_type before using its setting (a robot without
+# rosapi fails the call at once; this covers one that never answers).
+DETECT_TIMEOUT_S: Final = 3.0
 
 Kind = Literal["msg", "srv"]
 
@@ -154,6 +157,7 @@ def page_config() -> dict[str, object]:
     """What the vehicle page needs to pick its type names, for its embedded config."""
     return {
         "default": DEFAULT_FLAVOUR,
+        "detectTimeoutS": DETECT_TIMEOUT_S,
         "settings": list(ROS_SETTINGS),
         "types": {flavour: types.as_json() for flavour, types in TYPES.items()},
     }
