@@ -15,6 +15,8 @@ from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
 from app.protocol.constants import PROFILES, ROLES, Role
+from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
 
@@ -44,7 +46,9 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         # An unknown profile falls back to the default rather than breaking the page.
         "profile": profile if profile in PROFILES else "default",
         "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
-        "ros": "2" if query.get("ros") == "2" else "1",
+        # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
+        "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
+        "rosTypes": ros_page_config(),
     }
 
 
