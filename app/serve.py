@@ -15,6 +15,7 @@ from pydantic import ValidationError
 from app.config import Settings
 from app.main import create_app
 from app.operations import SpecError
+from app.server import tls
 
 log = logging.getLogger(__name__)
 
@@ -23,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot serve``."""
     parser.add_argument("--host", help="address to bind (default: AUTOPILOT_HOST or 127.0.0.1)")
     parser.add_argument("--port", type=int, help="port to bind (default: AUTOPILOT_PORT or 8000)")
+    tls.add_arguments(parser)
 
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
@@ -44,12 +46,25 @@ def run(args: argparse.Namespace) -> int:
     except SpecError as exc:
         log.error("cannot start: %s", exc)
         return 1
+    try:
+        files = tls.from_arguments(args)
+    except ValueError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
     host = args.host or settings.host
     port = args.port or settings.port
-    base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
+    scheme = "http" if files is None else "https"
+    base = f"{scheme}://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
     for role, url in page_urls(base).items():
         log.info("%s page: %s", role, url)
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    uvicorn.run(
+        app,
+        host=host,
+        port=port,
+        log_level="info",
+        ssl_certfile=None if files is None else str(files.certfile),
+        ssl_keyfile=None if files is None else str(files.keyfile),
+    )
     return 0
 
 
@@ -63,7 +78,7 @@ class RunningServer:
 
     @property
     def ws_url(self) -> str:
-        """The signaling endpoint."""
+        """The signaling endpoint (``wss://`` when served over HTTPS)."""
         return self.url.replace("http", "ws", 1) + "/ws"
 
     def stop(self) -> None:
@@ -77,6 +92,7 @@ def start_in_thread(
     host: str = "127.0.0.1",
     port: int = 0,
     log_level: str = "warning",
+    tls_files: tls.TlsFiles | None = None,
 ) -> RunningServer:
     """Start the app in a daemon thread (``port=0``: a free one); returns once it accepts
     connections. Raises ``OSError`` when the address cannot be bound."""
@@ -84,7 +100,13 @@ def start_in_thread(
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     port = sock.getsockname()[1]
-    config = uvicorn.Config(create_app(settings), log_level=log_level, lifespan="on")
+    config = uvicorn.Config(
+        create_app(settings),
+        log_level=log_level,
+        lifespan="on",
+        ssl_certfile=None if tls_files is None else str(tls_files.certfile),
+        ssl_keyfile=None if tls_files is None else str(tls_files.keyfile),
+    )
     server = uvicorn.Server(config)
     thread = threading.Thread(
         target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True, name="uvicorn"
@@ -96,4 +118,5 @@ def start_in_thread(
         threading.Event().wait(0.01)
     else:
         raise RuntimeError("server did not start within 5 s")
-    return RunningServer(url=f"http://{host}:{port}", server=server, thread=thread)
+    scheme = "http" if tls_files is None else "https"
+    return RunningServer(url=f"{scheme}://{host}:{port}", server=server, thread=thread)

@@ -1,0 +1,1 @@
+"""Tools around the server: relay service, demo, parity, bench, token minting."""
