@@ -12,6 +12,7 @@ import asyncio
 import json
 import logging
 import random
+import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
@@ -45,6 +46,10 @@ class AgentConfig:
     profile: str = "default"
     goal_timeout_s: float | None = None
     ice_servers: list[RTCIceServer] = field(default_factory=list)
+    # A vehicle token for the room (``autopilot token``), when the server asks for one.
+    token: str | None = None
+    # Trust for an https:// server: None means the system's CAs.
+    tls: ssl.SSLContext | None = None
 
 
 class Backoff:
@@ -155,7 +160,13 @@ class Agent:
         backoff = Backoff()
         first = True
         while True:
-            client = SignalingClient(self.config.server, self.config.name, self.config.room)
+            client = SignalingClient(
+                self.config.server,
+                self.config.name,
+                self.config.room,
+                token=self.config.token,
+                tls=self.config.tls,
+            )
             try:
                 peers = await client.connect()
             except SignalingError as exc:
