@@ -10,7 +10,9 @@ end. Private keys are written readable by their owner only.
 from __future__ import annotations
 
 import argparse
+import base64
 import datetime
+import hashlib
 import ipaddress
 import logging
 import os
@@ -109,7 +111,12 @@ def self_signed(
     if _needs_issue(files.certfile, ca_cert, names, addresses, now):
         cert, key = _issue(ca_cert, ca_key, names, addresses, now)
         _write_key(files.keyfile, key)
-        files.certfile.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+        # The CA goes with it: clients pinning the CA's key (Chromium's
+        # --ignore-certificate-errors-spki-list) see it only if the server presents it.
+        files.certfile.write_bytes(
+            cert.public_bytes(serialization.Encoding.PEM)
+            + ca_cert.public_bytes(serialization.Encoding.PEM)
+        )
         log.info(
             "issued a server certificate for %s",
             ", ".join([*names, *(str(a) for a in addresses)]),
@@ -135,6 +142,16 @@ def trust_instructions(ca_file: Path) -> str:
         f"  Android/iOS: copy the file to the device and install it as a CA certificate\n"
         f"  autopilot vehicle / autopilot relay: --ca-file {ca_file}"
     )
+
+
+def spki_sha256(pem_file: Path) -> str:
+    """Base64 SHA-256 of the public key of the (first) certificate in ``pem_file``: the form
+    Chromium's ``--ignore-certificate-errors-spki-list`` takes."""
+    cert = x509.load_pem_x509_certificate(pem_file.read_bytes())
+    der = cert.public_key().public_bytes(
+        serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    )
+    return base64.b64encode(hashlib.sha256(der).digest()).decode("ascii")
 
 
 def _make_ca(now: datetime.datetime) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
