@@ -274,7 +274,7 @@ class Hub:
         ]
         connection.errors_in_a_row += 1
         if connection.errors_in_a_row >= self.max_errors_in_a_row:
-            who = connection.peer.name if connection.peer else f"connection {connection.id}"
+            who = repr(connection.peer.name) if connection.peer else f"connection {connection.id}"
             log.warning("closing %s: %d bad messages in a row", who, connection.errors_in_a_row)
             connection.closing = True
             if connection.peer is not None:
@@ -288,7 +288,8 @@ class Hub:
                 )
             )
         else:
-            log.debug("refused %s from %s: %s", ref, connection.id, reason)
+            # %r: both may quote what the peer sent, and must not forge a log line.
+            log.debug("refused %r from %s: %r", ref, connection.id, reason)
         return actions
 
     def _refuse_login(self, connection: _Connection, reason: str) -> list[Action]:
