@@ -11,6 +11,8 @@ from fastapi.staticfiles import StaticFiles
 from app import operations
 from app.config import PACKAGE_DIR, Settings
 from app.pages import router as pages_router
+from app.server.headers import SecurityHeaders
+from app.server.origins import OriginGuard
 from app.signaling.routes import Switchboard
 from app.signaling.routes import router as signaling_router
 from app.turtlesim.routes import Simulator
@@ -29,8 +31,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await app.state.simulator.stop()
 
-    app = FastAPI(title="webrtc-autopilot", lifespan=lifespan)
+    docs = settings.docs_enabled
+    app = FastAPI(
+        title="webrtc-autopilot",
+        lifespan=lifespan,
+        docs_url="/docs" if docs else None,
+        redoc_url="/redoc" if docs else None,
+        openapi_url="/openapi.json" if docs else None,
+    )
     app.state.settings = settings
+    # The middleware added last runs first: the security headers go on every HTTP response,
+    # the origin guard's refusals included; a foreign origin reaches no route.
+    app.add_middleware(OriginGuard, allowed=settings.allowed_origins)
+    app.add_middleware(SecurityHeaders)
     # Validated here so that a bad operations spec stops the server before it serves anything.
     app.state.operations = operations.load_spec(settings.operations_spec)
     app.include_router(operations.router)

@@ -10,8 +10,14 @@ site could drive, so they are judged by their token alone.
 from __future__ import annotations
 
 import enum
+import logging
 from collections.abc import Iterable
 from urllib.parse import urlsplit
+
+from starlette.datastructures import Headers
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+log = logging.getLogger(__name__)
 
 DEFAULT_PORTS = {"http": 80, "https": 443, "ws": 80, "wss": 443}
 
@@ -78,3 +84,52 @@ def _host_header(host: str, scheme: str) -> str:
         return _authority(normalise(f"{scheme}://{host}"))
     except ValueError:
         return ""
+
+
+# Requests that only read; every other method changes state and must come from an allowed page.
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+class OriginGuard:
+    """ASGI middleware refusing, with 403, WebSocket handshakes and state-changing requests
+    whose ``Origin`` is neither this server nor in ``allowed``.
+
+    A WebSocket is refused before ``accept()``: closing a handshake that was never accepted
+    makes the server answer it with HTTP 403, so a foreign page never gets an open socket.
+    """
+
+    def __init__(self, app: ASGIApp, allowed: Iterable[str] = ()) -> None:
+        self.app = app
+        self.allowed = [normalise(origin) for origin in allowed]
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Refuse a foreign origin; pass everything else on untouched."""
+        guarded = scope["type"] == "websocket" or (
+            scope["type"] == "http" and scope["method"] not in SAFE_METHODS
+        )
+        if guarded:
+            headers = Headers(scope=scope)
+            origin = headers.get("origin")
+            if not judge(origin, headers.get("host"), self.allowed).admitted:
+                log.warning("refused %s %s from origin %r", scope["type"], scope["path"], origin)
+                await self._refuse(scope, send)
+                return
+        await self.app(scope, receive, send)
+
+    @staticmethod
+    async def _refuse(scope: Scope, send: Send) -> None:
+        if scope["type"] == "websocket":
+            await send({"type": "websocket.close", "code": 1008, "reason": "origin not allowed"})
+            return
+        body = b'{"detail":"origin not allowed"}'
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 403,
+                "headers": [
+                    (b"content-type", b"application/json"),
+                    (b"content-length", str(len(body)).encode()),
+                ],
+            }
+        )
+        await send({"type": "http.response.body", "body": body})

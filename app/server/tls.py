@@ -19,6 +19,7 @@ import os
 import socket
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import ifaddr
 from cryptography import x509
@@ -305,3 +306,32 @@ def from_arguments(args: argparse.Namespace) -> TlsFiles | None:
         if not path.is_file():
             raise ValueError(f"no such file: {path}")
     return TlsFiles(certfile=certfile, keyfile=keyfile)
+
+
+LOCAL_HOSTS = frozenset({"localhost", "127.0.0.1", "::1"})
+ROSBRIDGE_TLS_FIX = (
+    "start rosbridge with its own TLS (roslaunch rosbridge_server rosbridge_websocket.launch "
+    "ssl:=true certfile:=CERT keyfile:=KEY, or the same arguments to ros2 launch "
+    "rosbridge_server rosbridge_websocket_launch.xml) and use wss://"
+)
+
+
+def insecure_rosbridge(url: str, page_scheme: str) -> str | None:
+    """Why a page served over ``page_scheme`` must not use the rosbridge at ``url``, or None.
+
+    An HTTPS page may open ``ws://`` only to this machine (browsers treat localhost as
+    secure); anywhere else the browser blocks it as mixed content and the rosbridge's traffic
+    would cross the network in clear.
+    """
+    parts = urlsplit(url)
+    if parts.scheme not in ("ws", "wss") or not parts.hostname:
+        return f"the rosbridge URL must look like wss://host:9090, not {url!r}"
+    if page_scheme != "https" or parts.scheme == "wss":
+        return None
+    host = parts.hostname.lower()
+    if host in LOCAL_HOSTS or host.endswith(".localhost"):
+        return None
+    return (
+        f"refusing the rosbridge at {url}: this page is served over HTTPS, so a ws:// rosbridge "
+        f"on another machine is blocked as mixed content; {ROSBRIDGE_TLS_FIX}"
+    )

@@ -9,15 +9,17 @@ one slow client never holds up the tick or the other clients.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
 from dataclasses import asdict
 from typing import Any
 
-from fastapi import APIRouter, Request, WebSocket
+from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
+from app.server.access import CLOSE_POLICY_VIOLATION, RosbridgeGate, bearer_token, state_refusal
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -116,7 +118,12 @@ class Simulator:
 
 @router.get("/turtlesim/state")
 async def turtlesim_state(request: Request) -> dict[str, Any]:
-    """Read-only view of the simulator: poses, pens and pen strokes."""
+    """Read-only view of the simulator: poses, pens and pen strokes (a token of any role)."""
+    refusal = state_refusal(
+        request.app.state.settings.secret, bearer_token(request.headers), time.time()
+    )
+    if refusal is not None:
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, refusal, {"WWW-Authenticate": "Bearer"})
     simulator: Simulator = request.app.state.simulator
     return simulator.state()
 
@@ -125,6 +132,12 @@ async def turtlesim_state(request: Request) -> dict[str, Any]:
 async def rosbridge(websocket: WebSocket) -> None:
     """One rosbridge v2 client (roslibpy, roslib.js): JSON text frames both ways."""
     simulator: Simulator = websocket.app.state.simulator
+    gate = RosbridgeGate(websocket.app.state.settings.secret)
+    refusal = gate.handshake(bearer_token(websocket.headers), time.time())
+    if refusal is not None:
+        log.info("rosbridge handshake refused: %s", refusal)
+        await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
+        return
     await websocket.accept()
     session, outbox = simulator.open()
     writer = asyncio.create_task(_write(websocket, outbox), name="rosbridge-writer")
@@ -143,13 +156,30 @@ async def rosbridge(websocket: WebSocket) -> None:
                     f"message of {size} bytes exceeds the limit of {simulator.max_message_bytes}"
                 )
             else:
-                replies = session.receive(text)
+                decision = gate.check(text, time.time())
+                replies = session.receive(text) if decision.forward else []
+                if decision.reply is not None:
+                    replies.append(decision.reply)
+                if decision.close is not None:
+                    for reply in replies:
+                        outbox.put_nowait(json.dumps(reply))
+                    await _drain(outbox)
+                    await websocket.close(*decision.close)
+                    break
             for reply in replies:
                 outbox.put_nowait(json.dumps(reply))
     finally:
         simulator.forget(session)
         writer.cancel()
         await asyncio.gather(writer, return_exceptions=True)
+
+
+async def _drain(outbox: asyncio.Queue[str], timeout_s: float = 1.0) -> None:
+    """Give the writer a moment to send what is queued (a refusal's reason) before closing."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(timeout_s):
+            while not outbox.empty():
+                await asyncio.sleep(0.01)
 
 
 def _report_crash(task: asyncio.Task[None]) -> None:
