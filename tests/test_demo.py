@@ -32,8 +32,11 @@ pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]
 
 
-def turtle_theta(base: str) -> float:
-    with urllib.request.urlopen(f"{base}/turtlesim/state", timeout=10) as response:
+def turtle_theta(base: str, token: str) -> float:
+    request = urllib.request.Request(
+        f"{base}/turtlesim/state", headers={"Authorization": f"Bearer {token}"}
+    )
+    with urllib.request.urlopen(request, timeout=10) as response:
         state = json.load(response)
     turtle = next(t for t in state["turtles"] if t["name"] == "turtle1")
     return float(turtle["theta"])
@@ -97,8 +100,10 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
     demo: tuple[subprocess.Popen[str], Queue[str]],
 ) -> None:
     process, lines = demo
-    url = wait_for_line(lines, r"(http://\S+/client\?room=default)", 60).group(1)
+    # The demo mints its own tokens; the client's rides in the URL fragment.
+    url = wait_for_line(lines, r"(http://\S+/client\?room=default#token=\S+)", 60).group(1)
     base = url.split("/client")[0]
+    token = url.split("#token=", 1)[1]
     with urllib.request.urlopen(url, timeout=10) as response:
         assert response.status == 200
         assert "Start Piloting" in response.read().decode()
@@ -120,11 +125,11 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
             page.wait_for_function(
                 "() => !document.querySelector('[data-action=start]').disabled", timeout=120_000
             )
-            before = turtle_theta(base)
+            before = turtle_theta(base, token)
             page.get_by_role("button", name="Start Piloting").click()
             clicked = time.monotonic()
             # Goals reach the agent, whose Twists turn the server's turtle through /rosbridge.
-            while abs(math.remainder(turtle_theta(base) - before, math.tau)) < 0.3:
+            while abs(math.remainder(turtle_theta(base, token) - before, math.tau)) < 0.3:
                 assert time.monotonic() - clicked < 30, "the turtle did not turn after Start"
                 time.sleep(0.1)
             (REPO / "artifacts").mkdir(exist_ok=True)

@@ -17,7 +17,7 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Literal, get_args
 
-from app.signaling.messages import Role
+from app.signaling.messages import Role as Role  # re-exported: tokens.Role
 
 ROLES: tuple[Role, ...] = get_args(Role)
 
