@@ -16,9 +16,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from app.server import tokens
-from app.server.tokens import Claims, TokenError
-from app.signaling.messages import Role
+from app.protocol import tokens
+from app.protocol.constants import Role
+from app.protocol.tokens import Claims, TokenError
 
 # Close code for a connection that failed to authenticate (RFC 6455: policy violation).
 CLOSE_POLICY_VIOLATION = 1008

@@ -1,1 +1,1 @@
-"""Tools around the server: relay service, demo, parity, bench, token minting."""
+"""Tools that drive Chromium or child processes: relay service, demo, parity, bench."""

@@ -16,8 +16,8 @@ import time
 from datetime import UTC, datetime
 from urllib.parse import quote, urlsplit
 
-from app.server import tokens
-from app.signaling.messages import Role
+from app.protocol import tokens
+from app.protocol.constants import Role
 
 log = logging.getLogger(__name__)
 

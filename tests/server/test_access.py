@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from app.server import tokens
+from app.protocol import tokens
 from app.server.access import (
     CLOSE_POLICY_VIOLATION,
     Decision,

@@ -15,11 +15,11 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from app.config import Settings
-from app.serve import RunningServer
-from app.server import tokens
+from app.protocol import tokens
+from app.server.config import Settings
+from app.server.serve import RunningServer
 from app.server.tls import ROSBRIDGE_TLS_FIX
-from tests.test_pages import embedded_config
+from tests.server.test_pages import embedded_config
 
 SECRET = "guarded-endpoints-test-secret"
 EVIL = "http://evil.example"

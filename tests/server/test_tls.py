@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 from cryptography import x509
 
-from app.config import Settings
-from app.serve import start_in_thread
 from app.server import tls
+from app.server.config import Settings
+from app.server.serve import start_in_thread
 
 LOOPBACK = [ipaddress.ip_address("127.0.0.1"), ipaddress.ip_address("::1")]
 

@@ -7,7 +7,7 @@ import logging
 
 import pytest
 
-from app.signaling.core import Hub, Outgoing
+from app.signaling.hub import Hub, Outgoing
 
 FORGED = "x\nINFO app.signaling.core: vehicle 'v' joined room 'r'"
 

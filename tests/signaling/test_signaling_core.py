@@ -7,9 +7,10 @@ from typing import Any
 
 import pytest
 
-from app.config import Settings
-from app.server import tokens
-from app.signaling.core import Action, Close, Hub, Outgoing
+from app.protocol import tokens
+from app.server.config import Settings
+from app.server.signaling import Switchboard
+from app.signaling.hub import Action, Close, Hub, Outgoing
 
 
 class Harness:
@@ -209,7 +210,7 @@ def test_a_squatter_without_a_relay_token_cannot_take_the_relay_role() -> None:
 
 
 def test_hub_from_settings_enforces_tokens_and_size() -> None:
-    hub = Hub.from_settings(Settings(secret=SECRET, max_message_bytes=1000))
+    hub = Switchboard.from_settings(Settings(secret=SECRET, max_message_bytes=1000)).hub
     assert hub.secret == SECRET and hub.max_message_bytes == 1000
 
 

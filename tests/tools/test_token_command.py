@@ -9,7 +9,7 @@ import sys
 import time
 from urllib.parse import parse_qs, urlsplit
 
-from app.server import tokens
+from app.protocol import tokens
 
 SECRET = "token-command-test-secret"
 

@@ -10,7 +10,7 @@ import asyncio
 import contextlib
 import math
 import statistics
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -18,9 +18,10 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import Page, async_playwright
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
-from app.browser import chromium_args, chromium_path
-from app.relay_service import RelayService
-from app.serve import RunningServer
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
+from app.tools.relay_service import RelayService
+from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
@@ -30,15 +31,6 @@ pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
 W, H = 640, 480
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
-
-
-async def eventually(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    try:
-        async with asyncio.timeout(timeout):
-            while not condition():
-                await asyncio.sleep(0.05)
-    except TimeoutError:
-        raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from None
 
 
 async def page_until(page: Page, expression: str, timeout: float, what: str) -> None:
