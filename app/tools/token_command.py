@@ -14,10 +14,10 @@ import os
 import sys
 import time
 from datetime import UTC, datetime
-from urllib.parse import quote, urlsplit
 
 from app.protocol import tokens
 from app.protocol.constants import Role
+from app.protocol.urls import ServerUrlError, page_url, server_base
 
 log = logging.getLogger(__name__)
 
@@ -41,9 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def page_url(server: str, room: str, role: Role, token: str) -> str:
+def token_url(server: str, room: str, role: Role, token: str) -> str:
     """The role page for ``room`` on ``server``, with the token in the fragment."""
-    return f"{server.rstrip('/')}/{role}?room={quote(room, safe='')}#token={token}"
+    return f"{page_url(server, role, room)}#token={token}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,9 +52,10 @@ def run(args: argparse.Namespace) -> int:
     if not secret:
         log.error("cannot mint a token: %s is not set (the server's signing secret)", SECRET_ENV)
         return 1
-    parts = urlsplit(args.server)
-    if parts.scheme not in ("http", "https") or not parts.netloc:
-        log.error("--server must look like https://host:port, not %r", args.server)
+    try:
+        server_base(args.server)
+    except ServerUrlError as exc:
+        log.error("--server: %s", exc)
         return 1
     now = time.time()
     try:
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     expires = datetime.fromtimestamp(now + args.ttl, UTC).isoformat(timespec="seconds")
     log.info("%s token for room %r, valid until %s", args.role, args.room, expires)
     sys.stdout.write(
-        json.dumps({"token": token, "url": page_url(args.server, args.room, args.role, token)})
+        json.dumps({"token": token, "url": token_url(args.server, args.room, args.role, token)})
         + "\n"
     )
     return 0
