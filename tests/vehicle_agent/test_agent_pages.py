@@ -186,8 +186,12 @@ async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
         # tick stretches one gap and shortens the next, but the mean stays at 1.1 s.
         assert all(gap > 0.9 for gap in gaps), gaps
         assert statistics.mean(gaps) == pytest.approx(1.1, abs=0.1), gaps
-        goals = [e["t"] for e in s.events if e["ev"] == "goal"]
-        assert len(goals) >= 2
+        def goal_times() -> list[float]:
+            return [e["t"] for e in s.events if e["ev"] == "goal"]
+
+        # Enough goals that one late snapshot (a loaded machine) cannot move the median.
+        await eventually(lambda: len(goal_times()) >= 5, 30, "five thesis-profile goals")
+        goals = goal_times()
         # Snapshots every 1.5 s; analysis time varies, so the goals' spacing jitters around it.
         goal_gaps = [b - a for a, b in zip(goals, goals[1:], strict=False)]
         assert statistics.median(goal_gaps) > 1.2, goal_gaps
