@@ -247,3 +247,23 @@ def test_a_page_from_another_site_cannot_join_or_drive(
         pages.opened.clear()
     after = _turtle(https_server, tls_files)
     assert after["name"] == "turtle1" and after["x"] == before["x"]
+
+
+def test_an_https_vehicle_page_refuses_a_remote_ws_rosbridge_and_says_how_to_fix_it(
+    https_server: RunningServer, tls_files: tls.TlsFiles, playwright: Playwright, pages: _Pages
+) -> None:
+    browser = _launch(playwright, tls_files, None)
+    try:
+        vehicle = pages.open(
+            "vehicle",
+            browser,
+            f"{https_server.url}/vehicle?room={ROOM}&rosbridge=ws://{OTHER_ADDRESS}:9090"
+            f"#token={_token('vehicle')}",
+        )
+        log = vehicle.get_by_test_id("log")
+        expect(log).to_contain_text(f"refusing the rosbridge at ws://{OTHER_ADDRESS}:9090")
+        expect(log).to_contain_text("ssl:=true certfile:=CERT keyfile:=KEY")
+        assert status(vehicle)["rosConnected"] is False
+    finally:
+        browser.close()
+        pages.opened.clear()

@@ -149,6 +149,7 @@ async def rosbridge(websocket: WebSocket) -> None:
                 break
             text = frame.get("text")
             size = len(text.encode()) if text is not None else 0
+            closing: tuple[int, str] | None = None
             if text is None:
                 replies = session.error("binary frames are not supported: send JSON text")
             elif size > simulator.max_message_bytes:
@@ -160,14 +161,13 @@ async def rosbridge(websocket: WebSocket) -> None:
                 replies = session.receive(text) if decision.forward else []
                 if decision.reply is not None:
                     replies.append(decision.reply)
-                if decision.close is not None:
-                    for reply in replies:
-                        outbox.put_nowait(json.dumps(reply))
-                    await _drain(outbox)
-                    await websocket.close(*decision.close)
-                    break
+                closing = decision.close
             for reply in replies:
                 outbox.put_nowait(json.dumps(reply))
+            if closing is not None:
+                await _drain(outbox)  # the refusal's reason first, then the close
+                await websocket.close(*closing)
+                break
     finally:
         simulator.forget(session)
         writer.cancel()

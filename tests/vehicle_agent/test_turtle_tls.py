@@ -23,6 +23,11 @@ def https_server(tmp_path: Path) -> Iterator[tuple[RunningServer, tls.TlsFiles]]
     files = tls.self_signed(tmp_path)
     running = start_in_thread(Settings(secret=SECRET), tls_files=files)
     yield running, files
+    # roslibpy closes over TLS at its own pace; uvicorn stopped while a socket is still closing
+    # raises in its shutdown (InvalidState), so let the client's close finish first.
+    deadline = time.monotonic() + 5
+    while running.server.server_state.connections and time.monotonic() < deadline:
+        time.sleep(0.05)
     running.stop()
 
 
