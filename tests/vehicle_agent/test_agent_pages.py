@@ -186,6 +186,7 @@ async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
         # tick stretches one gap and shortens the next, but the mean stays at 1.1 s.
         assert all(gap > 0.9 for gap in gaps), gaps
         assert statistics.mean(gaps) == pytest.approx(1.1, abs=0.1), gaps
+
         def goal_times() -> list[float]:
             return [e["t"] for e in s.events if e["ev"] == "goal"]
 
