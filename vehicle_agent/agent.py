@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
@@ -46,6 +47,10 @@ class AgentConfig:
     profile: str = "default"
     goal_timeout_s: float | None = None
     ice_servers: list[RTCIceServer] = field(default_factory=list)
+    # A vehicle token for the room (``autopilot token``), when the server asks for one.
+    token: str | None = None
+    # Trust for an https:// server: None means the system's CAs.
+    tls: ssl.SSLContext | None = None
 
 
 class GoalMessage(BaseModel):
@@ -138,7 +143,13 @@ class Agent:
         backoff = Backoff()
         first = True
         while True:
-            client = SignalingClient(self.config.server, self.config.name, self.config.room)
+            client = SignalingClient(
+                self.config.server,
+                self.config.name,
+                self.config.room,
+                token=self.config.token,
+                tls=self.config.tls,
+            )
             try:
                 peers = await client.connect()
             except SignalingError as exc:

@@ -14,10 +14,14 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any, Protocol
+from urllib.parse import urlsplit
 
 import roslibpy
+from autobahn.twisted.websocket import connectWS
 from twisted.internet import reactor
+from twisted.internet import ssl as twisted_ssl
 
 from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, Detected, RosSetting, detect
 from app.turtlesim.sim import TurtleSim
@@ -100,7 +104,14 @@ class RosbridgeTurtle:
     roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
     """
 
-    def __init__(self, url: str, ros: RosSetting = AUTO, name: str = "turtle1") -> None:
+    def __init__(
+        self,
+        url: str,
+        ros: RosSetting = AUTO,
+        name: str = "turtle1",
+        token: str | None = None,
+        ca_file: Path | None = None,
+    ) -> None:
         if not url.startswith(("ws://", "wss://")):
             raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
         if ros not in ROS_SETTINGS:
@@ -110,6 +121,9 @@ class RosbridgeTurtle:
         self.setting: RosSetting = ros
         # Known once connected: the types in use and whether the robot named them.
         self.types: Detected | None = None
+        # Sent as a bearer header on the handshake; the server's /rosbridge checks it.
+        self.headers = {"Authorization": f"Bearer {token}"} if token else None
+        self.ca_file = ca_file
         self._ros: roslibpy.Ros | None = None
         self._cmd_vel: roslibpy.Topic | None = None
         self._pose: roslibpy.Topic | None = None
@@ -117,7 +131,10 @@ class RosbridgeTurtle:
     async def start(self, on_pose: PoseCallback) -> None:
         """Connect, advertise ``cmd_vel`` and subscribe to ``pose``."""
         loop = asyncio.get_running_loop()
-        ros = roslibpy.Ros(host=self.url, transport="twisted")
+        if self.url.startswith("wss:"):
+            ros: roslibpy.Ros = _VerifiedRos(self.url, self.headers, _tls_options(self))
+        else:
+            ros = roslibpy.Ros(host=self.url, headers=self.headers, transport="twisted")
         try:
             await asyncio.to_thread(ros.run, CONNECT_TIMEOUT_S)
         except TimeoutError as exc:
@@ -192,3 +209,35 @@ class RosbridgeTurtle:
         if self._cmd_vel is not None:
             self._cmd_vel.unadvertise()
         await asyncio.to_thread(ros.close)
+
+
+def _tls_options(turtle: RosbridgeTurtle) -> Any:
+    """Twisted TLS options that check the rosbridge's certificate and name: against
+    ``turtle.ca_file`` if given, else the system's trusted CAs."""
+    host = urlsplit(turtle.url).hostname or ""
+    if turtle.ca_file is None:
+        return twisted_ssl.optionsForClientTLS(host)
+    try:
+        root = twisted_ssl.Certificate.loadPEM(turtle.ca_file.read_bytes())
+    except OSError as exc:
+        raise TurtleError(f"cannot read --ca-file {turtle.ca_file}: {exc}") from exc
+    return twisted_ssl.optionsForClientTLS(host, trustRoot=root)
+
+
+class _VerifiedRos(roslibpy.Ros):  # type: ignore[misc]
+    """roslibpy's twisted transport connects wss:// without checking the certificate at all
+    (autobahn's default ``ClientContextFactory``); this one connects with ``options`` instead."""
+
+    def __init__(self, url: str, headers: dict[str, str] | None, options: Any) -> None:
+        self._tls = options
+        super().__init__(host=url, headers=headers, transport="twisted")
+
+    def connect(self) -> None:
+        factory = self.factory
+
+        def connect_verified() -> None:
+            factory.connector = connectWS(factory, contextFactory=self._tls)
+
+        # Ros.connect() queues factory._connect on the reactor thread; this replaces it.
+        factory._connect = connect_verified
+        super().connect()

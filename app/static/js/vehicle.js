@@ -32,10 +32,12 @@ window.autopilotStatus = status;
 
 /** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
 class Turtle {
-  constructor(url, setting, rosTypes) {
+  /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
+  constructor(url, setting, rosTypes, token) {
     this.url = url;
     this.setting = setting;
     this.rosTypes = rosTypes;
+    this.token = token;
     this.types = null; // learnt on each connection
     this.ros = null;
     this.cmdVel = null;
@@ -47,6 +49,8 @@ class Turtle {
   connect() {
     const ros = new ROSLIB.Ros({ url: this.url });
     this.ros = ros;
+    // Queued for the moment the socket opens, ahead of the subscriptions made on 'connection'.
+    if (this.token) ros.callOnConnection({ op: 'auth', token: this.token });
     ros.on('connection', () => {
       log.info(`rosbridge connected: ${this.url}`);
       this.reported = false;
@@ -128,7 +132,9 @@ class Turtle {
   }
 }
 
-const turtle = new Turtle(config.rosbridge, config.ros, config.rosTypes);
+const turtle = new Turtle(
+  config.rosbridge, config.ros, config.rosTypes, config.rosbridgeAuth ? config.token : null,
+);
 /** Everything else this page holds, in one place. */
 const session = {
   channel: null, // the open `autopilot` data channel
@@ -242,7 +248,12 @@ room.addEventListener('roster', showState);
 room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') halt('left the room');
 });
-turtle.connect();
+if (config.rosbridgeError) {
+  log.error(config.rosbridgeError);
+  show('ros-state', 'refused: insecure rosbridge URL');
+} else {
+  turtle.connect();
+}
 const stream = await startCamera();
 const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: (peer) => setupPeer(peer, stream) });
 link.addEventListener('lost', (event) => {
