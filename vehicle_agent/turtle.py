@@ -26,8 +26,16 @@ PoseCallback = Callable[[Pose], None]
 
 # Message type names differ between ROS 1 and ROS 2 rosbridge servers.
 TYPE_NAMES: dict[int, dict[str, str]] = {
-    1: {"twist": "geometry_msgs/Twist", "pose": "turtlesim/Pose"},
-    2: {"twist": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"},
+    1: {
+        "twist": "geometry_msgs/Twist",
+        "pose": "turtlesim/Pose",
+        "teleport": "turtlesim/TeleportAbsolute",
+    },
+    2: {
+        "twist": "geometry_msgs/msg/Twist",
+        "pose": "turtlesim/msg/Pose",
+        "teleport": "turtlesim/srv/TeleportAbsolute",
+    },
 }
 CONNECT_TIMEOUT_S = 5.0
 
@@ -44,6 +52,9 @@ class Turtle(Protocol):
 
     def publish(self, twist: Twist) -> None:
         """Send a velocity command (``cmd_vel``)."""
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Put the turtle at (x, y) facing theta (``teleport_absolute``); raises TurtleError."""
 
     async def close(self) -> None:
         """Disconnect and stop calling ``on_pose``."""
@@ -87,6 +98,10 @@ class SimTurtle:
     def publish(self, twist: Twist) -> None:
         """Command the simulated turtle."""
         self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Teleport the simulated turtle."""
+        self.sim.teleport_absolute(self.name, x, y, theta)
 
     async def close(self) -> None:
         """Stop ticking."""
@@ -142,6 +157,31 @@ class RosbridgeTurtle:
         """Publish on ``/turtleN/cmd_vel`` (roslibpy hands it to its network thread)."""
         if self._cmd_vel is not None:
             self._cmd_vel.publish(roslibpy.Message(twist_message(twist)))
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Call ``/turtleN/teleport_absolute`` and wait for the robot's answer."""
+        ros = self._ros
+        if ros is None:
+            raise TurtleError(f"not connected to rosbridge at {self.url}")
+        loop = asyncio.get_running_loop()
+        answered: asyncio.Future[str | None] = loop.create_future()
+
+        def settle(error: str | None) -> None:
+            if not answered.done():
+                answered.set_result(error)
+
+        service = roslibpy.Service(ros, f"/{self.name}/teleport_absolute", self.types["teleport"])
+        service.call(
+            roslibpy.ServiceRequest({"x": x, "y": y, "theta": theta}),
+            lambda _response: loop.call_soon_threadsafe(settle, None),
+            lambda error: loop.call_soon_threadsafe(settle, str(error)),
+        )
+        try:
+            error = await asyncio.wait_for(answered, CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            error = f"no answer within {CONNECT_TIMEOUT_S:g} s"
+        if error is not None:
+            raise TurtleError(f"/{self.name}/teleport_absolute failed: {error}")
 
     async def close(self) -> None:
         """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""
