@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from app.browser import BrowserNotFound, chromium_path
 from app.config import Settings
+from app.protocol.control import DEFAULT_PROFILE, PROFILES
 from app.serve import RunningServer, start_in_thread
 
 log = logging.getLogger(__name__)
@@ -38,9 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", default="default", help="room (default: default)")
     parser.add_argument(
         "--profile",
-        choices=("default", "thesis"),
-        default="default",
-        help="relay and agent profile",
+        choices=sorted(PROFILES),
+        default=DEFAULT_PROFILE,
+        help="vehicle profile: default (turn in place), thesis (1100 ms), follow (drive to the"
+        " target and keep a standoff; see docs/demo.md)",
     )
 
 
@@ -57,9 +59,11 @@ def children_for(base_url: str, room: str, profile: str) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
-    common = ["--server", base_url, "--room", room, "--profile", profile]
+    common = ["--server", base_url, "--room", room]
+    # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+    relay_profile = PROFILES[profile].relay_profile
     return [
-        Child("relay", [python, "-m", "app.cli", "relay", *common]),
+        Child("relay", [python, "-m", "app.cli", "relay", *common, "--profile", relay_profile]),
         Child(
             "vehicle",
             [
@@ -68,6 +72,8 @@ def children_for(base_url: str, room: str, profile: str) -> list[Child]:
                 "app.cli",
                 "vehicle",
                 *common,
+                "--profile",
+                profile,
                 "--video",
                 "synthetic",
                 "--rosbridge",

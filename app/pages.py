@@ -7,6 +7,7 @@ the default rosbridge URL (this server's ``/rosbridge``) and what the query stri
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
 from fastapi import APIRouter, Request
@@ -14,13 +15,13 @@ from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
 from app.config import PACKAGE_DIR, Settings
+from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
 
 router = APIRouter()
 templates = Jinja2Templates(directory=PACKAGE_DIR / "templates")
 
 Role = Literal["vehicle", "relay", "client"]
 ROLES: tuple[Role, ...] = ("vehicle", "relay", "client")
-PROFILES = ("default", "thesis")
 
 
 def _ws_base(request: Request) -> str:
@@ -33,7 +34,9 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     """What a role page needs to run on its own, ``?auto=1`` included."""
     settings: Settings = request.app.state.settings
     query = request.query_params
-    profile = query.get("profile", "default")
+    asked = query.get("profile", DEFAULT_PROFILE)
+    # An unknown profile falls back to the default rather than breaking the page.
+    profile = PROFILES[asked if asked in PROFILES else DEFAULT_PROFILE]
     return {
         "role": role,
         "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
@@ -42,11 +45,32 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         "name": query.get("name", ""),
         "token": query.get("token"),
         "auto": query.get("auto") in ("1", "true", "yes"),
-        # An unknown profile falls back to the default rather than breaking the page.
-        "profile": profile if profile in PROFILES else "default",
+        # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
+        "profile": profile.relay_profile if role == "relay" else profile.name,
+        "control": _control(query.get("standoff")),
+        # The vehicle page's spawn step (turn to face up at start); ?spawn=0 switches it off.
+        "spawnStep": query.get("spawn") not in ("0", "false", "no"),
         "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
         "ros": "2" if query.get("ros") == "2" else "1",
     }
+
+
+def _standoff(text: str | None) -> float | None:
+    """``?standoff=M`` in metres; None (the profile's own) when absent or not a distance >= 0,
+    just as an unknown profile falls back to the default."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) and value >= 0 else None
+
+
+def _control(standoff: str | None) -> dict[str, Any]:
+    """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance."""
+    profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
+    return page_constants(profiles)
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:

@@ -342,12 +342,12 @@ def test_follow_slows_near_a_wall() -> None:
         assert twist is not None
         return twist.linear_x
 
-    # The same 2.3 m to go, facing the target: in the open the turtle drives at full speed,
+    # The same 3 m to go, facing the target: in the open the turtle drives at full speed,
     # towards a target at the wall it is already slowing down.
-    open_speed = speed(Pose(3.0, 5.5, 0.0), (5.3, 5.5))
+    open_speed = speed(Pose(3.0, 5.5, 0.0), (6.0, 5.5))
     wall_target = (TurtleSim.WORLD_SIZE, 5.5)
     inside = TurtleSim.WORLD_SIZE - profile.wall_margin_m  # the target is kept this far in
-    wall_speed = speed(Pose(inside - 2.3, 5.5, 0.0), wall_target)
+    wall_speed = speed(Pose(inside - 3.0, 5.5, 0.0), wall_target)
     assert open_speed == pytest.approx(profile.max_linear)
     assert 0.0 < wall_speed < open_speed
     # Backing off from a target that came too close, with a wall behind: slower and slower,
