@@ -26,8 +26,8 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from bench.results import MemorySample, ProfileRun
-from bench.stats import PoseSample, TruthSample, heading_track
-from vehicle_agent.control import pixel_to_terrain
+from bench.stats import PoseSample, TruthSample, heading_track, standoff_errors
+from vehicle_agent.control import PROFILES, pixel_to_terrain
 
 log = logging.getLogger(__name__)
 
@@ -296,5 +296,8 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
     window = run.window or (float("-inf"), float("inf"))
     poses = [p for p in poses if window[0] <= p.t <= window[1]]
     run.heading = heading_track(poses, truth, pixel_to_terrain)
+    if PROFILES[options.profile].law == "follow":
+        standoff = PROFILES[options.profile].standoff_m
+        run.position_error = standoff_errors(poses, truth, pixel_to_terrain, standoff)
     if first_command is not None:
         run.settle_at = max(first_command, window[0]) + SETTLE_S
