@@ -15,7 +15,7 @@ import pytest
 from playwright.sync_api import Browser, Page
 
 from app.protocol.control import page_constants
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from vehicle_agent import control
 
 pytestmark = [pytest.mark.browser]

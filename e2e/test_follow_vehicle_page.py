@@ -9,7 +9,7 @@ import pytest
 from playwright.sync_api import Browser, expect
 
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from e2e.conftest import OpenRole
 from e2e.helpers import HEIGHT, WIDTH, status, turtle_state, wait_until
 from vehicle_agent.control import pixel_to_terrain

@@ -12,6 +12,9 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
+from app.protocol.constants import DEFAULT_PROFILE
+from app.protocol.constants import Profile as RelayProfile
+
 # turtlesim's square world (metres) and its centre, where turtle1 starts.
 WORLD_SIZE = 11.088889
 TERRAIN_CENTRE = 5.544445
@@ -48,7 +51,7 @@ class Profile:
     # No goal for this long: the vehicle stops (one zero Twist).
     goal_timeout_s: float
     # The relay profile (snapshot pacing and detector parameters) this vehicle profile pairs with.
-    relay_profile: str
+    relay_profile: RelayProfile
     # --- follow only -------------------------------------------------------------------------
     # Forward speed per metre beyond the standoff, and its limit (m/s).
     linear_gain: float = 0.0
@@ -114,7 +117,7 @@ PROFILES: dict[str, Profile] = {
         search_angular=1.0,
     ),
 }
-DEFAULT_PROFILE = "default"
+__all__ = ["DEFAULT_PROFILE", "PROFILES", "Profile", "page_constants", "with_standoff"]
 
 
 def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:

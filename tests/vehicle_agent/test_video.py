@@ -11,8 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from app.config import PACKAGE_DIR
-from app.operations import detect, load_spec
+from app.resources import OPERATIONS_SPEC
+from app.vision.reference import detect
+from app.vision.spec import load_spec
 from vehicle_agent.video import (
     FileVideo,
     FixedPath,
@@ -112,7 +113,7 @@ def test_synthetic_frames_flag_exactly_the_jumps() -> None:
 
 def test_the_scene_has_a_flame_apart_from_the_face() -> None:
     """Face and fire operations pick different targets in the same frames (issue 12)."""
-    spec = load_spec(PACKAGE_DIR / "operations.json")
+    spec = load_spec(OPERATIONS_SPEC)
     video = SyntheticVideo(640, 480, fps=30)
     try:
         flame = video.flame_centre()
@@ -132,7 +133,7 @@ def test_the_scene_has_a_flame_apart_from_the_face() -> None:
 
 
 def test_a_scene_without_a_flame_gives_the_fire_operation_nothing() -> None:
-    spec = load_spec(PACKAGE_DIR / "operations.json")
+    spec = load_spec(OPERATIONS_SPEC)
     video = SyntheticVideo(640, 480, fps=30, flame=None)
     try:
         rgba = cv2.cvtColor(video.render(0), cv2.COLOR_RGB2RGBA)
