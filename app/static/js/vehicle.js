@@ -124,7 +124,7 @@ function publish(twist, why) {
   status.lastTwist = { ...twist, t: Date.now() };
   const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
   show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
-  if (twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
+  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
 }
 
 function halt(reason) {
