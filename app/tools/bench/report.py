@@ -324,7 +324,8 @@ def _follow_section(results: dict[str, Any]) -> list[str]:
         "",
         "The turtle drives toward the face's terrain point and holds a standoff from it, while"
         " the synthetic face glides and leaps along its path. Position error: at each pose, the"
-        " distance from the turtle to the face's true terrain point minus the standoff, after a"
+        " absolute difference between the standoff and the distance from the turtle to the face's"
+        " true terrain point, after a"
         " 1 s settle; it includes the time the turtle needs to catch up after each glide and"
         " leap.",
         "",
