@@ -10,6 +10,7 @@ from pathlib import Path
 
 from aiortc import RTCIceServer
 
+from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
@@ -80,7 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
     )
     parser.add_argument(
-        "--ros", type=int, choices=(1, 2), default=1, help="ROS message type names (default 1)"
+        "--ros",
+        choices=ROS_SETTINGS,
+        default=AUTO,
+        help="ROS flavour of the robot's type names when its rosapi cannot tell: 1, 2 (up to "
+        "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
         "--profile",

@@ -8,6 +8,7 @@ from typing import Literal
 from pydantic import BaseModel, Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.resources import OPERATIONS_SPEC
 
 
@@ -34,6 +35,7 @@ class Settings(BaseSettings):
     max_message_bytes: int = 64 * 1024
     operations_spec: Path = OPERATIONS_SPEC
     sim_tick_s: float = 0.016
+    ros: RosFlavour = DEFAULT_FLAVOUR
 
     @model_validator(mode="after")
     def _refuse_unsafe(self) -> Settings:

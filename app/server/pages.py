@@ -17,6 +17,8 @@ from fastapi.templating import Jinja2Templates
 
 from app.protocol.constants import ROLES, Role
 from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
+from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
 
@@ -51,7 +53,9 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         # The vehicle page's spawn step (turn to face up at start); ?spawn=0 switches it off.
         "spawnStep": query.get("spawn") not in ("0", "false", "no"),
         "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
-        "ros": "2" if query.get("ros") == "2" else "1",
+        # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
+        "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
+        "rosTypes": ros_page_config(),
     }
 
 

@@ -18,6 +18,7 @@ from typing import Any
 from fastapi import APIRouter, Request, WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
+from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -38,9 +39,14 @@ class Simulator:
     Lives on ``app.state.simulator``; ``app.state.turtlesim`` is its :class:`TurtleSim`.
     """
 
-    def __init__(self, tick_s: float = TurtleSim.TICK_S, max_message_bytes: int = 64 * 1024):
+    def __init__(
+        self,
+        tick_s: float = TurtleSim.TICK_S,
+        max_message_bytes: int = 64 * 1024,
+        ros: RosFlavour = DEFAULT_FLAVOUR,
+    ):
         self.sim = TurtleSim()
-        self.hub = RosbridgeHub(self.sim)
+        self.hub = RosbridgeHub(self.sim, ros)
         self.tick_s = tick_s
         self.max_message_bytes = max_message_bytes
         self._outboxes: dict[RosbridgeSession, asyncio.Queue[str]] = {}

@@ -14,6 +14,7 @@ from pydantic import ValidationError
 
 from app.protocol.constants import ROLES
 from app.protocol.errors import describe
+from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server.app import create_app
 from app.server.config import Settings
@@ -26,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot serve``."""
     parser.add_argument("--host", help="address to bind (default: AUTOPILOT_HOST or 127.0.0.1)")
     parser.add_argument("--port", type=int, help="port to bind (default: AUTOPILOT_PORT or 8000)")
+    parser.add_argument(
+        "--ros",
+        choices=ROS_FLAVOURS,
+        help="ROS flavour the simulated robot speaks: 1, 2 (up to Iron) or jazzy "
+        f"(default: AUTOPILOT_ROS or {DEFAULT_FLAVOUR})",
+    )
 
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
@@ -36,7 +43,7 @@ def page_urls(base: str, room: str = "default") -> dict[str, str]:
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted; a bad setting or operations spec is one line and exit 1."""
     try:
-        settings = Settings()
+        settings = Settings(**({"ros": args.ros} if getattr(args, "ros", None) else {}))
         app = create_app(settings)
     except ValidationError as exc:
         log.error("cannot start: %s", describe(exc))

@@ -5,11 +5,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 
 import httpx
 import pytest
 
+from app.protocol.ros import RosFlavour
+from app.server.config import Settings
 from app.server.serve import RunningServer
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
@@ -26,7 +28,7 @@ def turtle1(server: RunningServer) -> dict[str, float]:
 
 @contextlib.asynccontextmanager
 async def agent_on_rosbridge(
-    server: RunningServer, ros_version: int, spawn_step: bool, events: list[Event]
+    server: RunningServer, spawn_step: bool, events: list[Event]
 ) -> AsyncIterator[Agent]:
     log = EventLog()
     log.listeners.append(events.append)
@@ -34,7 +36,7 @@ async def agent_on_rosbridge(
     agent = Agent(
         AgentConfig(server=server.url, spawn_step=spawn_step),
         SyntheticVideo(160, 120, fps=5, path=FixedPath(0.5, 0.5)),
-        RosbridgeTurtle(rosbridge, ros_version=ros_version),
+        RosbridgeTurtle(rosbridge),  # learns the robot's flavour from rosapi
         log,
     )
     task = asyncio.create_task(agent.run())
@@ -48,12 +50,16 @@ async def agent_on_rosbridge(
             await task
 
 
-@pytest.mark.parametrize("ros_version", [1, 2])
-async def test_agent_turns_the_turtle_up_at_start(server: RunningServer, ros_version: int) -> None:
+@pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
+async def test_agent_turns_the_turtle_up_at_start(
+    start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+) -> None:
+    # teleport_absolute's type name differs in each flavour (turtlesim_msgs/srv/... in Jazzy).
+    server = start_server(Settings(environment="development", token=None, ros=flavour))
     start = turtle1(server)
     assert start["theta"] == pytest.approx(0.0)
     events: list[Event] = []
-    async with agent_on_rosbridge(server, ros_version, True, events):
+    async with agent_on_rosbridge(server, True, events):
         async with asyncio.timeout(15):
             while not any(e["ev"] == "spawn" for e in events):
                 await asyncio.sleep(0.05)
@@ -67,7 +73,7 @@ async def test_agent_turns_the_turtle_up_at_start(server: RunningServer, ros_ver
 
 async def test_spawn_step_can_be_switched_off(server: RunningServer) -> None:
     events: list[Event] = []
-    async with agent_on_rosbridge(server, 1, False, events) as agent:
+    async with agent_on_rosbridge(server, False, events) as agent:
         async with asyncio.timeout(15):
             while agent.pose is None:
                 await asyncio.sleep(0.05)
