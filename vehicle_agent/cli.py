@@ -49,6 +49,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, not {text!r}")
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot vehicle``."""
     parser.add_argument(
@@ -84,7 +94,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
-        "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"
+        "--profile",
+        choices=sorted(PROFILES),
+        default="default",
+        help="control profile: default (turn in place), thesis (1100 ms pacing), follow (drive)",
+    )
+    parser.add_argument(
+        "--standoff",
+        type=_non_negative,
+        metavar="M",
+        help=f"follow: distance kept from the target (default {PROFILES['follow'].standoff_m:g} m)",
+    )
+    parser.add_argument(
+        "--no-spawn-step",
+        dest="spawn_step",
+        action="store_false",
+        help="do not turn the turtle to face up (θ = π/2) at start",
     )
     parser.add_argument(
         "--goal-timeout",
@@ -149,7 +174,11 @@ async def _main(args: argparse.Namespace) -> int:
         args.size,
         args.fps,
         on_frame=lambda info: events.emit(
-            "frame_sent", frame=info.frame, face_x=info.face_x, face_y=info.face_y
+            "frame_sent",
+            frame=info.frame,
+            face_x=info.face_x,
+            face_y=info.face_y,
+            jump=info.jump,
         ),
     )
     turtle: Turtle = SimTurtle()
@@ -162,6 +191,8 @@ async def _main(args: argparse.Namespace) -> int:
         name=args.name,
         profile=args.profile,
         goal_timeout_s=args.goal_timeout,
+        standoff_m=args.standoff,
+        spawn_step=args.spawn_step,
         ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
         token=args.token,
         tls=tls_context(args.ca_file),

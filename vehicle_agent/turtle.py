@@ -23,7 +23,15 @@ from autobahn.twisted.websocket import connectWS
 from twisted.internet import reactor
 from twisted.internet import ssl as twisted_ssl
 
-from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, Detected, RosSetting, detect
+from app.protocol.ros import (
+    AUTO,
+    DETECT_TIMEOUT_S,
+    ROS_SETTINGS,
+    TYPES,
+    Detected,
+    RosSetting,
+    detect,
+)
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -46,6 +54,9 @@ class Turtle(Protocol):
 
     def publish(self, twist: Twist) -> None:
         """Send a velocity command (``cmd_vel``)."""
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Put the turtle at (x, y) facing theta (``teleport_absolute``); raises TurtleError."""
 
     async def close(self) -> None:
         """Disconnect and stop calling ``on_pose``."""
@@ -89,6 +100,10 @@ class SimTurtle:
     def publish(self, twist: Twist) -> None:
         """Command the simulated turtle."""
         self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Teleport the simulated turtle."""
+        self.sim.teleport_absolute(self.name, x, y, theta)
 
     async def close(self) -> None:
         """Stop ticking."""
@@ -198,6 +213,32 @@ class RosbridgeTurtle:
         """Publish on ``/turtleN/cmd_vel`` (roslibpy hands it to its network thread)."""
         if self._cmd_vel is not None:
             self._cmd_vel.publish(roslibpy.Message(twist_message(twist)))
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Call ``/turtleN/teleport_absolute`` and wait for the robot's answer."""
+        ros, types = self._ros, self.types
+        if ros is None or types is None:
+            raise TurtleError(f"not connected to rosbridge at {self.url}")
+        loop = asyncio.get_running_loop()
+        answered: asyncio.Future[str | None] = loop.create_future()
+
+        def settle(error: str | None) -> None:
+            if not answered.done():
+                answered.set_result(error)
+
+        teleport = TYPES[types.flavour].teleport_absolute
+        service = roslibpy.Service(ros, f"/{self.name}/teleport_absolute", teleport)
+        service.call(
+            roslibpy.ServiceRequest({"x": x, "y": y, "theta": theta}),
+            lambda _response: loop.call_soon_threadsafe(settle, None),
+            lambda error: loop.call_soon_threadsafe(settle, str(error)),
+        )
+        try:
+            error = await asyncio.wait_for(answered, CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            error = f"no answer within {CONNECT_TIMEOUT_S:g} s"
+        if error is not None:
+            raise TurtleError(f"/{self.name}/teleport_absolute failed: {error}")
 
     async def close(self) -> None:
         """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""

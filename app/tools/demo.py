@@ -24,7 +24,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from app.protocol import tokens
-from app.protocol.constants import PROFILES
+from app.protocol.control import DEFAULT_PROFILE, PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings
@@ -53,9 +53,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", default="default", help="room (default: default)")
     parser.add_argument(
         "--profile",
-        choices=PROFILES,
-        default="default",
-        help="relay and agent profile",
+        choices=sorted(PROFILES),
+        default=DEFAULT_PROFILE,
+        help="vehicle profile: default (turn in place), thesis (1100 ms), follow (drive to the"
+        " target and keep a standoff; see docs/demo.md)",
     )
     tls.add_arguments(parser)
 
@@ -82,7 +83,7 @@ def children_for(
     with a token for its role in ``room`` when there is a ``secret``."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
-    common = ["--server", base_url, "--room", room, "--profile", profile]
+    common = ["--server", base_url, "--room", room]
     if ca_file is not None:
         common += ["--ca-file", str(ca_file)]
 
@@ -93,7 +94,20 @@ def children_for(
         return {TOKEN_ENV: tokens.sign(secret, room, role, now=now, ttl_s=DEMO_TOKEN_TTL_S)}
 
     return [
-        Child("relay", [python, "-m", "app.cli", "relay", *common], token_env("relay")),
+        # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+        Child(
+            "relay",
+            [
+                python,
+                "-m",
+                "app.cli",
+                "relay",
+                *common,
+                "--profile",
+                PROFILES[profile].relay_profile,
+            ],
+            token_env("relay"),
+        ),
         Child(
             "vehicle",
             [
@@ -102,6 +116,8 @@ def children_for(
                 "app.cli",
                 "vehicle",
                 *common,
+                "--profile",
+                profile,
                 "--video",
                 "synthetic",
                 "--rosbridge",

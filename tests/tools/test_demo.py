@@ -6,6 +6,7 @@ Run inside the private network namespace: ``scripts/in-netns python -m pytest te
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -26,8 +27,11 @@ import pytest
 from playwright.sync_api import sync_playwright
 
 from app.server import tls
+from app.tools import relay_service
 from app.tools.browser import chromium_args, chromium_path
+from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
+from vehicle_agent import cli as agent_cli
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
@@ -162,3 +166,23 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=60) == 0
     assert wait_all_gone(children) == []
+
+
+@pytest.mark.parametrize(
+    ("profile", "relay_profile"), [("follow", "default"), ("thesis", "thesis")]
+)
+def test_demo_profile_drives_the_vehicle_and_paces_the_relay(
+    profile: str, relay_profile: str
+) -> None:
+    relay, vehicle = children_for("http://127.0.0.1:8000", "r", profile)
+    assert relay.argv[relay.argv.index("--profile") + 1] == relay_profile
+    assert vehicle.argv[vehicle.argv.index("--profile") + 1] == profile
+    # Both command lines are ones the relay and the agent accept.
+    for child, add_arguments in (
+        (relay, relay_service.add_arguments),
+        (vehicle, agent_cli.add_arguments),
+    ):
+        parser = argparse.ArgumentParser()
+        add_arguments(parser)
+        args = parser.parse_args(child.argv[child.argv.index(child.name) + 1 :])
+        assert args.profile in (profile, relay_profile)

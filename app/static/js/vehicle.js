@@ -1,6 +1,6 @@
 // The vehicle page: camera to the relay, goals from the `autopilot` data channel turned into
 // Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to the relay.
-import { Controller, PROFILES } from './control.js';
+import { ControlLaw, Controller } from './control.js';
 import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
 import { pickTypes } from './rosflavour.js';
@@ -13,8 +13,9 @@ const ROS_RETRY_MS = 2000;
 const config = readConfig();
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
-const profile = PROFILES[config.profile];
-const controller = new Controller(profile);
+const law = new ControlLaw(config.control);
+const profile = law.profiles[config.profile];
+const controller = new Controller(law, profile);
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
@@ -119,13 +120,14 @@ class Turtle {
 
   // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
   #spawnStep(pose) {
+    if (!config.spawnStep) return;
     const service = new ROSLIB.Service({
       ros: this.ros,
       name: '/turtle1/teleport_absolute',
       serviceType: this.types.teleport,
     });
     service.callService(
-      { x: pose.x, y: pose.y, theta: Math.PI / 2 },
+      { x: pose.x, y: pose.y, theta: law.spawnTheta },
       () => log.info('spawn step: turtle1 turned to π/2'),
       (err) => log.error(`spawn step failed: ${err}`),
     );
@@ -153,8 +155,9 @@ function publish(twist, why) {
   session.rosWarned = false;
   status.twistsPublished += 1;
   status.lastTwist = { ...twist, t: Date.now() };
-  show('twist', `angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
-  if (twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
+  const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
+  show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
+  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
 }
 
 function halt(reason) {

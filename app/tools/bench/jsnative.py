@@ -62,7 +62,7 @@ def synthetic_frames(count: int, width: int = 640, height: int = 480) -> list[Rg
 
     fps = 15.0
     path = SweepPath()
-    cycle_frames = int(2 * (path.hold_s + path.glide_s) * fps)
+    cycle_frames = int(path.cycle_s * fps)
     video = SyntheticVideo(width, height, fps, path=path)
     frames = []
     for i in range(count):

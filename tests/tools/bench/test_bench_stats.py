@@ -15,6 +15,7 @@ from app.tools.bench.stats import (
     heading_error_deg_median,
     heading_track,
     rate_per_s,
+    standoff_errors,
     summarize,
     wrap_angle,
 )
@@ -116,3 +117,20 @@ def test_growth_pct() -> None:
     assert growth_pct(200.0, 100.0) == pytest.approx(-50.0)
     with pytest.raises(ValueError):
         growth_pct(0.0, 1.0)
+
+
+def test_standoff_error_is_the_distance_off_the_standoff_from_the_target_shown() -> None:
+    def identity(x: float, y: float, w: int, h: int) -> tuple[float, float]:
+        return x, y
+
+    # The target sits at (0, 0) until t = 1, then leaps to (10, 0).
+    truth = [TruthSample(0.0, 0.0, 0.0, 1, 1), TruthSample(1.0, 10.0, 0.0, 1, 1)]
+    poses = [
+        PoseSample(-0.5, 1.0, 0.0, 0.0),  # before the first frame: skipped
+        PoseSample(0.5, 1.0, 0.0, 0.0),  # exactly at the 1 m standoff
+        PoseSample(0.9, 0.0, 3.0, 0.0),  # 3 m off the target: 2 m too far
+        PoseSample(1.5, 9.5, 0.0, 0.0),  # 0.5 m from the leapt target: 0.5 m too close
+    ]
+    errors = standoff_errors(poses, truth, identity, 1.0)
+    assert [t for t, _ in errors] == [0.5, 0.9, 1.5]
+    assert [e for _, e in errors] == pytest.approx([0.0, 2.0, 0.5])
