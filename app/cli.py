@@ -19,6 +19,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("app.demo", "run the whole system on an embedded default"),
     "parity": ("app.parity", "compare OpenCV.js detections with Python OpenCV"),
     "bench": ("bench.cli", "measure the running system and write a report"),
+    "lab": ("app.tools.lab.cli", "build the field lab: NATs, TURN and network conditions"),
 }
 
 

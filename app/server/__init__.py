@@ -1,0 +1,1 @@
+"""The server: app factory, settings, pages, the WebSocket adapter, routes and ``serve``."""

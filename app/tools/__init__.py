@@ -1,0 +1,1 @@
+"""Tools built on the system: browsers, the relay service, demo, parity, bench and the field lab."""
