@@ -5,7 +5,8 @@
     robot 192.168.10.2 ── rnat ──┐                ┌── onat ── operator 192.168.20.2
       (eth0)      (lan0)  (wan0) │  wan (bridge)  │ (wan0)  (lan0)      (eth0)
                       172.30.0.2 ├───────┬────────┤ 172.30.0.3
-                                         │
+                                         │ wan's own 172.30.0.1: the default gateway
+                                         │ (routes nowhere further)
                                   cloud 172.30.0.10 (server, coturn, relay)
 
 Every box is a network namespace; ``rnat`` and ``onat`` forward and masquerade (nftables), so the
@@ -48,6 +49,7 @@ SITES = ("cloud", "robot", "operator")
 ROUTERS = ("wan", "rnat", "onat")
 
 CLOUD = "172.30.0.10"
+INTERNET_GATEWAY = "172.30.0.1"
 PUBLIC_PREFIX = 24
 ROBOT_NAT = "172.30.0.2"
 OPERATOR_NAT = "172.30.0.3"
@@ -119,12 +121,14 @@ class Lab:
             netns.ip("link", "set", "lo", "up", namespace=name)
         ns = self.namespaces
         netns.ip("link", "add", "br0", "type", "bridge", namespace=ns["wan"])
-        netns.ip("link", "set", "br0", "up", namespace=ns["wan"])
+        self._address(ns["wan"], "br0", INTERNET_GATEWAY, PUBLIC_PREFIX)
         for host, address in (("cloud", CLOUD), ("rnat", ROBOT_NAT), ("onat", OPERATOR_NAT)):
             port = f"to-{host}"
             self._veth(ns["wan"], port, ns[host], "wan0")
             netns.ip("link", "set", port, "master", "br0", "up", namespace=ns["wan"])
             self._address(ns[host], "wan0", address, PUBLIC_PREFIX)
+            # Chromium gathers no candidates at all on a host without a default route.
+            netns.ip("route", "add", "default", "via", INTERNET_GATEWAY, namespace=ns[host])
         for router, lan_site, gateway, address in (
             ("rnat", "robot", ROBOT_GATEWAY, ROBOT),
             ("onat", "operator", OPERATOR_GATEWAY, OPERATOR),
