@@ -9,7 +9,7 @@ from dataclasses import asdict
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 
 pytestmark = [pytest.mark.browser]

@@ -1,1 +1,1 @@
-"""The server: app factory, settings, pages, the WebSocket adapter, routes and ``serve``."""
+"""The web server: app factory, settings, pages, WebSocket adapters and HTTP routes."""

@@ -1,1 +1,1 @@
-"""Tools built on the system: browsers, the relay service, demo, parity, bench and the field lab."""
+"""Tools that drive Chromium or child processes: relay service, demo, parity, bench, field lab."""
