@@ -1,9 +1,9 @@
 """The role pages (vehicle, relay, client) and an index linking them.
 
 Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
-ES modules need no globals: ICE servers from :class:`~app.server.config.Settings`, the
-signaling path, the default rosbridge URL (this server's ``/rosbridge``) and what the query
-string asks for.
+ES modules need no globals: the signaling path, the default rosbridge URL (this server's
+``/rosbridge``) and what the query string asks for. ICE servers are not in it: each login
+reply carries them, with TURN credentials minted for that login.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from fastapi.templating import Jinja2Templates
 
 from app.protocol.constants import PROFILES, ROLES, Role
 from app.resources import TEMPLATES_DIR
-from app.server.config import Settings
 
 router = APIRouter()
 templates = Jinja2Templates(directory=TEMPLATES_DIR)
@@ -30,12 +29,10 @@ def _ws_base(request: Request) -> str:
 
 def page_config(request: Request, role: Role) -> dict[str, Any]:
     """What a role page needs to run on its own, ``?auto=1`` included."""
-    settings: Settings = request.app.state.settings
     query = request.query_params
     profile = query.get("profile", "default")
     return {
         "role": role,
-        "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
         "wsPath": "/ws",
         "room": query.get("room", "default"),
         "name": query.get("name", ""),

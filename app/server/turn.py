@@ -11,11 +11,13 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
-from typing import Literal
+from typing import Self
 
 from pydantic import BaseModel, Field, SecretStr, model_validator
 
-IceTransportPolicy = Literal["all", "relay"]
+from app.protocol.signaling import IceServer, IceTransportPolicy
+
+__all__ = ["IceTransportPolicy", "TurnSettings", "ice_servers_for", "mint_turn_credentials"]
 
 
 def mint_turn_credentials(secret: str, name: str, ttl_s: int, now: float) -> tuple[str, str]:
@@ -34,22 +36,23 @@ def mint_turn_credentials(secret: str, name: str, ttl_s: int, now: float) -> tup
 
 
 class TurnSettings(BaseModel):
-    """TURN/STUN part of the settings; embedded in ``Settings``.
+    """The TURN/STUN part of the settings; ``Settings`` inherits these fields.
 
     ``turn_urls`` and ``stun_urls`` are RTCIceServer ``urls`` (``turn:host:3478?transport=udp``,
-    ``stun:host:3478``). With ``turn_urls`` set, ``secret`` is coturn's ``static-auth-secret``.
-    ``ice_transport_policy = "relay"`` makes every peer use relayed candidates only.
+    ``stun:host:3478``). With ``turn_urls`` set, ``turn_secret`` is coturn's
+    ``static-auth-secret``. ``ice_transport_policy = "relay"`` makes every peer use relayed
+    candidates only.
     """
 
     turn_urls: list[str] = Field(default_factory=list)
     stun_urls: list[str] = Field(default_factory=list)
-    secret: SecretStr | None = None
+    turn_secret: SecretStr | None = None
     ice_transport_policy: IceTransportPolicy = "all"
-    credential_ttl_s: int = Field(default=3600, gt=0)
+    turn_credential_ttl_s: int = Field(default=3600, gt=0)
 
     @model_validator(mode="after")
-    def _check(self) -> TurnSettings:
-        if self.turn_urls and self.secret is None:
+    def _check_turn(self) -> Self:
+        if self.turn_urls and self.turn_secret is None:
             raise ValueError("TURN urls need the TURN shared secret (coturn static-auth-secret)")
         for url in self.turn_urls:
             if not url.startswith(("turn:", "turns:")):
@@ -60,3 +63,20 @@ class TurnSettings(BaseModel):
         if self.ice_transport_policy == "relay" and not self.turn_urls:
             raise ValueError("ice_transport_policy 'relay' needs at least one TURN url")
         return self
+
+
+def ice_servers_for(
+    settings: TurnSettings, extra: list[IceServer], name: str, now: float
+) -> list[IceServer]:
+    """The ICE servers one login gets: STUN, TURN with credentials minted for ``name``, then
+    ``extra`` as configured."""
+    servers = [IceServer(urls=settings.stun_urls)] if settings.stun_urls else []
+    if settings.turn_urls and settings.turn_secret is not None:
+        username, password = mint_turn_credentials(
+            settings.turn_secret.get_secret_value(),
+            name.replace(":", "_"),
+            settings.turn_credential_ttl_s,
+            now,
+        )
+        servers.append(IceServer(urls=settings.turn_urls, username=username, credential=password))
+    return servers + extra
