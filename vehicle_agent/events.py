@@ -5,7 +5,9 @@ processes of one machine):
 
 * ``{"ev": "frame_sent", "frame", "face_x", "face_y", "t"}`` -- synthetic frame handed to the
   encoder, with the true face centre in pixels;
-* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received;
+* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received and applied;
+* ``{"ev": "goal_dropped", "seq", "frame", "why", "t"}`` -- goal refused by the latest-wins
+  rule (``why``: ``old`` seq or ``stale``);
 * ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
   (``seq``/``frame`` of the goal that caused it, null for a stop);
 * ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;

@@ -19,15 +19,17 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Literal
 
+from app.protocol.channels import GOAL_AGE_WINDOW_S, GOAL_MAX_AGE_S
+
 Verdict = Literal["fresh", "old", "stale"]
 
 
 @dataclass(frozen=True)
 class FreshnessRule:
-    """The numbers of the rule; one instance is shared by the agent and the page config."""
+    """The numbers of the rule (defaults: ``app.protocol.channels``, which pages get too)."""
 
-    max_age_s: float = 0.5
-    window_s: float = 5.0
+    max_age_s: float = GOAL_MAX_AGE_S
+    window_s: float = GOAL_AGE_WINDOW_S
 
 
 class GoalGate:

@@ -14,6 +14,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
+from app.protocol.channels import page_channels
 from app.protocol.constants import PROFILES, ROLES, Role
 from app.resources import TEMPLATES_DIR
 
@@ -42,6 +43,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         "profile": profile if profile in PROFILES else "default",
         "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
         "ros": "2" if query.get("ros") == "2" else "1",
+        "channels": page_channels(),
     }
 
 
