@@ -81,6 +81,8 @@ class RelayLink:
             maxRetransmits=STATE_CHANNEL_MAX_RETRANSMITS,
         )
         self.connected = asyncio.Event()
+        # Called once when the reliable channel opens (the agent records the link as up).
+        self.on_up: Callable[[RelayLink], None] | None = None
 
         @self.state_channel.on("message")
         def _state_message(message: str | bytes) -> None:
@@ -92,6 +94,8 @@ class RelayLink:
         def _open() -> None:
             log.info("data channel %r to %s open", CHANNEL_LABEL, relay)
             self.connected.set()
+            if self.on_up is not None:
+                self.on_up(self)
 
         @self.channel.on("message")
         def _message(message: str | bytes) -> None:
@@ -149,6 +153,13 @@ class RelayLink:
         if candidate.sdpMid is None and candidate.sdpMLineIndex is None:
             candidate.sdpMLineIndex = 0
         await self.pc.addIceCandidate(candidate)
+
+    def local_candidate_types(self) -> list[str]:
+        """Types of the candidates this side gathered (``relay`` only under the relay policy)."""
+        ice = self.pc.sctp.transport.transport if self.pc.sctp is not None else None
+        if ice is None:
+            return []
+        return sorted({c.type for c in ice.iceGatherer.getLocalCandidates()})
 
     def send(self, message: dict[str, Any]) -> bool:
         """Send a JSON message on the reliable channel; False when it is not open."""

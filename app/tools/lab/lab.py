@@ -22,9 +22,11 @@ are applied (NAT and DNAT decisions are cached per connection by conntrack).
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import secrets
+import shlex
 import shutil
 import socket
 import subprocess
@@ -40,6 +42,7 @@ from typing import Any
 from aioice import stun
 
 import app
+from app.server.turn import IceTransportPolicy
 from app.tools.lab import coturn, netns
 from app.tools.lab.conditions import Condition, condition
 
@@ -245,6 +248,49 @@ class Lab:
     def socket(self, site: str, kind: socket.SocketKind = socket.SOCK_DGRAM) -> socket.socket:
         """An IPv4 socket in ``site``, for this process to talk from there."""
         return netns.open_socket(self.namespace(site), kind)
+
+    def stop(self, process: subprocess.Popen[Any]) -> None:
+        """Stop a process started with :meth:`popen` before the lab goes down."""
+        _stop(process)
+        if process in self._processes:
+            self._processes.remove(process)
+
+    def wait_for_tcp(self, site: str, address: tuple[str, int], timeout_s: float = 30.0) -> None:
+        """Return once ``address`` accepts TCP connections from ``site``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with contextlib.closing(self.socket(site, socket.SOCK_STREAM)) as sock:
+                sock.settimeout(1)
+                try:
+                    sock.connect(address)
+                    return
+                except OSError as exc:
+                    if time.monotonic() > deadline:
+                        raise netns.LabError(f"{address} unreachable from {site}: {exc}") from exc
+            time.sleep(0.2)
+
+    def chromium(self, site: str, executable: str) -> Path:
+        """A launcher that runs ``executable`` (Chromium) inside ``site``, for Playwright's
+        ``executable_path``: Playwright talks to the browser over pipes, so it need not be in
+        the site itself."""
+        assert self._workdir is not None
+        path = self._workdir / f"chromium-{site}"
+        path.write_text(
+            f'#!/bin/sh\nexec ip netns exec {self.namespace(site)} {shlex.quote(executable)} "$@"\n'
+        )
+        path.chmod(0o755)
+        return path
+
+    def server_env(self, policy: IceTransportPolicy | None = None) -> dict[str, str]:
+        """Environment for ``autopilot serve`` in the cloud: the lab's STUN and TURN (shared
+        secret), and the ICE policy (the current condition's unless given)."""
+        return {
+            **self.env(),
+            "AUTOPILOT_STUN_URLS": json.dumps([self.stun_url]),
+            "AUTOPILOT_TURN_URLS": json.dumps([self.turn_url]),
+            "AUTOPILOT_TURN_SECRET": self.turn_secret,
+            "AUTOPILOT_ICE_TRANSPORT_POLICY": policy or self.condition.ice_transport_policy,
+        }
 
     # -- conditions ----------------------------------------------------------------------------
 
