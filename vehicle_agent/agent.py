@@ -283,13 +283,20 @@ class Agent:
         link.on_up = self._on_link_up
         self._link = link
         self.goal_gate.reset()
+        self.events.emit("link", state="offer", relay=link.relay)
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
 
     def _on_link_up(self, link: RelayLink) -> None:
         candidates = link.local_candidate_types()
         log.info("link to %s up (local candidates: %s)", link.relay, ", ".join(candidates))
-        self.events.emit("link", state="up", relay=link.relay, local_candidates=candidates)
+        self.events.emit(
+            "link",
+            state="up",
+            relay=link.relay,
+            local_candidates=candidates,
+            selected=link.selected_candidate_type(),
+        )
 
     def _check_connected(self, link: RelayLink) -> None:
         if link is self._link and not link.connected.is_set():

@@ -11,8 +11,9 @@ processes of one machine):
 * ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
   (``seq``/``frame`` of the goal that caused it, null for a stop);
 * ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;
-* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay up (with
-  ``local_candidates``: the candidate types gathered) or down (with ``reason``).
+* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay offered, up (with
+  ``local_candidates``: the candidate types gathered, and ``selected``: this side's candidate
+  type in the nominated pair, or null) or down (with ``reason``).
 """
 
 from __future__ import annotations

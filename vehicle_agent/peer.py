@@ -161,6 +161,19 @@ class RelayLink:
             return []
         return sorted({c.type for c in ice.iceGatherer.getLocalCandidates()})
 
+    def selected_candidate_type(self) -> str | None:
+        """Type of this side's candidate in the nominated pair (host/srflx/relay), or None.
+
+        aiortc exposes no selected pair, so this reads aioice's nominated pair (a private
+        attribute): None when it is not there, never a guess.
+        """
+        ice = self.pc.sctp.transport.transport if self.pc.sctp is not None else None
+        connection = getattr(ice, "_connection", None)
+        pair = getattr(connection, "_nominated", {}).get(1)
+        local = getattr(pair, "local_candidate", None)
+        kind = getattr(local, "type", None)
+        return kind if isinstance(kind, str) else None
+
     def send(self, message: dict[str, Any]) -> bool:
         """Send a JSON message on the reliable channel; False when it is not open."""
         return _send(self.channel, message)
