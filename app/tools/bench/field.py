@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -163,6 +164,7 @@ def run(out: Path, quick: bool) -> dict[str, Any]:
     from app.tools.lab.stack import field_stack
 
     window_s = QUICK_WINDOW_S if quick else FULL_WINDOW_S
+    load_before = os.getloadavg()[0]
     rows: list[FieldRow] = []
     drop: dict[str, float | None] = {"stop_after_s": None, "resume_after_s": None}
     with Lab() as lab, sync_playwright() as playwright:
@@ -210,6 +212,8 @@ def run(out: Path, quick: bool) -> dict[str, Any]:
         "link_drop": drop,
         "window_s": window_s,
         "quick": quick,
+        # Everything shares this machine's cores: the figures move with its load.
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
     write(out, obj)
     return obj
@@ -234,7 +238,8 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         "# Field bench",
         "",
         f"Each condition measured over {obj['window_s']:g} s after the first goal "
-        "(see `app/tools/bench/field.py`). Null: not measured, the reason is listed below.",
+        "(see `app/tools/bench/field.py`). Null: not measured, the reason is listed below. "
+        f"Load average before/after: {obj.get('load_average')}.",
         "",
         "| " + " | ".join(keys) + " |",
         "| " + " | ".join("---" for _ in keys) + " |",
