@@ -172,3 +172,27 @@ def test_a_dead_run_namespaces_are_removed_by_the_next_lab() -> None:
     netns.ip("netns", "add", stale)
     with Lab():
         assert stale not in netns.list_names()
+
+
+def test_cap_1mbit_holds_the_robot_uplink_to_its_rate(lab: Lab) -> None:
+    applied = lab.apply("cap_1mbit")
+    payload = b"x" * 125_000  # one second's worth at 1 Mbit/s
+    with lab.socket("cloud", socket.SOCK_STREAM) as listener:
+        listener.bind((CLOUD, PORT))
+        listener.listen()
+        listener.settimeout(10)
+        with lab.socket("robot", socket.SOCK_STREAM) as client:
+            client.settimeout(10)
+            client.connect((CLOUD, PORT))
+            accepted, _ = listener.accept()
+            with accepted:
+                accepted.settimeout(10)
+                started = time.monotonic()
+                client.sendall(payload)
+                received = 0
+                while received < len(payload):
+                    received += len(accepted.recv(65536))
+                elapsed = time.monotonic() - started
+    # A lower bound only: the bytes cannot cross faster than the cap (less the token bucket's
+    # burst), however fast the machine is.
+    assert elapsed >= 0.6 * len(payload) * 8 / (applied.uplink_kbit * 1000), elapsed
