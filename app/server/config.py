@@ -31,9 +31,18 @@ class Settings(BaseSettings):
     ice_servers: list[IceServer] = Field(default_factory=list)
     # When set, every login must carry this token.
     token: str | None = None
-    max_message_bytes: int = 64 * 1024
+    # One policy for both WebSockets (/ws and /rosbridge), see app/server/websocket.py:
+    # a larger frame is refused by uvicorn before it is buffered (close 1009) ...
+    max_message_bytes: int = Field(default=64 * 1024, gt=0)
+    # ... a peer leaving more than this unread is closed (1013) ...
+    outbox_messages: int = Field(default=256, gt=0)
+    outbox_bytes: int = Field(default=1024 * 1024, gt=0)
+    # ... and these many sockets of each kind are served at once; more are closed with 1013.
+    max_connections: int = Field(default=256, ge=1)
+    max_rosbridge_sessions: int = Field(default=64, ge=1)
+    # A /ws connection that has not logged in this long after opening is closed (1008).
+    login_timeout_s: float = Field(default=10.0, gt=0)
     operations_spec: Path = OPERATIONS_SPEC
-    sim_tick_s: float = 0.016
 
     @model_validator(mode="after")
     def _refuse_unsafe(self) -> Settings:

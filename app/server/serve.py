@@ -8,6 +8,7 @@ import logging
 import socket
 import threading
 from dataclasses import dataclass
+from typing import Any
 
 import uvicorn
 from pydantic import ValidationError
@@ -47,8 +48,29 @@ def run(args: argparse.Namespace) -> int:
     base = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}"
     for role, url in page_urls(base).items():
         log.info("%s page: %s", role, url)
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    uvicorn.run(app, **uvicorn_options(settings), host=host, port=port, log_level="info")
     return 0
+
+
+class _QuietInvalidUtf8(logging.Filter):
+    """uvicorn logs a traceback for every text frame that is not UTF-8 (then closes with 1007,
+    as RFC 6455 requires); one line says the same without letting a peer flood the log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage().startswith("Invalid UTF-8 sequence"):
+            record.msg, record.args = "invalid UTF-8 in a text frame: closed with 1007", ()
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+            record.exc_info = record.exc_text = None
+        return True
+
+
+def uvicorn_options(settings: Settings) -> dict[str, Any]:
+    """What every uvicorn we start needs from ``settings`` (the WebSocket frame size limit:
+    uvicorn refuses a larger frame before buffering it, closing with 1009)."""
+    logger = logging.getLogger("uvicorn.error")
+    if not any(isinstance(f, _QuietInvalidUtf8) for f in logger.filters):
+        logger.addFilter(_QuietInvalidUtf8())
+    return {"ws_max_size": settings.max_message_bytes}
 
 
 @dataclass
@@ -82,7 +104,10 @@ def start_in_thread(
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     port = sock.getsockname()[1]
-    config = uvicorn.Config(create_app(settings), log_level=log_level, lifespan="on")
+    settings = settings or Settings()
+    config = uvicorn.Config(
+        create_app(settings), **uvicorn_options(settings), log_level=log_level, lifespan="on"
+    )
     server = uvicorn.Server(config)
     thread = threading.Thread(
         target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True, name="uvicorn"

@@ -11,8 +11,10 @@ from __future__ import annotations
 import hmac
 import itertools
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, assert_never
+from typing import Any, Final, assert_never
 
 from app.protocol.constants import Role
 from app.protocol.signaling import (
@@ -40,6 +42,15 @@ ConnId = str
 # WebSocket close codes (RFC 6455 §7.4.1).
 CLOSE_NORMAL = 1000
 CLOSE_POLICY_VIOLATION = 1008
+
+# Peers per room: a vehicle, a relay and clients. Also bounds each roster update, which every
+# join and leave sends to everyone in the room (N messages of N entries).
+MAX_ROOM_PEERS: Final = 32
+# Per-sender rate limit (a token bucket): a burst of this many messages, refilled at this rate.
+# Trickled ICE candidates come in bursts of a few dozen; a client flooding ``stop`` is refused
+# (and, after ``max_errors_in_a_row``, closed) before the relay it targets falls behind.
+RATE_BURST: Final = 100
+RATE_PER_S: Final = 50.0
 
 
 @dataclass(frozen=True)
@@ -76,9 +87,20 @@ class _Peer:
 @dataclass
 class _Connection:
     id: ConnId
+    allowance: float
+    checked_at: float
     peer: _Peer | None = None
     errors_in_a_row: int = 0
     closing: bool = False
+
+    def spend(self, now: float) -> bool:
+        """Take one message from the sender's token bucket; False when it is empty."""
+        self.allowance = min(RATE_BURST, self.allowance + (now - self.checked_at) * RATE_PER_S)
+        self.checked_at = now
+        if self.allowance < 1.0:
+            return False
+        self.allowance -= 1.0
+        return True
 
 
 @dataclass
@@ -89,6 +111,7 @@ class Hub:
     max_message_bytes: int = 64 * 1024
     # A peer whose last this-many messages were all refused is closed as abusive.
     max_errors_in_a_row: int = 20
+    clock: Callable[[], float] = time.monotonic
     _connections: dict[ConnId, _Connection] = field(default_factory=dict, init=False)
     # room -> name -> peer, in join order (rosters list peers in the order they joined).
     _rooms: dict[str, dict[str, _Peer]] = field(default_factory=dict, init=False)
@@ -97,8 +120,13 @@ class Hub:
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
         conn = f"c{next(self._ids)}"
-        self._connections[conn] = _Connection(conn)
+        self._connections[conn] = _Connection(conn, RATE_BURST, self.clock())
         return conn
+
+    def logged_in(self, conn: ConnId) -> bool:
+        """True once ``conn`` has logged in (and until it leaves)."""
+        connection = self._connections.get(conn)
+        return connection is not None and connection.peer is not None
 
     def rooms(self) -> list[str]:
         """Names of the rooms that have anyone in them."""
@@ -113,6 +141,11 @@ class Hub:
         connection = self._connections[conn]
         if connection.closing:
             return []
+        if not connection.spend(self.clock()):
+            # Refused before parsing: the flood costs its sender, not the peer it targets.
+            return self._refuse(
+                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+            )
         size = len(text.encode("utf-8"))
         if size > self.max_message_bytes:
             return self._refuse(
@@ -132,6 +165,10 @@ class Hub:
         connection = self._connections[conn]
         if connection.closing:
             return []
+        if not connection.spend(self.clock()):
+            return self._refuse(
+                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+            )
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
 
     def disconnect(self, conn: ConnId) -> list[Action]:
@@ -183,6 +220,10 @@ class Hub:
         if login.name in room:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
+            )
+        if len(room) >= MAX_ROOM_PEERS:
+            return self._refuse_login(
+                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)"
             )
         relay = _relay_of(room)
         if login.role == "relay" and relay is not None:
