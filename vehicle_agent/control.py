@@ -120,7 +120,11 @@ def steering_error(goal: Goal, pose: Pose) -> float | None:
     """Signed turn, in (−π, π], that makes the turtle face the goal; None when undefined."""
     tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
     dx, dy = tx - pose.x, ty - pose.y
-    if math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M:
+    # A non-finite goal or pose has no direction: never a command (NaN would pass every clamp).
+    if (
+        not all(map(math.isfinite, (dx, dy, pose.theta)))
+        or math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M
+    ):
         return None
     return wrap_angle(math.atan2(dy, dx) - pose.theta)
 

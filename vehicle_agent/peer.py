@@ -9,7 +9,6 @@ when it fails or the relay goes away the agent closes it and makes a new one.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -22,6 +21,8 @@ from aiortc import (
     RTCSessionDescription,
 )
 from aiortc.sdp import candidate_from_sdp
+
+from app.protocol import jsonedge
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +126,12 @@ class RelayLink:
         """Send a JSON message on the data channel; False when it is not open."""
         if self.channel.readyState != "open":
             return False
-        self.channel.send(json.dumps(message))
+        try:
+            frame = jsonedge.dumps(message)
+        except ValueError as exc:  # NaN or Infinity: browsers' JSON.parse would refuse it
+            log.error("not sending a %r message to %s: %s", message.get("type"), self.relay, exc)
+            return False
+        self.channel.send(frame)
         return True
 
     def _fail(self, reason: str) -> None:
