@@ -1,0 +1,213 @@
+"""Hostile input against the real server (issue 9): each case gets a clear error or close, the
+server logs no traceback, and everyone else keeps being served."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import httpx
+import pytest
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
+from websockets.frames import Frame, Opcode
+
+from app.server.config import Settings
+from app.server.serve import RunningServer
+from app.turtlesim.sim import MAX_TURTLES
+
+TIMEOUT_S = 10
+
+
+class Records(logging.Handler):
+    """Every record the server logs (uvicorn's loggers do not propagate to the root)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+    def tracebacks(self) -> list[str]:
+        return [r.getMessage() for r in self.records if r.exc_info]
+
+
+@pytest.fixture
+def server_log() -> Iterator[Records]:
+    records = Records()
+    loggers = [
+        logging.getLogger(),
+        logging.getLogger("uvicorn"),
+        logging.getLogger("uvicorn.error"),
+    ]
+    for logger in loggers:
+        logger.addHandler(records)
+    yield records
+    for logger in loggers:
+        logger.removeHandler(records)
+
+
+def rosbridge_url(server: RunningServer) -> str:
+    return server.url.replace("http", "ws", 1) + "/rosbridge"
+
+
+async def recv(ws: ClientConnection) -> dict[str, Any]:
+    message: dict[str, Any] = json.loads(await asyncio.wait_for(ws.recv(), TIMEOUT_S))
+    return message
+
+
+async def login(ws: ClientConnection, name: str, role: str) -> None:
+    await ws.send(json.dumps({"type": "login", "name": name, "role": role}))
+    assert (await recv(ws))["success"] is True
+
+
+async def closed(ws: ClientConnection) -> tuple[int | None, str | None]:
+    """Read (and drop) what is left until the server's close; its code and reason."""
+
+    async def drain() -> None:
+        with contextlib.suppress(ConnectionClosed):
+            async for _ in ws:
+                pass
+
+    await asyncio.wait_for(drain(), TIMEOUT_S)
+    return ws.close_code, ws.close_reason
+
+
+async def send_invalid_utf8(ws: ClientConnection) -> None:
+    ws.protocol.send_frame(Frame(Opcode.TEXT, b'{"type": "\xff\xfe"}'))
+    ws.send_data()
+
+
+async def test_a_5000_digit_integer_before_login_gets_an_error_and_no_traceback(
+    server: RunningServer, server_log: Records
+) -> None:
+    async with connect(server.ws_url) as ws:
+        await ws.send('{"type": "login", "name": "c", "role": "client", "n": ' + "9" * 5000 + "}")
+        error = await recv(ws)
+        assert error["type"] == "error" and "digits" in error["reason"]
+        await login(ws, "c", "client")  # the connection still works
+    assert server_log.tracebacks() == []
+
+
+async def test_nan_is_refused_not_relayed(server: RunningServer) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as vehicle:
+        await login(relay, "r", "relay")
+        await login(vehicle, "v", "vehicle")
+        await recv(relay)  # roster update
+        await vehicle.send('{"type": "offer", "to": "r", "sdp": "x", "q": NaN}')
+        error = await recv(vehicle)
+        assert error["type"] == "error" and "NaN" in error["reason"]
+        await vehicle.send('{"type": "offer", "to": "r", "sdp": "after"}')
+        assert (await recv(relay))["sdp"] == "after", "nothing came before it"
+
+
+@pytest.mark.parametrize("endpoint", ["/ws", "/rosbridge"])
+async def test_invalid_utf8_closes_with_1007_and_logs_no_traceback(
+    server: RunningServer, server_log: Records, endpoint: str
+) -> None:
+    url = server.url.replace("http", "ws", 1) + endpoint
+    for _ in range(3):
+        async with connect(url) as ws:
+            await send_invalid_utf8(ws)
+            with pytest.raises(ConnectionClosed):
+                await asyncio.wait_for(ws.recv(), TIMEOUT_S)
+            assert ws.close_code == 1007
+    assert server_log.tracebacks() == []
+    async with connect(url) as ws:  # the endpoint still serves
+        await ws.send("{broken")
+        assert "malformed" in json.dumps(await recv(ws))
+
+
+async def test_a_flooding_client_is_closed_and_the_slow_relay_is_not(server: RunningServer) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as client:
+        await login(relay, "r", "relay")
+        await login(client, "c", "client")
+        await recv(relay)  # roster update
+        # The relay does not read while the client floods.
+        for _ in range(2000):
+            try:
+                await client.send('{"type": "stop"}')
+            except ConnectionClosed:
+                break
+        code, reason = await closed(client)
+        assert code == 1008 and reason is not None and "abusive" in reason
+        # The relay reads at its leisure: everything that reached it, then the client leaving.
+        kinds = set()
+        while (kind := (await recv(relay))["type"]) != "peers":
+            kinds.add(kind)
+        assert kinds == {"stop", "leave"}
+        await relay.send('{"type": "getOps"}')  # still logged in: refused only for its role
+        assert "client" in (await recv(relay))["reason"]
+
+
+async def test_a_socket_that_never_logs_in_is_closed_at_the_deadline(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(Settings(environment="development", token=None, login_timeout_s=0.5))
+    async with connect(server.ws_url) as idle, connect(server.ws_url) as prompt:
+        await login(prompt, "p", "client")
+        code, reason = await closed(idle)
+        assert code == 1008 and reason == "no login within 0.5 s"
+        await asyncio.sleep(0.5)
+        await prompt.send('{"type": "getOps"}')
+        assert (await recv(prompt))["type"] == "error"  # logged in in time: still open
+
+
+async def test_connections_are_capped_with_a_clear_close(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(
+        Settings(environment="development", token=None, max_connections=3, max_rosbridge_sessions=2)
+    )
+    async with connect(server.ws_url), connect(server.ws_url), connect(server.ws_url):
+        async with connect(server.ws_url) as extra:
+            assert await closed(extra) == (1013, "server full: 3 connections")
+    url = rosbridge_url(server)
+    async with connect(url), connect(url), connect(url) as extra:
+        assert await closed(extra) == (1013, "server full: 2 rosbridge clients")
+
+
+async def test_a_rosbridge_client_that_never_reads_is_closed(server: RunningServer) -> None:
+    url = rosbridge_url(server)
+    request = json.dumps({"op": "call_service", "service": "/rosapi/services", "id": "x" * 40})
+    # max_queue=1: the client library stops reading the socket, as a stuck peer would.
+    async with connect(url, max_queue=1) as stuck, connect(url) as other:
+        for n in range(MAX_TURTLES - 1):
+            await other.send(json.dumps({"op": "call_service", "service": "/spawn", "args": {}}))
+        for _ in range(MAX_TURTLES - 1):
+            assert (await recv(other))["result"] is True
+        started = time.monotonic()
+        while stuck.close_code is None and time.monotonic() - started < 30:
+            try:
+                for _ in range(100):
+                    await stuck.send(request)
+            except ConnectionClosed:
+                break
+            await asyncio.sleep(0.01)
+        # The server gave up on it (1013) rather than buffer without bound.
+        await asyncio.wait_for(stuck.wait_closed(), TIMEOUT_S)
+        await other.send(json.dumps({"op": "call_service", "service": "/rosapi/topics"}))
+        assert (await recv(other))["result"] is True
+
+
+async def test_2000_spawn_attempts_hold_the_cap_and_the_server_keeps_answering(
+    server: RunningServer,
+) -> None:
+    spawn = json.dumps({"op": "call_service", "service": "/spawn", "args": {}})
+    async with connect(rosbridge_url(server)) as ws, httpx.AsyncClient() as http:
+        await ws.send(json.dumps({"op": "set_level", "level": "none"}))  # responses only
+        spawned = 0
+        for _ in range(20):
+            for _ in range(100):
+                await ws.send(spawn)
+            spawned += sum([(await recv(ws))["result"] for _ in range(100)])
+        assert spawned == MAX_TURTLES - 1
+        assert (await http.get(f"{server.url}/healthz", timeout=TIMEOUT_S)).status_code == 200
+        state = (await http.get(f"{server.url}/turtlesim/state", timeout=TIMEOUT_S)).json()
+        assert len(state["turtles"]) == MAX_TURTLES
