@@ -7,15 +7,20 @@ import asyncio
 import contextlib
 import json
 import logging
+import socket
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
+from urllib.parse import urlsplit
 
 import httpx
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
+from websockets.client import ClientProtocol
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import Frame, Opcode
+from websockets.http11 import Response
+from websockets.uri import parse_uri
 
 from app.server.config import Settings
 from app.server.serve import RunningServer
@@ -173,25 +178,73 @@ async def test_connections_are_capped_with_a_clear_close(
         assert await closed(extra) == (1013, "server full: 2 rosbridge clients")
 
 
-async def test_a_rosbridge_client_that_never_reads_is_closed(server: RunningServer) -> None:
+class StuckClient:
+    """A WebSocket client that sends but never reads a byte (websockets' sans-I/O protocol over
+    a blocking socket with a small receive buffer), as a hung or malicious peer would."""
+
+    def __init__(self, url: str) -> None:
+        parts = urlsplit(url)
+        self.sock = socket.socket()
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        self.sock.settimeout(TIMEOUT_S)
+        self.sock.connect((parts.hostname or "127.0.0.1", parts.port or 80))
+        self.protocol = ClientProtocol(parse_uri(url))
+        self.protocol.send_request(self.protocol.connect())
+        self._flush()
+        while self.protocol.handshake_exc is None and not isinstance(
+            next(iter(self.protocol.events_received()), None), Response
+        ):
+            self.protocol.receive_data(self.sock.recv(4096))
+        self.sock.settimeout(0.5)
+
+    def send(self, text: str) -> bool:
+        """Send one text frame; False once the server has stopped reading from us."""
+        self.protocol.send_text(text.encode())
+        try:
+            self._flush()
+        except OSError:  # send timed out or the connection was reset: we were dropped
+            return False
+        return True
+
+    def _flush(self) -> None:
+        for data in self.protocol.data_to_send():
+            self.sock.sendall(data)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+async def test_a_rosbridge_client_that_never_reads_is_dropped(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(Settings(environment="development", token=None, max_rosbridge_sessions=2))
     url = rosbridge_url(server)
     request = json.dumps({"op": "call_service", "service": "/rosapi/services", "id": "x" * 40})
-    # max_queue=1: the client library stops reading the socket, as a stuck peer would.
-    async with connect(url, max_queue=1) as stuck, connect(url) as other:
-        for n in range(MAX_TURTLES - 1):
+    async with connect(url) as other:
+        for _ in range(MAX_TURTLES - 1):
             await other.send(json.dumps({"op": "call_service", "service": "/spawn", "args": {}}))
         for _ in range(MAX_TURTLES - 1):
             assert (await recv(other))["result"] is True
-        started = time.monotonic()
-        while stuck.close_code is None and time.monotonic() - started < 30:
-            try:
-                for _ in range(100):
-                    await stuck.send(request)
-            except ConnectionClosed:
-                break
-            await asyncio.sleep(0.01)
-        # The server gave up on it (1013) rather than buffer without bound.
-        await asyncio.wait_for(stuck.wait_closed(), TIMEOUT_S)
+        stuck = await asyncio.to_thread(StuckClient, url)
+        try:
+            # The server drops the stuck client (1013) rather than buffer its replies without
+            # bound: its session slot frees up, so a newcomer is served; until then newcomers
+            # are refused as the server is full.
+            started = time.monotonic()
+            while True:
+                assert time.monotonic() - started < 30, "the stuck client was never dropped"
+                for _ in range(50):
+                    await asyncio.to_thread(stuck.send, request)
+                async with connect(url) as newcomer:
+                    try:
+                        topics = {"op": "call_service", "service": "/rosapi/topics"}
+                        await newcomer.send(json.dumps(topics))
+                        if (await recv(newcomer))["op"] == "service_response":
+                            break
+                    except ConnectionClosed:
+                        assert newcomer.close_code == 1013
+        finally:
+            stuck.close()
         await other.send(json.dumps({"op": "call_service", "service": "/rosapi/topics"}))
         assert (await recv(other))["result"] is True
 
