@@ -219,3 +219,8 @@ async def _write(websocket: WebSocket, outbox: Outbox) -> None:
             await websocket.send_text(item)
     except (WebSocketDisconnect, WebSocketDisconnected):
         return
+    except RuntimeError as exc:
+        # uvicorn closed the socket itself (1007 invalid UTF-8, 1009 frame too big) while this
+        # frame was on its way: the reader sees the disconnect; nothing is left to deliver.
+        log.debug("not delivered, socket closed by the server: %s", exc)
+        return

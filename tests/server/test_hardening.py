@@ -6,70 +6,26 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import logging
-import socket
 import time
-from collections.abc import Callable, Iterator
-from typing import Any
-from urllib.parse import urlsplit
+from collections.abc import Callable
 
 import httpx
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
-from websockets.client import ClientProtocol
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import Frame, Opcode
-from websockets.http11 import Response
-from websockets.uri import parse_uri
 
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.turtlesim.sim import MAX_TURTLES
-
-TIMEOUT_S = 10
-
-
-class Records(logging.Handler):
-    """Every record the server logs (uvicorn's loggers do not propagate to the root)."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.DEBUG)
-        self.records: list[logging.LogRecord] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.records.append(record)
-
-    def tracebacks(self) -> list[str]:
-        return [r.getMessage() for r in self.records if r.exc_info]
-
-
-@pytest.fixture
-def server_log() -> Iterator[Records]:
-    records = Records()
-    loggers = [
-        logging.getLogger(),
-        logging.getLogger("uvicorn"),
-        logging.getLogger("uvicorn.error"),
-    ]
-    for logger in loggers:
-        logger.addHandler(records)
-    yield records
-    for logger in loggers:
-        logger.removeHandler(records)
-
-
-def rosbridge_url(server: RunningServer) -> str:
-    return server.url.replace("http", "ws", 1) + "/rosbridge"
-
-
-async def recv(ws: ClientConnection) -> dict[str, Any]:
-    message: dict[str, Any] = json.loads(await asyncio.wait_for(ws.recv(), TIMEOUT_S))
-    return message
-
-
-async def login(ws: ClientConnection, name: str, role: str) -> None:
-    await ws.send(json.dumps({"type": "login", "name": name, "role": role}))
-    assert (await recv(ws))["success"] is True
+from tests.helpers.sockets import (
+    TIMEOUT_S,
+    Records,
+    StuckClient,
+    login,
+    recv,
+    rosbridge_url,
+)
 
 
 async def closed(ws: ClientConnection) -> tuple[int | None, str | None]:
@@ -176,42 +132,6 @@ async def test_connections_are_capped_with_a_clear_close(
     url = rosbridge_url(server)
     async with connect(url), connect(url), connect(url) as extra:
         assert await closed(extra) == (1013, "server full: 2 rosbridge clients")
-
-
-class StuckClient:
-    """A WebSocket client that sends but never reads a byte (websockets' sans-I/O protocol over
-    a blocking socket with a small receive buffer), as a hung or malicious peer would."""
-
-    def __init__(self, url: str) -> None:
-        parts = urlsplit(url)
-        self.sock = socket.socket()
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        self.sock.settimeout(TIMEOUT_S)
-        self.sock.connect((parts.hostname or "127.0.0.1", parts.port or 80))
-        self.protocol = ClientProtocol(parse_uri(url))
-        self.protocol.send_request(self.protocol.connect())
-        self._flush()
-        while self.protocol.handshake_exc is None and not isinstance(
-            next(iter(self.protocol.events_received()), None), Response
-        ):
-            self.protocol.receive_data(self.sock.recv(4096))
-        self.sock.settimeout(0.5)
-
-    def send(self, text: str) -> bool:
-        """Send one text frame; False once the server has stopped reading from us."""
-        self.protocol.send_text(text.encode())
-        try:
-            self._flush()
-        except OSError:  # send timed out or the connection was reset: we were dropped
-            return False
-        return True
-
-    def _flush(self) -> None:
-        for data in self.protocol.data_to_send():
-            self.sock.sendall(data)
-
-    def close(self) -> None:
-        self.sock.close()
 
 
 async def test_a_rosbridge_client_that_never_reads_is_dropped(
