@@ -7,7 +7,7 @@ import asyncio
 import contextlib
 import json
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 
 import httpx
 import pytest
@@ -53,6 +53,24 @@ async def test_a_5000_digit_integer_before_login_gets_an_error_and_no_traceback(
         error = await recv(ws)
         assert error["type"] == "error" and "digits" in error["reason"]
         await login(ws, "c", "client")  # the connection still works
+    assert server_log.tracebacks() == []
+
+
+async def test_a_fragmented_message_over_the_limit_is_refused_as_it_arrives(
+    server: RunningServer, server_log: Records
+) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as sender:
+        await login(relay, "r", "relay")
+
+        async def fragments() -> AsyncIterator[str]:
+            for _ in range(20):  # 160 kB in 8 kB fragments, none of them too big alone
+                yield "x" * 8000
+
+        with pytest.raises(ConnectionClosed):
+            await sender.send(fragments())
+            await recv(sender)
+        await relay.send('{"type": "getOps"}')  # the relay is unaffected
+        assert (await recv(relay))["type"] == "error"
     assert server_log.tracebacks() == []
 
 
