@@ -292,11 +292,14 @@ class Hub:
     def _rosters(self, room_name: str, *, skip: ConnId | None = None) -> list[Action]:
         """A ``peers`` message to everyone in the room, each listing the others."""
         room = self._rooms[room_name]
+        # Each entry is built once; each recipient's roster is then a filtered list of them
+        # (N rosters of N-1 entries remain, bounded by MAX_ROOM_PEERS).
+        entries = [(peer, peer.info()) for peer in room.values()]
         actions: list[Action] = []
         for recipient in room.values():
             if recipient.conn == skip:
                 continue
-            others = [p.info() for p in room.values() if p is not recipient]
+            others = [info for peer, info in entries if peer is not recipient]
             actions.append(
                 Outgoing(recipient.conn, Peers(room=room_name, peers=others).model_dump())
             )
