@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Iterator
 
 import pytest
 
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
+from tests.helpers.sockets import Records
 
 
 @pytest.fixture
@@ -35,3 +37,19 @@ def start_server() -> Iterator[Callable[[Settings], RunningServer]]:
 def server(start_server: Callable[[Settings], RunningServer], settings: Settings) -> RunningServer:
     """The app with default settings, running on a free port."""
     return start_server(settings)
+
+
+@pytest.fixture
+def server_log() -> Iterator[Records]:
+    """Every record the server logs during the test, uvicorn's included."""
+    records = Records()
+    loggers = [
+        logging.getLogger(),
+        logging.getLogger("uvicorn"),
+        logging.getLogger("uvicorn.error"),
+    ]
+    for logger in loggers:
+        logger.addHandler(records)
+    yield records
+    for logger in loggers:
+        logger.removeHandler(records)

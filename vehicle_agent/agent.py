@@ -9,7 +9,6 @@ restarting. Everything that happens is dispatched from one queue, one handler pe
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import ssl
 import time
@@ -21,6 +20,7 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from app.protocol import jsonedge
 from app.protocol.control import with_standoff
 from app.protocol.errors import describe
 from app.supervise import Backoff
@@ -59,18 +59,25 @@ class AgentConfig:
     tls: ssl.SSLContext | None = None
 
 
-class GoalMessage(BaseModel):
-    """relay→vehicle ``goal`` (DESIGN §3, docs/contracts.md)."""
+# A frame wider or taller than this is not a camera frame (8K is 7680 wide).
+MAX_FRAME_SIDE = 16_384
 
-    model_config = ConfigDict(extra="allow")
+
+class GoalMessage(BaseModel):
+    """relay→vehicle ``goal`` (DESIGN §3, docs/contracts.md).
+
+    Strict and finite: ``"nan"``, ``"1"`` or ``NaN`` are refused, never turned into a command.
+    """
+
+    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)
 
     type: Literal["goal"]
     seq: int
     op: str
     x: float
     y: float
-    w: int = Field(gt=0)
-    h: int = Field(gt=0)
+    w: int = Field(gt=0, le=MAX_FRAME_SIDE)
+    h: int = Field(gt=0, le=MAX_FRAME_SIDE)
     t: float
     frame: int | None = None
 
@@ -123,7 +130,7 @@ class Agent:
             "link_down": self._on_link_event,
             "retry": self._on_retry,
         }
-        self._channel_handlers: dict[str, Callable[[RelayLink, dict[str, Any]], None]] = {
+        self._channel_handlers: dict[str, Callable[[str, dict[str, Any]], str | None]] = {
             "goal": self._on_goal,
             "stop": self._on_stop,
             "error": self._on_peer_error,
@@ -353,53 +360,63 @@ class Agent:
 
     # --- data channel ----------------------------------------------------------------------
 
-    def _on_channel_message(self, link: RelayLink, text: str) -> None:
+    def _on_channel_message(self, link: RelayLink, text: str | bytes) -> None:
         if link is not self._link:
             return
         if not link.connected.is_set():
             link.connected.set()
+        reply = self.handle_channel_message(text, link.relay)
+        if reply is not None:
+            link.send(reply)
+
+    def handle_channel_message(self, text: str | bytes, relay: str) -> dict[str, Any] | None:
+        """Act on one data-channel message from ``relay``; returns the error reply, if any.
+
+        Every frame goes through the JSON edge, so no input raises: it drives the turtle or is
+        refused with a reason.
+        """
         try:
-            message = json.loads(text)
-        except json.JSONDecodeError as exc:
-            self._reject(link, f"malformed JSON: {exc.msg}", None)
-            return
+            message = jsonedge.loads(text)
+        except jsonedge.JsonEdgeError as exc:
+            return self._reject(relay, str(exc), None)
         kind = message.get("type") if isinstance(message, dict) else None
         if not isinstance(kind, str):
-            self._reject(link, "expected a JSON object with a string 'type'", None)
-            return
+            return self._reject(relay, "expected a JSON object with a string 'type'", None)
         handler = self._channel_handlers.get(kind)
         if handler is None:
-            self._reject(link, f"unknown message type {kind!r}", kind)
-            return
-        handler(link, message)
+            return self._reject(relay, f"unknown message type {kind!r}", kind)
+        reason = handler(relay, message)
+        return None if reason is None else self._reject(relay, reason, kind)
 
-    def _reject(self, link: RelayLink, reason: str, ref: str | None) -> None:
-        log.warning("dropped a data-channel message from %s: %s", link.relay, reason)
-        link.send({"type": "error", "reason": reason, "ref": ref})
+    def _reject(self, relay: str, reason: str, ref: str | None) -> dict[str, Any]:
+        log.warning("dropped a data-channel message from %r: %s", relay, reason)
+        return {"type": "error", "reason": reason, "ref": ref}
 
-    def _on_goal(self, link: RelayLink, message: dict[str, Any]) -> None:
+    def _on_goal(self, relay: str, message: dict[str, Any]) -> str | None:
         try:
             goal = GoalMessage.model_validate(message)
         except ValidationError as exc:
-            self._reject(link, f"bad goal: {describe(exc)}", "goal")
-            return
+            return f"bad goal: {describe(exc)}"
         verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
         if verdict != "fresh":
             self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
-            return
+            return None
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
         )
         self._publish(
             self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
         )
+        return None
 
-    def _on_stop(self, link: RelayLink, message: dict[str, Any]) -> None:
-        log.info("piloting stopped by %s", link.relay)
+    def _on_stop(self, relay: str, message: dict[str, Any]) -> str | None:
+        log.info("piloting stopped by %r", relay)
         self._publish(self.controller.stop())
+        return None
 
-    def _on_peer_error(self, link: RelayLink, message: dict[str, Any]) -> None:
-        log.warning("%s reported an error: %s", link.relay, message.get("reason"))
+    def _on_peer_error(self, relay: str, message: dict[str, Any]) -> str | None:
+        log.warning("%r reported an error: %r", relay, message.get("reason"))
+        return None
 
     # --- turtle ------------------------------------------------------------------------------
 

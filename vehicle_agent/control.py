@@ -113,7 +113,11 @@ def steering_error(goal: Goal, pose: Pose) -> float | None:
 
 def _heading_error(tx: float, ty: float, pose: Pose) -> float | None:
     dx, dy = tx - pose.x, ty - pose.y
-    if math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M:
+    # A non-finite goal or pose has no direction: never a command (NaN would pass every clamp).
+    if (
+        not all(map(math.isfinite, (dx, dy, pose.theta)))
+        or math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M
+    ):
         return None
     return wrap_angle(math.atan2(dy, dx) - pose.theta)
 
@@ -167,6 +171,9 @@ def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[
 def _command(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
     if profile.law == "follow":
         tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
+        # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
+        if not all(map(math.isfinite, (tx, ty, pose.x, pose.y, pose.theta))):
+            return 0.0, 0.0
         return follow_command(tx, ty, pose, profile)
     error = steering_error(goal, pose)
     # No defined heading: hold still rather than keep the last turn going.

@@ -10,7 +10,6 @@ when it fails or the relay goes away the agent closes it and makes a new one.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -26,6 +25,7 @@ from aiortc import (
 )
 from aiortc.sdp import candidate_from_sdp
 
+from app.protocol import jsonedge
 from app.protocol.channels import (
     CONTROL_CHANNEL,
     STATE_CHANNEL,
@@ -198,5 +198,10 @@ class RelayLink:
 def _send(channel: RTCDataChannel, message: dict[str, Any]) -> bool:
     if channel.readyState != "open":
         return False
-    channel.send(json.dumps(message))
+    try:
+        frame = jsonedge.dumps(message)
+    except ValueError as exc:  # NaN or Infinity: browsers' JSON.parse would refuse it
+        log.error("not sending a %r message on %s: %s", message.get("type"), channel.label, exc)
+        return False
+    channel.send(frame)
     return True

@@ -6,7 +6,6 @@ the sender's name on everything it relays, whatever the peer wrote there.
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, get_args
@@ -21,6 +20,7 @@ from pydantic import (
     ValidationError,
 )
 
+from app.protocol import jsonedge
 from app.protocol.constants import Role
 from app.protocol.errors import describe
 
@@ -174,12 +174,9 @@ class ParseError:
 def parse(text: str) -> Incoming | ParseError:
     """Parse one text frame into its message model, or say precisely why it is not one."""
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        return ParseError(f"malformed JSON: {exc.msg} at position {exc.pos}", None)
-    except RecursionError:
-        # 64 KiB of "[" is valid-looking input that exhausts the parser's recursion.
-        return ParseError("malformed JSON: nested too deeply", None)
+        data = jsonedge.loads(text)
+    except jsonedge.JsonEdgeError as exc:
+        return ParseError(str(exc), None)
     if not isinstance(data, dict):
         return ParseError(f"expected a JSON object, got {type(data).__name__}", None)
     kind = data.get("type")

@@ -52,7 +52,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.signaling = Switchboard.from_settings(settings)
     app.include_router(signaling_router)
     app.include_router(pages_router)
-    app.state.simulator = Simulator(settings.sim_tick_s, settings.max_message_bytes, settings.ros)
+    app.state.simulator = Simulator.from_settings(settings)
     app.state.turtlesim = app.state.simulator.sim
     app.include_router(rosbridge_router)
 

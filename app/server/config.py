@@ -42,9 +42,18 @@ class Settings(TurnSettings, BaseSettings):
     # The single shared login token of earlier versions; refused, so that an operator who still
     # sets it is told it no longer protects anything.
     token: str | None = Field(default=None, repr=False)
-    max_message_bytes: int = 64 * 1024
+    # One policy for both WebSockets (/ws and /rosbridge), see app/server/websocket.py:
+    # a larger frame is refused by uvicorn before it is buffered (close 1009) ...
+    max_message_bytes: int = Field(default=64 * 1024, gt=0)
+    # ... a peer leaving more than this unread is closed (1013) ...
+    outbox_messages: int = Field(default=256, gt=0)
+    outbox_bytes: int = Field(default=1024 * 1024, gt=0)
+    # ... and these many sockets of each kind are served at once; more are closed with 1013.
+    max_connections: int = Field(default=256, ge=1)
+    max_rosbridge_sessions: int = Field(default=64, ge=1)
+    # A /ws connection that has not logged in this long after opening is closed (1008).
+    login_timeout_s: float = Field(default=10.0, gt=0)
     operations_spec: Path = OPERATIONS_SPEC
-    sim_tick_s: float = 0.016
     ros: RosFlavour = DEFAULT_FLAVOUR
 
     @property

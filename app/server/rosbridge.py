@@ -1,26 +1,27 @@
 """WebSocket ``/rosbridge`` and ``GET /turtlesim/state``, plus the task that steps the simulator.
 
-The rules live in :mod:`app.turtlesim.rosbridge`; this module only moves text frames between
-sockets and sessions. Every tick the simulator steps, the hub offers each turtle's pose to the
-subscribers, and each connection's publications go to its outbox, which a writer task drains, so
-one slow client never holds up the tick or the other clients.
+The rules live in :mod:`app.turtlesim.rosbridge`; :mod:`app.server.websocket` moves the frames
+with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge). Every tick the
+simulator steps, the hub offers each turtle's pose to the subscribers, and each connection's
+publications go to its outbox, so one slow client never holds up the tick or the other clients.
+The tick is fixed at :attr:`TurtleSim.TICK_S` (16 ms, turtlesim's own): the simulator advances
+that much per step, so pacing the loop any other way would only change the turtle's speed.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import json
 import logging
 import time
 from dataclasses import asdict
 from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
-from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import CLOSE_POLICY_VIOLATION, RosbridgeGate, bearer_token, state_refusal
+from app.server.config import Settings
+from app.server.websocket import CLOSE_TRY_AGAIN_LATER, Outbox, SocketPolicy, oversize, serve
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -28,9 +29,6 @@ log = logging.getLogger(__name__)
 
 router = APIRouter()
 
-# Publications waiting for a slow reader beyond this are dropped (poses are superseded every
-# tick anyway); replies to the client's own requests are always queued.
-OUTBOX_LIMIT = 512
 # If the tick task falls this far behind the wall clock it skips ahead instead of catching up.
 MAX_LAG_S = 0.5
 
@@ -42,17 +40,28 @@ class Simulator:
     """
 
     def __init__(
-        self,
-        tick_s: float = TurtleSim.TICK_S,
-        max_message_bytes: int = 64 * 1024,
-        ros: RosFlavour = DEFAULT_FLAVOUR,
-    ):
+        self, policy: SocketPolicy, max_sessions: int = 64, ros: RosFlavour = DEFAULT_FLAVOUR
+    ) -> None:
         self.sim = TurtleSim()
         self.hub = RosbridgeHub(self.sim, ros)
-        self.tick_s = tick_s
-        self.max_message_bytes = max_message_bytes
-        self._outboxes: dict[RosbridgeSession, asyncio.Queue[str]] = {}
+        self.tick_s = TurtleSim.TICK_S
+        self.policy = policy
+        self.max_sessions = max_sessions
+        self._outboxes: dict[RosbridgeSession, Outbox] = {}
         self._task: asyncio.Task[None] | None = None
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> Simulator:
+        """A fresh simulator with the socket policy and session cap of ``settings``."""
+        policy = SocketPolicy(
+            settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes
+        )
+        return cls(policy, settings.max_rosbridge_sessions, settings.ros)
+
+    @property
+    def full(self) -> bool:
+        """True when no more rosbridge clients are accepted."""
+        return len(self._outboxes) >= self.max_sessions
 
     def start(self) -> None:
         """Start stepping the simulator every ``tick_s`` of wall time."""
@@ -67,10 +76,10 @@ class Simulator:
         await asyncio.gather(self._task, return_exceptions=True)
         self._task = None
 
-    def open(self) -> tuple[RosbridgeSession, asyncio.Queue[str]]:
+    def open(self) -> tuple[RosbridgeSession, Outbox]:
         """A new rosbridge client: its session and outbox."""
         session = self.hub.open_session()
-        outbox: asyncio.Queue[str] = asyncio.Queue()
+        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
         self._outboxes[session] = outbox
         return session, outbox
 
@@ -101,13 +110,11 @@ class Simulator:
         self.sim.step()
         self.hub.tick(time.monotonic())
         for session, outbox in self._outboxes.items():
-            publications = session.take_publications()
-            room = OUTBOX_LIMIT - outbox.qsize()
-            if len(publications) > room:
-                log.debug("rosbridge client too slow: %d publications dropped", len(publications))
-                publications = publications[:room] if room > 0 else []
-            for publication in publications:
-                outbox.put_nowait(json.dumps(publication))
+            # Publications are superseded by the next tick's: a slow reader misses some
+            # rather than being closed (replies to its own requests do close it).
+            dropped = sum(not outbox.offer(p) for p in session.take_publications())
+            if dropped:
+                log.debug("rosbridge client too slow: %d publications dropped", dropped)
 
     async def _run(self) -> None:
         next_at = time.monotonic()
@@ -145,59 +152,40 @@ async def rosbridge(websocket: WebSocket) -> None:
         await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
         return
     await websocket.accept()
+    if simulator.full:
+        log.warning("refusing a rosbridge client: %d open", simulator.max_sessions)
+        await websocket.close(
+            CLOSE_TRY_AGAIN_LATER, f"server full: {simulator.max_sessions} rosbridge clients"
+        )
+        return
     session, outbox = simulator.open()
-    writer = asyncio.create_task(_write(websocket, outbox), name="rosbridge-writer")
-    writer.add_done_callback(_report_crash)
+
+    def on_text(text: str) -> None:
+        closing: tuple[int, str] | None = None
+        if (reason := oversize(text, simulator.policy.max_message_bytes)) is not None:
+            replies = session.error(reason)
+        else:
+            decision = gate.check(text, time.time())
+            replies = session.receive(text) if decision.forward else []
+            if decision.reply is not None:
+                replies.append(decision.reply)
+            closing = decision.close
+        for reply in replies:
+            outbox.send(reply)
+        if closing is not None:
+            outbox.close(*closing)  # after the refusal's reason
+
+    def on_binary(_data: bytes) -> None:
+        for reply in session.error("binary frames are not supported: send JSON text"):
+            outbox.send(reply)
+
     try:
-        while not writer.done():
-            frame = await websocket.receive()
-            if frame["type"] == "websocket.disconnect":
-                break
-            text = frame.get("text")
-            size = len(text.encode()) if text is not None else 0
-            closing: tuple[int, str] | None = None
-            if text is None:
-                replies = session.error("binary frames are not supported: send JSON text")
-            elif size > simulator.max_message_bytes:
-                replies = session.error(
-                    f"message of {size} bytes exceeds the limit of {simulator.max_message_bytes}"
-                )
-            else:
-                decision = gate.check(text, time.time())
-                replies = session.receive(text) if decision.forward else []
-                if decision.reply is not None:
-                    replies.append(decision.reply)
-                closing = decision.close
-            for reply in replies:
-                outbox.put_nowait(json.dumps(reply))
-            if closing is not None:
-                await _drain(outbox)  # the refusal's reason first, then the close
-                await websocket.close(*closing)
-                break
+        await serve(websocket, outbox, on_text, on_binary, name="rosbridge")
     finally:
         simulator.forget(session)
-        writer.cancel()
-        await asyncio.gather(writer, return_exceptions=True)
-
-
-async def _drain(outbox: asyncio.Queue[str], timeout_s: float = 1.0) -> None:
-    """Give the writer a moment to send what is queued (a refusal's reason) before closing."""
-    with contextlib.suppress(TimeoutError):
-        async with asyncio.timeout(timeout_s):
-            while not outbox.empty():
-                await asyncio.sleep(0.01)
 
 
 def _report_crash(task: asyncio.Task[None]) -> None:
     # Cancelling and gathering hides a task's own failure; log it here instead.
     if not task.cancelled() and (error := task.exception()) is not None:
         log.error("%s died", task.get_name(), exc_info=error)
-
-
-async def _write(websocket: WebSocket, outbox: asyncio.Queue[str]) -> None:
-    """Send queued frames in order until the socket is gone."""
-    try:
-        while True:
-            await websocket.send_text(await outbox.get())
-    except (WebSocketDisconnect, WebSocketDisconnected):
-        return

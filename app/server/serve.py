@@ -8,6 +8,7 @@ import logging
 import socket
 import threading
 from dataclasses import dataclass
+from typing import Any
 
 import uvicorn
 from pydantic import ValidationError
@@ -66,13 +67,37 @@ def run(args: argparse.Namespace) -> int:
         log.info("%s page: %s", role, url)
     uvicorn.run(
         app,
+        **uvicorn_options(settings, files),
         host=host,
         port=port,
         log_level="info",
-        ssl_certfile=None if files is None else str(files.certfile),
-        ssl_keyfile=None if files is None else str(files.keyfile),
     )
     return 0
+
+
+class _QuietInvalidUtf8(logging.Filter):
+    """uvicorn logs a traceback for every text frame that is not UTF-8 (then closes with 1007,
+    as RFC 6455 requires); one line says the same without letting a peer flood the log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage().startswith("Invalid UTF-8 sequence"):
+            record.msg, record.args = "invalid UTF-8 in a text frame: closed with 1007", ()
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+            record.exc_info = record.exc_text = None
+        return True
+
+
+def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> dict[str, Any]:
+    """What every uvicorn we start needs: the WebSocket frame size limit from ``settings``
+    (uvicorn refuses a larger frame before buffering it, closing with 1009) and TLS ``files``."""
+    logger = logging.getLogger("uvicorn.error")
+    if not any(isinstance(f, _QuietInvalidUtf8) for f in logger.filters):
+        logger.addFilter(_QuietInvalidUtf8())
+    return {
+        "ws_max_size": settings.max_message_bytes,
+        "ssl_certfile": None if files is None else str(files.certfile),
+        "ssl_keyfile": None if files is None else str(files.keyfile),
+    }
 
 
 @dataclass
@@ -107,12 +132,12 @@ def start_in_thread(
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     port = sock.getsockname()[1]
+    settings = settings or Settings()
     config = uvicorn.Config(
         create_app(settings),
+        **uvicorn_options(settings, tls_files),
         log_level=log_level,
         lifespan="on",
-        ssl_certfile=None if tls_files is None else str(tls_files.certfile),
-        ssl_keyfile=None if tls_files is None else str(tls_files.keyfile),
     )
     server = uvicorn.Server(config)
     thread = threading.Thread(

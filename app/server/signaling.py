@@ -1,42 +1,27 @@
 """WebSocket ``/ws``: moves frames between sockets and the :class:`~app.signaling.hub.Hub`.
 
-All rules live in the hub; this module only reads frames, hands them over, and delivers what the
-hub returns. Each connection has a bounded outbox drained by its own writer task, so one slow
-peer never holds up the others and messages to a peer keep their order.
+All rules live in the hub; :mod:`app.server.websocket` moves the frames, with the policy it
+shares with ``/rosbridge`` (size limit, bounded outbox, JSON edge). This module adds what is
+particular to signaling: the cap on connections and the login deadline.
 """
 
 from __future__ import annotations
 
-import asyncio
-import json
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any
 
 from fastapi import APIRouter, WebSocket
-from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
 from app.server.turn import ice_servers_for
+from app.server.websocket import CLOSE_TRY_AGAIN_LATER, Outbox, SocketPolicy, serve
 from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
 
 log = logging.getLogger(__name__)
 
 router = APIRouter()
-
-# Close code for a peer that does not read its messages fast enough (RFC 6455: "try again later").
-CLOSE_TRY_AGAIN_LATER = 1013
-
-
-@dataclass(frozen=True)
-class _Shut:
-    code: int
-    reason: str
-
-
-_OutboxItem = dict[str, Any] | _Shut
 
 
 @dataclass
@@ -44,9 +29,10 @@ class Switchboard:
     """The hub plus the outbox of every open connection; lives on ``app.state.signaling``."""
 
     hub: Hub
-    # Messages waiting for a slow reader; past this the reader is closed rather than buffered.
-    outbox_limit: int = 256
-    _outboxes: dict[ConnId, asyncio.Queue[_OutboxItem]] = field(default_factory=dict, init=False)
+    policy: SocketPolicy
+    max_connections: int = 256
+    login_timeout_s: float = 10.0
+    _outboxes: dict[ConnId, Outbox] = field(default_factory=dict, init=False)
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Switchboard:
@@ -61,13 +47,23 @@ class Switchboard:
                 secret=settings.secret,
                 max_message_bytes=settings.max_message_bytes,
                 ice=ice,
-            )
+            ),
+            SocketPolicy(
+                settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes
+            ),
+            max_connections=settings.max_connections,
+            login_timeout_s=settings.login_timeout_s,
         )
 
-    def open(self) -> tuple[ConnId, asyncio.Queue[_OutboxItem]]:
+    @property
+    def full(self) -> bool:
+        """True when no more connections are accepted."""
+        return len(self._outboxes) >= self.max_connections
+
+    def open(self) -> tuple[ConnId, Outbox]:
         """Register a connection with the hub and give it an outbox."""
         conn = self.hub.connect()
-        outbox: asyncio.Queue[_OutboxItem] = asyncio.Queue(self.outbox_limit)
+        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
         self._outboxes[conn] = outbox
         return conn, outbox
 
@@ -84,18 +80,9 @@ class Switchboard:
                 continue  # closed while this batch was being produced
             match action:
                 case Outgoing(message=message):
-                    item: _OutboxItem = message
+                    outbox.send(message)
                 case Close(code=code, reason=reason):
-                    item = _Shut(code, reason)
-            try:
-                outbox.put_nowait(item)
-            except asyncio.QueueFull:
-                log.warning("closing %s: %d messages unread", action.conn, outbox.qsize())
-                while not outbox.empty():
-                    outbox.get_nowait()
-                outbox.put_nowait(_Shut(CLOSE_TRY_AGAIN_LATER, "too many unread messages"))
-                # Nothing more for it: its writer closes the socket, its reader then leaves.
-                del self._outboxes[action.conn]
+                    outbox.close(code, reason)
 
 
 @router.websocket("/ws")
@@ -103,48 +90,29 @@ async def signaling(websocket: WebSocket) -> None:
     """One signaling connection: frames in to the hub, the hub's messages out."""
     board: Switchboard = websocket.app.state.signaling
     await websocket.accept()
+    if board.full:
+        log.warning("refusing a signaling connection: %d open", board.max_connections)
+        await websocket.close(
+            CLOSE_TRY_AGAIN_LATER, f"server full: {board.max_connections} connections"
+        )
+        return
     conn, outbox = board.open()
-    writer = asyncio.create_task(_write(websocket, outbox), name=f"signaling-writer-{conn}")
-    closing = False
+
+    def on_text(text: str) -> None:
+        # The hub applies the same size limit (it is sans-I/O and tested without uvicorn).
+        board.dispatch(board.hub.receive(conn, text))
+
+    def on_binary(_data: bytes) -> None:
+        board.dispatch(board.hub.receive_binary(conn))
+
+    deadline = (
+        board.login_timeout_s,
+        lambda: board.hub.logged_in(conn),
+        f"no login within {board.login_timeout_s:g} s",
+    )
     try:
-        while not writer.done():
-            frame = await websocket.receive()
-            if frame["type"] == "websocket.disconnect":
-                break
-            text = frame.get("text")
-            if text is not None:
-                actions = board.hub.receive(conn, text)
-            else:
-                actions = board.hub.receive_binary(conn)
-            board.dispatch(actions)
-            if any(isinstance(a, Close) and a.conn == conn for a in actions):
-                closing = True
-                break
+        await serve(
+            websocket, outbox, on_text, on_binary, name=f"signaling-{conn}", deadline=deadline
+        )
     finally:
         board.forget(conn)
-        await _finish(writer, flush=closing)
-
-
-async def _finish(writer: asyncio.Task[None], *, flush: bool) -> None:
-    """Stop the writer: after it has sent its last messages and the close, if ``flush``."""
-    if not flush:
-        writer.cancel()  # the socket is gone; nothing left to deliver
-    done, _ = await asyncio.wait([writer], timeout=5)
-    if not done:
-        log.warning("signaling writer did not finish within 5 s; cancelling it")
-        writer.cancel()
-    elif not writer.cancelled() and (error := writer.exception()) is not None:
-        raise error
-
-
-async def _write(websocket: WebSocket, outbox: asyncio.Queue[_OutboxItem]) -> None:
-    """Send queued messages in order until told to close or the socket is gone."""
-    try:
-        while True:
-            item = await outbox.get()
-            if isinstance(item, _Shut):
-                await websocket.close(item.code, item.reason)
-                return
-            await websocket.send_text(json.dumps(item))
-    except (WebSocketDisconnect, WebSocketDisconnected):
-        return

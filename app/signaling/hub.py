@@ -13,7 +13,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, assert_never
+from typing import Any, Final, assert_never
 
 from app.protocol import tokens
 from app.protocol.constants import Role
@@ -44,6 +44,15 @@ ConnId = str
 # WebSocket close codes (RFC 6455 §7.4.1).
 CLOSE_NORMAL = 1000
 CLOSE_POLICY_VIOLATION = 1008
+
+# Peers per room: a vehicle, a relay and clients. Also bounds each roster update, which every
+# join and leave sends to everyone in the room (N messages of N entries).
+MAX_ROOM_PEERS: Final = 32
+# Per-sender rate limit (a token bucket): a burst of this many messages, refilled at this rate.
+# Trickled ICE candidates come in bursts of a few dozen; a client flooding ``stop`` is refused
+# (and, after ``max_errors_in_a_row``, closed) before the relay it targets falls behind.
+RATE_BURST: Final = 100
+RATE_PER_S: Final = 50.0
 
 
 @dataclass(frozen=True)
@@ -80,9 +89,20 @@ class _Peer:
 @dataclass
 class _Connection:
     id: ConnId
+    allowance: float
+    checked_at: float
     peer: _Peer | None = None
     errors_in_a_row: int = 0
     closing: bool = False
+
+    def spend(self, now: float) -> bool:
+        """Take one message from the sender's token bucket; False when it is empty."""
+        self.allowance = min(RATE_BURST, self.allowance + (now - self.checked_at) * RATE_PER_S)
+        self.checked_at = now
+        if self.allowance < 1.0:
+            return False
+        self.allowance -= 1.0
+        return True
 
 
 @dataclass
@@ -103,14 +123,19 @@ class Hub:
     # room -> name -> peer, in join order (rosters list peers in the order they joined).
     _rooms: dict[str, dict[str, _Peer]] = field(default_factory=dict, init=False)
     _ids: itertools.count[int] = field(default_factory=itertools.count, init=False)
-    # Unix seconds, for token expiry; tests pass their own.
+    # Unix seconds, for token expiry and the senders' rate limit; tests pass their own.
     clock: Callable[[], float] = time.time
 
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
         conn = f"c{next(self._ids)}"
-        self._connections[conn] = _Connection(conn)
+        self._connections[conn] = _Connection(conn, RATE_BURST, self.clock())
         return conn
+
+    def logged_in(self, conn: ConnId) -> bool:
+        """True once ``conn`` has logged in (and until it leaves)."""
+        connection = self._connections.get(conn)
+        return connection is not None and connection.peer is not None
 
     def rooms(self) -> list[str]:
         """Names of the rooms that have anyone in them."""
@@ -125,6 +150,11 @@ class Hub:
         connection = self._connections[conn]
         if connection.closing:
             return []
+        if not connection.spend(self.clock()):
+            # Refused before parsing: the flood costs its sender, not the peer it targets.
+            return self._refuse(
+                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+            )
         size = len(text.encode("utf-8"))
         if size > self.max_message_bytes:
             return self._refuse(
@@ -144,6 +174,10 @@ class Hub:
         connection = self._connections[conn]
         if connection.closing:
             return []
+        if not connection.spend(self.clock()):
+            return self._refuse(
+                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+            )
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
 
     def disconnect(self, conn: ConnId) -> list[Action]:
@@ -195,6 +229,10 @@ class Hub:
         if login.name in room:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
+            )
+        if len(room) >= MAX_ROOM_PEERS:
+            return self._refuse_login(
+                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)"
             )
         relay = _relay_of(room)
         if login.role == "relay" and relay is not None:
@@ -270,11 +308,14 @@ class Hub:
     def _rosters(self, room_name: str, *, skip: ConnId | None = None) -> list[Action]:
         """A ``peers`` message to everyone in the room, each listing the others."""
         room = self._rooms[room_name]
+        # Each entry is built once; each recipient's roster is then a filtered list of them
+        # (N rosters of N-1 entries remain, bounded by MAX_ROOM_PEERS).
+        entries = [(peer, peer.info()) for peer in room.values()]
         actions: list[Action] = []
         for recipient in room.values():
             if recipient.conn == skip:
                 continue
-            others = [p.info() for p in room.values() if p is not recipient]
+            others = [info for peer, info in entries if peer is not recipient]
             actions.append(
                 Outgoing(recipient.conn, Peers(room=room_name, peers=others).model_dump())
             )

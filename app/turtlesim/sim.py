@@ -27,6 +27,13 @@ from dataclasses import dataclass, field, replace
 _NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 # Beyond this many points per turtle the oldest are dropped, so hours of driving stay bounded.
 MAX_TRAIL_POINTS = 20_000
+# ... and beyond this many on the whole canvas (killed turtles' strokes included) the oldest
+# points of the oldest strokes go, so /turtlesim/state stays around a megabyte.
+MAX_CANVAS_POINTS = 50_000
+# At most this many turtles live at once, with names this long: each tick steps and publishes
+# every turtle, so the tick cost stays flat whatever a client spawns.
+MAX_TURTLES = 100
+MAX_NAME_LENGTH = 64
 # A point is added to the trail only when the turtle has moved at least this far (m):
 # turning in place adds nothing.
 _TRAIL_MIN_STEP_M = 1e-3
@@ -91,8 +98,19 @@ class _Turtle:
 
 
 def normalize_angle(angle: float) -> float:
-    """Wrap an angle into [-pi, pi), as turtlesim does."""
-    return angle - 2.0 * math.pi * math.floor((angle + math.pi) / (2.0 * math.pi))
+    """Wrap an angle into [-pi, pi), as turtlesim does; ``ValueError`` if it is not finite.
+
+    ``fmod`` is exact, so even 1e308 lands inside the range (subtracting a multiple of 2*pi
+    computed in floating point does not, for large angles).
+    """
+    if not math.isfinite(angle):
+        raise ValueError(f"angle must be finite, got {angle}")
+    wrapped = math.fmod(angle + math.pi, 2.0 * math.pi)
+    if wrapped < 0.0:
+        wrapped += 2.0 * math.pi
+    wrapped -= math.pi
+    # Rounding can land exactly on pi (e.g. a tiny negative fmod plus 2*pi).
+    return -math.pi if wrapped >= math.pi else wrapped
 
 
 def float32(value: float) -> float:
@@ -122,6 +140,7 @@ class TurtleSim:
         self._strokes: list[Stroke] = []
         # Points drawn per turtle name, so trimming is only computed when a trail is too long.
         self._trail_points: dict[str, int] = {}
+        self._canvas_points = 0
         self._id_counter = 0
         self.ticks = 0
         self.spawn(self.CENTRE, self.CENTRE, 0.0)
@@ -152,9 +171,11 @@ class TurtleSim:
         """Set a turtle's velocities until the next command or for one second, whichever first.
 
         ``linear_y`` (sideways, m/s) is taken only while :attr:`holonomic` is set; otherwise the
-        sideways velocity keeps its value, as turtlesim leaves it alone.
+        sideways velocity keeps its value, as turtlesim leaves it alone. ``ValueError`` for a
+        velocity that is not finite.
         """
         turtle = self._turtle(name)
+        _finite(linear_x=linear_x, angular_z=angular_z, linear_y=linear_y)
         turtle.linear_x = float(linear_x)
         if self.holonomic:
             turtle.linear_y = float(linear_y)
@@ -186,8 +207,14 @@ class TurtleSim:
     def spawn(self, x: float, y: float, theta: float, name: str = "") -> str:
         """Add a turtle; an empty name becomes ``turtleN``. Returns the name used.
 
-        Raises ``ValueError`` for a name already in use or one that cannot be a topic prefix.
+        Raises ``ValueError`` for a name already in use or one that cannot be a topic prefix, a
+        coordinate that is not finite, or when ``MAX_TURTLES`` are alive.
         """
+        _finite(x=x, y=y, theta=theta)
+        if len(self._turtles) >= MAX_TURTLES:
+            raise ValueError(f"at most {MAX_TURTLES} turtles may live at once")
+        if len(name) > MAX_NAME_LENGTH:
+            raise ValueError(f"turtle name longer than {MAX_NAME_LENGTH} characters")
         if not name:
             while True:
                 self._id_counter += 1
@@ -219,6 +246,7 @@ class TurtleSim:
         self._turtles.clear()
         self._strokes.clear()
         self._trail_points.clear()
+        self._canvas_points = 0
         self._id_counter = 0
         self.spawn(self.CENTRE, self.CENTRE, 0.0)
 
@@ -226,20 +254,34 @@ class TurtleSim:
         """Erase the canvas; turtles stay where they are and keep drawing from there."""
         self._strokes.clear()
         self._trail_points.clear()
+        self._canvas_points = 0
         for name, turtle in self._turtles.items():
             self._start_stroke(name, turtle)
 
     def teleport_absolute(self, name: str, x: float, y: float, theta: float) -> None:
         """Queue a jump to (x, y) facing theta; it happens, and is clamped, on the next tick."""
+        _finite(x=x, y=y, theta=theta)
+        bound = self._far
         self._turtle(name).teleports.append(
-            _Teleport(relative=False, x=float32(x), y=float32(y), theta=float32(theta))
+            _Teleport(
+                relative=False,
+                x=float32(max(-bound, min(bound, x))),
+                y=float32(max(-bound, min(bound, y))),
+                theta=_float32_angle(theta),
+            )
         )
 
     def teleport_relative(self, name: str, linear: float, angular: float) -> None:
         """Queue a turn by ``angular`` then a move of ``linear`` metres along the new heading;
         it happens, and is clamped, on the next tick."""
+        _finite(linear=linear, angular=angular)
+        bound = self._far
         self._turtle(name).teleports.append(
-            _Teleport(relative=True, linear=float32(linear), theta=float32(angular))
+            _Teleport(
+                relative=True,
+                linear=float32(max(-bound, min(bound, linear))),
+                theta=_float32_angle(angular),
+            )
         )
 
     def set_pen(self, name: str, r: int, g: int, b: int, width: int, off: bool | int) -> None:
@@ -269,6 +311,10 @@ class TurtleSim:
     def _clamp(self, value: float) -> float:
         return min(max(float(value), 0.0), self.WORLD_SIZE)
 
+    # Teleport coordinates and distances are bounded to this before their float32 rounding: the
+    # tick's clamp gives the same place for anything farther, and 1e308 would round to inf.
+    _far = 2.0 * WORLD_SIZE
+
     def _apply(self, turtle: _Turtle, teleport: _Teleport) -> None:
         # No clamp here: a teleport may leave the world until the tick's clamp brings it back.
         if teleport.relative:
@@ -291,6 +337,9 @@ class TurtleSim:
             self._trail_points[stroke.turtle] = self._trail_points.get(stroke.turtle, 0) + 1
             if self._trail_points[stroke.turtle] > MAX_TRAIL_POINTS:
                 self._trim(stroke.turtle)
+            self._canvas_points += 1
+            if self._canvas_points > MAX_CANVAS_POINTS:
+                self._trim_canvas()
 
     def _start_stroke(self, name: str, turtle: _Turtle) -> None:
         if turtle.pen.off:
@@ -299,6 +348,9 @@ class TurtleSim:
         turtle.stroke = Stroke(turtle=name, pen=turtle.pen, points=[(turtle.x, turtle.y)])
         self._strokes.append(turtle.stroke)
         self._trail_points[name] = self._trail_points.get(name, 0) + 1
+        self._canvas_points += 1
+        if self._canvas_points > MAX_CANVAS_POINTS:
+            self._trim_canvas()
 
     def _trim(self, name: str) -> None:
         own = [s for s in self._strokes if s.turtle == name]
@@ -311,3 +363,33 @@ class TurtleSim:
             excess -= drop
         self._strokes = [s for s in self._strokes if s.points]
         self._trail_points[name] = sum(len(s.points) for s in own)
+        self._canvas_points = sum(len(s.points) for s in self._strokes)
+
+    def _trim_canvas(self) -> None:
+        """Drop the oldest points of the canvas, a tenth of the cap at a time (amortised)."""
+        excess = self._canvas_points - MAX_CANVAS_POINTS * 9 // 10
+        live = {id(t.stroke) for t in self._turtles.values() if t.stroke is not None}
+        for stroke in self._strokes:
+            if excess <= 0:
+                break
+            # A stroke being drawn keeps its last point: the next segment starts there.
+            keep = 1 if id(stroke) in live else 0
+            drop = min(excess, len(stroke.points) - keep)
+            if drop > 0:
+                del stroke.points[:drop]
+                self._trail_points[stroke.turtle] -= drop
+                excess -= drop
+        self._strokes = [s for s in self._strokes if s.points]
+        self._canvas_points = sum(len(s.points) for s in self._strokes)
+
+
+def _float32_angle(angle: float) -> float:
+    """``angle`` as a float32 message field holds it; one beyond float32's range (it would
+    round to inf) is wrapped first, which changes nothing on the turtle's heading."""
+    return float32(angle if abs(angle) < 1e30 else normalize_angle(angle))
+
+
+def _finite(**values: float) -> None:
+    for label, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f"{label} must be finite, got {value}")

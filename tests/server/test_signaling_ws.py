@@ -17,6 +17,7 @@ from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.server.signaling import Switchboard
+from app.server.websocket import Shut, SocketPolicy
 from app.signaling.hub import Hub, Outgoing
 
 # Generous: the machine is shared and loaded; a healthy server answers in milliseconds.
@@ -121,8 +122,6 @@ async def test_client_commands_reach_the_relay(new_peer: Connect) -> None:
         assert await relay.recv() == {"type": kind, "from": "c"}
 
 
-BIG = json.dumps({"type": "offer", "to": "r", "sdp": "x" * (64 * 1024)})
-
 # (payload, ref of the expected error, whether it comes from a fresh connection that sends it
 # instead of logging in / as its login)
 BAD_INPUT = {
@@ -133,7 +132,6 @@ BAD_INPUT = {
     "mistyped field": ({"type": "offer", "to": "r", "sdp": 1}, "offer", False),
     "wrong role": ({"type": "start"}, "start", False),
     "to naming nobody": ({"type": "offer", "to": "nobody", "sdp": "x"}, "offer", False),
-    "over 64 KiB": (BIG, None, False),
     "binary frame": (b"\x00\x01", None, False),
     "before login": ({"type": "getOps"}, "getOps", True),
     "duplicate name": (
@@ -182,17 +180,22 @@ async def test_bad_input_gets_an_error_and_everyone_keeps_being_served(
     assert await other_relay.recv() == {"type": "getOps", "from": "c"}
 
 
-async def test_a_100_kib_message_gets_an_error_and_the_connection_still_works(
+async def test_a_100_kib_frame_is_refused_before_it_is_buffered_and_others_carry_on(
     new_peer: Connect,
 ) -> None:
     relay = await joined(new_peer, "r", "relay")
+    vehicle = await joined(new_peer, "v", "vehicle")
     client = await joined(new_peer, "c", "client")
-    await relay.recv()  # roster update
+    await relay.recv()  # roster updates
+    await relay.recv()
 
+    # uvicorn's ws_max_size (Settings.max_message_bytes) refuses the frame as it arrives.
     await client.send(json.dumps({"type": "offer", "to": "r", "sdp": "x" * 100 * 1024}))
-    error = await client.recv()
-    assert error["type"] == "error" and "bytes" in error["reason"]
-    await client.send({"type": "offer", "to": "r", "sdp": "small"})
+    assert await client.closed() == 1009
+    assert client.ws.close_reason == f"frame exceeds limit of {Settings().max_message_bytes} bytes"
+    assert (await relay.recv())["type"] == "leave"
+    await vehicle.send({"type": "offer", "to": "r", "sdp": "small"})
+    assert (await relay.recv())["type"] == "peers"
     assert (await relay.recv())["sdp"] == "small"
 
 
@@ -252,13 +255,13 @@ async def test_login_needs_the_token_when_the_server_has_one(
 
 
 async def test_a_peer_that_does_not_read_is_closed_instead_of_buffered_without_bound() -> None:
-    board = Switchboard(Hub(), outbox_limit=3)
+    board = Switchboard(Hub(), SocketPolicy(64 * 1024, outbox_messages=3, outbox_bytes=10**6))
     conn, outbox = board.open()
     board.dispatch([Outgoing(conn, {"type": "peers", "n": n}) for n in range(4)])
 
     # What was queued is dropped; what remains is the order to close the slow connection.
-    assert outbox.qsize() == 1
-    shut = outbox.get_nowait()
-    assert getattr(shut, "code", None) == 1013
+    assert len(outbox) == 0
+    shut = await outbox.get()
+    assert isinstance(shut, Shut) and shut.code == 1013
     board.dispatch([Outgoing(conn, {"type": "peers"})])
-    assert outbox.empty(), "nothing is queued behind the close"
+    assert len(outbox) == 0, "nothing is queued behind the close"

@@ -228,11 +228,10 @@ async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) 
             {"op": "publish", "id": "e5", "topic": "/turtle1/cmd_vel", "msg": {"velocity": 1}}
         ),
         b"\x00\x01",
-        json.dumps({"op": "publish", "id": "e6", "topic": "/turtle1/cmd_vel", "pad": "x" * 70000}),
     ]
     errors = await exchange(rosbridge_url, *frames, replies=len(frames) - 1)
     assert all(e["op"] == "status" and e["level"] == "error" for e in errors)
-    assert [e.get("id") for e in errors] == [None, "e1", "e2", "e3", "e4", "e5", None, None]
+    assert [e.get("id") for e in errors] == [None, "e1", "e2", "e3", "e4", "e5", None]
     words = [
         "malformed JSON",
         "fly",
@@ -241,7 +240,6 @@ async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) 
         "unknown topic",
         "velocity",
         "binary",
-        "bytes",
     ]
     for error, word in zip(errors, words, strict=True):
         assert word in error["msg"]

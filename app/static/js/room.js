@@ -27,7 +27,7 @@ export class RoomSession extends EventTarget {
     this.roster = [];
     this.auto = false;
     this.signaling.addEventListener('message', (event) => this.#onMessage(event.detail));
-    this.signaling.addEventListener('close', () => this.#onClose());
+    this.signaling.addEventListener('close', (event) => this.#onClose(event.detail));
     this.signaling.addEventListener('protocolerror', (event) => this.log.error(event.detail));
   }
 
@@ -158,9 +158,11 @@ export class RoomSession extends EventTarget {
     }
   }
 
-  #onClose() {
+  #onClose({ code, reason } = {}) {
     if (this.phase === 'disconnected' || this.phase === 'connecting') return;
-    this.log.warn('signaling connection closed');
+    // The server says why it closed (login deadline, too slow, abusive, server full ...).
+    const why = reason ? ` (${code}: ${reason})` : code ? ` (${code})` : '';
+    this.log.warn(`signaling connection closed${why}`);
     this.#reset();
     if (this.auto) setTimeout(() => this.autoJoin(), this.#retryMs);
   }

@@ -1,0 +1,226 @@
+"""The one WebSocket adapter behind ``/ws`` and ``/rosbridge``: one policy for both sockets.
+
+The rules live in sans-I/O cores (the signaling hub, the rosbridge session); this module only
+moves frames between a socket and a core, the same way for both:
+
+* **Size.** uvicorn refuses a frame larger than ``Settings.max_message_bytes`` before buffering
+  it (``ws_max_size``, set in :mod:`app.server.serve`) and closes with 1009 "frame exceeds limit
+  of N bytes"; a text frame that still arrives over the limit (an app served some other way) is
+  refused here with an error reply.
+* **Outbox.** Each connection has an :class:`Outbox` bounded in messages and bytes, drained by
+  its own writer task, so a slow peer never holds up the others. A peer that leaves more than
+  that unread is closed with 1013; droppable messages (rosbridge publications, superseded every
+  tick) are dropped instead while the outbox is full.
+* **JSON.** Replies are written with :func:`app.protocol.jsonedge.dumps`: never NaN or Infinity.
+  Incoming text is parsed by the cores with :func:`app.protocol.jsonedge.loads`.
+* **Deadline.** A connection may be given a deadline (the login on ``/ws``); if the core does not
+  report it met in time the connection is closed with 1008.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Final
+
+from fastapi import WebSocket
+from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
+
+from app.protocol import jsonedge
+
+log = logging.getLogger(__name__)
+
+# WebSocket close codes (RFC 6455 §7.4.1).
+CLOSE_POLICY_VIOLATION: Final = 1008
+CLOSE_TRY_AGAIN_LATER: Final = 1013
+# After the close is queued, the writer has this long to deliver what precedes it; a peer that
+# does not read by then gets no more (its socket's own buffer is bounded by uvicorn).
+CLOSE_GRACE_S: Final = 2.0
+
+
+@dataclass(frozen=True)
+class SocketPolicy:
+    """The limits every WebSocket connection gets, from :class:`~app.server.config.Settings`."""
+
+    max_message_bytes: int
+    outbox_messages: int
+    outbox_bytes: int
+
+
+@dataclass(frozen=True)
+class Shut:
+    """The last item of an outbox: close the socket with this code and reason."""
+
+    code: int
+    reason: str
+
+
+class Outbox:
+    """Frames waiting for one peer, bounded in count and bytes; overflowing closes the peer."""
+
+    def __init__(self, max_messages: int, max_bytes: int) -> None:
+        self.max_messages = max_messages
+        self.max_bytes = max_bytes
+        self._frames: deque[str] = deque()
+        self._bytes = 0
+        self._shut: Shut | None = None
+        self._ready = asyncio.Event()
+        self.closing = asyncio.Event()
+
+    @property
+    def shut(self) -> Shut | None:
+        """The close queued behind the frames, once there is one."""
+        return self._shut
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def send(self, message: dict[str, Any]) -> None:
+        """Queue a message; if the peer has left too much unread it is closed instead."""
+        frame = self._encode(message)
+        if frame is None or self._shut is not None:
+            return
+        if not self._fits(frame):
+            unread = len(self._frames)
+            log.warning("closing a slow reader: %d messages (%d bytes) unread", unread, self._bytes)
+            self._frames.clear()
+            self._bytes = 0
+            self.close(CLOSE_TRY_AGAIN_LATER, f"too slow: {unread} messages left unread")
+            return
+        self._push(frame)
+
+    def offer(self, message: dict[str, Any]) -> bool:
+        """Queue a message that a newer one supersedes; dropped (False) while the outbox is full."""
+        frame = self._encode(message)
+        if frame is None or self._shut is not None or not self._fits(frame):
+            return False
+        self._push(frame)
+        return True
+
+    def close(self, code: int, reason: str) -> None:
+        """Close the peer once the frames queued so far are sent; nothing is queued after it."""
+        if self._shut is None:
+            self._shut = Shut(code, reason)
+            self._ready.set()
+            self.closing.set()
+
+    async def get(self) -> str | Shut:
+        """The next frame, or the close once every frame before it has been taken."""
+        while not self._frames:
+            if self._shut is not None:
+                return self._shut
+            self._ready.clear()
+            await self._ready.wait()
+        frame = self._frames.popleft()
+        self._bytes -= len(frame)
+        return frame
+
+    def _fits(self, frame: str) -> bool:
+        return len(self._frames) < self.max_messages and self._bytes + len(frame) <= self.max_bytes
+
+    def _push(self, frame: str) -> None:
+        self._frames.append(frame)
+        self._bytes += len(frame)
+        self._ready.set()
+
+    @staticmethod
+    def _encode(message: dict[str, Any]) -> str | None:
+        try:
+            return jsonedge.dumps(message)
+        except ValueError as exc:  # NaN or Infinity: a bug upstream, never sent to a browser
+            log.error("not sending a %r message: %s", message.get("type", message.get("op")), exc)
+            return None
+
+
+def oversize(text: str, limit: int) -> str | None:
+    """Why a text frame is too large for ``limit`` bytes, or None when it fits."""
+    size = len(text.encode("utf-8"))
+    if size > limit:
+        return f"message of {size} bytes exceeds the limit of {limit} bytes"
+    return None
+
+
+async def serve(
+    websocket: WebSocket,
+    outbox: Outbox,
+    on_text: Callable[[str], None],
+    on_binary: Callable[[bytes], None],
+    *,
+    name: str,
+    deadline: tuple[float, Callable[[], bool], str] | None = None,
+) -> None:
+    """Pump one accepted socket until it closes or its outbox is closed.
+
+    Each text frame goes to ``on_text`` and each binary frame to ``on_binary``; they answer by
+    queueing on ``outbox``. ``deadline`` is ``(seconds, met, reason)``: unless ``met()`` is
+    true that long after the start, the connection is closed with 1008 and ``reason``.
+    """
+    loop = asyncio.get_running_loop()
+    timer = None
+    if deadline is not None:
+        seconds, met, reason = deadline
+
+        def check() -> None:
+            if not met():
+                log.info("closing %s: %s", name, reason)
+                outbox.close(CLOSE_POLICY_VIOLATION, reason)
+
+        timer = loop.call_later(seconds, check)
+    reader = asyncio.create_task(
+        _read(websocket, outbox, on_text, on_binary), name=f"{name}-reader"
+    )
+    writer = asyncio.create_task(_write(websocket, outbox), name=f"{name}-writer")
+    closing = asyncio.create_task(outbox.closing.wait(), name=f"{name}-closing")
+    tasks = (reader, writer, closing)
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        if outbox.shut is not None and not writer.done():
+            # Deliver what precedes the close, then the close; a peer that reads nothing
+            # would keep the writer waiting on a full socket buffer forever.
+            await asyncio.wait([writer], timeout=CLOSE_GRACE_S)
+    finally:
+        if timer is not None:
+            timer.cancel()
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for task in (reader, writer):
+            if not task.cancelled() and (error := task.exception()) is not None:
+                log.error("%s died", task.get_name(), exc_info=error)
+
+
+async def _read(
+    websocket: WebSocket,
+    outbox: Outbox,
+    on_text: Callable[[str], None],
+    on_binary: Callable[[bytes], None],
+) -> None:
+    while outbox.shut is None:
+        frame = await websocket.receive()
+        if frame["type"] == "websocket.disconnect":
+            return
+        text = frame.get("text")
+        if text is not None:
+            on_text(text)
+        else:
+            on_binary(frame.get("bytes") or b"")
+
+
+async def _write(websocket: WebSocket, outbox: Outbox) -> None:
+    try:
+        while True:
+            item = await outbox.get()
+            if isinstance(item, Shut):
+                await websocket.close(item.code, item.reason)
+                return
+            await websocket.send_text(item)
+    except (WebSocketDisconnect, WebSocketDisconnected):
+        return
+    except RuntimeError as exc:
+        # uvicorn closed the socket itself (1007 invalid UTF-8, 1009 frame too big) while this
+        # frame was on its way: the reader sees the disconnect; nothing is left to deliver.
+        log.debug("not delivered, socket closed by the server: %s", exc)
+        return

@@ -1,0 +1,206 @@
+"""Hostile input against the real server (issue 9): each case gets a clear error or close, the
+server logs no traceback, and everyone else keeps being served."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from collections.abc import AsyncIterator, Callable
+
+import httpx
+import pytest
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
+from websockets.frames import Frame, Opcode
+
+from app.server.config import Settings
+from app.server.serve import RunningServer
+from app.turtlesim.sim import MAX_TURTLES
+from tests.helpers.sockets import (
+    TIMEOUT_S,
+    Records,
+    StuckClient,
+    login,
+    recv,
+    rosbridge_url,
+)
+
+
+async def closed(ws: ClientConnection) -> tuple[int | None, str | None]:
+    """Read (and drop) what is left until the server's close; its code and reason."""
+
+    async def drain() -> None:
+        with contextlib.suppress(ConnectionClosed):
+            async for _ in ws:
+                pass
+
+    await asyncio.wait_for(drain(), TIMEOUT_S)
+    return ws.close_code, ws.close_reason
+
+
+async def send_invalid_utf8(ws: ClientConnection) -> None:
+    ws.protocol.send_frame(Frame(Opcode.TEXT, b'{"type": "\xff\xfe"}'))
+    ws.send_data()
+
+
+async def test_a_5000_digit_integer_before_login_gets_an_error_and_no_traceback(
+    server: RunningServer, server_log: Records
+) -> None:
+    async with connect(server.ws_url) as ws:
+        await ws.send('{"type": "login", "name": "c", "role": "client", "n": ' + "9" * 5000 + "}")
+        error = await recv(ws)
+        assert error["type"] == "error" and "digits" in error["reason"]
+        await login(ws, "c", "client")  # the connection still works
+    assert server_log.tracebacks() == []
+
+
+async def test_a_fragmented_message_over_the_limit_is_refused_as_it_arrives(
+    server: RunningServer, server_log: Records
+) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as sender:
+        await login(relay, "r", "relay")
+
+        async def fragments() -> AsyncIterator[str]:
+            for _ in range(20):  # 160 kB in 8 kB fragments, none of them too big alone
+                yield "x" * 8000
+
+        with pytest.raises(ConnectionClosed):
+            await sender.send(fragments())
+            await recv(sender)
+        await relay.send('{"type": "getOps"}')  # the relay is unaffected
+        assert (await recv(relay))["type"] == "error"
+    assert server_log.tracebacks() == []
+
+
+async def test_nan_is_refused_not_relayed(server: RunningServer) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as vehicle:
+        await login(relay, "r", "relay")
+        await login(vehicle, "v", "vehicle")
+        await recv(relay)  # roster update
+        await vehicle.send('{"type": "offer", "to": "r", "sdp": "x", "q": NaN}')
+        error = await recv(vehicle)
+        assert error["type"] == "error" and "NaN" in error["reason"]
+        await vehicle.send('{"type": "offer", "to": "r", "sdp": "after"}')
+        assert (await recv(relay))["sdp"] == "after", "nothing came before it"
+
+
+@pytest.mark.parametrize("endpoint", ["/ws", "/rosbridge"])
+async def test_invalid_utf8_closes_with_1007_and_logs_no_traceback(
+    server: RunningServer, server_log: Records, endpoint: str
+) -> None:
+    url = server.url.replace("http", "ws", 1) + endpoint
+    for _ in range(3):
+        async with connect(url) as ws:
+            await send_invalid_utf8(ws)
+            with pytest.raises(ConnectionClosed):
+                await asyncio.wait_for(ws.recv(), TIMEOUT_S)
+            assert ws.close_code == 1007
+    assert server_log.tracebacks() == []
+    async with connect(url) as ws:  # the endpoint still serves
+        if endpoint == "/rosbridge":  # rosbridge reports errors only to a client that asks
+            await ws.send('{"op": "set_level", "level": "error"}')
+        await ws.send("{broken")
+        assert "malformed" in json.dumps(await recv(ws))
+
+
+async def test_a_flooding_client_is_closed_and_the_slow_relay_is_not(server: RunningServer) -> None:
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as client:
+        await login(relay, "r", "relay")
+        await login(client, "c", "client")
+        await recv(relay)  # roster update
+        # The relay does not read while the client floods.
+        for _ in range(2000):
+            try:
+                await client.send('{"type": "stop"}')
+            except ConnectionClosed:
+                break
+        code, reason = await closed(client)
+        assert code == 1008 and reason is not None and "abusive" in reason
+        # The relay reads at its leisure: everything that reached it, then the client leaving.
+        kinds = set()
+        while (kind := (await recv(relay))["type"]) != "peers":
+            kinds.add(kind)
+        assert kinds == {"stop", "leave"}
+        await relay.send('{"type": "getOps"}')  # still logged in: refused only for its role
+        assert "client" in (await recv(relay))["reason"]
+
+
+async def test_a_socket_that_never_logs_in_is_closed_at_the_deadline(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(Settings(environment="development", token=None, login_timeout_s=0.5))
+    async with connect(server.ws_url) as idle, connect(server.ws_url) as prompt:
+        await login(prompt, "p", "client")
+        code, reason = await closed(idle)
+        assert code == 1008 and reason == "no login within 0.5 s"
+        await asyncio.sleep(0.5)
+        await prompt.send('{"type": "getOps"}')
+        assert (await recv(prompt))["type"] == "error"  # logged in in time: still open
+
+
+async def test_connections_are_capped_with_a_clear_close(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(
+        Settings(environment="development", token=None, max_connections=3, max_rosbridge_sessions=2)
+    )
+    async with connect(server.ws_url), connect(server.ws_url), connect(server.ws_url):
+        async with connect(server.ws_url) as extra:
+            assert await closed(extra) == (1013, "server full: 3 connections")
+    url = rosbridge_url(server)
+    async with connect(url), connect(url), connect(url) as extra:
+        assert await closed(extra) == (1013, "server full: 2 rosbridge clients")
+
+
+async def test_a_rosbridge_client_that_never_reads_is_dropped(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    server = start_server(Settings(environment="development", token=None, max_rosbridge_sessions=2))
+    url = rosbridge_url(server)
+    request = json.dumps({"op": "call_service", "service": "/rosapi/services", "id": "x" * 40})
+    async with connect(url) as other:
+        for _ in range(MAX_TURTLES - 1):
+            await other.send(json.dumps({"op": "call_service", "service": "/spawn", "args": {}}))
+        for _ in range(MAX_TURTLES - 1):
+            assert (await recv(other))["result"] is True
+        stuck = await asyncio.to_thread(StuckClient, url)
+        try:
+            # The server drops the stuck client (1013) rather than buffer its replies without
+            # bound: its session slot frees up, so a newcomer is served; until then newcomers
+            # are refused as the server is full.
+            started = time.monotonic()
+            while True:
+                assert time.monotonic() - started < 30, "the stuck client was never dropped"
+                for _ in range(50):
+                    await asyncio.to_thread(stuck.send, request)
+                async with connect(url) as newcomer:
+                    try:
+                        topics = {"op": "call_service", "service": "/rosapi/topics"}
+                        await newcomer.send(json.dumps(topics))
+                        if (await recv(newcomer))["op"] == "service_response":
+                            break
+                    except ConnectionClosed:
+                        assert newcomer.close_code == 1013
+        finally:
+            stuck.close()
+        await other.send(json.dumps({"op": "call_service", "service": "/rosapi/topics"}))
+        assert (await recv(other))["result"] is True
+
+
+async def test_2000_spawn_attempts_hold_the_cap_and_the_server_keeps_answering(
+    server: RunningServer,
+) -> None:
+    spawn = json.dumps({"op": "call_service", "service": "/spawn", "args": {}})
+    async with connect(rosbridge_url(server)) as ws, httpx.AsyncClient() as http:
+        await ws.send(json.dumps({"op": "set_level", "level": "none"}))  # responses only
+        spawned = 0
+        for _ in range(20):
+            for _ in range(100):
+                await ws.send(spawn)
+            spawned += sum([(await recv(ws))["result"] for _ in range(100)])
+        assert spawned == MAX_TURTLES - 1
+        assert (await http.get(f"{server.url}/healthz", timeout=TIMEOUT_S)).status_code == 200
+        state = (await http.get(f"{server.url}/turtlesim/state", timeout=TIMEOUT_S)).json()
+        assert len(state["turtles"]) == MAX_TURTLES

@@ -1,0 +1,67 @@
+"""Hostile data-channel input to the agent's real handler (issue 9): refused with a reason,
+never a command. No WebRTC needed: the handler is called the way the data channel calls it."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+
+from tests.helpers.agent import H, Vehicle, W
+from vehicle_agent.control import PROFILES, Controller, Goal, Pose, angular_command
+
+
+@pytest.fixture(scope="module", params=sorted(PROFILES))
+def vehicles(request: pytest.FixtureRequest) -> Vehicle:
+    # One per profile: building the video source takes seconds on a loaded machine.
+    return Vehicle(request.param)
+
+
+@pytest.fixture
+def vehicle(vehicles: Vehicle) -> Iterator[Vehicle]:
+    vehicles.events.clear()
+    # Every case sends seq 1 again: a fresh link, as far as the latest-wins rule is concerned.
+    vehicles.agent.goal_gate.reset()
+    yield vehicles
+
+
+GOAL = '{"type": "goal", "seq": 1, "op": "face", "x": %s, "y": 100, "w": 320, "h": 240, "t": 0}'
+
+HOSTILE: dict[str, str | bytes] = {
+    "NaN literal": GOAL % "NaN",
+    "Infinity literal": GOAL % "Infinity",
+    '"nan" string': GOAL % '"nan"',
+    '"inf" string': GOAL % '"inf"',
+    "1e999": GOAL % "1e999",
+    "5000-digit integer": GOAL % ("9" * 5000),
+    "3000-deep nesting": "[" * 3000 + "]" * 3000,
+    "invalid UTF-8": b'{"type": "goal\xff"}',
+    "frame of 1e9 pixels": GOAL.replace('"w": 320', '"w": 1000000000') % "10",
+    "not an object": "[1, 2]",
+}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE))
+def test_hostile_goals_get_an_error_and_never_drive_the_turtle(vehicle: Vehicle, case: str) -> None:
+    reply = vehicle.agent.handle_channel_message(HOSTILE[case], "relay")
+    assert reply is not None and reply["type"] == "error" and reply["reason"]
+    assert vehicle.twists() == []
+    # The handler still works: a good goal is taken.
+    assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None
+    assert [e["x"] for e in vehicle.events if e["ev"] == "goal"] == [10]
+    vehicle.turtle.sim.step()
+    pose = vehicle.turtle.sim.pose("turtle1")
+    assert all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta))
+
+
+def test_a_nan_goal_in_the_controller_holds_still_in_both_profiles() -> None:
+    for profile in PROFILES.values():
+        controller = Controller(profile, clock=lambda: 100.0)
+        controller.pose(Pose(5.5, 5.5, 0.0))
+        twist = controller.goal(Goal(math.nan, 10.0, W, H, 1)) or controller.pose(
+            Pose(5.5, 5.5, 0.0)
+        )
+        assert twist is not None and math.isfinite(twist.angular_z), profile.name
+        assert twist.angular_z == 0.0
+        assert math.isfinite(angular_command(math.pi, profile))
