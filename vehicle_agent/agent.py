@@ -9,19 +9,18 @@ restarting. Everything that happens is dispatched from one queue, one handler pe
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import random
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Any
 
 from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from app.protocol.errors import describe
+from app.protocol import channels
+from app.protocol.constants import AUTOPILOT_CHANNEL
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -34,6 +33,9 @@ log = logging.getLogger(__name__)
 CONNECT_TIMEOUT_S = 10.0
 TELEMETRY_PERIOD_S = 0.1
 TICK_PERIOD_S = 0.05
+
+# Handles one validated data-channel message from the relay.
+ChannelHandler = Callable[[RelayLink, Any], None]
 
 
 @dataclass
@@ -64,22 +66,6 @@ class Backoff:
     def reset(self) -> None:
         """After a success, start again from the first delay."""
         self._next = self.first
-
-
-class GoalMessage(BaseModel):
-    """relay→vehicle ``goal`` (DESIGN §3, docs/contracts.md)."""
-
-    model_config = ConfigDict(extra="allow")
-
-    type: Literal["goal"]
-    seq: int
-    op: str
-    x: float
-    y: float
-    w: int = Field(gt=0)
-    h: int = Field(gt=0)
-    t: float
-    frame: int | None = None
 
 
 class Agent:
@@ -126,10 +112,11 @@ class Agent:
             "link_down": self._on_link_event,
             "retry": self._on_retry,
         }
-        self._channel_handlers: dict[str, Callable[[RelayLink, dict[str, Any]], None]] = {
-            "goal": self._on_goal,
-            "stop": self._on_stop,
-            "error": self._on_peer_error,
+        # One handler per message the vehicle accepts on `autopilot` (channels.RECEIVERS).
+        self._channel_handlers: dict[type[channels.ChannelMessage], ChannelHandler] = {
+            channels.Goal: self._on_goal,
+            channels.Stop: self._on_stop,
+            channels.Error: self._on_peer_error,
         }
 
     @property
@@ -328,31 +315,14 @@ class Agent:
             return
         if not link.connected.is_set():
             link.connected.set()
-        try:
-            message = json.loads(text)
-        except json.JSONDecodeError as exc:
-            self._reject(link, f"malformed JSON: {exc.msg}", None)
+        message = channels.parse(text, AUTOPILOT_CHANNEL, "vehicle")
+        if isinstance(message, channels.Refused):
+            log.warning("dropped a data-channel message from %s: %s", link.relay, message.reason)
+            link.send(channels.Error(reason=message.reason, ref=message.ref))
             return
-        kind = message.get("type") if isinstance(message, dict) else None
-        if not isinstance(kind, str):
-            self._reject(link, "expected a JSON object with a string 'type'", None)
-            return
-        handler = self._channel_handlers.get(kind)
-        if handler is None:
-            self._reject(link, f"unknown message type {kind!r}", kind)
-            return
-        handler(link, message)
+        self._channel_handlers[type(message)](link, message)
 
-    def _reject(self, link: RelayLink, reason: str, ref: str | None) -> None:
-        log.warning("dropped a data-channel message from %s: %s", link.relay, reason)
-        link.send({"type": "error", "reason": reason, "ref": ref})
-
-    def _on_goal(self, link: RelayLink, message: dict[str, Any]) -> None:
-        try:
-            goal = GoalMessage.model_validate(message)
-        except ValidationError as exc:
-            self._reject(link, f"bad goal: {describe(exc)}", "goal")
-            return
+    def _on_goal(self, link: RelayLink, goal: channels.Goal) -> None:
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
         )
@@ -360,12 +330,12 @@ class Agent:
             self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
         )
 
-    def _on_stop(self, link: RelayLink, message: dict[str, Any]) -> None:
+    def _on_stop(self, link: RelayLink, message: channels.Stop) -> None:
         log.info("piloting stopped by %s", link.relay)
         self._publish(self.controller.stop())
 
-    def _on_peer_error(self, link: RelayLink, message: dict[str, Any]) -> None:
-        log.warning("%s reported an error: %s", link.relay, message.get("reason"))
+    def _on_peer_error(self, link: RelayLink, message: channels.Error) -> None:
+        log.warning("%s reported an error: %s", link.relay, message.reason)
 
     # --- turtle ------------------------------------------------------------------------------
 
@@ -377,13 +347,7 @@ class Agent:
             self._last_telemetry = now
             link = self._link
             sent = link is not None and link.send(
-                {
-                    "type": "pose",
-                    "x": pose.x,
-                    "y": pose.y,
-                    "theta": pose.theta,
-                    "t": time.time() * 1000,
-                }
+                channels.Pose(x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000)
             )
             self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
 

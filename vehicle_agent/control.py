@@ -17,7 +17,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-TERRAIN_CENTRE = 5.544445
+from app.protocol.angles import wrap_angle
+from app.protocol.constants import TERRAIN_CENTRE
+
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).
 MIN_TARGET_DISTANCE_M = 0.05
@@ -99,16 +101,6 @@ PROFILES: dict[str, Profile] = {
         goal_timeout_s=2.5,
     ),
 }
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` wrapped into (−π, π]."""
-    wrapped = math.fmod(angle, 2 * math.pi)
-    if wrapped <= -math.pi:
-        wrapped += 2 * math.pi
-    elif wrapped > math.pi:
-        wrapped -= 2 * math.pi
-    return wrapped
 
 
 def pixel_to_terrain(x: float, y: float, w: int, h: int) -> tuple[float, float]:

@@ -9,7 +9,6 @@ when it fails or the relay goes away the agent closes it and makes a new one.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -23,9 +22,12 @@ from aiortc import (
 )
 from aiortc.sdp import candidate_from_sdp
 
+from app.protocol.channels import ChannelMessage, dump
+from app.protocol.constants import AUTOPILOT_CHANNEL
+
 log = logging.getLogger(__name__)
 
-CHANNEL_LABEL = "autopilot"
+CHANNEL_LABEL = AUTOPILOT_CHANNEL
 
 SendSignal = Callable[[dict[str, Any]], Awaitable[None]]
 
@@ -121,11 +123,11 @@ class RelayLink:
             candidate.sdpMLineIndex = 0
         await self.pc.addIceCandidate(candidate)
 
-    def send(self, message: dict[str, Any]) -> bool:
-        """Send a JSON message on the data channel; False when it is not open."""
+    def send(self, message: ChannelMessage) -> bool:
+        """Send a message on the data channel; False when it is not open."""
         if self.channel.readyState != "open":
             return False
-        self.channel.send(json.dumps(message))
+        self.channel.send(dump(message))
         return True
 
     def _fail(self, reason: str) -> None:

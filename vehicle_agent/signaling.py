@@ -9,8 +9,13 @@ from collections.abc import AsyncIterator
 from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
+from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
+
+from app.protocol.constants import Role
+from app.protocol.errors import describe
+from app.protocol.signaling import Leave, Login
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +47,7 @@ def ws_url(server: str) -> str:
 class SignalingClient:
     """One logged-in signaling connection; iterate over it for the server's messages."""
 
-    def __init__(self, server: str, name: str, room: str, role: str = "vehicle") -> None:
+    def __init__(self, server: str, name: str, room: str, role: Role = "vehicle") -> None:
         self.url = ws_url(server)
         self.name = name
         self.room = room
@@ -55,7 +60,12 @@ class SignalingClient:
             self._ws = await connect(self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20)
         except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
             raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
-        await self.send({"type": "login", "name": self.name, "role": self.role, "room": self.room})
+        try:
+            login = Login(type="login", name=self.name, role=self.role, room=self.room)
+        except ValidationError as exc:
+            await self.close()
+            raise SignalingError(f"cannot log in as {self.name!r}: {describe(exc)}") from exc
+        await self.send(login.model_dump(exclude_none=True))
         try:
             async with asyncio.timeout(LOGIN_TIMEOUT_S):
                 reply = await self._receive()
@@ -107,7 +117,7 @@ class SignalingClient:
         if ws is None:
             return
         try:
-            await ws.send(json.dumps({"type": "leave"}))
+            await ws.send(Leave(type="leave").model_dump_json())
         except ConnectionClosed:
             pass
         await ws.close()

@@ -3,7 +3,8 @@
 Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
 ES modules need no globals: ICE servers from :class:`~app.server.config.Settings`, the
 signaling path, the default rosbridge URL (this server's ``/rosbridge``) and what the query
-string asks for.
+string asks for, and the protocol constants and data-channel schemas rendered from
+:mod:`app.protocol` (``config.protocol``, read by ``protocol.js``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.protocol.constants import PROFILES, ROLES, Role
+from app.protocol.browser import browser_protocol
+from app.protocol.constants import DEFAULT_PROFILE, RELAY_PROFILES, ROLES, VEHICLE_PROFILES, Role
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
 
@@ -32,7 +34,8 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     """What a role page needs to run on its own, ``?auto=1`` included."""
     settings: Settings = request.app.state.settings
     query = request.query_params
-    profile = query.get("profile", "default")
+    profile = query.get("profile", DEFAULT_PROFILE)
+    profiles = VEHICLE_PROFILES if role == "vehicle" else RELAY_PROFILES
     return {
         "role": role,
         "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
@@ -42,10 +45,16 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         "token": query.get("token"),
         "auto": query.get("auto") in ("1", "true", "yes"),
         # An unknown profile falls back to the default rather than breaking the page.
-        "profile": profile if profile in PROFILES else "default",
+        "profile": profile if profile in profiles else DEFAULT_PROFILE,
         "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
         "ros": "2" if query.get("ros") == "2" else "1",
+        "protocol": browser_protocol(),
     }
+
+
+def base_config() -> dict[str, Any]:
+    """The config of a page with no role (index, parity): the protocol alone."""
+    return {"protocol": browser_protocol()}
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:
@@ -58,7 +67,9 @@ def _render(request: Request, role: Role) -> HTMLResponse:
 async def index(request: Request) -> HTMLResponse:
     """Links to the three role pages for one room."""
     room = request.query_params.get("room", "default")
-    return templates.TemplateResponse(request, "index.html", {"room": room, "roles": ROLES})
+    return templates.TemplateResponse(
+        request, "index.html", {"room": room, "roles": ROLES, "config": base_config()}
+    )
 
 
 @router.get("/vehicle", response_class=HTMLResponse)

@@ -15,6 +15,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from app.protocol.angles import turtlesim_normalize
+from app.protocol.constants import WORLD_SIZE
+
 # turtlesim's own turtle-name rule is ROS's graph-name rule; names also become topic prefixes.
 _NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 # Beyond this many points per turtle the oldest are dropped, so hours of driving stay bounded.
@@ -68,15 +71,10 @@ class _Turtle:
     stroke: Stroke | None = None
 
 
-def normalize_angle(angle: float) -> float:
-    """Wrap an angle into [-pi, pi), as turtlesim does."""
-    return angle - 2.0 * math.pi * math.floor((angle + math.pi) / (2.0 * math.pi))
-
-
 class TurtleSim:
     """The turtlesim world: turtles, their commands, and the pen strokes they leave."""
 
-    WORLD_SIZE = 11.088889
+    WORLD_SIZE = WORLD_SIZE  # class attribute too: the simulator's callers read it there
     TICK_S = 0.016
     COMMAND_TIMEOUT_S = 1.0
     CENTRE = WORLD_SIZE / 2.0
@@ -101,7 +99,7 @@ class TurtleSim:
             if now - turtle.last_command > self.COMMAND_TIMEOUT_S:
                 turtle.linear_x = 0.0
                 turtle.angular_z = 0.0
-            turtle.theta = normalize_angle(turtle.theta + turtle.angular_z * dt)
+            turtle.theta = turtlesim_normalize(turtle.theta + turtle.angular_z * dt)
             self._move_to(
                 turtle,
                 turtle.x + math.cos(turtle.theta) * turtle.linear_x * dt,
@@ -152,7 +150,7 @@ class TurtleSim:
             raise ValueError(f"a turtle named {name!r} already exists")
         elif not _NAME_RE.match(name):
             raise ValueError(f"invalid turtle name {name!r}")
-        turtle = _Turtle(x=self._clamp(x), y=self._clamp(y), theta=normalize_angle(theta))
+        turtle = _Turtle(x=self._clamp(x), y=self._clamp(y), theta=turtlesim_normalize(theta))
         self._turtles[name] = turtle
         self._start_stroke(name, turtle)
         return name
@@ -180,13 +178,13 @@ class TurtleSim:
     def teleport_absolute(self, name: str, x: float, y: float, theta: float) -> None:
         """Put a turtle at (x, y) facing theta; the pen draws the jump, as in turtlesim."""
         turtle = self._turtle(name)
-        turtle.theta = normalize_angle(theta)
+        turtle.theta = turtlesim_normalize(theta)
         self._move_to(turtle, x, y)
 
     def teleport_relative(self, name: str, linear: float, angular: float) -> None:
         """Turn by ``angular``, then move ``linear`` metres along the new heading."""
         turtle = self._turtle(name)
-        turtle.theta = normalize_angle(turtle.theta + angular)
+        turtle.theta = turtlesim_normalize(turtle.theta + angular)
         self._move_to(
             turtle,
             turtle.x + math.cos(turtle.theta) * linear,

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from app.protocol.angles import wrap_angle
 from app.tools.bench.stats import (
     HeadingSample,
     PoseSample,
@@ -16,7 +17,6 @@ from app.tools.bench.stats import (
     heading_track,
     rate_per_s,
     summarize,
-    wrap_angle,
 )
 
 
