@@ -5,8 +5,11 @@
 // its origin bottom-left with y growing upward. A goal pixel is flipped vertically when mapped
 // to the terrain: a face in the top half of the frame is a target in the upper half.
 
-export const TERRAIN_CENTRE = 5.544445;
-export const WORLD_SIZE = 11.088889;
+import { WORLD } from './protocol.js';
+
+// From app/protocol/constants.py, through the page config.
+export const TERRAIN_CENTRE = WORLD.terrainCentre;
+export const WORLD_SIZE = WORLD.size;
 // Below this distance the direction to the target is meaningless.
 export const MIN_TARGET_DISTANCE_M = 0.05;
 

@@ -1,6 +1,6 @@
-// A turtlesim look-alike drawn from pose telemetry: the blue terrain (11.088889 m square,
-// 45 px per metre at 500 px), the pen trail, and the turtle itself.
-import { WORLD_SIZE } from './control.js';
+// A turtlesim look-alike drawn from pose telemetry: the blue terrain (the protocol's world
+// square, 45 px per metre at 500 px), the pen trail, and the turtle itself.
+import { WORLD } from './protocol.js';
 
 const BACKGROUND = 'rgb(69, 86, 255)'; // turtlesim's default background
 const PEN = 'rgb(179, 184, 255)'; // turtlesim's default pen
@@ -38,7 +38,7 @@ export class TurtleView {
   draw() {
     const { canvas } = this;
     const ctx = canvas.getContext('2d');
-    const scale = canvas.width / WORLD_SIZE;
+    const scale = canvas.width / WORLD.size;
     const px = (x) => x * scale;
     const py = (y) => canvas.height - y * scale;
     ctx.fillStyle = BACKGROUND;

@@ -1,7 +1,8 @@
 // The vehicle page: camera to the relay, goals from the `autopilot` data channel turned into
 // Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to the relay.
 import { Controller, PROFILES } from './control.js';
-import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RelayLink, sendJson, serveChannel } from './peer.js';
+import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { byTestId, fmt, Log, readConfig, show } from './ui.js';
 
@@ -146,28 +147,20 @@ turtle.onPose = (pose) => {
 
 setInterval(() => drive(() => controller.tick()), TICK_MS);
 
+/** A goal, already validated against the protocol's Goal model by serveChannel. */
 function onGoal(msg) {
-  const goal = {
-    x: requireNumber(msg, 'x'),
-    y: requireNumber(msg, 'y'),
-    w: requireNumber(msg, 'w'),
-    h: requireNumber(msg, 'h'),
-    seq: typeof msg.seq === 'number' ? msg.seq : null,
-    frame: typeof msg.frame === 'number' ? msg.frame : null,
-    op: typeof msg.op === 'string' ? msg.op : null,
-  };
-  if (goal.w <= 0 || goal.h <= 0) throw new BadMessage('"goal" needs a positive frame size w, h');
-  if (!controller.active) log.info(`piloting: first goal${goal.op ? ` (${goal.op})` : ''}`);
+  const goal = { x: msg.x, y: msg.y, w: msg.w, h: msg.h, seq: msg.seq, frame: msg.frame ?? null, op: msg.op };
+  if (!controller.active) log.info(`piloting: first goal (${goal.op})`);
   status.goalsReceived += 1;
-  status.lastGoal = { ...goal, t: msg.t ?? null };
+  status.lastGoal = { ...goal, t: msg.t };
   show('goals-received', String(status.goalsReceived));
   drive(() => controller.goal(goal));
 }
 
 function setupPeer(peer, stream) {
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
-  const dc = peer.pc.createDataChannel('autopilot');
-  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log);
+  const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
+  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log, SCHEMAS.autopilot.vehicle);
   dc.addEventListener('open', () => {
     session.channel = dc;
     status.relayChannelOpen = true;
