@@ -20,7 +20,7 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL
+from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -43,7 +43,7 @@ class AgentConfig:
     """What ``autopilot vehicle`` was asked to do."""
 
     server: str
-    room: str = "default"
+    room: str = DEFAULT_ROOM
     name: str = "vehicle"
     profile: str = "default"
     goal_timeout_s: float | None = None

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from aiortc import RTCIceServer
 
+from app.protocol.constants import DEFAULT_ROOM
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -49,7 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="http://127.0.0.1:8000",
         help="the server's base URL (default http://127.0.0.1:8000)",
     )
-    parser.add_argument("--room", default="default", help="room to join (default: default)")
+    parser.add_argument(
+        "--room", default=DEFAULT_ROOM, help=f"room to join (default: {DEFAULT_ROOM})"
+    )
     parser.add_argument("--name", default="vehicle", help="peer name (default: vehicle)")
     parser.add_argument(
         "--video",

@@ -20,6 +20,7 @@ def browser_protocol() -> dict[str, Any]:
     """The constants and data-channel schemas every page gets (computed once, never mutated)."""
     return {
         "roles": list(c.ROLES),
+        "defaultRoom": c.DEFAULT_ROOM,
         "profiles": {"relay": list(c.RELAY_PROFILES), "vehicle": list(c.VEHICLE_PROFILES)},
         "defaultProfile": c.DEFAULT_PROFILE,
         "relayProfiles": {

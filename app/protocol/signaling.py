@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, TypeAdapter, ValidationError
 
-from app.protocol.constants import Role
+from app.protocol.constants import DEFAULT_ROOM, Role
 from app.protocol.errors import describe
 
 # Names and rooms show up in logs and on pages; keep them short and non-empty.
@@ -30,7 +30,7 @@ class Login(_Incoming):
     type: Literal["login"]
     name: Name
     role: Role
-    room: Name = "default"
+    room: Name = DEFAULT_ROOM
     token: str | None = None
 
 

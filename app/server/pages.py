@@ -16,7 +16,14 @@ from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
 from app.protocol.browser import browser_protocol
-from app.protocol.constants import DEFAULT_PROFILE, RELAY_PROFILES, ROLES, VEHICLE_PROFILES, Role
+from app.protocol.constants import (
+    DEFAULT_PROFILE,
+    DEFAULT_ROOM,
+    RELAY_PROFILES,
+    ROLES,
+    VEHICLE_PROFILES,
+    Role,
+)
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
 
@@ -40,7 +47,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         "role": role,
         "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
         "wsPath": "/ws",
-        "room": query.get("room", "default"),
+        "room": query.get("room", DEFAULT_ROOM),
         "name": query.get("name", ""),
         "token": query.get("token"),
         "auto": query.get("auto") in ("1", "true", "yes"),
@@ -66,7 +73,7 @@ def _render(request: Request, role: Role) -> HTMLResponse:
 @router.get("/", response_class=HTMLResponse)
 async def index(request: Request) -> HTMLResponse:
     """Links to the three role pages for one room."""
-    room = request.query_params.get("room", "default")
+    room = request.query_params.get("room", DEFAULT_ROOM)
     return templates.TemplateResponse(
         request, "index.html", {"room": room, "roles": ROLES, "config": base_config()}
     )

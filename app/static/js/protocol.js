@@ -10,7 +10,7 @@ function readProtocol() {
 }
 
 /**
- * {roles, profiles: {relay, vehicle}, defaultProfile, relayProfiles: {name: {snapshotPeriodMs}},
+ * {roles, defaultRoom, profiles: {relay, vehicle}, defaultProfile, relayProfiles: {name: {snapshotPeriodMs}},
  *  channels: {autopilot, control}, world: {size, terrainCentre},
  *  frameTag: {blocksPerWidth, markerBlocks, bits}, schemas: {label: {role: JSON Schema}}}
  */
