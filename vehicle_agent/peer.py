@@ -27,8 +27,6 @@ from app.protocol.constants import AUTOPILOT_CHANNEL
 
 log = logging.getLogger(__name__)
 
-CHANNEL_LABEL = AUTOPILOT_CHANNEL
-
 SendSignal = Callable[[dict[str, Any]], Awaitable[None]]
 
 
@@ -58,12 +56,12 @@ class RelayLink:
         # may talk to the outside world unless the operator configured it.
         self.pc = RTCPeerConnection(RTCConfiguration(iceServers=list(ice_servers or [])))
         self.pc.addTrack(track)
-        self.channel = self.pc.createDataChannel(CHANNEL_LABEL)
+        self.channel = self.pc.createDataChannel(AUTOPILOT_CHANNEL)
         self.connected = asyncio.Event()
 
         @self.channel.on("open")
         def _open() -> None:
-            log.info("data channel %r to %s open", CHANNEL_LABEL, relay)
+            log.info("data channel %r to %s open", AUTOPILOT_CHANNEL, relay)
             self.connected.set()
 
         @self.channel.on("message")
