@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import random
+import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
@@ -21,6 +21,7 @@ from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels
 from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
+from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -48,24 +49,10 @@ class AgentConfig:
     profile: str = "default"
     goal_timeout_s: float | None = None
     ice_servers: list[RTCIceServer] = field(default_factory=list)
-
-
-class Backoff:
-    """Exponential backoff with jitter: 0.5 s, 1 s, 2 s ... up to ``cap``."""
-
-    def __init__(self, first: float = 0.5, cap: float = 8.0) -> None:
-        self.first, self.cap = first, cap
-        self._next = first
-
-    def next(self) -> float:
-        """The delay to wait now; the following one doubles."""
-        delay = self._next
-        self._next = min(self.cap, self._next * 2)
-        return delay * random.uniform(0.9, 1.1)
-
-    def reset(self) -> None:
-        """After a success, start again from the first delay."""
-        self._next = self.first
+    # A vehicle token for the room (``autopilot token``), when the server asks for one.
+    token: str | None = None
+    # Trust for an https:// server: None means the system's CAs.
+    tls: ssl.SSLContext | None = None
 
 
 class Agent:
@@ -143,7 +130,13 @@ class Agent:
         backoff = Backoff()
         first = True
         while True:
-            client = SignalingClient(self.config.server, self.config.name, self.config.room)
+            client = SignalingClient(
+                self.config.server,
+                self.config.name,
+                self.config.room,
+                token=self.config.token,
+                tls=self.config.tls,
+            )
             try:
                 peers = await client.connect()
             except SignalingError as exc:

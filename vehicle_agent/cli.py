@@ -6,12 +6,16 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import signal
+import os
+import ssl
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
 from app.protocol.constants import DEFAULT_ROOM
+from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -20,6 +24,9 @@ from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
+
+# Read when --token is not given, so the token stays out of the process list.
+TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -73,7 +80,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
     )
     parser.add_argument(
-        "--ros", type=int, choices=(1, 2), default=1, help="ROS message type names (default 1)"
+        "--ros",
+        choices=ROS_SETTINGS,
+        default=AUTO,
+        help="ROS flavour of the robot's type names when its rosapi cannot tell: 1, 2 (up to "
+        "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
         "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"
@@ -94,6 +105,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--events", type=Path, metavar="PATH", help="append a JSON-lines event log here"
     )
+    parser.add_argument(
+        "--token",
+        default=os.environ.get(TOKEN_ENV),
+        help=f"vehicle token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
+    )
+    parser.add_argument(
+        "--ca-file",
+        type=Path,
+        metavar="PEM",
+        help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
+    )
+
+
+def tls_context(ca_file: Path | None) -> ssl.SSLContext:
+    """A client context trusting ``ca_file``, or the system's CAs; names are always checked."""
+    try:
+        return ssl.create_default_context(cafile=None if ca_file is None else str(ca_file))
+    except (OSError, ssl.SSLError) as exc:
+        raise OSError(f"cannot use --ca-file {ca_file}: {exc}") from exc
+
+
+def same_server(server: str, rosbridge: str) -> bool:
+    """True when ``rosbridge`` is the server's own ``/rosbridge`` (same host and port), the only
+    rosbridge the token is sent to."""
+    ours, theirs = urlsplit(server), urlsplit(rosbridge)
+    return (ours.hostname, ours.port) == (theirs.hostname, theirs.port)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,7 +155,10 @@ async def _main(args: argparse.Namespace) -> int:
             "frame_sent", frame=info.frame, face_x=info.face_x, face_y=info.face_y
         ),
     )
-    turtle: Turtle = RosbridgeTurtle(args.rosbridge, args.ros) if args.rosbridge else SimTurtle()
+    turtle: Turtle = SimTurtle()
+    if args.rosbridge:
+        token = args.token if same_server(args.server, args.rosbridge) else None
+        turtle = RosbridgeTurtle(args.rosbridge, args.ros, token=token, ca_file=args.ca_file)
     config = AgentConfig(
         server=args.server,
         room=args.room,
@@ -126,12 +166,12 @@ async def _main(args: argparse.Namespace) -> int:
         profile=args.profile,
         goal_timeout_s=args.goal_timeout,
         ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
+        token=args.token,
+        tls=tls_context(args.ca_file),
     )
     agent = Agent(config, video, turtle, events)
     task = asyncio.create_task(agent.run())
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, task.cancel)
+    on_stop_signals(task.cancel)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task

@@ -5,9 +5,9 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import ssl
 from collections.abc import AsyncIterator
 from typing import Any
-from urllib.parse import urlsplit, urlunsplit
 
 from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection, connect
@@ -16,6 +16,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from app.protocol.constants import Role
 from app.protocol.errors import describe
 from app.protocol.signaling import Leave, Login
+from app.protocol.urls import ServerUrlError, ws_endpoint
 
 log = logging.getLogger(__name__)
 
@@ -34,34 +35,45 @@ class LoginRefused(SignalingError):
 
 def ws_url(server: str) -> str:
     """The ``/ws`` endpoint for a server base URL (``http://host:port`` or ``ws://.../ws``)."""
-    parts = urlsplit(server)
-    scheme = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}.get(parts.scheme)
-    if scheme is None or not parts.netloc:
-        raise SignalingError(f"server URL must look like http://host:port, not {server!r}")
-    path = parts.path.rstrip("/")
-    if not path.endswith("/ws"):
-        path += "/ws"
-    return urlunsplit((scheme, parts.netloc, path, parts.query, ""))
+    try:
+        return ws_endpoint(server)
+    except ServerUrlError as exc:
+        raise SignalingError(str(exc)) from None
 
 
 class SignalingClient:
     """One logged-in signaling connection; iterate over it for the server's messages."""
 
-    def __init__(self, server: str, name: str, room: str, role: Role = "vehicle") -> None:
+    def __init__(
+        self,
+        server: str,
+        name: str,
+        room: str,
+        role: Role = "vehicle",
+        token: str | None = None,
+        tls: ssl.SSLContext | None = None,
+    ) -> None:
         self.url = ws_url(server)
         self.name = name
         self.room = room
         self.role = role
+        self.token = token
+        # Only for wss://; None there means the system's trusted CAs.
+        self.tls = tls if self.url.startswith("wss:") else None
         self._ws: ClientConnection | None = None
 
     async def connect(self) -> list[Message]:
         """Open the socket and log in; returns the room's roster (``[{name, role}]``)."""
         try:
-            self._ws = await connect(self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20)
+            self._ws = await connect(
+                self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20, ssl=self.tls
+            )
         except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
             raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
         try:
-            login = Login(type="login", name=self.name, role=self.role, room=self.room)
+            login = Login(
+                type="login", name=self.name, role=self.role, room=self.room, token=self.token
+            )
         except ValidationError as exc:
             await self.close()
             raise SignalingError(f"cannot log in as {self.name!r}: {describe(exc)}") from exc

@@ -4,7 +4,8 @@ Each page embeds its configuration as ``<script type="application/json" id="conf
 ES modules need no globals: ICE servers from :class:`~app.server.config.Settings`, the
 signaling path, the default rosbridge URL (this server's ``/rosbridge``) and what the query
 string asks for, and the protocol constants and data-channel schemas rendered from
-:mod:`app.protocol` (``config.protocol``, read by ``protocol.js``).
+:mod:`app.protocol` (``config.protocol``, read by ``protocol.js``). The token is not among
+them: the page reads it from its URL fragment, which no server sees.
 """
 
 from __future__ import annotations
@@ -24,8 +25,11 @@ from app.protocol.constants import (
     VEHICLE_PROFILES,
     Role,
 )
+from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
+from app.server.tls import insecure_rosbridge
 
 router = APIRouter()
 templates = Jinja2Templates(directory=TEMPLATES_DIR)
@@ -43,18 +47,24 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     query = request.query_params
     profile = query.get("profile", DEFAULT_PROFILE)
     profiles = VEHICLE_PROFILES if role == "vehicle" else RELAY_PROFILES
+    own_rosbridge = f"{_ws_base(request)}/rosbridge"
+    rosbridge = query.get("rosbridge") or own_rosbridge
     return {
         "role": role,
         "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
         "wsPath": "/ws",
         "room": query.get("room", DEFAULT_ROOM),
         "name": query.get("name", ""),
-        "token": query.get("token"),
         "auto": query.get("auto") in ("1", "true", "yes"),
         # An unknown profile falls back to the default rather than breaking the page.
         "profile": profile if profile in profiles else DEFAULT_PROFILE,
-        "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
-        "ros": "2" if query.get("ros") == "2" else "1",
+        "rosbridge": rosbridge,
+        # The page's token (read from the URL fragment) goes only to this server's rosbridge.
+        "rosbridgeAuth": rosbridge == own_rosbridge,
+        "rosbridgeError": insecure_rosbridge(rosbridge, request.url.scheme),
+        # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
+        "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
+        "rosTypes": ros_page_config(),
         "protocol": browser_protocol(),
     }
 

@@ -11,6 +11,7 @@ from typing import Any
 import httpx
 import pytest
 
+from app.protocol.ros import page_config as ros_page_config
 from app.server.config import IceServer, Settings
 from app.server.serve import RunningServer
 
@@ -74,7 +75,9 @@ def test_defaults_no_ice_servers_and_this_servers_rosbridge(
     assert config["auto"] is False
     assert config["profile"] == "default"
     assert config["rosbridge"] == server.url.replace("http://", "ws://") + "/rosbridge"
-    assert config["ros"] == "1"
+    # The page learns the robot's flavour from rosapi unless told; the type table comes along.
+    assert config["ros"] == "auto"
+    assert config["rosTypes"] == ros_page_config()
 
 
 def test_query_sets_room_name_auto_profile_and_rosbridge(server: RunningServer) -> None:
@@ -83,6 +86,13 @@ def test_query_sets_room_name_auto_profile_and_rosbridge(server: RunningServer) 
     assert (config["room"], config["name"], config["auto"]) == ("r1", "v1", True)
     assert config["profile"] == "thesis"
     assert (config["rosbridge"], config["ros"]) == ("ws://robot:9090", "2")
+
+
+def test_an_unknown_ros_setting_falls_back_to_auto(server: RunningServer) -> None:
+    config = embedded_config(httpx.get(f"{server.url}/vehicle?ros=3").text)
+    assert config["ros"] == "auto"
+    config = embedded_config(httpx.get(f"{server.url}/vehicle?ros=jazzy").text)
+    assert config["ros"] == "jazzy"
 
 
 def test_an_unknown_profile_falls_back_to_default(server: RunningServer) -> None:

@@ -10,7 +10,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 
 import pytest
 from websockets.asyncio.client import connect
@@ -18,6 +17,7 @@ from websockets.asyncio.client import connect
 from app.server.serve import RunningServer
 from app.tools.relay_service import RelayService
 from tests.helpers.processes import cmdline, descendants, wait_all_gone
+from tests.helpers.waiting import eventually
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -32,15 +32,6 @@ async def roster(server: RunningServer, room: str = "default") -> list[dict[str,
     assert reply["success"], reply
     peers: list[dict[str, str]] = reply["peers"]
     return peers
-
-
-async def eventually(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    try:
-        async with asyncio.timeout(timeout):
-            while not condition():
-                await asyncio.sleep(0.1)
-    except TimeoutError:
-        raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from None
 
 
 async def wait_for_relay_in(server: RunningServer, room: str, what: str) -> None:

@@ -4,6 +4,7 @@ import { Controller, PROFILES } from './control.js';
 import { RelayLink, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
+import { pickTypes } from './rosflavour.js';
 import { byTestId, fmt, Log, readConfig, show } from './ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
@@ -24,20 +25,21 @@ const status = {
   lastTwist: null,
   pose: null,
   rosConnected: false,
+  rosFlavour: null, // '1', '2' or 'jazzy' once connected
+  rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
 };
 window.autopilotStatus = status;
 
 /** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
 class Turtle {
-  constructor(url, rosVersion) {
+  /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
+  constructor(url, setting, rosTypes, token) {
     this.url = url;
-    const ros2 = rosVersion === '2';
-    this.types = {
-      twist: ros2 ? 'geometry_msgs/msg/Twist' : 'geometry_msgs/Twist',
-      pose: ros2 ? 'turtlesim/msg/Pose' : 'turtlesim/Pose',
-      teleport: ros2 ? 'turtlesim/srv/TeleportAbsolute' : 'turtlesim/TeleportAbsolute',
-    };
+    this.setting = setting;
+    this.rosTypes = rosTypes;
+    this.token = token;
+    this.types = null; // learnt on each connection
     this.ros = null;
     this.cmdVel = null;
     this.spawnDone = false;
@@ -48,14 +50,14 @@ class Turtle {
   connect() {
     const ros = new ROSLIB.Ros({ url: this.url });
     this.ros = ros;
+    // Queued for the moment the socket opens, ahead of the subscriptions made on 'connection'.
+    if (this.token) ros.callOnConnection({ op: 'auth', token: this.token });
     ros.on('connection', () => {
       log.info(`rosbridge connected: ${this.url}`);
       this.reported = false;
       status.rosConnected = true;
       show('ros-state', 'connected');
-      this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: this.types.twist });
-      const pose = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: this.types.pose });
-      pose.subscribe((msg) => this.#pose(msg));
+      this.#learnTypes(ros);
     });
     // roslib throws on an 'error' nobody listens to; the 'close' that follows is what we report.
     ros.on('error', () => {});
@@ -70,6 +72,35 @@ class Turtle {
       this.cmdVel = null;
       show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
       setTimeout(() => this.connect(), ROS_RETRY_MS);
+    });
+  }
+
+  // The robot's own type names from rosapi topic_type; the ros= setting when it cannot say.
+  async #learnTypes(ros) {
+    const [pose, twist] = await Promise.all(
+      ['/turtle1/pose', '/turtle1/cmd_vel'].map((topic) => this.#topicType(ros, topic)),
+    );
+    if (this.ros !== ros) return; // reconnected meanwhile
+    const types = pickTypes(this.rosTypes, this.setting, pose, twist);
+    this.types = types;
+    status.rosFlavour = types.flavour;
+    status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
+    const from = types.fromRobot ? 'as its rosapi reports' : `from ros=${this.setting}: rosapi did not say`;
+    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.twist}) ${from}`);
+    show('ros-state', `connected (ROS ${types.flavour})`);
+    this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: types.twist });
+    const topic = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: types.pose });
+    topic.subscribe((msg) => this.#pose(msg));
+  }
+
+  #topicType(ros, topic) {
+    return new Promise((resolve) => {
+      const timer = setTimeout(() => resolve(null), this.rosTypes.detectTimeoutS * 1000);
+      const done = (type) => {
+        clearTimeout(timer);
+        resolve(type || null);
+      };
+      ros.getTopicType(topic, done, () => done(null));
     });
   }
 
@@ -102,7 +133,9 @@ class Turtle {
   }
 }
 
-const turtle = new Turtle(config.rosbridge, config.ros);
+const turtle = new Turtle(
+  config.rosbridge, config.ros, config.rosTypes, config.rosbridgeAuth ? config.token : null,
+);
 /** Everything else this page holds, in one place. */
 const session = {
   channel: null, // the open `autopilot` data channel
@@ -208,7 +241,12 @@ room.addEventListener('roster', showState);
 room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') halt('left the room');
 });
-turtle.connect();
+if (config.rosbridgeError) {
+  log.error(config.rosbridgeError);
+  show('ros-state', 'refused: insecure rosbridge URL');
+} else {
+  turtle.connect();
+}
 const stream = await startCamera();
 const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: (peer) => setupPeer(peer, stream) });
 link.addEventListener('lost', (event) => {

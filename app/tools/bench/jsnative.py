@@ -85,7 +85,10 @@ async def compare(
     page = await browser.new_page()
     try:
         await page.goto(f"{base_url}/parity")
-        await page.wait_for_function("document.body.dataset.ready !== undefined", timeout=180_000)
+        # A function, not an expression, which the page's CSP would refuse to eval.
+        await page.wait_for_function(
+            "() => document.body.dataset.ready !== undefined", timeout=180_000
+        )
         if await page.evaluate("document.body.dataset.ready") != "true":
             state = await page.text_content("#state")
             raise RuntimeError(f"the parity page's analyzer did not start: {state}")

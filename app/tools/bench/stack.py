@@ -25,6 +25,7 @@ from playwright.async_api import Browser, ConsoleMessage, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
+from app.protocol.urls import page_url
 from app.tools.bench.results import MemorySample, ProfileRun
 from app.tools.bench.stats import PoseSample, TruthSample, heading_track
 from vehicle_agent.control import pixel_to_terrain
@@ -93,7 +94,7 @@ async def run_profile(
     async with AsyncExitStack() as stack:
         relay = await _open_page(stack, browser, "relay")
         await relay.goto(
-            f"{server_url}/relay?room={room}&name=relay&auto=1&profile={options.profile}"
+            page_url(server_url, "relay", room, name="relay", auto=1, profile=options.profile)
         )
         await _wait(
             relay,
@@ -104,7 +105,7 @@ async def run_profile(
         agent = await _start_agent(server_url, room, options, events_path, agent_log)
         stack.push_async_callback(_stop_agent, agent, agent_log)
         client = await _open_page(stack, browser, "client")
-        await client.goto(f"{server_url}/client?room={room}&name=client&auto=1")
+        await client.goto(page_url(server_url, "client", room, name="client", auto=1))
         start = client.get_by_role("button", name="Start Piloting")
         await _unless_agent_exits(
             agent,
