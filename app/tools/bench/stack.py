@@ -98,7 +98,7 @@ async def run_profile(
         )
         await _wait(
             relay,
-            "window.autopilotStatus?.analyzerReady === true",
+            "() => window.autopilotStatus?.analyzerReady === true",
             ANALYZER_TIMEOUT_S,
             "the relay's OpenCV.js analyzer did not become ready",
         )
@@ -120,7 +120,7 @@ async def run_profile(
             agent_log,
             _wait(
                 relay,
-                "window.autopilotStatus.goalsSent > 0",
+                "() => window.autopilotStatus.goalsSent > 0",
                 FIRST_GOAL_TIMEOUT_S,
                 "piloting started but the relay sent no goal",
             ),
@@ -196,6 +196,8 @@ async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page
 
 
 async def _wait(page: Page, condition: str, timeout_s: float, failure: str) -> None:
+    # ``condition`` is a JS function: under the pages' CSP (no 'unsafe-eval') Playwright cannot
+    # evaluate a bare expression.
     try:
         await page.wait_for_function(condition, timeout=timeout_s * 1000, polling=250)
     except PlaywrightTimeout as exc:
