@@ -3,6 +3,8 @@ answered with errors and never breaks the vehicle; a relay leaving stops the tur
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from playwright.sync_api import Browser, expect
 
@@ -65,17 +67,24 @@ def test_vehicle_answers_bad_messages_with_errors_and_stops_when_the_relay_leave
             "not json {",
             "[1, 2]",
             '{"type": "warp"}',
-            '{"type": "goal", "x": "left", "y": 1, "w": 640, "h": 480}',
-            '{"type": "goal", "x": 1, "y": 1, "w": 0, "h": 480}',
+            json.dumps({**GOAL, "x": "left"}),
+            json.dumps({**GOAL, "w": 0}),
+            json.dumps({k: v for k, v in GOAL.items() if k != "seq"}),
+            json.dumps(GOAL).replace('"y": 240', '"y": NaN'),
         ]
         relay.evaluate("texts => texts.forEach((t) => window.fakeRelay.channel.send(t))", bad)
         relay.wait_for_function(f"() => window.fakeRelay.errors.length >= {len(bad)}")
-        reasons = relay.evaluate("() => window.fakeRelay.errors.map((e) => e.reason)")
+        errors = relay.evaluate("() => window.fakeRelay.errors")
+        reasons = [e["reason"] for e in errors]
         assert "malformed JSON" in reasons[0]
         assert "type" in reasons[1]
-        assert "warp" in reasons[2]
-        assert '"x"' in reasons[3]
-        assert "w, h" in reasons[4]
+        assert "warp" in reasons[2] and errors[2]["ref"] == "warp"
+        # A message that breaks the Goal model is refused naming the field (schema.js, from
+        # the same pydantic model the Python agent validates with).
+        assert 'field "x"' in reasons[3] and errors[3]["ref"] == "goal"
+        assert 'field "w"' in reasons[4]
+        assert 'field "seq"' in reasons[5] and "required" in reasons[5]
+        assert "malformed JSON" in reasons[6]
         expect(vehicle.get_by_test_id("goals-received")).to_have_text("0")
 
         # The vehicle still works: good goals are taken and turned into Twists.

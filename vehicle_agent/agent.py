@@ -10,19 +10,19 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Any
 
 from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from app.protocol import jsonedge
+from app.protocol import channels, jsonedge
+from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
 from app.protocol.control import with_standoff
-from app.protocol.errors import describe
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
@@ -38,13 +38,16 @@ CONNECT_TIMEOUT_S = 10.0
 TELEMETRY_PERIOD_S = 0.1
 TICK_PERIOD_S = 0.05
 
+# Handles one validated data-channel message from the relay.
+ChannelHandler = Callable[[str, Any], None]
+
 
 @dataclass
 class AgentConfig:
     """What ``autopilot vehicle`` was asked to do."""
 
     server: str
-    room: str = "default"
+    room: str = DEFAULT_ROOM
     name: str = "vehicle"
     profile: str = "default"
     goal_timeout_s: float | None = None
@@ -57,29 +60,6 @@ class AgentConfig:
     token: str | None = None
     # Trust for an https:// server: None means the system's CAs.
     tls: ssl.SSLContext | None = None
-
-
-# A frame wider or taller than this is not a camera frame (8K is 7680 wide).
-MAX_FRAME_SIDE = 16_384
-
-
-class GoalMessage(BaseModel):
-    """relay→vehicle ``goal`` (DESIGN §3, docs/contracts.md).
-
-    Strict and finite: ``"nan"``, ``"1"`` or ``NaN`` are refused, never turned into a command.
-    """
-
-    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False)
-
-    type: Literal["goal"]
-    seq: int
-    op: str
-    x: float
-    y: float
-    w: int = Field(gt=0, le=MAX_FRAME_SIDE)
-    h: int = Field(gt=0, le=MAX_FRAME_SIDE)
-    t: float
-    frame: int | None = None
 
 
 class Agent:
@@ -130,10 +110,11 @@ class Agent:
             "link_down": self._on_link_event,
             "retry": self._on_retry,
         }
-        self._channel_handlers: dict[str, Callable[[str, dict[str, Any]], str | None]] = {
-            "goal": self._on_goal,
-            "stop": self._on_stop,
-            "error": self._on_peer_error,
+        # One handler per message the vehicle accepts on `autopilot` (channels.RECEIVERS).
+        self._channel_handlers: dict[type[channels.ChannelMessage], ChannelHandler] = {
+            channels.Goal: self._on_goal,
+            channels.Stop: self._on_stop,
+            channels.Error: self._on_peer_error,
         }
 
     @property
@@ -369,54 +350,45 @@ class Agent:
         if reply is not None:
             link.send(reply)
 
-    def handle_channel_message(self, text: str | bytes, relay: str) -> dict[str, Any] | None:
+    def handle_channel_message(self, text: str | bytes, relay: str) -> channels.Error | None:
         """Act on one data-channel message from ``relay``; returns the error reply, if any.
 
-        Every frame goes through the JSON edge, so no input raises: it drives the turtle or is
-        refused with a reason.
+        Every frame goes through the JSON edge and the channel's models, so no input raises: it
+        drives the turtle or is refused with a reason. Both channels to the relay accept what
+        ``autopilot`` does (the state channel carries goals only).
         """
         try:
-            message = jsonedge.loads(text)
+            data = jsonedge.loads(text)
         except jsonedge.JsonEdgeError as exc:
             return self._reject(relay, str(exc), None)
-        kind = message.get("type") if isinstance(message, dict) else None
-        if not isinstance(kind, str):
-            return self._reject(relay, "expected a JSON object with a string 'type'", None)
-        handler = self._channel_handlers.get(kind)
-        if handler is None:
-            return self._reject(relay, f"unknown message type {kind!r}", kind)
-        reason = handler(relay, message)
-        return None if reason is None else self._reject(relay, reason, kind)
+        message = channels.validate(data, AUTOPILOT_CHANNEL, "vehicle")
+        if isinstance(message, channels.Refused):
+            return self._reject(relay, message.reason, message.ref)
+        self._channel_handlers[type(message)](relay, message)
+        return None
 
-    def _reject(self, relay: str, reason: str, ref: str | None) -> dict[str, Any]:
+    def _reject(self, relay: str, reason: str, ref: str | None) -> channels.Error:
         log.warning("dropped a data-channel message from %r: %s", relay, reason)
-        return {"type": "error", "reason": reason, "ref": ref}
+        return channels.Error(reason=reason, ref=ref)
 
-    def _on_goal(self, relay: str, message: dict[str, Any]) -> str | None:
-        try:
-            goal = GoalMessage.model_validate(message)
-        except ValidationError as exc:
-            return f"bad goal: {describe(exc)}"
+    def _on_goal(self, relay: str, goal: channels.Goal) -> None:
         verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
         if verdict != "fresh":
             self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
-            return None
+            return
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
         )
         self._publish(
             self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
         )
-        return None
 
-    def _on_stop(self, relay: str, message: dict[str, Any]) -> str | None:
+    def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)
         self._publish(self.controller.stop())
-        return None
 
-    def _on_peer_error(self, relay: str, message: dict[str, Any]) -> str | None:
-        log.warning("%r reported an error: %r", relay, message.get("reason"))
-        return None
+    def _on_peer_error(self, relay: str, message: channels.Error) -> None:
+        log.warning("%r reported an error: %r", relay, message.reason)
 
     # --- turtle ------------------------------------------------------------------------------
 
@@ -443,15 +415,12 @@ class Agent:
         if now - self._last_telemetry >= TELEMETRY_PERIOD_S:
             self._last_telemetry = now
             link = self._link
-            sent = link is not None and link.send_state(
-                {
-                    "type": "pose",
-                    "x": pose.x,
-                    "y": pose.y,
-                    "theta": pose.theta,
-                    "t": time.time() * 1000,
-                }
-            )
+            sent = False
+            if link is not None and all(map(math.isfinite, (pose.x, pose.y, pose.theta))):
+                # Pose is state: the lossy channel, where a late one is skipped, not waited for.
+                sent = link.send_state(
+                    channels.Pose(x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000)
+                )
             self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
 
     async def _tick(self) -> None:

@@ -13,6 +13,7 @@ from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
+from app.protocol.constants import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
@@ -66,7 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="http://127.0.0.1:8000",
         help="the server's base URL (default http://127.0.0.1:8000)",
     )
-    parser.add_argument("--room", default="default", help="room to join (default: default)")
+    parser.add_argument(
+        "--room", default=DEFAULT_ROOM, help=f"room to join (default: {DEFAULT_ROOM})"
+    )
     parser.add_argument("--name", default="vehicle", help="peer name (default: vehicle)")
     parser.add_argument(
         "--video",

@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from app.protocol.angles import wrap_angle
 from app.protocol.control import (
     MIN_TARGET_DISTANCE_M,
     PROFILES,
@@ -84,16 +85,6 @@ class Twist:
 
 
 ZERO_TWIST = Twist(0.0, 0.0)
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` wrapped into (−π, π]."""
-    wrapped = math.fmod(angle, 2 * math.pi)
-    if wrapped <= -math.pi:
-        wrapped += 2 * math.pi
-    elif wrapped > math.pi:
-        wrapped -= 2 * math.pi
-    return wrapped
 
 
 def _clamp(value: float, low: float, high: float) -> float:

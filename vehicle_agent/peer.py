@@ -25,18 +25,16 @@ from aiortc import (
 )
 from aiortc.sdp import candidate_from_sdp
 
-from app.protocol import jsonedge
 from app.protocol.channels import (
-    CONTROL_CHANNEL,
-    STATE_CHANNEL,
     STATE_CHANNEL_MAX_RETRANSMITS,
     STATE_CHANNEL_ORDERED,
+    ChannelMessage,
+    dump,
 )
+from app.protocol.constants import AUTOPILOT_CHANNEL, AUTOPILOT_STATE_CHANNEL
 from app.protocol.signaling import IceTransportPolicy
 
 log = logging.getLogger(__name__)
-
-CHANNEL_LABEL = CONTROL_CHANNEL
 
 SendSignal = Callable[[dict[str, Any]], Awaitable[None]]
 
@@ -74,9 +72,9 @@ class RelayLink:
             )
         )
         self.pc.addTrack(track)
-        self.channel = self.pc.createDataChannel(CHANNEL_LABEL)
+        self.channel = self.pc.createDataChannel(AUTOPILOT_CHANNEL)
         self.state_channel = self.pc.createDataChannel(
-            STATE_CHANNEL,
+            AUTOPILOT_STATE_CHANNEL,
             ordered=STATE_CHANNEL_ORDERED,
             maxRetransmits=STATE_CHANNEL_MAX_RETRANSMITS,
         )
@@ -92,7 +90,7 @@ class RelayLink:
 
         @self.channel.on("open")
         def _open() -> None:
-            log.info("data channel %r to %s open", CHANNEL_LABEL, relay)
+            log.info("data channel %r to %s open", AUTOPILOT_CHANNEL, relay)
             self.connected.set()
             if self.on_up is not None:
                 self.on_up(self)
@@ -174,11 +172,11 @@ class RelayLink:
         kind = getattr(local, "type", None)
         return kind if isinstance(kind, str) else None
 
-    def send(self, message: dict[str, Any]) -> bool:
+    def send(self, message: ChannelMessage) -> bool:
         """Send a JSON message on the reliable channel; False when it is not open."""
         return _send(self.channel, message)
 
-    def send_state(self, message: dict[str, Any]) -> bool:
+    def send_state(self, message: ChannelMessage) -> bool:
         """Send a JSON message on the lossy state channel; False when it is not open."""
         return _send(self.state_channel, message)
 
@@ -195,13 +193,9 @@ class RelayLink:
         await asyncio.shield(self.pc.close())
 
 
-def _send(channel: RTCDataChannel, message: dict[str, Any]) -> bool:
+def _send(channel: RTCDataChannel, message: ChannelMessage) -> bool:
     if channel.readyState != "open":
         return False
-    try:
-        frame = jsonedge.dumps(message)
-    except ValueError as exc:  # NaN or Infinity: browsers' JSON.parse would refuse it
-        log.error("not sending a %r message on %s: %s", message.get("type"), channel.label, exc)
-        return False
-    channel.send(frame)
+    # A model holds finite numbers only, so its JSON never carries NaN (browsers refuse it).
+    channel.send(dump(message))
     return True

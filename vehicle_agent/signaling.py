@@ -13,7 +13,9 @@ from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 
-from app.protocol.signaling import IceServer, IceTransportPolicy, LoginReply
+from app.protocol.constants import Role
+from app.protocol.errors import describe
+from app.protocol.signaling import IceServer, IceTransportPolicy, Leave, Login, LoginReply
 from app.protocol.urls import ServerUrlError, ws_endpoint
 
 log = logging.getLogger(__name__)
@@ -47,7 +49,7 @@ class SignalingClient:
         server: str,
         name: str,
         room: str,
-        role: str = "vehicle",
+        role: Role = "vehicle",
         token: str | None = None,
         tls: ssl.SSLContext | None = None,
     ) -> None:
@@ -72,10 +74,14 @@ class SignalingClient:
             )
         except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
             raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
-        login: Message = {"type": "login", "name": self.name, "role": self.role, "room": self.room}
-        if self.token is not None:
-            login["token"] = self.token
-        await self.send(login)
+        try:
+            login = Login(
+                type="login", name=self.name, role=self.role, room=self.room, token=self.token
+            )
+        except ValidationError as exc:
+            await self.close()
+            raise SignalingError(f"cannot log in as {self.name!r}: {describe(exc)}") from exc
+        await self.send(login.model_dump(exclude_none=True))
         try:
             async with asyncio.timeout(LOGIN_TIMEOUT_S):
                 reply = await self._receive()
@@ -133,7 +139,7 @@ class SignalingClient:
         if ws is None:
             return
         try:
-            await ws.send(json.dumps({"type": "leave"}))
+            await ws.send(Leave(type="leave").model_dump_json())
         except ConnectionClosed:
             pass
         await ws.close()

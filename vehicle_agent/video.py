@@ -31,6 +31,8 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
+from app.protocol.constants import TAG_BITS, TAG_BLOCKS_PER_WIDTH, TAG_MARKER_BLOCKS
+
 log = logging.getLogger(__name__)
 
 ASSETS = Path(__file__).resolve().parent / "assets"
@@ -43,10 +45,9 @@ DEFAULT_FPS = 30.0
 
 Image = npt.NDArray[np.uint8]
 
-# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge.
-TAG_BLOCKS_PER_WIDTH = 40
-TAG_BITS = 24
-TAG_FIRST_BIT_BLOCK = 2
+# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
+# blocks first, then the bits.
+TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
 
 
 class VideoSourceError(RuntimeError):

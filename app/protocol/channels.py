@@ -1,19 +1,36 @@
-"""The vehicle's data channels to the relay, and the latest-wins numbers (DESIGN §9).
+"""The data-channel messages of DESIGN §3 (and docs/contracts.md) as pydantic models.
 
-The vehicle opens two channels. ``autopilot`` is reliable and ordered: mode commands (``stop``)
-and error reports, which must arrive. ``autopilot-state`` is unordered and never retransmits:
-goals (relay -> vehicle) and pose (vehicle -> relay) are state, only the newest matters, and a
-lost one is better skipped than waited for (no head-of-line blocking on a lossy link). The
-vehicle applies a goal only if its ``seq`` is newer than every goal applied on this link and it
-is not stale (see ``vehicle_agent/freshness.py`` and ``app/static/js/freshness.js``).
+One model per message ``type``; each direction of each channel accepts a tagged union of them
+(:data:`RECEIVERS`). Numbers must be finite: JSON has no NaN or Infinity, and Python's ``json``
+module would otherwise let them through. Models are strict (a string is not a number) and allow
+extra fields, so a newer peer may add one without breaking an older one. The browser validates
+against JSON Schemas generated from these same models (:func:`channel_schemas`).
+
+The vehicle opens two channels to the relay (DESIGN §9 "Lossy links"). ``autopilot`` is reliable
+and ordered: mode commands (``stop``) and error reports, which must arrive. ``autopilot-state`` is
+unordered and never retransmits: goals (relay -> vehicle) and pose (vehicle -> relay) are state,
+only the newest matters, and a lost one is better skipped than waited for (no head-of-line
+blocking on a lossy link). The vehicle applies a goal only if its ``seq`` is newer than every
+goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
+``app/static/js/freshness.js``). The client's ``control`` channel is reliable.
 """
 
 from __future__ import annotations
 
-from typing import Any, Final
+import json
+from dataclasses import dataclass
+from typing import Annotated, Any, Final, Literal, get_args
 
-CONTROL_CHANNEL: Final = "autopilot"
-STATE_CHANNEL: Final = "autopilot-state"
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from app.protocol.constants import (
+    AUTOPILOT_CHANNEL,
+    AUTOPILOT_STATE_CHANNEL,
+    CONTROL_CHANNEL,
+    Role,
+)
+from app.protocol.errors import describe
+
 # RTCDataChannelInit of the state channel (aiortc takes the same two keyword arguments).
 STATE_CHANNEL_ORDERED: Final = False
 STATE_CHANNEL_MAX_RETRANSMITS: Final = 0
@@ -22,17 +39,203 @@ STATE_CHANNEL_MAX_RETRANSMITS: Final = 0
 GOAL_MAX_AGE_S: Final = 0.5
 GOAL_AGE_WINDOW_S: Final = 5.0
 
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Count = Annotated[int, Field(ge=0)]
+# A frame wider or taller than this is not a camera frame (8K is 7680 wide).
+MAX_FRAME_SIDE: Final = 16_384
+Size = Annotated[int, Field(gt=0, le=MAX_FRAME_SIDE)]
+OpId = Annotated[str, Field(min_length=1, max_length=64)]
 
-def page_channels() -> dict[str, Any]:
-    """The same facts for a page's embedded config."""
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="allow", strict=True, frozen=True)
+
+
+class Goal(_Message):
+    """relay→vehicle: steer toward pixel (x, y) of a w×h frame; ``t`` is the relay's ms clock."""
+
+    type: Literal["goal"] = "goal"
+    seq: Annotated[int, Field(ge=1)]
+    op: OpId
+    x: Finite
+    y: Finite
+    w: Size
+    h: Size
+    t: Finite
+    # The frame tag of the analysed frame, when the video carries one.
+    frame: Count | None = None
+
+
+class Pose(_Message):
+    """vehicle→relay, and relay→client as forwarded: the turtle's pose in terrain metres."""
+
+    type: Literal["pose"] = "pose"
+    x: Finite
+    y: Finite
+    theta: Finite
+    t: Finite | None = None
+
+
+class Stop(_Message):
+    """relay→vehicle: piloting stopped, zero at once; client→relay: stop piloting."""
+
+    type: Literal["stop"] = "stop"
+
+
+class Start(_Message):
+    """client→relay: start piloting (signaling is the normal path, as in the thesis)."""
+
+    type: Literal["start"] = "start"
+
+
+class GetOps(_Message):
+    """client→relay: ask for the operations (answered with ``ops`` then ``state``)."""
+
+    type: Literal["getOps"] = "getOps"
+
+
+class SetOp(_Message):
+    """client→relay: use this operation from the next snapshot on."""
+
+    type: Literal["setOp"] = "setOp"
+    op: OpId
+
+
+class OpInfo(_Message):
+    """One operation the relay offers."""
+
+    id: OpId
+    label: str
+    description: str
+
+
+class Ops(_Message):
+    """relay→client: the operations, in spec order, and the current one."""
+
+    type: Literal["ops"] = "ops"
+    ops: list[OpInfo]
+    current: OpId | None = None
+
+
+class State(_Message):
+    """relay→client: whether piloting, with which operation, and the vehicle's name."""
+
+    type: Literal["state"] = "state"
+    piloting: bool
+    op: OpId | None
+    vehicle: str | None
+
+
+class Point(_Message):
+    """A pixel of the analysed frame."""
+
+    x: Finite
+    y: Finite
+
+
+Box = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+
+
+class Detections(_Message):
+    """relay→client: what one snapshot found, with the relay's statistics riding along."""
+
+    type: Literal["detections"] = "detections"
+    op: OpId
+    boxes: list[Box]  # [x, y, w, h] in pixels of the w×h frame
+    target: Point | None
+    w: Size
+    h: Size
+    ms: NonNegative  # this snapshot's processing delay: taken -> goal sent
+    goalsPerS: NonNegative  # noqa: N815 -- the wire name
+
+
+class Error(_Message):
+    """Any peer→any peer: why a message was refused; ``ref`` is its type, if known."""
+
+    type: Literal["error"] = "error"
+    reason: str
+    ref: str | None = None
+
+
+ChannelMessage = Goal | Pose | Stop | Start | GetOps | SetOp | Ops | State | Detections | Error
+
+
+def _or(models: tuple[type[_Message], ...]) -> Any:
+    union: Any = models[0]
+    for model in models[1:]:
+        union = union | model
+    return union
+
+
+# What each side accepts on each channel: RECEIVERS[label][receiving role].
+RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
+    # Goals fall back to the reliable channel while the state channel is not open.
+    AUTOPILOT_CHANNEL: {"vehicle": (Goal, Stop, Error), "relay": (Pose, Error)},
+    AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Error), "relay": (Pose, Error)},
+    CONTROL_CHANNEL: {
+        "relay": (GetOps, SetOp, Start, Stop, Error),
+        "client": (Ops, State, Detections, Pose, Error),
+    },
+}
+
+
+def type_of(model: type[_Message]) -> str:
+    """The ``type`` a model's messages carry."""
+    value: str = get_args(model.model_fields["type"].annotation)[0]
+    return value
+
+
+_adapters: dict[tuple[str, Role], TypeAdapter[Any]] = {
+    (label, role): TypeAdapter(Annotated[_or(models), Field(discriminator="type")])
+    for label, by_role in RECEIVERS.items()
+    for role, models in by_role.items()
+}
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A data-channel text that is not a message this side accepts; ``ref`` is its type."""
+
+    reason: str
+    ref: str | None
+
+
+def parse(text: str | bytes, label: str, role: Role) -> ChannelMessage | Refused:
+    """Parse one data-channel message received by ``role`` on channel ``label``."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        return Refused(f"malformed JSON: {exc.msg} at position {exc.pos}", None)
+    except (RecursionError, UnicodeDecodeError) as exc:
+        return Refused(f"malformed JSON: {exc}", None)
+    return validate(data, label, role)
+
+
+def validate(data: Any, label: str, role: Role) -> ChannelMessage | Refused:
+    """Validate an already-decoded JSON value as a message ``role`` accepts on ``label``."""
+    if not isinstance(data, dict) or not isinstance(data.get("type"), str):
+        return Refused("expected a JSON object with a string field 'type'", None)
+    kind = data["type"]
+    accepted = {type_of(model) for model in RECEIVERS[label][role]}
+    if kind not in accepted:
+        return Refused(f"unknown message type {kind!r} on channel {label!r}", kind)
+    try:
+        message: ChannelMessage = _adapters[label, role].validate_python(data)
+    except ValidationError as exc:
+        # The first element of loc is the union tag (the message type); the rest is the field.
+        return Refused(f"bad {kind}: {describe(exc, skip=1)}", kind)
+    return message
+
+
+def dump(message: ChannelMessage) -> str:
+    """The JSON text of a message, as it goes on the wire."""
+    return message.model_dump_json()
+
+
+def channel_schemas() -> dict[str, dict[str, dict[str, Any]]]:
+    """JSON Schema of what each role accepts on each channel: ``[label][role]``."""
     return {
-        "control": CONTROL_CHANNEL,
-        "state": {
-            "label": STATE_CHANNEL,
-            "options": {
-                "ordered": STATE_CHANNEL_ORDERED,
-                "maxRetransmits": STATE_CHANNEL_MAX_RETRANSMITS,
-            },
-        },
-        "goalFreshness": {"maxAgeS": GOAL_MAX_AGE_S, "windowS": GOAL_AGE_WINDOW_S},
+        label: {role: _adapters[label, role].json_schema() for role in by_role}
+        for label, by_role in RECEIVERS.items()
     }

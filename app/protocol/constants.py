@@ -1,8 +1,16 @@
-"""Constants shared by the server, the agent, the tools and (through page config) the browser."""
+"""Constants shared by the server, the agent, the tools and (through page config) the browser.
+
+Everything here that a page needs is also in :func:`app.protocol.browser.browser_protocol`, which
+the server embeds in every page; the JS modules read it from there (``protocol.js``) instead of
+typing the numbers again.
+"""
 
 from __future__ import annotations
 
 from typing import Final, Literal
+
+# The room a peer joins when it names none.
+DEFAULT_ROOM: Final = "default"
 
 Role = Literal["vehicle", "relay", "client"]
 ROLES: Final[tuple[Role, ...]] = ("vehicle", "relay", "client")
@@ -12,4 +20,31 @@ Profile = Literal["default", "thesis"]
 # (these two and ``follow``, which the relay paces as ``default``) are
 # ``app.protocol.control.PROFILES``.
 PROFILES: Final[tuple[Profile, ...]] = ("default", "thesis")
+RELAY_PROFILES: Final[tuple[Profile, ...]] = PROFILES
+# How often the relay takes a snapshot, per profile: None is every decoded video frame.
+THESIS_SNAPSHOT_PERIOD_MS: Final = 1500
+RELAY_SNAPSHOT_PERIOD_MS: Final[dict[Profile, int | None]] = {
+    "default": None,
+    "thesis": THESIS_SNAPSHOT_PERIOD_MS,
+}
 DEFAULT_PROFILE: Final[Profile] = "default"
+
+# Data-channel labels (DESIGN §3): the vehicle opens ``autopilot`` to the relay, the client
+# opens ``control`` to the relay.
+AUTOPILOT_CHANNEL: Final = "autopilot"
+# ... and beside it the lossy ``autopilot-state`` for goals and pose (app/protocol/channels.py).
+AUTOPILOT_STATE_CHANNEL: Final = "autopilot-state"
+CONTROL_CHANNEL: Final = "control"
+
+# The turtlesim world: a square of this many metres, origin bottom-left, y up. The terrain
+# centre (where turtle1 spawns, and where a goal in the middle of the frame lands) is half of it,
+# written as turtlesim and the thesis write it.
+WORLD_SIZE: Final = 11.088889
+TERRAIN_CENTRE: Final = 5.544445
+
+# Frame tag (docs/contracts.md, "Frame tag"): a row of square blocks along the top edge, each
+# floor(width / TAG_BLOCKS_PER_WIDTH) px; TAG_MARKER_BLOCKS marker blocks (white, black), then
+# TAG_BITS bits of the frame number, most significant first.
+TAG_BLOCKS_PER_WIDTH: Final = 40
+TAG_MARKER_BLOCKS: Final = 2
+TAG_BITS: Final = 24

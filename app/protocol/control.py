@@ -12,12 +12,9 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
-from app.protocol.constants import DEFAULT_PROFILE
+from app.protocol.constants import DEFAULT_PROFILE, TERRAIN_CENTRE, WORLD_SIZE
 from app.protocol.constants import Profile as RelayProfile
 
-# turtlesim's square world (metres) and its centre, where turtle1 starts.
-WORLD_SIZE = 11.088889
-TERRAIN_CENTRE = 5.544445
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).
 MIN_TARGET_DISTANCE_M = 0.05
@@ -117,7 +114,15 @@ PROFILES: dict[str, Profile] = {
         search_angular=1.0,
     ),
 }
-__all__ = ["DEFAULT_PROFILE", "PROFILES", "Profile", "page_constants", "with_standoff"]
+__all__ = [
+    "DEFAULT_PROFILE",
+    "PROFILES",
+    "TERRAIN_CENTRE",
+    "WORLD_SIZE",
+    "Profile",
+    "page_constants",
+    "with_standoff",
+]
 
 
 def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:

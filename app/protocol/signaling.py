@@ -21,7 +21,7 @@ from pydantic import (
 )
 
 from app.protocol import jsonedge
-from app.protocol.constants import Role
+from app.protocol.constants import DEFAULT_ROOM, Role
 from app.protocol.errors import describe
 
 # Names and rooms show up in logs and on pages; keep them short, non-empty, and free of control
@@ -49,7 +49,7 @@ class Login(_Incoming):
     type: Literal["login"]
     name: Name
     role: Role
-    room: Name = "default"
+    room: Name = DEFAULT_ROOM
     token: str | None = None
 
 

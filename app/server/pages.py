@@ -2,9 +2,11 @@
 
 Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
 ES modules need no globals: the signaling path, the default rosbridge URL (this server's
-``/rosbridge``) and what the query string asks for. ICE servers are not in it: each login
-reply carries them, with TURN credentials minted for that login. Nor is the token: the page
-reads it from its URL fragment, which no server sees.
+``/rosbridge``) and what the query string asks for, the control law's numbers, and the protocol
+constants and data-channel schemas rendered from :mod:`app.protocol` (``config.protocol``, read
+by ``protocol.js``). ICE servers are not in it: each login reply carries them, with TURN
+credentials minted for that login. Nor is the token: the page reads it from its URL fragment,
+which no server sees.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.protocol.channels import page_channels
-from app.protocol.constants import ROLES, Role
+from app.protocol.browser import browser_protocol
+from app.protocol.constants import DEFAULT_ROOM, ROLES, Role
 from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.protocol.ros import page_config as ros_page_config
@@ -45,7 +47,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     return {
         "role": role,
         "wsPath": "/ws",
-        "room": query.get("room", "default"),
+        "room": query.get("room", DEFAULT_ROOM),
         "name": query.get("name", ""),
         "auto": query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
@@ -60,8 +62,13 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
         "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
         "rosTypes": ros_page_config(),
-        "channels": page_channels(),
+        "protocol": browser_protocol(),
     }
+
+
+def base_config() -> dict[str, Any]:
+    """The config of a page with no role (index, parity): the protocol alone."""
+    return {"protocol": browser_protocol()}
 
 
 def _standoff(text: str | None) -> float | None:
@@ -91,8 +98,10 @@ def _render(request: Request, role: Role) -> HTMLResponse:
 @router.get("/", response_class=HTMLResponse)
 async def index(request: Request) -> HTMLResponse:
     """Links to the three role pages for one room."""
-    room = request.query_params.get("room", "default")
-    return templates.TemplateResponse(request, "index.html", {"room": room, "roles": ROLES})
+    room = request.query_params.get("room", DEFAULT_ROOM)
+    return templates.TemplateResponse(
+        request, "index.html", {"room": room, "roles": ROLES, "config": base_config()}
+    )
 
 
 @router.get("/vehicle", response_class=HTMLResponse)

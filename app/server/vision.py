@@ -7,6 +7,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from fastapi.templating import Jinja2Templates
 
 from app.resources import TEMPLATES_DIR
+from app.server.pages import base_config
 from app.vision.spec import CASCADE_DIR, Spec
 
 router = APIRouter()
@@ -35,4 +36,4 @@ async def cascade(name: str, request: Request) -> FileResponse:
 @router.get("/parity", response_class=HTMLResponse)
 async def parity_page(request: Request) -> HTMLResponse:
     """Harness page for ``autopilot parity``: the relay's analyzer, driven from Python."""
-    return _templates.TemplateResponse(request, "parity.html", {})
+    return _templates.TemplateResponse(request, "parity.html", {"config": base_config()})

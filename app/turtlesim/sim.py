@@ -23,6 +23,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
+from app.protocol.angles import turtlesim_normalize
+
 # turtlesim's own turtle-name rule is ROS's graph-name rule; names also become topic prefixes.
 _NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 # Beyond this many points per turtle the oldest are dropped, so hours of driving stay bounded.
@@ -97,22 +99,6 @@ class _Turtle:
     teleports: list[_Teleport] = field(default_factory=list)
 
 
-def normalize_angle(angle: float) -> float:
-    """Wrap an angle into [-pi, pi), as turtlesim does; ``ValueError`` if it is not finite.
-
-    ``fmod`` is exact, so even 1e308 lands inside the range (subtracting a multiple of 2*pi
-    computed in floating point does not, for large angles).
-    """
-    if not math.isfinite(angle):
-        raise ValueError(f"angle must be finite, got {angle}")
-    wrapped = math.fmod(angle + math.pi, 2.0 * math.pi)
-    if wrapped < 0.0:
-        wrapped += 2.0 * math.pi
-    wrapped -= math.pi
-    # Rounding can land exactly on pi (e.g. a tiny negative fmod plus 2*pi).
-    return -math.pi if wrapped >= math.pi else wrapped
-
-
 def float32(value: float) -> float:
     """``value`` rounded to the nearest float32, as a float32 field of a ROS interface holds it."""
     result: float = struct.unpack("f", struct.pack("f", value))[0]
@@ -157,7 +143,7 @@ class TurtleSim:
             turtle.teleports.clear()
             if now - turtle.last_command > self.COMMAND_TIMEOUT_S:
                 turtle.linear_x = turtle.linear_y = turtle.angular_z = 0.0
-            turtle.theta = normalize_angle(turtle.theta + turtle.angular_z * dt)
+            turtle.theta = turtlesim_normalize(turtle.theta + turtle.angular_z * dt)
             cos, sin = math.cos(turtle.theta), math.sin(turtle.theta)
             turtle.x += (cos * turtle.linear_x - sin * turtle.linear_y) * dt
             turtle.y += (sin * turtle.linear_x + cos * turtle.linear_y) * dt
@@ -386,7 +372,7 @@ class TurtleSim:
 def _float32_angle(angle: float) -> float:
     """``angle`` as a float32 message field holds it; one beyond float32's range (it would
     round to inf) is wrapped first, which changes nothing on the turtle's heading."""
-    return float32(angle if abs(angle) < 1e30 else normalize_angle(angle))
+    return float32(angle if abs(angle) < 1e30 else turtlesim_normalize(angle))
 
 
 def _finite(**values: float) -> None:

@@ -211,7 +211,7 @@ def fuzz_channel(fuzzer: Fuzzer, vehicles: list[Vehicle], frames: int) -> None:
     for vehicle in vehicles:
         for n in range(frames // len(vehicles)):
             reply = vehicle.agent.handle_channel_message(fuzzer.frame(VALID_CHANNEL), "relay")
-            assert reply is None or (reply["type"] == "error" and reply["reason"])
+            assert reply is None or (reply.type == "error" and reply.reason)
             if n % 10 == 0:
                 vehicle.turtle.sim.step()
         pose = vehicle.turtle.sim.pose("turtle1")

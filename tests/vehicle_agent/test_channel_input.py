@@ -45,7 +45,7 @@ HOSTILE: dict[str, str | bytes] = {
 @pytest.mark.parametrize("case", list(HOSTILE))
 def test_hostile_goals_get_an_error_and_never_drive_the_turtle(vehicle: Vehicle, case: str) -> None:
     reply = vehicle.agent.handle_channel_message(HOSTILE[case], "relay")
-    assert reply is not None and reply["type"] == "error" and reply["reason"]
+    assert reply is not None and reply.type == "error" and reply.reason
     assert vehicle.twists() == []
     # The handler still works: a good goal is taken.
     assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None

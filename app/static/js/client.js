@@ -1,7 +1,8 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
 import { ControlLaw } from './control.js';
-import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RelayLink, sendJson, serveChannel } from './peer.js';
+import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
 import { button, byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
@@ -39,13 +40,14 @@ const session = {
 
 // ---------------------------------------------------------------- relay messages
 
+// Each handler gets a message already validated against the protocol's model (serveChannel).
+
 function onOps(msg) {
-  if (!Array.isArray(msg.ops)) throw new BadMessage('"ops" needs an array "ops"');
   status.ops = msg.ops;
   select.replaceChildren(
     ...msg.ops.map((op) => {
       const option = new Option(op.label || op.id, op.id);
-      option.title = op.description || '';
+      option.title = op.description;
       return option;
     }),
   );
@@ -57,7 +59,7 @@ function onOps(msg) {
 
 function onState(msg) {
   const previous = status.relay;
-  status.relay = { piloting: Boolean(msg.piloting), op: msg.op ?? null, vehicle: msg.vehicle ?? null };
+  status.relay = { piloting: msg.piloting, op: msg.op, vehicle: msg.vehicle };
   if (previous?.op !== status.relay.op && status.relay.op) log.info(`operation is now ${status.relay.op}`);
   if (previous !== null && previous.piloting !== status.relay.piloting) {
     log.info(status.relay.piloting ? 'piloting started' : 'piloting stopped');
@@ -69,22 +71,19 @@ function onState(msg) {
 }
 
 function onDetections(msg) {
-  if (!Array.isArray(msg.boxes)) throw new BadMessage('"detections" needs an array "boxes"');
   status.detections += 1;
   status.lastDetections = msg;
   drawDetections(overlay, msg);
-  if (typeof msg.ms === 'number') {
-    session.recentMs.push(msg.ms);
-    if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
-    show('ms-per-snapshot', fmt(median(session.recentMs)));
-  }
-  if (typeof msg.goalsPerS === 'number') show('goals-per-s', fmt(msg.goalsPerS));
-  const target = msg.target && msg.w && msg.h ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
+  session.recentMs.push(msg.ms);
+  if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
+  show('ms-per-snapshot', fmt(median(session.recentMs)));
+  show('goals-per-s', fmt(msg.goalsPerS));
+  const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
   turtleView.setTarget(target);
 }
 
 function onPose(msg) {
-  const pose = { x: requireNumber(msg, 'x'), y: requireNumber(msg, 'y'), theta: requireNumber(msg, 'theta') };
+  const pose = { x: msg.x, y: msg.y, theta: msg.theta };
   status.pose = pose;
   status.poses += 1;
   turtleView.addPose(pose);
@@ -115,8 +114,9 @@ function setupPeer(peer) {
     video.srcObject = new MediaStream([event.detail.track]);
     log.info('relayed video track received');
   });
-  const dc = peer.pc.createDataChannel('control');
-  serveChannel(dc, { ops: onOps, state: onState, detections: onDetections, pose: onPose }, log);
+  const dc = peer.pc.createDataChannel(CHANNELS.control);
+  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose };
+  serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
     session.control = dc;
     status.controlOpen = true;

@@ -5,6 +5,7 @@
 // The signaling server lets only vehicles and clients send `offer` and only the relay send
 // `answer` (DESIGN §2), so the relay is the polite side and never offers: it forwards video by
 // replacing the track of the client's recvonly transceiver, which needs no renegotiation.
+import { acceptedTypes, describeProblems, validate } from './schema.js';
 
 /**
  * Events: `track` (detail: RTCTrackEvent), `datachannel` (detail: RTCDataChannel),
@@ -138,11 +139,22 @@ export function sendJson(channel, msg) {
 }
 
 /**
- * Dispatch a data channel's JSON messages through `handlers` (one per `type`). Malformed JSON,
- * a missing type, an unknown type or a handler's BadMessage is logged and answered with
- * `{"type":"error","reason","ref"}`, never thrown; an `error` from the other side is logged.
+ * Dispatch a data channel's JSON messages through `handlers` (one per `type`), each message
+ * first validated against `schema`: what this side accepts on this channel, generated from
+ * app/protocol/channels.py (`SCHEMAS[label][role]` of protocol.js). Malformed JSON, a type the
+ * schema does not accept, a field that breaks it or a handler's BadMessage is logged and
+ * answered with `{"type":"error","reason","ref"}` naming the field, never thrown; an `error`
+ * from the other side is logged. The handlers must cover exactly the schema's types (but
+ * `error`), or this throws at once: a page and the protocol that drifted apart are a bug.
  */
-export function serveChannel(channel, handlers, log) {
+export function serveChannel(channel, handlers, log, schema) {
+  const accepted = acceptedTypes(schema);
+  const handled = [...Object.keys(handlers), 'error'];
+  const missing = accepted.filter((type) => !handled.includes(type));
+  const extra = handled.filter((type) => !accepted.includes(type));
+  if (missing.length || extra.length) {
+    throw new Error(`${channel.label}: handlers do not match the protocol (missing ${missing}; not in it ${extra})`);
+  }
   const refuse = (reason, ref) => {
     log.warn(`${channel.label}: ${reason}`);
     sendJson(channel, { type: 'error', reason, ref });
@@ -155,35 +167,30 @@ export function serveChannel(channel, handlers, log) {
       refuse(`malformed JSON: ${String(event.data).slice(0, 60)}`, null);
       return;
     }
-    if (msg === null || typeof msg !== 'object' || typeof msg.type !== 'string') {
-      refuse('message has no string "type"', null);
+    if (msg === null || typeof msg !== 'object' || Array.isArray(msg) || typeof msg.type !== 'string') {
+      refuse('expected a JSON object with a string field "type"', null);
+      return;
+    }
+    if (!accepted.includes(msg.type)) {
+      refuse(`unknown message type "${msg.type}" on channel "${channel.label}"`, msg.type);
+      return;
+    }
+    const problems = validate(schema, msg);
+    if (problems.length) {
+      refuse(`bad ${msg.type}: ${describeProblems(problems)}`, msg.type);
       return;
     }
     if (msg.type === 'error') {
       log.error(`${channel.label}: the other side says: ${msg.reason}${msg.ref ? ` (about ${msg.ref})` : ''}`);
       return;
     }
-    const handler = handlers[msg.type];
-    if (handler === undefined) {
-      refuse(`unknown message type "${msg.type}"`, msg.type);
-      return;
-    }
     try {
-      handler(msg);
+      handlers[msg.type](msg);
     } catch (err) {
       if (!(err instanceof BadMessage)) throw err;
       refuse(err.message, msg.type);
     }
   });
-}
-
-/** Require `msg[field]` to be a finite number (throws BadMessage naming the field). */
-export function requireNumber(msg, field) {
-  const value = msg[field];
-  if (typeof value !== 'number' || !Number.isFinite(value)) {
-    throw new BadMessage(`"${msg.type}" needs a number "${field}"`);
-  }
-  return value;
 }
 
 /**

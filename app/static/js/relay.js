@@ -1,37 +1,14 @@
 // The relay page (the thesis's "intermediate server"): answers the vehicle's and the clients'
-// offers, forwards the vehicle's video to every client, runs the selected OpenCV.js operation
-// on snapshots while piloting and sends goals to the vehicle on the `autopilot` channel.
-import { BadMessage, Peer, requireNumber, sendJson, serveChannel } from './peer.js';
+// offers, forwards the vehicle's video to every client, and while piloting feeds the frames on
+// show to the snapshot loop (snapshot-loop.js), whose goals go to the vehicle on the
+// `autopilot` channel and whose detections go to the clients on `control`. This module is the
+// page: connections, control messages, scheduling the frames and the DOM.
+import { BadMessage, Peer, sendJson, serveChannel } from './peer.js';
+import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
+import { SnapshotLoop } from './snapshot-loop.js';
 import { byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
 import { createAnalyzer } from './vision.js';
-
-const THESIS_PERIOD_MS = 1500;
-const RATE_WINDOW_MS = 2000;
-const MS_SAMPLES = 2000;
-
-/**
- * The latest `capacity` samples, in storage allocated once: a ring that fills up must not look
- * like heap growth to a memory check. `toArray()` gives them oldest first.
- */
-class SampleRing {
-  constructor(capacity) {
-    this.values = new Float64Array(capacity);
-    this.count = 0;
-    this.next = 0;
-  }
-
-  push(value) {
-    this.values[this.next] = value;
-    this.next = (this.next + 1) % this.values.length;
-    this.count = Math.min(this.count + 1, this.values.length);
-  }
-
-  toArray() {
-    const start = (this.next - this.count + this.values.length) % this.values.length;
-    return Array.from({ length: this.count }, (_, i) => this.values[(start + i) % this.values.length]);
-  }
-}
 
 const config = readConfig();
 const log = new Log(byTestId('log'));
@@ -39,7 +16,13 @@ const room = new RoomSession(config, log);
 const video = byTestId('video');
 const overlay = byTestId('overlay');
 
-/** The page's one session object, read-only for tests and benchmarks. */
+// null: a snapshot per decoded video frame; otherwise one every this many ms.
+const SNAPSHOT_PERIOD_MS = PROTOCOL.relayProfiles[config.profile].snapshotPeriodMs;
+
+/**
+ * The page's one status object, read-only, for tests and benchmarks: its fields are the
+ * declared interface (docs/contracts.md, "Role pages"); nothing else of the page is.
+ */
 const status = {
   profile: config.profile,
   analyzerReady: false,
@@ -48,25 +31,41 @@ const status = {
   vehicle: null, // name of the connected vehicle
   clients: [], // names of connected clients
   vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
-  snapshots: 0,
-  goalsSent: 0,
-  lastGoal: null,
-  lastDetections: null,
+  get snapshots() {
+    return session.loop?.stats.snapshots ?? 0;
+  },
+  get goalsSent() {
+    return session.loop?.stats.goalsSent ?? 0;
+  },
+  get lastGoal() {
+    return session.loop?.lastGoal ?? null;
+  },
+  get lastDetections() {
+    return session.loop?.lastDetections ?? null;
+  },
   /** Snapshot taken -> goal sent (or analysis done when nothing was found), ms, oldest first. */
   get processingMs() {
-    return session.samples.processing.toArray();
+    return session.loop?.stats.processing.toArray() ?? [];
   },
   /** Of which in the vision worker: pixels read and detection. */
   get workMs() {
-    return session.samples.work.toArray();
+    return session.loop?.stats.work.toArray() ?? [];
   },
   /** Of which the operation's detect() alone. */
   get detectMs() {
-    return session.samples.detect.toArray();
+    return session.loop?.stats.detect.toArray() ?? [];
   },
-  goalTimes: [], // performance.now() of recent goals, for goals per second
+  /** performance.now() of the goals sent in the last rate window. */
+  get goalTimes() {
+    return [...(session.loop?.stats.goalTimes ?? [])];
+  },
 };
 window.autopilotStatus = status;
+/**
+ * The bench's one other entry point (status stays plain data, cloneable by tests): resolves to
+ * {wasmHeapBytes}, the analyzer's OpenCV WASM heap size (analyzer.memory()), or null.
+ */
+window.autopilotMemory = () => (session.analyzer === null ? Promise.resolve(null) : session.analyzer.memory());
 
 /** Everything else this page holds, in one place. */
 const session = {
@@ -74,16 +73,9 @@ const session = {
   signalQueues: new Map(), // remote name -> promise of its last signaling message handled
   vehicleTrack: null,
   analyzer: null,
-  lastError: null, // the last snapshot failure, logged once
-  busy: false, // a snapshot is being analysed
-  timer: null, // thesis profile: the snapshot interval
-  frameCallback: null, // default profile: the pending requestVideoFrameCallback
-  // Per-snapshot timings behind status.processingMs, workMs and detectMs.
-  samples: {
-    processing: new SampleRing(MS_SAMPLES),
-    work: new SampleRing(MS_SAMPLES),
-    detect: new SampleRing(MS_SAMPLES),
-  },
+  loop: null, // the SnapshotLoop, once the analyzer is ready
+  timer: null, // a profile with a snapshot period: its interval
+  frameCallback: null, // a snapshot per frame: the pending requestVideoFrameCallback
 };
 
 const ANALYZER_SLOW_MS = 30000;
@@ -94,6 +86,8 @@ const slowAnalyzer = setTimeout(
 const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer)).then(
   (created) => {
     session.analyzer = created;
+    session.loop = createLoop(created);
+    if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
     status.analyzerReady = true;
     status.op = created.defaultOp;
     show('operation', status.op);
@@ -220,9 +214,9 @@ function onVehicleTrack({ track, receiver }) {
 
 function onDataChannel(entry, channel) {
   const name = entry.peer.remote;
-  if (entry.role === 'vehicle' && channel.label === config.channels.state.label) {
+  if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilotState) {
     // Goals go out and pose comes in here: unordered, never retransmitted, latest wins.
-    serveChannel(channel, { pose: (msg) => onPose(msg) }, log);
+    serveChannel(channel, { pose: (msg) => onPose(msg) }, log, SCHEMAS[CHANNELS.autopilotState].relay);
     channel.addEventListener('open', () => {
       entry.stateChannel = channel;
     });
@@ -231,8 +225,8 @@ function onDataChannel(entry, channel) {
     });
     return;
   }
-  if (entry.role === 'vehicle' && channel.label === config.channels.control) {
-    serveChannel(channel, { pose: (msg) => onPose(msg) }, log);
+  if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilot) {
+    serveChannel(channel, { pose: (msg) => onPose(msg) }, log, SCHEMAS.autopilot.relay);
     channel.addEventListener('open', () => {
       entry.channel = channel;
       status.vehicle = name;
@@ -240,7 +234,7 @@ function onDataChannel(entry, channel) {
       broadcastState();
       updatePeers();
     });
-  } else if (entry.role === 'client' && channel.label === 'control') {
+  } else if (entry.role === 'client' && channel.label === CHANNELS.control) {
     serveChannel(
       channel,
       {
@@ -250,6 +244,7 @@ function onDataChannel(entry, channel) {
         stop: () => setPiloting(false, name),
       },
       log,
+      SCHEMAS.control.relay,
     );
     channel.addEventListener('open', () => {
       entry.channel = channel;
@@ -300,13 +295,13 @@ async function sendOps(entry) {
 }
 
 function setOp(msg, from) {
-  if (typeof msg.op !== 'string') throw new BadMessage('"setOp" needs a string "op"');
   if (session.analyzer === null) throw new BadMessage('operations are still loading; try again');
   if (!session.analyzer.ops.some((op) => op.id === msg.op)) {
     throw new BadMessage(`unknown operation "${msg.op}"; the current one stays "${status.op}"`);
   }
   if (msg.op !== status.op) log.info(`operation ${status.op} → ${msg.op} (asked by ${from})`);
   status.op = msg.op;
+  session.loop.op = msg.op;
   broadcastState();
 }
 
@@ -326,23 +321,41 @@ function setPiloting(on, from) {
   broadcastState();
 }
 
+/** Forward the vehicle's pose (validated by serveChannel) to every client. */
 function onPose(msg) {
-  const pose = {
-    type: 'pose',
-    x: requireNumber(msg, 'x'),
-    y: requireNumber(msg, 'y'),
-    theta: requireNumber(msg, 'theta'),
-    t: typeof msg.t === 'number' ? msg.t : Date.now(),
-  };
-  broadcast(pose);
+  broadcast({ type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() });
 }
 
 // ---------------------------------------------------------------- snapshot loop
 
+function createLoop(analyzer) {
+  const loop = new SnapshotLoop({
+    analyzer,
+    profile: config.profile,
+    op: analyzer.defaultOp,
+    // The lossy state channel when it is open (latest wins), else the reliable one.
+    sendGoal: (goal) => {
+      const vehicle = vehicleEntry();
+      return sendJson(vehicle?.stateChannel ?? vehicle?.channel, goal);
+    },
+  });
+  loop.addEventListener('detections', (event) => {
+    const detections = event.detail;
+    broadcast(detections);
+    drawDetections(overlay, detections);
+    show('goals-sent', String(loop.stats.goalsSent));
+    show('ms-per-snapshot', fmt(detections.ms));
+    show('goals-per-s', fmt(detections.goalsPerS));
+  });
+  loop.addEventListener('failure', (event) => log.error(`snapshot failed: ${event.detail}`));
+  return loop;
+}
 
+/** Feed the loop the frame on show: on every decoded frame, or every snapshot period. */
 function startLoop() {
-  if (config.profile === 'thesis') {
-    session.timer = setInterval(snapshot, THESIS_PERIOD_MS);
+  session.loop?.start();
+  if (SNAPSHOT_PERIOD_MS !== null) {
+    session.timer = setInterval(snapshot, SNAPSHOT_PERIOD_MS);
     return;
   }
   const onFrame = () => {
@@ -354,78 +367,19 @@ function startLoop() {
 }
 
 function stopLoop() {
+  session.loop?.stop();
   if (session.timer !== null) clearInterval(session.timer);
   if (session.frameCallback !== null) video.cancelVideoFrameCallback(session.frameCallback);
   session.timer = null;
   session.frameCallback = null;
 }
 
-/** One snapshot → analysis → goal, unless one is already in flight. */
-async function snapshot() {
-  if (session.busy || session.analyzer === null || video.videoWidth === 0) return;
-  session.busy = true;
-  try {
-    await analyzeOnce();
-    session.lastError = null;
-  } catch (err) {
-    // Every frame would repeat it: log a failure once until something succeeds again.
-    if (err.message !== session.lastError) log.error(`snapshot failed: ${err.message}`);
-    session.lastError = err.message;
-  } finally {
-    session.busy = false;
-  }
-}
-
-async function analyzeOnce() {
-  const started = performance.now();
+/** Hand the loop the frame on show, unless it is still busy with the last one. */
+function snapshot() {
+  if (session.loop === null || session.loop.busy || video.videoWidth === 0) return;
   // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
   // converts it to RGBA straight into OpenCV's memory.
-  const frame = new VideoFrame(video);
-  const result = await session.analyzer.analyze(frame, status.op, { profile: config.profile });
-  if (!status.piloting) return;
-  status.snapshots += 1;
-  if (result.target) {
-    const goal = {
-      type: 'goal',
-      seq: status.goalsSent + 1,
-      op: result.op,
-      x: result.target.x,
-      y: result.target.y,
-      w: result.w,
-      h: result.h,
-      t: Date.now(),
-    };
-    if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
-    const vehicle = vehicleEntry();
-    if (sendJson(vehicle?.stateChannel ?? vehicle?.channel, goal)) {
-      status.goalsSent += 1;
-      status.lastGoal = goal;
-      status.goalTimes.push(performance.now());
-    }
-  }
-  const ms = performance.now() - started;
-  session.samples.processing.push(ms);
-  session.samples.work.push(result.workMs);
-  session.samples.detect.push(result.ms);
-  const now = performance.now();
-  while (status.goalTimes.length && now - status.goalTimes[0] > RATE_WINDOW_MS) status.goalTimes.shift();
-  const goalsPerS = status.goalTimes.length / (RATE_WINDOW_MS / 1000);
-  const detections = {
-    type: 'detections',
-    op: result.op,
-    boxes: result.boxes,
-    target: result.target,
-    w: result.w,
-    h: result.h,
-    ms,
-    goalsPerS,
-  };
-  status.lastDetections = detections;
-  broadcast(detections);
-  drawDetections(overlay, detections);
-  show('goals-sent', String(status.goalsSent));
-  show('ms-per-snapshot', fmt(ms));
-  show('goals-per-s', fmt(goalsPerS));
+  session.loop.frame(new VideoFrame(video));
 }
 
 // ---------------------------------------------------------------- page

@@ -1,6 +1,7 @@
 // One page's membership of a signaling room: Connect / Join Room / Leave Room, the roster of
 // the other peers, and the unattended mode (?auto=1) that joins by itself and rejoins after
 // the server goes away.
+import { PROTOCOL } from './protocol.js';
 import { LoginRefused, Signaling } from './signaling.js';
 import { button, byTestId } from './ui.js';
 
@@ -136,7 +137,7 @@ export class RoomSession extends EventTarget {
   }
 
   #chosenRoom() {
-    return byTestId('room').value.trim() || 'default';
+    return byTestId('room').value.trim() || PROTOCOL.defaultRoom;
   }
 
   #onMessage(msg) {

@@ -3,7 +3,8 @@
 // the relay on the same channel; `stop` on the reliable `autopilot` channel.
 import { ControlLaw, Controller } from './control.js';
 import { GoalGate } from './freshness.js';
-import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
+import { RelayLink, sendJson, serveChannel } from './peer.js';
+import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { pickTypes } from './rosflavour.js';
 import { byTestId, fmt, Log, readConfig, show } from './ui.js';
@@ -18,7 +19,7 @@ const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
 const profile = law.profiles[config.profile];
 const controller = new Controller(law, profile);
-const goalGate = new GoalGate(config.channels.goalFreshness);
+const goalGate = new GoalGate(PROTOCOL.goalFreshness);
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
@@ -187,37 +188,30 @@ turtle.onPose = (pose) => {
 
 setInterval(() => drive(() => controller.tick()), TICK_MS);
 
+/** A goal, already validated against the protocol's Goal model by serveChannel. */
 function onGoal(msg) {
-  const goal = {
-    x: requireNumber(msg, 'x'),
-    y: requireNumber(msg, 'y'),
-    w: requireNumber(msg, 'w'),
-    h: requireNumber(msg, 'h'),
-    seq: typeof msg.seq === 'number' ? msg.seq : null,
-    frame: typeof msg.frame === 'number' ? msg.frame : null,
-    op: typeof msg.op === 'string' ? msg.op : null,
-  };
-  if (goal.w <= 0 || goal.h <= 0) throw new BadMessage('"goal" needs a positive frame size w, h');
-  const verdict = goalGate.admit(requireNumber(msg, 'seq'), requireNumber(msg, 't'), performance.now() / 1000);
+  // Validated against the goal schema by serveChannel before it gets here.
+  const goal = { x: msg.x, y: msg.y, w: msg.w, h: msg.h, seq: msg.seq, frame: msg.frame ?? null, op: msg.op };
+  const verdict = goalGate.admit(msg.seq, msg.t, performance.now() / 1000);
   if (verdict !== 'fresh') {
     status.goalsDropped[verdict] += 1;
     return;
   }
-  if (!controller.active) log.info(`piloting: first goal${goal.op ? ` (${goal.op})` : ''}`);
+  if (!controller.active) log.info(`piloting: first goal (${goal.op})`);
   status.goalsReceived += 1;
-  status.lastGoal = { ...goal, t: msg.t ?? null };
+  status.lastGoal = { ...goal, t: msg.t };
   show('goals-received', String(status.goalsReceived));
   drive(() => controller.goal(goal));
 }
 
 function setupPeer(peer, stream) {
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
-  const dc = peer.pc.createDataChannel(config.channels.control);
-  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log);
+  const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
+  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log, SCHEMAS.autopilot.vehicle);
   // A new link: the relay's seq starts again.
   goalGate.reset();
-  const state = peer.pc.createDataChannel(config.channels.state.label, config.channels.state.options);
-  serveChannel(state, { goal: onGoal }, log);
+  const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);
+  serveChannel(state, { goal: onGoal }, log, SCHEMAS[CHANNELS.autopilotState].vehicle);
   state.addEventListener('open', () => {
     session.stateChannel = state;
   });

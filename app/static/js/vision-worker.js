@@ -10,8 +10,8 @@
 
 importScripts('/static/opencv.js');
 
-const FRAME_TAG_BITS = 24;
-const FRAME_TAG_BLOCKS = 2 + FRAME_TAG_BITS;
+// From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits}, defaultProfile}.
+const PROTOCOL = JSON.parse(new URLSearchParams(self.location.search).get('protocol'));
 
 /** Everything the worker holds, in one place. */
 const session = {
@@ -70,7 +70,7 @@ async function init() {
     }
   }
   // Build every default-profile instance now so a broken module fails at start, not mid-flight.
-  for (const op of session.spec.operations) instanceFor(op.id, 'default');
+  for (const op of session.spec.operations) instanceFor(op.id, PROTOCOL.defaultProfile);
   return {
     ops: session.spec.operations.map(({ id, label, description }) => ({ id, label, description })),
     defaultOp: session.spec.default,
@@ -142,7 +142,8 @@ async function readPixels(source) {
  * "Frame tag"), or null when the marker blocks do not read white, black.
  */
 function decodeFrameTag(width, height, data) {
-  const b = Math.floor(width / 40);
+  const { blocksPerWidth, markerBlocks, bits } = PROTOCOL.frameTag;
+  const b = Math.floor(width / blocksPerWidth);
   if (b < 2 || height < b) return null;
   const lo = Math.floor(b / 4);
   const hi = lo + Math.max(1, Math.floor(b / 2));
@@ -160,7 +161,7 @@ function decodeFrameTag(width, height, data) {
   };
   if (bit(0) !== 1 || bit(1) !== 0) return null;
   let value = 0;
-  for (let i = 2; i < FRAME_TAG_BLOCKS; i += 1) value = value * 2 + bit(i);
+  for (let i = markerBlocks; i < markerBlocks + bits; i += 1) value = value * 2 + bit(i);
   return value;
 }
 
@@ -172,7 +173,7 @@ function describe(error) {
   return String(error?.message ?? error);
 }
 
-async function analyze({ source, opId, profile = 'default', returnPixels = false }) {
+async function analyze({ source, opId, profile = PROTOCOL.defaultProfile, returnPixels = false }) {
   const started = performance.now();
   let instance;
   try {

@@ -2,7 +2,12 @@
 // The relay page and the parity page both use it, so parity checks the code path live frames
 // take. Interface: docs/contracts.md, "The analyzer".
 
-const WORKER_URL = '/static/js/vision-worker.js';
+import { PROTOCOL } from './protocol.js';
+
+// The worker has no page config: what it needs of the protocol rides in its URL.
+const WORKER_URL = `/static/js/vision-worker.js?${new URLSearchParams({
+  protocol: JSON.stringify({ frameTag: PROTOCOL.frameTag, defaultProfile: PROTOCOL.defaultProfile }),
+})}`;
 
 /**
  * Start the worker and wait until OpenCV.js, the cascades and every operation module are loaded.
@@ -57,10 +62,10 @@ export async function createAnalyzer() {
     /**
      * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so
      * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
-     * Options: profile 'default' | 'thesis'; returnPixels adds `rgba` (the pixels analysed).
+     * Options: profile (one of PROTOCOL.profiles.relay); returnPixels adds `rgba` (the pixels).
      * Resolves to {op, boxes, target, w, h, ms, workMs, frame[, rgba]}.
      */
-    analyze(source, opId, { profile = 'default', returnPixels = false } = {}) {
+    analyze(source, opId, { profile = PROTOCOL.defaultProfile, returnPixels = false } = {}) {
       const transfer = source.data ? [] : [source];
       return call({ type: 'analyze', source, opId, profile, returnPixels }, transfer);
     },

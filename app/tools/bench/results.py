@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from app.protocol.constants import THESIS_SNAPSHOT_PERIOD_MS
 from app.tools.bench.stats import (
     HeadingSample,
     Summary,
@@ -22,7 +23,7 @@ from app.tools.bench.stats import (
 # The thesis's Figure 31: snapshot -> goal sent, and how often it acted.
 THESIS_PROCESSING_MEAN_MS = 683.0
 THESIS_PROCESSING_SD_MS = 196.0
-THESIS_PERIOD_S = 1.5
+THESIS_PERIOD_S = THESIS_SNAPSHOT_PERIOD_MS / 1000
 
 # Headline keys, the same for each profile; the default profile's sit at the top level.
 FIGURE_KEYS = (

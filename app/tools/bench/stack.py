@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from playwright.async_api import Browser, ConsoleMessage, Page, Worker
+from playwright.async_api import Browser, ConsoleMessage, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
@@ -63,9 +63,9 @@ _JS_HEAP_JS = """() => {
   return performance.memory ? performance.memory.usedJSHeapSize : null;
 }"""
 
-# The analyzer's memory() reports cv.HEAPU8.length; the relay keeps its analyzer private, so the
-# bench asks the worker itself for the same number.
-_WASM_HEAP_JS = "session.cv ? session.cv.HEAPU8.length : null"
+# The relay page's declared window.autopilotMemory() (docs/contracts.md): its analyzer's OpenCV
+# WASM heap size.
+_WASM_HEAP_JS = "async () => (await window.autopilotMemory())?.wasmHeapBytes ?? null"
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ async def run_profile(
         )
         await _wait(
             relay,
-            "window.autopilotStatus?.analyzerReady === true",
+            "() => window.autopilotStatus?.analyzerReady === true",
             ANALYZER_TIMEOUT_S,
             "the relay's OpenCV.js analyzer did not become ready",
         )
@@ -121,7 +121,7 @@ async def run_profile(
             agent_log,
             _wait(
                 relay,
-                "window.autopilotStatus.goalsSent > 0",
+                "() => window.autopilotStatus.goalsSent > 0",
                 FIRST_GOAL_TIMEOUT_S,
                 "piloting started but the relay sent no goal",
             ),
@@ -138,7 +138,6 @@ async def run_profile(
 async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple[float, float]:
     """Poll the relay's samples and memory for ``duration_s``; returns the window measured."""
     begin = time.monotonic()
-    wasm_worker = _vision_worker(relay)
     first = await relay.evaluate(_POLL_JS, 0)
     seen = first["snapshots"]
     next_memory = begin + MEMORY_FIRST_SAMPLE_S
@@ -148,14 +147,14 @@ async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple
     )
     while (now := time.monotonic()) < begin + options.duration_s:
         if now >= next_memory:
-            run.memory.append(await _memory(relay, wasm_worker, run))
+            run.memory.append(await _memory(relay, run))
             next_memory += options.memory_every_s
         await asyncio.sleep(POLL_S)
         seen = (await _collect(relay, seen, run))["snapshots"]
     last = await _collect(relay, seen, run)
     run.snapshots = last["snapshots"] - first["snapshots"]
     run.relay_goals = last["goalsSent"] - first["goalsSent"]
-    run.memory.append(await _memory(relay, wasm_worker, run))
+    run.memory.append(await _memory(relay, run))
     return begin, time.monotonic()
 
 
@@ -198,6 +197,8 @@ async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page
 
 
 async def _wait(page: Page, condition: str, timeout_s: float, failure: str) -> None:
+    # ``condition`` is a JS function: under the pages' CSP (no 'unsafe-eval') Playwright cannot
+    # evaluate a bare expression.
     try:
         await page.wait_for_function(condition, timeout=timeout_s * 1000, polling=250)
     except PlaywrightTimeout as exc:
@@ -237,10 +238,6 @@ async def _stop_agent(agent: asyncio.subprocess.Process, log_path: Path) -> None
         )
 
 
-def _vision_worker(page: Page) -> Worker | None:
-    return next((w for w in page.workers if w.url.endswith("vision-worker.js")), None)
-
-
 async def _collect(relay: Page, seen: int, run: ProfileRun) -> dict[str, Any]:
     """Append the processing samples taken since snapshot ``seen``; returns the relay's counters."""
     polled: dict[str, Any] = await relay.evaluate(_POLL_JS, seen)
@@ -249,7 +246,7 @@ async def _collect(relay: Page, seen: int, run: ProfileRun) -> dict[str, Any]:
     return polled
 
 
-async def _memory(relay: Page, worker: Worker | None, run: ProfileRun) -> MemorySample:
+async def _memory(relay: Page, run: ProfileRun) -> MemorySample:
     js_heap = await relay.evaluate(_JS_HEAP_JS)
     if js_heap is None:
         run.problems.setdefault(
@@ -257,14 +254,13 @@ async def _memory(relay: Page, worker: Worker | None, run: ProfileRun) -> Memory
             "performance.memory is missing (needs --enable-precise-memory-info)",
         )
     wasm_heap = None
-    if worker is None:
-        run.problems.setdefault("memory_growth_pct", "the relay's vision worker was not found")
-    else:
-        try:
-            wasm_heap = await worker.evaluate(_WASM_HEAP_JS)
-        except PlaywrightError as exc:
-            # The worker's internals changed: say so in the report rather than stop the run.
-            run.problems.setdefault("memory_growth_pct", f"cannot read the WASM heap: {exc}")
+    try:
+        wasm_heap = await relay.evaluate(_WASM_HEAP_JS)
+    except PlaywrightError as exc:
+        # Say so in the report rather than stop the run.
+        run.problems.setdefault("memory_growth_pct", f"cannot read the WASM heap: {exc}")
+    if wasm_heap is None:
+        run.problems.setdefault("memory_growth_pct", "the relay has no analyzer to measure")
     return MemorySample(
         time.monotonic(),
         float(js_heap) if js_heap is not None else None,

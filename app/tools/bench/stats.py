@@ -9,6 +9,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from app.protocol.angles import wrap_angle
+
 
 @dataclass(frozen=True)
 class Summary:
@@ -77,12 +79,6 @@ def glass_to_command_ms(
         for frame, t in sorted(first_command.items())
         if t >= frame_sent[frame]
     ]
-
-
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped into ``(-pi, pi]``."""
-    wrapped = math.remainder(angle, 2 * math.pi)
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from app.protocol.angles import wrap_angle
 from app.tools.bench.stats import (
     HeadingSample,
     PoseSample,
@@ -17,7 +18,6 @@ from app.tools.bench.stats import (
     rate_per_s,
     standoff_errors,
     summarize,
-    wrap_angle,
 )
 
 

@@ -1,0 +1,127 @@
+// The relay's snapshot → goal loop, with no DOM and no WebRTC: fed frames (VideoFrame,
+// ImageBitmap or raw RGBA) by whoever owns the video, it analyses one at a time with the
+// current operation and emits what the relay sends on: a `goal` for the vehicle when the
+// operation found a target, and `detections` (with the statistics riding along) for the
+// clients. The relay page schedules the frames; a test can feed synthetic ones.
+
+import { RelayStats } from './relay-stats.js';
+
+/**
+ * Events (CustomEvent detail):
+ *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?}) once sent
+ *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms, goalsPerS})
+ *   `failure`     an analysis error's message, once until a snapshot succeeds again
+ */
+export class SnapshotLoop extends EventTarget {
+  #busy = false;
+  #lastFailure = null;
+
+  /**
+   * @param {object} options
+   * @param {{analyze: Function}} options.analyzer from vision.js createAnalyzer()
+   * @param {string} options.profile relay profile, passed to the analyzer
+   * @param {string} options.op the operation to run (change it with `op` at any time)
+   * @param {(goal: object) => boolean} options.sendGoal sends a goal; false when it could not
+   * @param {() => number} [options.clock] ms, for delays and rates (performance.now)
+   * @param {() => number} [options.wallClock] ms since the epoch, the goal's `t` (Date.now)
+   */
+  constructor({ analyzer, profile, op, sendGoal, clock = () => performance.now(), wallClock = () => Date.now() }) {
+    super();
+    this.analyzer = analyzer;
+    this.profile = profile;
+    this.op = op;
+    this.sendGoal = sendGoal;
+    this.clock = clock;
+    this.wallClock = wallClock;
+    this.stats = new RelayStats();
+    this.running = false;
+    this.lastGoal = null;
+    this.lastDetections = null;
+  }
+
+  /** Whether a snapshot is being analysed (the next frame is then skipped). */
+  get busy() {
+    return this.#busy;
+  }
+
+  start() {
+    this.running = true;
+  }
+
+  /** Stop: a snapshot still in flight is dropped when it comes back. */
+  stop() {
+    this.running = false;
+  }
+
+  /**
+   * Offer one frame. It is analysed unless the loop is stopped or busy, in which case it is
+   * closed and skipped. Resolves to {goal, detections} (goal null when nothing was found), or
+   * null when the frame was skipped, failed, or piloting stopped meanwhile.
+   */
+  async frame(source) {
+    if (!this.running || this.#busy) {
+      source.close?.();
+      return null;
+    }
+    this.#busy = true;
+    try {
+      const outcome = await this.#analyze(source);
+      this.#lastFailure = null;
+      return outcome;
+    } catch (err) {
+      // Every frame would repeat it: say it once until something succeeds again.
+      if (err.message !== this.#lastFailure) this.#emit('failure', err.message);
+      this.#lastFailure = err.message;
+      return null;
+    } finally {
+      this.#busy = false;
+    }
+  }
+
+  async #analyze(source) {
+    const started = this.clock();
+    const result = await this.analyzer.analyze(source, this.op, { profile: this.profile });
+    if (!this.running) return null;
+    let goal = null;
+    if (result.target) {
+      goal = {
+        type: 'goal',
+        seq: this.stats.goalsSent + 1,
+        op: result.op,
+        x: result.target.x,
+        y: result.target.y,
+        w: result.w,
+        h: result.h,
+        t: this.wallClock(),
+      };
+      if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
+      if (this.sendGoal(goal)) {
+        this.stats.goalSent(this.clock());
+        this.lastGoal = goal;
+        this.#emit('goal', goal);
+      } else {
+        goal = null;
+      }
+    }
+    const now = this.clock();
+    const ms = now - started;
+    this.stats.snapshot({ processingMs: ms, workMs: result.workMs, detectMs: result.ms });
+    const detections = {
+      type: 'detections',
+      op: result.op,
+      boxes: result.boxes,
+      target: result.target,
+      w: result.w,
+      h: result.h,
+      ms,
+      goalsPerS: this.stats.goalsPerS(now),
+    };
+    this.lastDetections = detections;
+    this.#emit('detections', detections);
+    return { goal, detections };
+  }
+
+  #emit(type, detail) {
+    this.dispatchEvent(new CustomEvent(type, { detail }));
+  }
+}

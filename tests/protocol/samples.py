@@ -1,0 +1,119 @@
+"""Data-channel messages, valid and not, that both validators must judge alike.
+
+Each sample is what one side receives on one channel, as the text on the wire. An invalid one
+names the field its error must mention (None when the message is refused as a whole).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from app.protocol.constants import Role
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One message text received by ``role`` on channel ``label``."""
+
+    label: str
+    role: Role
+    text: str
+    valid: bool
+    field: str | None = None
+
+
+GOAL: dict[str, Any] = {
+    "type": "goal", "seq": 3, "op": "face", "x": 100.5, "y": 240, "w": 640, "h": 480, "t": 1.7e12,
+}  # fmt: skip
+POSE: dict[str, Any] = {"type": "pose", "x": 5.5, "y": 1, "theta": -3.1, "t": 17.0}
+DETECTIONS: dict[str, Any] = {
+    "type": "detections", "op": "face", "boxes": [[1, 2, 30, 40]], "target": {"x": 16, "y": 22},
+    "w": 640, "h": 480, "ms": 12.5, "goalsPerS": 19.5,
+}  # fmt: skip
+OPS: dict[str, Any] = {
+    "type": "ops", "ops": [{"id": "face", "label": "Face", "description": "Haar"}],
+    "current": "face",
+}  # fmt: skip
+STATE: dict[str, Any] = {"type": "state", "piloting": True, "op": "face", "vehicle": None}
+
+
+def _with(base: dict[str, Any], **changes: Any) -> str:
+    return json.dumps({**base, **changes})
+
+
+def _without(base: dict[str, Any], key: str) -> str:
+    return json.dumps({k: v for k, v in base.items() if k != key})
+
+
+A, C = "autopilot", "control"
+
+SAMPLES: list[Sample] = [
+    # relay -> vehicle on `autopilot`
+    Sample(A, "vehicle", json.dumps(GOAL), True),
+    Sample(A, "vehicle", _with(GOAL, frame=12, extra="newer relays may add fields"), True),
+    Sample(A, "vehicle", _with(GOAL, frame=None), True),
+    Sample(A, "vehicle", _with(GOAL, x="left"), False, "x"),
+    Sample(A, "vehicle", _with(GOAL, x=True), False, "x"),
+    Sample(A, "vehicle", _with(GOAL, w=0), False, "w"),
+    Sample(A, "vehicle", _with(GOAL, h=-480), False, "h"),
+    Sample(A, "vehicle", _with(GOAL, w=640.5), False, "w"),
+    Sample(A, "vehicle", _with(GOAL, seq=0), False, "seq"),
+    Sample(A, "vehicle", _with(GOAL, seq="1"), False, "seq"),
+    Sample(A, "vehicle", _with(GOAL, op=""), False, "op"),
+    Sample(A, "vehicle", _with(GOAL, op=7), False, "op"),
+    Sample(A, "vehicle", _with(GOAL, frame=-1), False, "frame"),
+    Sample(A, "vehicle", _without(GOAL, "seq"), False, "seq"),
+    Sample(A, "vehicle", _without(GOAL, "t"), False, "t"),
+    Sample(A, "vehicle", json.dumps(GOAL).replace('"x": 100.5', '"x": NaN'), False),
+    Sample(A, "vehicle", json.dumps(GOAL).replace('"y": 240', '"y": Infinity'), False),
+    Sample(A, "vehicle", json.dumps(GOAL).replace('"y": 240', '"y": -Infinity'), False),
+    Sample(A, "vehicle", '{"type": "stop"}', True),
+    Sample(A, "vehicle", '{"type": "error", "reason": "bad pose", "ref": "pose"}', True),
+    Sample(A, "vehicle", '{"type": "error", "reason": "no ref"}', True),
+    Sample(A, "vehicle", '{"type": "error", "ref": "pose"}', False, "reason"),
+    Sample(A, "vehicle", json.dumps(POSE), False),  # the vehicle never receives a pose
+    Sample(A, "vehicle", '{"type": "warp"}', False),
+    Sample(A, "vehicle", '{"type": 3}', False),
+    Sample(A, "vehicle", "[1, 2]", False),
+    Sample(A, "vehicle", "null", False),
+    Sample(A, "vehicle", "not json {", False),
+    # vehicle -> relay on `autopilot`
+    Sample(A, "relay", json.dumps(POSE), True),
+    Sample(A, "relay", _without(POSE, "t"), True),
+    Sample(A, "relay", _with(POSE, t=None), True),
+    Sample(A, "relay", _with(POSE, theta="up"), False, "theta"),
+    Sample(A, "relay", _without(POSE, "y"), False, "y"),
+    Sample(A, "relay", json.dumps(GOAL), False),
+    # client -> relay on `control`
+    Sample(C, "relay", '{"type": "getOps"}', True),
+    Sample(C, "relay", '{"type": "start"}', True),
+    Sample(C, "relay", '{"type": "stop"}', True),
+    Sample(C, "relay", '{"type": "setOp", "op": "fire"}', True),
+    Sample(C, "relay", '{"type": "setOp"}', False, "op"),
+    Sample(C, "relay", '{"type": "setOp", "op": ["fire"]}', False, "op"),
+    Sample(C, "relay", '{"type": "setOp", "op": "' + "x" * 65 + '"}', False, "op"),
+    Sample(C, "relay", json.dumps(POSE), False),
+    # relay -> client on `control`
+    Sample(C, "client", json.dumps(OPS), True),
+    Sample(C, "client", _without(OPS, "current"), True),
+    Sample(C, "client", _with(OPS, ops={"id": "face"}), False, "ops"),
+    Sample(
+        C, "client", _with(OPS, ops=[{"id": "face", "label": "Face"}]), False, "ops.0.description"
+    ),
+    Sample(C, "client", json.dumps(STATE), True),
+    Sample(C, "client", _with(STATE, piloting="yes"), False, "piloting"),
+    Sample(C, "client", _with(STATE, piloting=1), False, "piloting"),
+    Sample(C, "client", _without(STATE, "vehicle"), False, "vehicle"),
+    Sample(C, "client", json.dumps(DETECTIONS), True),
+    Sample(C, "client", _with(DETECTIONS, boxes=[], target=None), True),
+    Sample(C, "client", _with(DETECTIONS, boxes=[[1, 2, 3]]), False, "boxes"),
+    Sample(C, "client", _with(DETECTIONS, boxes=[[1, 2, 3, "4"]]), False, "boxes"),
+    Sample(C, "client", _with(DETECTIONS, target={"x": 1}), False, "target"),
+    Sample(C, "client", _with(DETECTIONS, target=[1, 2]), False, "target"),
+    Sample(C, "client", _with(DETECTIONS, ms=-1), False, "ms"),
+    Sample(C, "client", _without(DETECTIONS, "goalsPerS"), False, "goalsPerS"),
+    Sample(C, "client", json.dumps(POSE), True),
+    Sample(C, "client", '{"type": "goal"}', False),
+]

@@ -1,0 +1,61 @@
+"""Every message type the pages write is a protocol model, received by the side it goes to.
+
+The pages build their messages as object literals (``{ type: 'goal', ... }``); this reads each
+``type: '<name>'`` out of the role modules and checks it against the signaling models and the
+data-channel receivers of ``app/protocol``. A page that starts sending a type the protocol does
+not define, or sends one to a side that does not accept it, fails here.
+"""
+
+from __future__ import annotations
+
+import re
+
+from app.protocol import channels
+from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.signaling import INCOMING_TYPES
+from app.resources import STATIC_DIR
+
+JS = STATIC_DIR / "js"
+TYPE_LITERAL = re.compile(r"\btype: '(\w+)'")
+
+# What each module sends on a data channel: (module, type) -> (channel, receiving role).
+CHANNEL_SENDS = {
+    ("vehicle.js", "pose"): (AUTOPILOT_CHANNEL, "relay"),
+    ("client.js", "getOps"): (CONTROL_CHANNEL, "relay"),
+    ("client.js", "setOp"): (CONTROL_CHANNEL, "relay"),
+    # askRelay(type) sends start/stop on `control` when signaling is down.
+    ("client.js", "start"): (CONTROL_CHANNEL, "relay"),
+    ("client.js", "stop"): (CONTROL_CHANNEL, "relay"),
+    ("relay.js", "state"): (CONTROL_CHANNEL, "client"),
+    ("relay.js", "ops"): (CONTROL_CHANNEL, "client"),
+    ("relay.js", "error"): (CONTROL_CHANNEL, "client"),
+    ("relay.js", "pose"): (CONTROL_CHANNEL, "client"),
+    ("relay.js", "stop"): (AUTOPILOT_CHANNEL, "vehicle"),
+    ("snapshot-loop.js", "goal"): (AUTOPILOT_CHANNEL, "vehicle"),
+    ("snapshot-loop.js", "detections"): (CONTROL_CHANNEL, "client"),
+    # serveChannel's error replies go back on whichever channel the bad message came from.
+    ("peer.js", "error"): (AUTOPILOT_CHANNEL, "vehicle"),
+}
+MODULES = sorted({module for module, _ in CHANNEL_SENDS} | {"room.js", "signaling.js"})
+
+
+def test_every_type_a_page_writes_is_a_signaling_or_channel_model() -> None:
+    channel_types = {channels.type_of(m) for m in channels.ChannelMessage.__args__}
+    for module in MODULES:
+        for kind in TYPE_LITERAL.findall((JS / module).read_text()):
+            sent_on_channel = (module, kind) in CHANNEL_SENDS
+            assert sent_on_channel or kind in INCOMING_TYPES, f"{module} writes {kind!r}"
+            if sent_on_channel:
+                assert kind in channel_types
+
+
+def test_each_channel_message_goes_to_a_side_that_accepts_it() -> None:
+    for (module, kind), (label, role) in CHANNEL_SENDS.items():
+        accepted = {channels.type_of(m) for m in channels.RECEIVERS[label][role]}
+        assert kind in accepted, f"{module} sends {kind!r} to the {role} on {label!r}"
+
+
+def test_error_replies_are_accepted_on_every_channel_by_every_side() -> None:
+    for by_role in channels.RECEIVERS.values():
+        for models in by_role.values():
+            assert channels.Error in models
