@@ -33,6 +33,7 @@ from pydantic import (
 from pydantic.alias_generators import to_camel
 
 from app.config import PACKAGE_DIR
+from app.vision import window
 
 # cv2.data.haarcascades of the pinned wheel (its type stubs omit the cv2.data module).
 CASCADE_DIR = Path(cv2.__file__).resolve().parent / "data"
@@ -62,6 +63,11 @@ class CascadeParams(_Model):
     max_size: tuple[int, int] = (0, 0)
     # The frame is reduced to this width before detection (INTER_AREA); null: full resolution.
     detect_width: int | None = Field(None, gt=0)
+    # Detect, then track (app/vision/window.py): after a hit, snapshots search a window around
+    # the last target grown by window_margin of its size on each side; the whole frame is
+    # scanned every full_scan_every snapshots and whenever the window finds nothing. 1: off.
+    full_scan_every: int = Field(1, ge=1)
+    window_margin: float = Field(0.5, gt=0.0)
 
 
 class HsvRange(_Model):
@@ -206,6 +212,8 @@ class Detection:
 
     boxes: list[Box]
     target: tuple[float, float] | None
+    # The window searched, in detection-image pixels; None for a full-frame scan.
+    region: Box | None = None
 
 
 def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, int] | None:
@@ -259,8 +267,17 @@ def _classifier(name: str) -> cv2.CascadeClassifier:
     return _classifiers[name]
 
 
-def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
+def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> Detection:
     gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
+    region = None
+    ox = oy = 0
+    if around is not None:
+        height, width = gray.shape[:2]
+        region = window.search_region(around, factor, width, height, params.window_margin)
+        if region is None:
+            return Detection(boxes=[], target=None, region=region)
+        ox, oy = region[:2]
+        gray = window.crop(gray, region)
     boxes: list[Box] = []
     for name in params.cascades:
         found = _classifier(name).detectMultiScale(
@@ -272,9 +289,9 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
             maxSize=params.max_size,
         )
         for x, y, w, h in found:
-            boxes.append(_scale_box((int(x), int(y), int(w), int(h)), factor))
+            boxes.append(_scale_box((int(x) + ox, int(y) + oy, int(w), int(h)), factor))
     boxes.sort()
-    return Detection(boxes=boxes, target=_centre_of_largest(boxes))
+    return Detection(boxes=boxes, target=_centre_of_largest(boxes), region=region)
 
 
 def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
@@ -301,15 +318,23 @@ def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
 
 
 def detect(
-    op: CascadeOperation | ColourOperation, rgba: Rgba, profile: str = "default"
+    op: CascadeOperation | ColourOperation,
+    rgba: Rgba,
+    profile: str = "default",
+    around: Box | None = None,
 ) -> Detection:
-    """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does."""
+    """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does.
+
+    ``around`` (cascade operations only): search just the window around this full-frame box.
+    """
     if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
         raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
     if profile not in PROFILES:
         raise ValueError(f"unknown profile {profile!r}; expected one of {PROFILES}")
     if isinstance(op, CascadeOperation):
-        return _detect_cascade(op.params_for(profile), rgba)
+        return _detect_cascade(op.params_for(profile), rgba, around)
+    if around is not None:
+        raise ValueError(f"operation {op.id!r} is not a cascade; it has no windowed search")
     return _detect_colour(op.params_for(profile), rgba)
 
 

@@ -5,6 +5,10 @@ Every image is decoded in headless Chromium and sent through the analyzer the re
 RGBA pixels that the worker analysed come back and :func:`app.operations.detect` runs on exactly
 those pixels, so decoding differences between browser and Python cannot hide or fake a mismatch.
 
+The windowed path (detect, then track: ``app/vision/window.py``) is checked too: for every
+cascade operation that found a target, both sides search the window around the same box on the
+same pixels, and must agree by the same rule.
+
 Agreement rule: both sides find the same number of boxes, and the JS boxes can be paired with
 distinct Python boxes so that every pair overlaps with IoU >= 0.9. For Haar cascades the boxes are
 expected to be identical; the tolerance only absorbs last-bit differences in colour conversion.
@@ -30,6 +34,7 @@ from app import operations
 from app.browser import chromium_args, chromium_path
 from app.config import Settings
 from app.serve import start_in_thread
+from app.vision import window
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +86,8 @@ class Pair:
     js_target: list[float] | None
     py_target: list[float] | None
     agree: bool
+    # The full-frame box whose window both sides searched; None for a full-frame scan.
+    around: list[int] | None = None
 
 
 @dataclass
@@ -144,6 +151,32 @@ class Harness:
         rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
         return rgba.reshape(out["height"], out["width"], 4), out["results"]
 
+    def analyze_pixels(
+        self,
+        rgba: np.ndarray[Any, np.dtype[np.uint8]],
+        op_id: str,
+        profile: str = "default",
+        *,
+        around: Sequence[int] | None = None,
+        track: bool = False,
+    ) -> dict[str, Any]:
+        """Run ``op_id`` in the browser on exactly these RGBA pixels (H×W×4).
+
+        ``around``: search only the window around this full-frame box; ``track``: detect,
+        then track across the calls that set it. Returns ``{boxes, target, scan, region}``.
+        """
+        height, width = rgba.shape[:2]
+        options = {"profile": profile, "track": track, "around": list(around) if around else None}
+        result: dict[str, Any] = self.page.evaluate(
+            "([data, w, h, op, options]) => window.runPixels(data, w, h, op, options)",
+            [base64.b64encode(rgba.tobytes()).decode("ascii"), width, height, op_id, options],
+        )
+        return result
+
+    def reset_tracking(self) -> None:
+        """Forget the analyzer's tracked targets: the next tracked call is a full scan."""
+        self.page.evaluate("() => window.analyzer.resetTracking()")
+
     def check(
         self, path: Path, op_ids: Sequence[str], report: Report, profile: str = "default"
     ) -> None:
@@ -156,21 +189,37 @@ class Harness:
             return
         report.images.append(name)
         for op_id in op_ids:
-            py = operations.detect(self.spec.op(op_id), rgba, profile)
+            op = self.spec.op(op_id)
+            py = operations.detect(op, rgba, profile)
             js = results[op_id]
-            js_target = js["target"]
-            py_boxes = [list(b) for b in py.boxes]
-            report.details.append(
-                Pair(
-                    image=name,
-                    op=op_id,
-                    js_boxes=js["boxes"],
-                    py_boxes=py_boxes,
-                    js_target=[js_target["x"], js_target["y"]] if js_target else None,
-                    py_target=list(py.target) if py.target else None,
-                    agree=boxes_agree(js["boxes"], py_boxes),
-                )
-            )
+            report.details.append(_pair(name, op_id, js, py))
+            largest = window.largest([tuple(b) for b in js["boxes"]])
+            if isinstance(op, operations.CascadeOperation) and largest is not None:
+                # The windowed path: both sides search the window around the same box.
+                js = self.analyze_pixels(rgba, op_id, profile, around=largest)
+                py = operations.detect(op, rgba, profile, around=largest)
+                report.details.append(_pair(name, op_id, js, py, around=list(largest)))
+
+
+def _pair(
+    image: str,
+    op_id: str,
+    js: dict[str, Any],
+    py: operations.Detection,
+    around: list[int] | None = None,
+) -> Pair:
+    js_target = js["target"]
+    py_boxes = [list(b) for b in py.boxes]
+    return Pair(
+        image=image,
+        op=op_id,
+        js_boxes=js["boxes"],
+        py_boxes=py_boxes,
+        js_target=[js_target["x"], js_target["y"]] if js_target else None,
+        py_target=list(py.target) if py.target else None,
+        agree=boxes_agree(js["boxes"], py_boxes),
+        around=around,
+    )
 
 
 @contextmanager
@@ -255,8 +304,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         for pair in report.details:
             verdict = "agree" if pair.agree else "DISAGREE"
+            where = f" (window around {_format_boxes([pair.around])})" if pair.around else ""
             sys.stdout.write(
-                f"{pair.image} {pair.op}: {verdict}\n"
+                f"{pair.image} {pair.op}{where}: {verdict}\n"
                 f"    js     {_format_boxes(pair.js_boxes)}\n"
                 f"    python {_format_boxes(pair.py_boxes)}\n"
             )

@@ -211,6 +211,8 @@ function onVehicleTrack({ track, receiver }) {
   receiver.jitterBufferTarget = 0;
   session.vehicleTrack = track;
   status.vehicleTracks += 1;
+  // A new video starts with a full scan, not a window where the old one last saw its target.
+  session.analyzer?.resetTracking().catch((err) => log.error(`could not reset tracking: ${err.message}`));
   video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
@@ -370,7 +372,8 @@ async function analyzeOnce() {
   // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
   // converts it to RGBA straight into OpenCV's memory.
   const frame = new VideoFrame(video);
-  const result = await session.analyzer.analyze(frame, status.op, { profile: config.profile });
+  // track: between full scans, search only around the last target (the spec's fullScanEvery).
+  const result = await session.analyzer.analyze(frame, status.op, { profile: config.profile, track: true });
   if (!status.piloting) return;
   status.snapshots += 1;
   if (result.target) {

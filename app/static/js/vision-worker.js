@@ -3,8 +3,8 @@
 //
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp} | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels}
-//                   {type: 'memory', id}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around}
+//                   {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
 'use strict';
 
@@ -19,6 +19,8 @@ const session = {
   spec: null,
   modules: new Map(), // module file -> imported ES module
   instances: new Map(), // `${opId}:${profile}` -> operation instance
+  window: null, // the imported window.js (detect, then track)
+  trackers: new Map(), // `${opId}:${profile}` -> Tracker of the snapshots analysed with track
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
   ctx: null,
@@ -64,6 +66,7 @@ async function init() {
     session.cv.FS_createDataFile('/', name, bytes, true, false, false);
     session.files.push(name);
   }
+  session.window = await import('./window.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
       session.modules.set(op.module, await import(`./operations/${op.module}`));
@@ -86,6 +89,9 @@ function instanceFor(opId, profile) {
   if (profile !== 'default' && profile !== 'thesis') throw new Error(`unknown profile "${profile}"`);
   const spec = profile === 'thesis' ? { ...op, params: { ...op.params, ...op.thesis } } : op;
   instance = session.modules.get(op.module).create(session.cv, spec, session.files);
+  // Cascade operations search a window around the last target between full scans.
+  instance.windowed = op.kind === 'cascade';
+  instance.tracker = new session.window.Tracker(instance.windowed ? spec.params.fullScanEvery : 1);
   session.instances.set(key, instance);
   return instance;
 }
@@ -170,7 +176,28 @@ function describe(error) {
   return String(error?.message ?? error);
 }
 
-async function analyze({ source, opId, profile = 'default', returnPixels = false }) {
+/**
+ * Run the operation on the frame: with `track`, its tracker picks a window around the last
+ * target or a full scan (window.js step); with `around` (a full-frame box, parity checks), the
+ * window around it alone is searched; otherwise the whole frame.
+ */
+function detectIn(instance, frame, track, around) {
+  if (around != null) {
+    if (!instance.windowed) throw new Error('this operation has no windowed search');
+    return { found: instance.detect(frame, around), scan: 'window' };
+  }
+  if (track) return session.window.step(instance.tracker, (box) => instance.detect(frame, box));
+  return { found: instance.detect(frame), scan: 'full' };
+}
+
+async function analyze({
+  source,
+  opId,
+  profile = 'default',
+  returnPixels = false,
+  track = false,
+  around = null,
+}) {
   const started = performance.now();
   let instance;
   try {
@@ -181,7 +208,8 @@ async function analyze({ source, opId, profile = 'default', returnPixels = false
   }
   const frame = await readPixels(source);
   const detectStarted = performance.now();
-  const { boxes, target } = instance.detect(frame);
+  const { found, scan } = detectIn(instance, frame, track, around);
+  const { boxes, target, region = null } = found;
   const done = performance.now();
   const { cols: width, rows: height } = frame;
   const result = {
@@ -193,6 +221,8 @@ async function analyze({ source, opId, profile = 'default', returnPixels = false
     ms: done - detectStarted,
     workMs: done - started,
     frame: decodeFrameTag(width, height, frame.data),
+    scan,
+    region,
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
@@ -216,6 +246,10 @@ async function handle(message) {
         id: message.id,
         result: { wasmHeapBytes: session.cv.HEAPU8.length },
       });
+      break;
+    case 'reset':
+      for (const instance of session.instances.values()) instance.tracker.reset();
+      self.postMessage({ type: 'result', id: message.id, result: {} });
       break;
     case 'close':
       for (const instance of session.instances.values()) instance.delete();

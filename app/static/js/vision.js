@@ -57,12 +57,20 @@ export async function createAnalyzer() {
     /**
      * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so
      * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
-     * Options: profile 'default' | 'thesis'; returnPixels adds `rgba` (the pixels analysed).
-     * Resolves to {op, boxes, target, w, h, ms, workMs, frame[, rgba]}.
+     * Options: profile 'default' | 'thesis'; returnPixels adds `rgba` (the pixels analysed);
+     * track: detect, then track (window.js) across the calls that set it, per operation and
+     * profile; around: a full-frame box [x, y, w, h] whose window alone is searched (parity).
+     * Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' | 'window',
+     * region: the window searched in detection-image pixels or null[, rgba]}.
      */
-    analyze(source, opId, { profile = 'default', returnPixels = false } = {}) {
+    analyze(source, opId, { profile = 'default', returnPixels = false, track = false, around = null } = {}) {
       const transfer = source.data ? [] : [source];
-      return call({ type: 'analyze', source, opId, profile, returnPixels }, transfer);
+      return call({ type: 'analyze', source, opId, profile, returnPixels, track, around }, transfer);
+    },
+
+    /** Forget every tracked target: the next tracked snapshot scans the whole frame. */
+    resetTracking() {
+      return call({ type: 'reset' });
     },
 
     /** {wasmHeapBytes}: size of the OpenCV WASM heap, for leak checks and benchmarks. */
