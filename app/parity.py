@@ -304,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         for pair in report.details:
             verdict = "agree" if pair.agree else "DISAGREE"
-            where = f" (window around {_format_boxes([pair.around])})" if pair.around else ""
+            where = " (window around ({},{},{},{}))".format(*pair.around) if pair.around else ""
             sys.stdout.write(
                 f"{pair.image} {pair.op}{where}: {verdict}\n"
                 f"    js     {_format_boxes(pair.js_boxes)}\n"
