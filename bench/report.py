@@ -44,6 +44,7 @@ LABELS = {
     "heading_error_deg_median": "median heading error (deg)",
     "js_over_native_ratio": "OpenCV.js / Python OpenCV",
     "memory_growth_pct": "relay memory growth (%)",
+    "recall_after_jump_pct": "goals within 3 frames of a jump (%)",
 }
 
 
@@ -282,6 +283,12 @@ def _limits(key: str, results: dict[str, Any]) -> str:
         return (
             "the face keeps moving: the turtle lags it by the glass-to-command latency and its"
             " turn-rate limit"
+        )
+    if key == "recall_after_jump_pct":
+        return (
+            f"{d.get('face_jumps', 0)} appearances or jumps of the face while measuring; a goal"
+            " must come from one of the 4 frames from the jump on, so any snapshot skipped"
+            " (one in flight at a time) or a window that misses without a full scan costs recall"
         )
     if key == "js_over_native_ratio":
         return "OpenCV.js's WebAssembly build against the native wheel's SIMD-dispatched x86 code"
