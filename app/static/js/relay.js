@@ -1,7 +1,7 @@
 // The relay page (the thesis's "intermediate server"): answers the vehicle's and the clients'
 // offers, forwards the vehicle's video to every client, runs the selected OpenCV.js operation
 // on snapshots while piloting and sends goals to the vehicle on the `autopilot` channel.
-import { BadMessage, Peer, requireNumber, sendJson, serveChannel } from './peer.js';
+import { BadMessage, Peer, preferLowLatency, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
 import { byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
 import { createAnalyzer } from './vision.js';
@@ -77,7 +77,8 @@ const session = {
   lastError: null, // the last snapshot failure, logged once
   busy: false, // a snapshot is being analysed
   timer: null, // thesis profile: the snapshot interval
-  frameCallback: null, // default profile: the pending requestVideoFrameCallback
+  frameCallback: null, // default profile without MediaStreamTrackProcessor: the pending rVFC
+  frameReader: null, // default profile: the reader of the vehicle track's decoded frames
   // Per-snapshot timings behind status.processingMs, workMs and detectMs.
   samples: {
     processing: new SampleRing(MS_SAMPLES),
@@ -206,13 +207,16 @@ async function sendVideoOn(pc) {
 }
 
 function onVehicleTrack({ track, receiver }) {
-  // Goals are worth most when fresh: ask for the smallest jitter buffer WebRTC allows, so a
-  // decoded frame is shown (and analysed) as soon as it is complete.
-  receiver.jitterBufferTarget = 0;
+  // Goals are worth most when fresh: a decoded frame is shown (and analysed) at once.
+  preferLowLatency(receiver);
   session.vehicleTrack = track;
   status.vehicleTracks += 1;
   // A new video starts with a full scan, not a window where the old one last saw its target.
   session.analyzer?.resetTracking().catch((err) => log.error(`could not reset tracking: ${err.message}`));
+  if (status.piloting && session.timer === null) {
+    stopLoop();
+    startLoop();
+  }
   video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
@@ -336,6 +340,10 @@ function startLoop() {
     session.timer = setInterval(snapshot, THESIS_PERIOD_MS);
     return;
   }
+  if (typeof MediaStreamTrackProcessor === 'function') {
+    if (session.vehicleTrack !== null) readFrames(session.vehicleTrack);
+    return;
+  }
   const onFrame = () => {
     if (!status.piloting) return;
     session.frameCallback = video.requestVideoFrameCallback(onFrame);
@@ -344,19 +352,47 @@ function startLoop() {
   session.frameCallback = video.requestVideoFrameCallback(onFrame);
 }
 
+/**
+ * Default profile: each frame straight from the decoder (MediaStreamTrackProcessor), without
+ * waiting for the video element to present it. A frame that arrives while one is being
+ * analysed is dropped, so the next snapshot is always the freshest frame.
+ */
+async function readFrames(track) {
+  const reader = new MediaStreamTrackProcessor({ track }).readable.getReader();
+  session.frameReader = reader;
+  try {
+    for (;;) {
+      const { value: frame, done } = await reader.read();
+      if (done) return;
+      if (session.busy || !status.piloting || session.frameReader !== reader) frame.close();
+      else snapshot(frame);
+    }
+  } catch (err) {
+    log.error(`reading video frames failed: ${err.message}`);
+  }
+}
+
 function stopLoop() {
   if (session.timer !== null) clearInterval(session.timer);
   if (session.frameCallback !== null) video.cancelVideoFrameCallback(session.frameCallback);
+  session.frameReader?.cancel().catch(() => {}); // the stream may have ended with its track
   session.timer = null;
   session.frameCallback = null;
+  session.frameReader = null;
 }
 
-/** One snapshot → analysis → goal, unless one is already in flight. */
-async function snapshot() {
-  if (session.busy || session.analyzer === null || video.videoWidth === 0) return;
+/**
+ * One snapshot → analysis → goal, unless one is already in flight. `frame`: a VideoFrame to
+ * analyse (owned from here on), or null for the frame the video element shows.
+ */
+async function snapshot(frame = null) {
+  if (session.busy || session.analyzer === null || (frame === null && video.videoWidth === 0)) {
+    frame?.close();
+    return;
+  }
   session.busy = true;
   try {
-    await analyzeOnce();
+    await analyzeOnce(frame);
     session.lastError = null;
   } catch (err) {
     // Every frame would repeat it: log a failure once until something succeeds again.
@@ -367,11 +403,11 @@ async function snapshot() {
   }
 }
 
-async function analyzeOnce() {
+async function analyzeOnce(decoded) {
   const started = performance.now();
-  // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
-  // converts it to RGBA straight into OpenCV's memory.
-  const frame = new VideoFrame(video);
+  // A VideoFrame wraps the decoded picture without copying it; the worker converts it to RGBA
+  // straight into OpenCV's memory.
+  const frame = decoded ?? new VideoFrame(video);
   // track: between full scans, search only around the last target (the spec's fullScanEvery).
   const result = await session.analyzer.analyze(frame, status.op, { profile: config.profile, track: true });
   if (!status.piloting) return;
