@@ -185,6 +185,7 @@ async def _compare_detection(
     for profile, comparison in comparisons.items():
         runs[profile].js_ms = comparison.js_ms
         runs[profile].native_ms = comparison.native_ms
+        runs[profile].js_window_ms = comparison.js_window_ms
 
 
 def _all(reason: str) -> dict[str, str]:

@@ -252,12 +252,18 @@ def _limits(key: str, results: dict[str, Any]) -> str:
 
     if key.startswith("processing"):
         det, proc = p50("js_detect_ms"), p50("processing_ms")
+        windowed = p50("js_window_detect_ms")
+        tracked = (
+            f" ({windowed:.1f} ms in the tracking window that most snapshots search)"
+            if windowed is not None
+            else ""
+        )
         if det is not None and proc is not None:
             return (
-                f"OpenCV.js detection alone takes {det:.1f} ms p50 (measured offline on the same"
-                f" kind of frame) of the {proc:.1f} ms p50; the rest is taking the snapshot,"
-                " handing it to the worker and sending the goal, on a CPU shared with the video"
-                f" encoder and decoders{busy}"
+                f"OpenCV.js detection alone takes {det:.1f} ms p50 on the whole frame{tracked}"
+                f" (measured offline on the same kind of frame) of the {proc:.1f} ms p50; the"
+                " rest is taking the snapshot, handing it to the worker and sending the goal, on"
+                f" a CPU shared with the video encoder and decoders{busy}"
             )
         return "the relay's per-snapshot timings"
     if key == "goals_per_s":

@@ -103,6 +103,8 @@ class ProfileRun:
     settle_at: float | None = None
     js_ms: list[float] = field(default_factory=list)
     native_ms: list[float] = field(default_factory=list)
+    # OpenCV.js detection in the tracking window around the face, same frames as js_ms.
+    js_window_ms: list[float] = field(default_factory=list)
     memory: list[MemorySample] = field(default_factory=list)
     # Growth is measured from the first memory sample at or after this time.
     memory_baseline_at: float | None = None
@@ -248,6 +250,7 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "goal_window_s": (run.window[1] - run.window[0]) if run.window else None,
         "face_jumps": run.recall()[1],
         "js_detect_ms": summary(run.js_ms),
+        "js_window_detect_ms": summary(run.js_window_ms),
         "native_detect_ms": summary(run.native_ms),
         "heading_samples": len(run.heading),
         "memory_start": vars(first) if first else None,
