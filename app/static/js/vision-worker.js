@@ -18,9 +18,10 @@ const session = {
   cv: null,
   spec: null,
   modules: new Map(), // module file -> imported ES module
-  instances: new Map(), // `${opId}:${profile}` -> operation instance
+  // `${opId}:${profile}` -> {op: operation instance, windowed: whether it can search a window,
+  // tracker: its window.js Tracker for the snapshots analysed with `track`}
+  instances: new Map(),
   window: null, // the imported window.js (detect, then track)
-  trackers: new Map(), // `${opId}:${profile}` -> Tracker of the snapshots analysed with track
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
   ctx: null,
@@ -88,10 +89,13 @@ function instanceFor(opId, profile) {
   if (!op) throw new Error(`unknown operation "${opId}"`);
   if (profile !== 'default' && profile !== 'thesis') throw new Error(`unknown profile "${profile}"`);
   const spec = profile === 'thesis' ? { ...op, params: { ...op.params, ...op.thesis } } : op;
-  instance = session.modules.get(op.module).create(session.cv, spec, session.files);
   // Cascade operations search a window around the last target between full scans.
-  instance.windowed = op.kind === 'cascade';
-  instance.tracker = new session.window.Tracker(instance.windowed ? spec.params.fullScanEvery : 1);
+  const windowed = op.kind === 'cascade';
+  instance = {
+    op: session.modules.get(op.module).create(session.cv, spec, session.files),
+    windowed,
+    tracker: new session.window.Tracker(windowed ? spec.params.fullScanEvery : 1),
+  };
   session.instances.set(key, instance);
   return instance;
 }
@@ -184,10 +188,10 @@ function describe(error) {
 function detectIn(instance, frame, track, around) {
   if (around != null) {
     if (!instance.windowed) throw new Error('this operation has no windowed search');
-    return { found: instance.detect(frame, around), scan: 'window' };
+    return { found: instance.op.detect(frame, around), scan: 'window' };
   }
-  if (track) return session.window.step(instance.tracker, (box) => instance.detect(frame, box));
-  return { found: instance.detect(frame), scan: 'full' };
+  if (track) return session.window.step(instance.tracker, (box) => instance.op.detect(frame, box));
+  return { found: instance.op.detect(frame), scan: 'full' };
 }
 
 async function analyze({
@@ -252,7 +256,7 @@ async function handle(message) {
       self.postMessage({ type: 'result', id: message.id, result: {} });
       break;
     case 'close':
-      for (const instance of session.instances.values()) instance.delete();
+      for (const instance of session.instances.values()) instance.op.delete();
       session.instances.clear();
       session.frame?.delete();
       session.frame = null;
