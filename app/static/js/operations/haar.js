@@ -93,8 +93,8 @@ export function createCascadeOperation(cv, spec, files) {
         if (searched !== input) searched.delete();
       }
       sortBoxes(boxes);
-      const window = region && [region.x, region.y, region.width, region.height];
-      return { boxes, target: centreOfLargest(boxes), region: window };
+      const searchedBox = region && [region.x, region.y, region.width, region.height];
+      return { boxes, target: centreOfLargest(boxes), region: searchedBox };
     },
     delete() {
       for (const c of classifiers) c.delete();
