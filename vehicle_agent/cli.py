@@ -6,11 +6,12 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import signal
 from pathlib import Path
 
 from aiortc import RTCIceServer
 
+from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -70,7 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
     )
     parser.add_argument(
-        "--ros", type=int, choices=(1, 2), default=1, help="ROS message type names (default 1)"
+        "--ros",
+        choices=ROS_SETTINGS,
+        default=AUTO,
+        help="ROS flavour of the robot's type names when its rosapi cannot tell: 1, 2 (up to "
+        "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
         "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"
@@ -126,9 +131,7 @@ async def _main(args: argparse.Namespace) -> int:
     )
     agent = Agent(config, video, turtle, events)
     task = asyncio.create_task(agent.run())
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, task.cancel)
+    on_stop_signals(task.cancel)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task

@@ -3,7 +3,9 @@
 * :class:`SimTurtle` -- an in-process :class:`app.turtlesim.sim.TurtleSim` stepped by an asyncio
   task on turtlesim's fixed 16 ms tick (the agent's default: no server, no ROS).
 * :class:`RosbridgeTurtle` -- any rosbridge v2 server through roslibpy: this project's
-  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server`` (ROS 1 or ROS 2 type names).
+  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server``. The pose and cmd_vel types
+  are learnt from the robot's rosapi ``topic_type``, falling back to the ``--ros`` setting
+  (:mod:`app.protocol.ros`), so ROS 1, ROS 2 up to Iron and Jazzy+ robots all work.
 """
 
 from __future__ import annotations
@@ -11,12 +13,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 import roslibpy
 from twisted.internet import reactor
 
+from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, Detected, RosSetting, detect
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -24,11 +27,6 @@ log = logging.getLogger(__name__)
 
 PoseCallback = Callable[[Pose], None]
 
-# Message type names differ between ROS 1 and ROS 2 rosbridge servers.
-TYPE_NAMES: dict[int, dict[str, str]] = {
-    1: {"twist": "geometry_msgs/Twist", "pose": "turtlesim/Pose"},
-    2: {"twist": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"},
-}
 CONNECT_TIMEOUT_S = 5.0
 
 
@@ -102,14 +100,16 @@ class RosbridgeTurtle:
     roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
     """
 
-    def __init__(self, url: str, ros_version: int = 1, name: str = "turtle1") -> None:
+    def __init__(self, url: str, ros: RosSetting = AUTO, name: str = "turtle1") -> None:
         if not url.startswith(("ws://", "wss://")):
             raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
-        if ros_version not in TYPE_NAMES:
-            raise TurtleError(f"ROS version must be 1 or 2, not {ros_version}")
+        if ros not in ROS_SETTINGS:
+            raise TurtleError(f"--ros must be one of {', '.join(ROS_SETTINGS)}, not {ros!r}")
         self.url = url
         self.name = name
-        self.types = TYPE_NAMES[ros_version]
+        self.setting: RosSetting = ros
+        # Known once connected: the types in use and whether the robot named them.
+        self.types: Detected | None = None
         self._ros: roslibpy.Ros | None = None
         self._cmd_vel: roslibpy.Topic | None = None
         self._pose: roslibpy.Topic | None = None
@@ -127,16 +127,55 @@ class RosbridgeTurtle:
             raise TurtleError(f"cannot connect to rosbridge at {self.url}: {reason}") from exc
         self._ros = ros
         ros.on("close", lambda *_: log.warning("rosbridge connection to %s lost", self.url))
-        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", self.types["twist"])
+        types = self.types = await self._detect(ros)
+        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", types.twist)
         self._cmd_vel.advertise()
 
         def received(message: dict[str, Any]) -> None:
             pose = Pose(float(message["x"]), float(message["y"]), float(message["theta"]))
             loop.call_soon_threadsafe(on_pose, pose)
 
-        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", self.types["pose"])
+        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", types.pose)
         self._pose.subscribe(received)
         log.info("driving /%s through rosbridge at %s", self.name, self.url)
+
+    async def _detect(self, ros: roslibpy.Ros) -> Detected:
+        """Ask rosapi for the pose and cmd_vel types; the setting decides what it cannot."""
+        reported = [
+            await asyncio.to_thread(self._topic_type, ros, f"/{self.name}/{leaf}")
+            for leaf in ("pose", "cmd_vel")
+        ]
+        types = detect(reported[0], reported[1], self.setting)
+        if types.from_robot:
+            log.info("the robot speaks ROS %s: %s, %s", types.flavour, types.pose, types.twist)
+            if self.setting not in (AUTO, types.flavour):
+                log.warning(
+                    "--ros %s ignored: the robot reports ROS %s types", self.setting, types.flavour
+                )
+        else:
+            log.warning(
+                "rosapi did not name /%s/pose's type; using ROS %s names (--ros %s)",
+                self.name,
+                types.flavour,
+                self.setting,
+            )
+        return types
+
+    def _topic_type(self, ros: roslibpy.Ros, topic: str) -> str | None:
+        """rosapi's ``topic_type`` for ``topic``; None when rosapi is missing or silent."""
+        service = roslibpy.Service(ros, "/rosapi/topic_type", "rosapi/TopicType")
+        try:
+            reply = service.call(
+                roslibpy.ServiceRequest({"topic": topic}), timeout=DETECT_TIMEOUT_S
+            )
+        except roslibpy.core.ServiceException as exc:
+            log.info("rosapi topic_type %s failed: %s", topic, exc)
+            return None
+        except TimeoutError:  # roslibpy's RosTimeoutError
+            log.info("rosapi topic_type %s: no answer within %g s", topic, DETECT_TIMEOUT_S)
+            return None
+        kind = reply.get("type") if isinstance(reply, Mapping) else None  # a UserDict
+        return kind if isinstance(kind, str) and kind else None
 
     def publish(self, twist: Twist) -> None:
         """Publish on ``/turtleN/cmd_vel`` (roslibpy hands it to its network thread)."""

@@ -2,15 +2,20 @@
 
 A :class:`RosbridgeHub` holds the simulator and every open :class:`RosbridgeSession` (one per
 WebSocket connection). The adapter hands each received text frame to
-:meth:`RosbridgeSession.receive`, which returns the direct replies (``service_response``,
-``status``); after each simulator step it calls :meth:`RosbridgeHub.tick` and sends what
-:meth:`RosbridgeSession.take_publications` returns (``publish`` messages for subscribed topics).
+:meth:`RosbridgeSession.receive`, which returns the direct replies (``service_response``, and
+``status`` for a client that asked for them); after each simulator step it calls
+:meth:`RosbridgeHub.tick` and sends what :meth:`RosbridgeSession.take_publications` returns
+(``publish`` messages for subscribed topics).
 
 Behaviour follows ``rosbridge_server``: topic and service names with or without the leading
 slash, replies that echo the client's spelling and ``id``, subscriptions with ``throttle_rate``
-(ms) and ``queue_length``, ``status`` messages filtered by ``set_level``, and ROS 1 or ROS 2 type
-names (``geometry_msgs/Twist`` or ``geometry_msgs/msg/Twist``). ``type`` is checked when given,
-never required.
+(ms) and ``queue_length``. A hub serves one ROS flavour (:mod:`app.protocol.ros`): its type
+names in rosapi's answers, and only its spellings accepted in ``advertise`` and ``subscribe``
+(``type`` is checked when given, never required; ``call_service``'s ``type`` is not checked, as
+rosbridge does not). A failed call gets ``service_response`` with ``result: false`` and the
+reason in ``values``; ``status`` messages are sent only after the client's ``set_level``, since
+current rosbridge_suite sends none. rosapi's services are answered by
+:class:`app.turtlesim.rosapi.RosGraph`.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import json
 import logging
 import math
 import re
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -34,7 +40,15 @@ from pydantic import (
     field_validator,
 )
 
-from app.turtlesim.sim import TurtleSim
+from app.protocol.errors import describe
+from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
+from app.turtlesim.rosapi import (
+    GLOBAL_SERVICES,
+    TURTLE_SERVICES,
+    RosapiError,
+    RosGraph,
+)
+from app.turtlesim.sim import TurtleSim, float32
 
 log = logging.getLogger(__name__)
 
@@ -42,23 +56,12 @@ Json = dict[str, Any]
 MessageId = StrictStr | StrictInt | None
 _Model = TypeVar("_Model", bound=BaseModel)
 
-# Status levels by rank: a session receives statuses at or above its level (rosbridge default
-# "error"); "none" silences them all.
+# Status levels by rank: after set_level a session receives statuses at or above its level;
+# "none" silences them all. Before set_level it receives none.
 _LEVELS = {"info": 0, "warning": 1, "error": 2, "none": 3}
 
-TWIST_TYPES = frozenset({"geometry_msgs/Twist", "geometry_msgs/msg/Twist"})
-POSE_TYPES = frozenset({"turtlesim/Pose", "turtlesim/msg/Pose"})
-_TOPIC_TYPES = {"cmd_vel": TWIST_TYPES, "pose": POSE_TYPES}
 _TOPIC_RE = re.compile(r"/?(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<leaf>cmd_vel|pose)\Z")
-_SERVICE_RE = re.compile(
-    r"/?(?:(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<turtle_service>teleport_absolute|"
-    r"teleport_relative|set_pen)|(?P<global_service>spawn|kill|reset|clear|"
-    r"rosapi/topics|rosapi/services|rosapi/topic_type))\Z"
-)
-
-
-def _ros_types(package: str, name: str, kind: str) -> frozenset[str]:
-    return frozenset({f"{package}/{name}", f"{package}/{kind}/{name}"})
+_TURTLE_SERVICE_RE = re.compile(r"/?(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<leaf>[a-z_]+)\Z")
 
 
 class ProtocolError(Exception):
@@ -206,10 +209,7 @@ def _parse(model: type[_Model], data: object, what: str = "") -> _Model:
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or 'message'}: {err['msg']}"
-            for err in exc.errors()
-        )
+        problems = describe(exc)
         raise ProtocolError(f"{what}: {problems}" if what else problems) from None
 
 
@@ -220,10 +220,7 @@ def _reject_constant(name: str) -> object:
 # -- services --------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class _Service:
-    types: frozenset[str]
-    call: Callable[[TurtleSim, str, Json], Json]
+_ServiceCall = Callable[[TurtleSim, str, Json], Json]
 
 
 def _spawn(sim: TurtleSim, _turtle: str, args: Json) -> Json:
@@ -266,64 +263,17 @@ def _set_pen(sim: TurtleSim, turtle: str, args: Json) -> Json:
     return {}
 
 
-class TopicTypeArgs(_Payload):
-    """``rosapi/TopicType`` request."""
-
-    topic: StrictStr = ""
-
-
-# What ``rosapi`` reports; ROS 2 names, as a ROS 2 rosbridge would.
-_REPORTED_TOPIC_TYPES = {"cmd_vel": "geometry_msgs/msg/Twist", "pose": "turtlesim/msg/Pose"}
-_TURTLE_SERVICES = ("teleport_absolute", "teleport_relative", "set_pen")
-
-
-def _rosapi_topics(sim: TurtleSim, _turtle: str, args: Json) -> Json:
-    _parse(EmptyArgs, args, "args")
-    pairs = [
-        (f"/{name}/{leaf}", kind)
-        for name in sim.names()
-        for leaf, kind in _REPORTED_TOPIC_TYPES.items()
-    ]
-    return {"topics": [t for t, _ in pairs], "types": [k for _, k in pairs]}
-
-
-def _rosapi_services(sim: TurtleSim, _turtle: str, args: Json) -> Json:
-    _parse(EmptyArgs, args, "args")
-    names = [f"/{name}" for name in SERVICES if name not in _TURTLE_SERVICES]
-    names += [f"/{turtle}/{name}" for turtle in sim.names() for name in _TURTLE_SERVICES]
-    return {"services": names}
-
-
-def _rosapi_topic_type(sim: TurtleSim, _turtle: str, args: Json) -> Json:
-    name = _parse(TopicTypeArgs, args, "args").topic
-    match = _TOPIC_RE.match(name)
-    if match is None or match["turtle"] not in sim.names():
-        return {"type": ""}  # rosapi's answer for a topic nobody publishes
-    return {"type": _REPORTED_TOPIC_TYPES[match["leaf"]]}
-
-
-def _rosapi_types(name: str) -> frozenset[str]:
-    return _ros_types("rosapi", name, "srv") | _ros_types("rosapi_msgs", name, "srv")
-
-
-_EMPTY_TYPES = _ros_types("std_srvs", "Empty", "srv")
-SERVICES: dict[str, _Service] = {
-    "spawn": _Service(_ros_types("turtlesim", "Spawn", "srv"), _spawn),
-    "kill": _Service(_ros_types("turtlesim", "Kill", "srv"), _kill),
-    "reset": _Service(_EMPTY_TYPES, _reset),
-    "clear": _Service(_EMPTY_TYPES, _clear),
-    "teleport_absolute": _Service(
-        _ros_types("turtlesim", "TeleportAbsolute", "srv"), _teleport_absolute
-    ),
-    "teleport_relative": _Service(
-        _ros_types("turtlesim", "TeleportRelative", "srv"), _teleport_relative
-    ),
-    "set_pen": _Service(_ros_types("turtlesim", "SetPen", "srv"), _set_pen),
-    # The discovery services of rosbridge_suite's rosapi node, which clients' get_topics() use.
-    "rosapi/topics": _Service(_rosapi_types("Topics"), _rosapi_topics),
-    "rosapi/services": _Service(_rosapi_types("Services"), _rosapi_services),
-    "rosapi/topic_type": _Service(_rosapi_types("TopicType"), _rosapi_topic_type),
+# turtlesim's services by name; a turtle's own services get its name as the second argument.
+SERVICES: dict[str, _ServiceCall] = {
+    "spawn": _spawn,
+    "kill": _kill,
+    "reset": _reset,
+    "clear": _clear,
+    "teleport_absolute": _teleport_absolute,
+    "teleport_relative": _teleport_relative,
+    "set_pen": _set_pen,
 }
+assert set(SERVICES) == {*GLOBAL_SERVICES, *TURTLE_SERVICES}, "the graph lists what is served"
 
 
 # -- topics ----------------------------------------------------------------------------------
@@ -335,11 +285,6 @@ class Topic:
 
     turtle: str
     leaf: Literal["cmd_vel", "pose"]
-
-    @property
-    def types(self) -> frozenset[str]:
-        """Type names a client may give for this topic."""
-        return _TOPIC_TYPES[self.leaf]
 
 
 def resolve_topic(name: str) -> Topic:
@@ -354,14 +299,14 @@ def resolve_topic(name: str) -> Topic:
 
 
 def pose_message(sim: TurtleSim, turtle: str) -> Json:
-    """A ``turtlesim/Pose`` message for one turtle."""
+    """A ``turtlesim/Pose`` message for one turtle; its fields are float32, as on the wire."""
     p = sim.pose(turtle)
     return {
-        "x": p.x,
-        "y": p.y,
-        "theta": p.theta,
-        "linear_velocity": p.linear_velocity,
-        "angular_velocity": p.angular_velocity,
+        "x": float32(p.x),
+        "y": float32(p.y),
+        "theta": float32(p.theta),
+        "linear_velocity": float32(p.linear_velocity),
+        "angular_velocity": float32(p.angular_velocity),
     }
 
 
@@ -425,7 +370,8 @@ class RosbridgeSession:
         self._hub = hub
         self._subscriptions: dict[str, _Subscription] = {}
         self._advertised: set[str] = set()
-        self._level = _LEVELS["error"]
+        # No status messages until the client asks for them with set_level.
+        self._level: int | None = None
         self._outbox: list[Json] = []
         self._handlers: dict[str, Callable[[Json], list[Json]]] = {
             "advertise": self._advertise,
@@ -518,7 +464,7 @@ class RosbridgeSession:
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
         twist = _parse(Twist, msg.msg, f"{msg.topic} (geometry_msgs/Twist)")
         try:
-            self._hub.sim.cmd_vel(topic.turtle, twist.linear.x, twist.angular.z)
+            self._hub.sim.cmd_vel(topic.turtle, twist.linear.x, twist.angular.z, twist.linear.y)
         except KeyError:
             raise ProtocolError(f"no turtle named {topic.turtle!r} for {msg.topic}") from None
         self._hub.broadcast(topic, twist.model_dump())
@@ -553,9 +499,9 @@ class RosbridgeSession:
             reply["id"] = msg.id
         try:
             values = self._run_service(msg)
-        except (ProtocolError, KeyError, ValueError) as exc:
+        except (ProtocolError, RosapiError, KeyError, ValueError) as exc:
             # rosbridge answers a failed call with result false (roslibpy's errback gets the
-            # text) and reports it as a status error too.
+            # text); a status error goes only to a client that asked for statuses.
             text = exc.args[0] if exc.args else str(exc)
             failure = {**reply, "values": f"{msg.service}: {text}", "result": False}
             return [*self._status("error", f"call_service {msg.service}: {text}", msg.id), failure]
@@ -568,24 +514,36 @@ class RosbridgeSession:
     # -- helpers ------------------------------------------------------------------------
 
     def _typed_topic(self, name: str, type_name: str | None) -> Topic:
-        topic = resolve_topic(name)
-        if type_name is not None and type_name not in topic.types:
-            raise ProtocolError(f"{name} has type {sorted(topic.types)[0]}, not {type_name!r}")
+        try:
+            topic = resolve_topic(name)
+        except ProtocolError:
+            absolute = name if name.startswith("/") else f"/{name}"
+            if absolute in self._hub.graph.topics():
+                raise ProtocolError(
+                    f"{name} is on a real robot's graph, but this simulator publishes nothing "
+                    "on it and takes nothing from it"
+                ) from None
+            raise
+        types = self._hub.types
+        canonical = types.twist if topic.leaf == "cmd_vel" else types.pose
+        if type_name is not None and type_name not in spellings(types.flavour, canonical):
+            raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
 
     def _run_service(self, msg: CallService) -> Json:
-        match = _SERVICE_RE.match(msg.service)
-        if match is None:
+        name = msg.service[1:] if msg.service.startswith("/") else msg.service
+        if name.startswith("rosapi/"):
+            return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args)
+        if name in GLOBAL_SERVICES:
+            return SERVICES[name](self._hub.sim, "", msg.args)
+        match = _TURTLE_SERVICE_RE.match(name)
+        if match is None or match["leaf"] not in TURTLE_SERVICES:
             raise ProtocolError("unknown service")
-        turtle = match["turtle"] or ""
-        service = SERVICES[match["turtle_service"] or match["global_service"]]
-        if msg.type is not None and msg.type not in service.types:
-            raise ProtocolError(f"has type {sorted(service.types)[0]}, not {msg.type!r}")
-        return service.call(self._hub.sim, turtle, msg.args)
+        return SERVICES[match["leaf"]](self._hub.sim, match["turtle"], msg.args)
 
     def _status(self, level: str, text: str, op_id: object) -> list[Json]:
         log.debug("rosbridge status %s: %s", level, text)
-        if _LEVELS[level] < self._level:
+        if self._level is None or _LEVELS[level] < self._level:
             return []
         status: Json = {"op": "status", "level": level, "msg": text}
         if op_id is not None:
@@ -596,8 +554,15 @@ class RosbridgeSession:
 class RosbridgeHub:
     """The simulator and every session talking to it; fans messages out to subscribers."""
 
-    def __init__(self, sim: TurtleSim) -> None:
+    def __init__(
+        self,
+        sim: TurtleSim,
+        ros: RosFlavour = DEFAULT_FLAVOUR,
+        wall_clock: Callable[[], float] = time.time,
+    ) -> None:
         self.sim = sim
+        self.graph = RosGraph(sim, ros, wall_clock)
+        self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
         self._now = -math.inf
 

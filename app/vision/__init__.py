@@ -1,1 +1,1 @@
-"""Vision: the operations spec and the Python reference pipeline the relay's OpenCV.js mirrors."""
+"""The vision side: the operations spec both languages read, and the Python reference pipeline."""

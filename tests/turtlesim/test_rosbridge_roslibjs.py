@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import pytest
 from playwright.async_api import Page, async_playwright
 
-from app.browser import chromium_args, chromium_path
-from app.serve import RunningServer
+from app.protocol.ros import RosFlavour
+from app.server.config import Settings
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
 from app.turtlesim.sim import TurtleSim
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
@@ -90,3 +92,60 @@ async def test_roslibjs_subscribes_publishes_and_calls_services(
     assert seen["spawned"] == {"ok": True, "values": {"name": "turtle2"}}
     assert seen["failed"]["ok"] is False
     assert "nobody" in seen["failed"]["error"]
+
+
+# Runs in the page: the rosapi calls tools make through roslib.js's own helpers.
+ROSAPI_SCRIPT = """
+async (url) => {
+  const ros = new ROSLIB.Ros({url});
+  await new Promise((resolve, reject) => {
+    ros.on('connection', resolve);
+    ros.on('error', () => reject(new Error('roslib.js could not connect')));
+  });
+  const ask = (method, ...args) => new Promise((resolve, reject) =>
+    ros[method](...args, (...values) => resolve(values.length === 1 ? values[0] : values),
+                (error) => reject(new Error(`${method}: ${error}`))));
+  const topics = await ask('getTopics');
+  const raw = await ask('getTopicsAndRawTypes');
+  const poseType = await ask('getTopicType', '/turtle1/pose');
+  const services = await ask('getServices');
+  const spawnType = await ask('getServiceType', '/spawn');
+  const nodes = await ask('getNodes');
+  const [subscribing, publishing, served] = await ask('getNodeDetails', '/turtlesim');
+  const params = await ask('getParams');
+  const name = params.find((p) => p.endsWith('background_g'));
+  const param = new ROSLIB.Param({ros, name});
+  const green = await new Promise((resolve) => param.get(resolve));
+  await new Promise((resolve) => param.set(120, resolve));
+  const greenAfter = await new Promise((resolve) => param.get(resolve));
+  ros.close();
+  return {topics, raw, poseType, services, spawnType, nodes, subscribing, publishing, served,
+          params, name, green, greenAfter};
+}
+"""
+
+POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
+
+
+@pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
+async def test_roslibjs_rosapi_helpers(
+    page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+) -> None:
+    robot = start_server(Settings(environment="development", token=None, ros=flavour))
+    url = robot.url.replace("http", "ws", 1) + "/rosbridge"
+    seen: dict[str, Any] = await page.evaluate(ROSAPI_SCRIPT, url)
+    listed = dict(zip(seen["topics"]["topics"], seen["topics"]["types"], strict=True))
+    assert listed["/turtle1/pose"] == POSE_TYPE[flavour]
+    assert "/rosout" in listed
+    raw = seen["raw"]
+    assert len(raw["typedefs_full_text"]) == len(raw["topics"])
+    assert seen["poseType"] == POSE_TYPE[flavour]
+    assert "/turtle1/set_pen" in seen["services"]
+    assert seen["spawnType"].endswith("Spawn")
+    assert "/turtlesim" in seen["nodes"]
+    assert "/turtle1/cmd_vel" in seen["subscribing"]
+    assert "/turtle1/pose" in seen["publishing"]
+    assert "/spawn" in seen["served"]
+    sep = "/" if flavour == "1" else ":"
+    assert seen["name"] == f"/turtlesim{sep}background_g"
+    assert (seen["green"], seen["greenAfter"]) == (86, 120)

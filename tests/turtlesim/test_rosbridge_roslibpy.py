@@ -2,8 +2,9 @@
 
 roslibpy runs Twisted's reactor in a daemon thread that can be started only once per process,
 so one module-scoped client serves every roslibpy test here, and the reactor is left running
-(stopping it would break any later roslibpy user in the same pytest run). roslibpy logs
-``status`` messages as unhandled, so the error cases use a raw ``websockets`` client.
+(stopping it would break any later roslibpy user in the same pytest run). Status messages come
+only after ``set_level`` (roslibpy never sends it, and logs them as unhandled), so the error cases
+use a raw ``websockets`` client that asks for them.
 """
 
 from __future__ import annotations
@@ -21,10 +22,11 @@ import pytest
 import roslibpy
 import websockets
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
-from app.turtlesim.routes import Simulator
+from app.server.config import Settings
+from app.server.rosbridge import Simulator
+from app.server.serve import RunningServer, start_in_thread
 from app.turtlesim.sim import TurtleSim
+from tests.helpers.waiting import wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -68,14 +70,6 @@ def fresh_world(ros: roslibpy.Ros) -> None:
     roslibpy.Service(ros, "/reset", "std_srvs/Empty").call(
         roslibpy.ServiceRequest({}), timeout=WAIT_S
     )
-
-
-def wait_for(condition: Callable[[], bool], what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 def state(server: RunningServer) -> dict[str, Any]:
@@ -170,6 +164,8 @@ def test_spawn_and_teleport_through_services(ros: roslibpy.Ros, server: RunningS
     assert response["name"] == "turtle2"
     teleport = roslibpy.Service(ros, "/turtle1/teleport_absolute", "turtlesim/TeleportAbsolute")
     teleport.call(roslibpy.ServiceRequest({"x": 1.0, "y": 9.0, "theta": 1.5}), timeout=WAIT_S)
+    # As in turtlesim, the teleport is queued and happens on the next tick.
+    wait_until(lambda: turtle(server, "turtle1")["x"] == pytest.approx(1.0), WAIT_S, "the teleport")
     turtles = {t["name"]: t for t in state(server)["turtles"]}
     assert sorted(turtles) == ["turtle1", "turtle2"]
     assert (turtles["turtle2"]["x"], turtles["turtle2"]["y"]) == pytest.approx((2.0, 3.0))
@@ -193,11 +189,17 @@ def test_discovery_through_rosapi(ros: roslibpy.Ros) -> None:
     roslibpy.Service(ros, "/spawn", "turtlesim/Spawn").call(
         roslibpy.ServiceRequest({"name": "leo"}), timeout=WAIT_S
     )
+    # The real graph of a ROS 2 turtlesim robot: each turtle's three topics, /rosout and
+    # /parameter_events (this listed only cmd_vel and pose before the graph was modelled).
     assert set(ros.get_topics()) == {
         "/turtle1/cmd_vel",
+        "/turtle1/color_sensor",
         "/turtle1/pose",
         "/leo/cmd_vel",
+        "/leo/color_sensor",
         "/leo/pose",
+        "/parameter_events",
+        "/rosout",
     }
     assert "/leo/teleport_absolute" in ros.get_services()
     assert ros.get_topic_type("/leo/pose") == "turtlesim/msg/Pose"
@@ -216,6 +218,7 @@ async def exchange(url: str, *frames: str | bytes, replies: int) -> list[dict[st
 
 async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) -> None:
     frames = [
+        json.dumps({"op": "set_level", "level": "error"}),  # statuses only for who asks
         "{broken",
         json.dumps({"op": "fly", "id": "e1"}),
         json.dumps({"op": "subscribe", "id": "e2"}),
@@ -227,7 +230,7 @@ async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) 
         b"\x00\x01",
         json.dumps({"op": "publish", "id": "e6", "topic": "/turtle1/cmd_vel", "pad": "x" * 70000}),
     ]
-    errors = await exchange(rosbridge_url, *frames, replies=len(frames))
+    errors = await exchange(rosbridge_url, *frames, replies=len(frames) - 1)
     assert all(e["op"] == "status" and e["level"] == "error" for e in errors)
     assert [e.get("id") for e in errors] == [None, "e1", "e2", "e3", "e4", "e5", None, None]
     words = [
@@ -244,9 +247,27 @@ async def test_bad_ops_get_status_errors_naming_the_problem(rosbridge_url: str) 
         assert word in error["msg"]
 
 
-async def test_unknown_service_gets_status_and_failed_response(rosbridge_url: str) -> None:
-    call = json.dumps({"op": "call_service", "id": "c1", "service": "/rosapi/nodes"})
-    status, response = await exchange(rosbridge_url, call, replies=2)
+async def test_unknown_service_gets_a_failed_response_and_no_status(rosbridge_url: str) -> None:
+    # As current rosbridge_suite: only the service_response, however long we listen.
+    call = json.dumps({"op": "call_service", "id": "c1", "service": "/nowhere"})
+    async with websockets.connect(rosbridge_url) as ws:
+        await ws.send(call)
+        response = json.loads(await asyncio.wait_for(ws.recv(), WAIT_S))
+        assert (response["op"], response["result"], response["id"]) == (
+            "service_response",
+            False,
+            "c1",
+        )
+        with pytest.raises(TimeoutError):
+            await asyncio.wait_for(ws.recv(), 0.5)
+
+
+async def test_unknown_service_gets_status_and_failed_response_after_set_level(
+    rosbridge_url: str,
+) -> None:
+    set_level = json.dumps({"op": "set_level", "level": "error"})
+    call = json.dumps({"op": "call_service", "id": "c1", "service": "/nowhere"})
+    status, response = await exchange(rosbridge_url, set_level, call, replies=2)
     assert status["op"] == "status"
     assert status["id"] == "c1"
     assert response["op"] == "service_response"
@@ -288,3 +309,66 @@ def test_simulator_ticks_at_about_62_hz(server: RunningServer) -> None:
     elapsed = time.monotonic() - started
     # 16 ms of wall time per tick; allow for a loaded machine in both directions.
     assert 0.6 * elapsed / 0.016 < ticks < 1.5 * elapsed / 0.016
+
+
+# -- rosapi through roslibpy's helpers, one server per ROS flavour ----------------------------
+
+POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
+
+
+@pytest.fixture(scope="module", params=["1", "2", "jazzy"])
+def flavoured(request: pytest.FixtureRequest) -> Iterator[tuple[str, roslibpy.Ros]]:
+    """A server started with ``ros=<flavour>`` and a roslibpy client on it."""
+    flavour: str = request.param
+    running = start_in_thread(Settings(environment="development", token=None, ros=flavour))
+    client = roslibpy.Ros(host=running.url.replace("http", "ws", 1) + "/rosbridge")
+    client.run(timeout=WAIT_S)
+    yield flavour, client
+    client.close()
+    running.stop()
+
+
+def test_roslibpy_rosapi_helpers(flavoured: tuple[str, roslibpy.Ros]) -> None:
+    flavour, ros = flavoured
+    assert "/rosout" in ros.get_topics()
+    assert ros.get_topic_type("/turtle1/pose") == POSE_TYPE[flavour]
+    assert "/turtle1/teleport_relative" in ros.get_services()
+    spawn_type = ros.get_service_type("/spawn")
+    assert spawn_type == POSE_TYPE[flavour].replace("msg/", "srv/").replace("Pose", "Spawn")
+    assert "/turtlesim" in ros.get_nodes()
+    details = ros.get_node_details("/turtlesim")
+    assert "/turtle1/pose" in details["publishing"]
+    assert "/turtle1/cmd_vel" in details["subscribing"]
+    sep = "/" if flavour == "1" else ":"
+    names = ros.get_params()
+    assert {f"/turtlesim{sep}background_{c}" for c in "rgb"} <= set(names)
+    assert ros.get_param(f"/turtlesim{sep}background_b") == 255
+    roslibpy.Param(ros, f"/turtlesim{sep}background_r").set(12, timeout=WAIT_S)
+    assert ros.get_param(f"/turtlesim{sep}background_r") == 12
+
+
+def test_get_time_in_the_flavours_shape(flavoured: tuple[str, roslibpy.Ros]) -> None:
+    flavour, ros = flavoured
+    before = time.time()
+    if flavour == "1":
+        # roslibpy's get_time reads ROS 1's {secs, nsecs}.
+        stamp = ros.get_time()
+        assert stamp.secs >= int(before)
+        return
+    # ROS 2 rosapi answers {sec, nanosec}, which roslibpy 2.1's get_time does not read.
+    reply = roslibpy.Service(ros, "/rosapi/get_time", "rosapi_msgs/srv/GetTime").call(
+        roslibpy.ServiceRequest({}), timeout=WAIT_S
+    )
+    assert set(reply["time"]) == {"sec", "nanosec"}
+    assert reply["time"]["sec"] >= int(before)
+
+
+def test_topics_and_raw_types_for_foxglove(flavoured: tuple[str, roslibpy.Ros]) -> None:
+    flavour, ros = flavoured
+    reply = roslibpy.Service(ros, "/rosapi/topics_and_raw_types", "rosapi/TopicsAndRawTypes").call(
+        roslibpy.ServiceRequest({}), timeout=WAIT_S
+    )
+    texts = dict(zip(reply["topics"], reply["typedefs_full_text"], strict=True))
+    types = dict(zip(reply["topics"], reply["types"], strict=True))
+    assert types["/turtle1/pose"] == POSE_TYPE[flavour]
+    assert "float32 theta" in texts["/turtle1/pose"]

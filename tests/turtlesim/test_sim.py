@@ -8,7 +8,8 @@ import pytest
 
 from app.turtlesim.sim import MAX_TRAIL_POINTS, Pen, TurtleSim
 
-SIZE = 11.088889
+# turtlesim's world edge: (500 px - 1) / 45 px per metre, held in a float32.
+SIZE = 11.088889122009277
 CENTRE = 5.544445
 
 
@@ -111,14 +112,18 @@ def test_heading_wraps_into_minus_pi_to_pi(sim: TurtleSim, clock: FakeClock) -> 
 
 def test_heading_of_exactly_pi_is_reported_as_minus_pi(sim: TurtleSim) -> None:
     sim.teleport_absolute("turtle1", 1.0, 1.0, math.pi)
+    sim.step()
     assert sim.pose("turtle1").theta == pytest.approx(-math.pi)
 
 
 def test_teleport_absolute_sets_pose_and_clamps(sim: TurtleSim) -> None:
+    # Teleports are queued and applied by the next tick, as turtlesim does.
     sim.teleport_absolute("turtle1", 2.0, 3.0, 1.0)
+    sim.step()
     pose = sim.pose("turtle1")
     assert (pose.x, pose.y, pose.theta) == pytest.approx((2.0, 3.0, 1.0))
     sim.teleport_absolute("turtle1", -5.0, 50.0, 7.0)
+    sim.step()
     pose = sim.pose("turtle1")
     assert (pose.x, pose.y) == (0.0, SIZE)
     assert pose.theta == pytest.approx(7.0 - 2 * math.pi)
@@ -126,10 +131,12 @@ def test_teleport_absolute_sets_pose_and_clamps(sim: TurtleSim) -> None:
 
 def test_teleport_relative_turns_then_moves(sim: TurtleSim) -> None:
     sim.teleport_relative("turtle1", 2.0, math.pi / 2)
+    sim.step()
     pose = sim.pose("turtle1")
     assert pose.theta == pytest.approx(math.pi / 2)
     assert (pose.x, pose.y) == pytest.approx((CENTRE, CENTRE + 2.0))
     sim.teleport_relative("turtle1", 1.0, math.pi / 2)
+    sim.step()
     pose = sim.pose("turtle1")
     assert (pose.x, pose.y) == pytest.approx((CENTRE - 1.0, CENTRE + 2.0))
 
@@ -222,12 +229,16 @@ def test_set_pen_changes_colour_and_off_stops_drawing(sim: TurtleSim, clock: Fak
     sim.set_pen("turtle1", 255, 0, 0, 5, False)
     assert sim.pen("turtle1") == Pen(255, 0, 0, 5, False)
     sim.teleport_absolute("turtle1", 1.0, 1.0, 0.0)
+    sim.step()
     red = [s for s in sim.strokes() if s.pen.r == 255]
     assert len(red) == 1
     assert red[0].points[-1] == (1.0, 1.0)
     sim.set_pen("turtle1", 0, 0, 0, 1, True)
+    # Lifting the pen keeps its colour and width, as turtlesim does.
+    assert sim.pen("turtle1") == Pen(255, 0, 0, 5, True)
     before = sum(len(s.points) for s in sim.strokes())
     sim.teleport_absolute("turtle1", 3.0, 3.0, 0.0)
+    sim.step()
     assert sum(len(s.points) for s in sim.strokes()) == before
     with pytest.raises(ValueError, match="0..255"):
         sim.set_pen("turtle1", 256, 0, 0, 1, False)
@@ -236,6 +247,7 @@ def test_set_pen_changes_colour_and_off_stops_drawing(sim: TurtleSim, clock: Fak
 def test_killed_turtles_drawing_stays(sim: TurtleSim) -> None:
     sim.spawn(1.0, 1.0, 0.0, "leo")
     sim.teleport_absolute("leo", 2.0, 1.0, 0.0)
+    sim.step()
     sim.kill("leo")
     assert any(s.turtle == "leo" and len(s.points) == 2 for s in sim.strokes())
 
@@ -243,8 +255,50 @@ def test_killed_turtles_drawing_stays(sim: TurtleSim) -> None:
 def test_trail_length_is_bounded(sim: TurtleSim) -> None:
     for i in range(MAX_TRAIL_POINTS + 500):
         sim.teleport_absolute("turtle1", 1.0 + (i % 2), 1.0, 0.0)
+        sim.step()
     total = sum(len(s.points) for s in sim.strokes() if s.turtle == "turtle1")
     assert total == MAX_TRAIL_POINTS
     # The oldest points went; the newest is where the turtle is now.
     pose = sim.pose("turtle1")
     assert sim.strokes()[-1].points[-1] == (pose.x, pose.y)
+
+
+def test_teleports_wait_for_the_next_tick(sim: TurtleSim) -> None:
+    # turtlesim queues teleport requests; its next update applies them (docs F5).
+    sim.teleport_absolute("turtle1", 1.0, 1.0, 0.0)
+    sim.teleport_relative("turtle1", 1.0, 0.0)
+    assert (sim.pose("turtle1").x, sim.pose("turtle1").y) == pytest.approx((CENTRE, CENTRE))
+    sim.step()
+    assert (sim.pose("turtle1").x, sim.pose("turtle1").y) == pytest.approx((2.0, 1.0))
+
+
+def test_spawn_outside_the_world_is_clamped_by_its_first_tick(sim: TurtleSim) -> None:
+    sim.spawn(-2.0, 30.0, 9.0, "leo")
+    assert (sim.pose("leo").x, sim.pose("leo").y, sim.pose("leo").theta) == (-2.0, 30.0, 9.0)
+    sim.step()
+    pose = sim.pose("leo")
+    assert (pose.x, pose.y) == (0.0, SIZE)
+    assert pose.theta == pytest.approx(9.0 - 2 * math.pi)
+
+
+def test_sideways_command_moves_a_holonomic_turtle_and_speed_is_a_magnitude(
+    sim: TurtleSim, clock: FakeClock
+) -> None:
+    sim.cmd_vel("turtle1", -0.6, 0.0, linear_y=0.8)
+    run(sim, clock, 0.16)  # 10 ticks
+    pose = sim.pose("turtle1")
+    assert (pose.x, pose.y) == pytest.approx((CENTRE - 0.096, CENTRE + 0.128))
+    assert pose.linear_velocity == pytest.approx(1.0)
+
+
+def test_sideways_command_is_ignored_unless_holonomic(sim: TurtleSim, clock: FakeClock) -> None:
+    sim.holonomic = False  # the turtlesim_msgs-era node without its ``holonomic`` parameter
+    sim.cmd_vel("turtle1", 0.0, 0.0, linear_y=1.0)
+    run(sim, clock, 0.16)
+    assert sim.pose("turtle1").y == pytest.approx(CENTRE)
+    assert sim.pose("turtle1").linear_velocity == 0.0
+
+
+def test_set_pen_width_zero_means_qt_default_width(sim: TurtleSim) -> None:
+    sim.set_pen("turtle1", 1, 2, 3, 0, False)
+    assert sim.pen("turtle1") == Pen(1, 2, 3, 1, False)

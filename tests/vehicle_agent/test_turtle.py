@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Callable
 
 import pytest
 
-from app.serve import RunningServer
+from app.protocol.ros import RosFlavour
+from app.server.config import Settings
+from app.server.serve import RunningServer
 from vehicle_agent.control import Pose, Twist
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 
@@ -61,10 +64,31 @@ async def test_sim_turtle_turns_and_stops() -> None:
     assert turtle.sim.pose("turtle1").theta > math.pi / 4
 
 
-@pytest.mark.parametrize("ros_version", [1, 2])
-async def test_rosbridge_turtle_against_our_server(server: RunningServer, ros_version: int) -> None:
-    url = server.url.replace("http", "ws", 1) + "/rosbridge"
-    await turn_and_stop(RosbridgeTurtle(url, ros_version=ros_version))
+# What each flavour's robot reports for /turtle1/pose (docs/turtlesim-facts.md F15).
+POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
+
+
+@pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
+async def test_rosbridge_turtle_learns_the_robots_flavour(
+    start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+) -> None:
+    robot = start_server(Settings(environment="development", token=None, ros=flavour))
+    turtle = RosbridgeTurtle(robot.url.replace("http", "ws", 1) + "/rosbridge")  # --ros auto
+    await turn_and_stop(turtle)
+    assert turtle.types is not None
+    assert (turtle.types.flavour, turtle.types.from_robot) == (flavour, True)
+    assert turtle.types.pose == POSE_TYPE[flavour]
+
+
+async def test_the_robots_answer_beats_a_wrong_setting(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    # A Jazzy robot refuses turtlesim/Pose; told "--ros 1", the agent still drives it.
+    robot = start_server(Settings(environment="development", token=None, ros="jazzy"))
+    turtle = RosbridgeTurtle(robot.url.replace("http", "ws", 1) + "/rosbridge", ros="1")
+    await turn_and_stop(turtle)
+    assert turtle.types is not None
+    assert turtle.types.flavour == "jazzy"
 
 
 async def test_dead_rosbridge_is_named() -> None:

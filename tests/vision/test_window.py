@@ -7,13 +7,13 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from app import operations
-from app.vision import window
+from app.resources import OPERATIONS_SPEC
+from app.vision import reference, spec, window
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
-SPEC = operations.load_spec(operations.PACKAGE_DIR / "operations.json")
+SPEC = spec.load_spec(OPERATIONS_SPEC)
 FACE = SPEC.op("face")
-assert isinstance(FACE, operations.CascadeOperation)
+assert isinstance(FACE, spec.CascadeOperation)
 EVERY = FACE.params.full_scan_every
 
 
@@ -43,9 +43,9 @@ def test_the_window_grows_the_box_and_stays_in_the_image() -> None:
 def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:
     video, _ = scene(FixedPath(0.3, 0.42))
     frame = rgba(video, 0)
-    full = operations.detect(FACE, frame)
+    full = reference.detect(FACE, frame)
     assert len(full.boxes) == 1
-    found = operations.detect(FACE, frame, around=full.boxes[0])
+    found = reference.detect(FACE, frame, around=full.boxes[0])
     assert found.region is not None and full.region is None
     assert len(found.boxes) == 1 and contains(found.boxes[0], video.face_centre(0))
 
@@ -53,13 +53,13 @@ def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:
 def test_a_window_away_from_the_face_finds_nothing() -> None:
     video, _ = scene(FixedPath(0.25, 0.42))
     frame = rgba(video, 0)
-    assert operations.detect(FACE, frame, around=(450, 150, 100, 100)).boxes == []
+    assert reference.detect(FACE, frame, around=(450, 150, 100, 100)).boxes == []
 
 
 def test_colour_operations_refuse_a_window() -> None:
     frame = np.zeros((48, 80, 4), np.uint8)
     with pytest.raises(ValueError, match="not a cascade"):
-        operations.detect(SPEC.op("fire"), frame, around=(0, 0, 10, 10))
+        reference.detect(SPEC.op("fire"), frame, around=(0, 0, 10, 10))
 
 
 def test_full_scan_cadence_and_refind_after_a_jump() -> None:
@@ -72,7 +72,7 @@ def test_full_scan_cadence_and_refind_after_a_jump() -> None:
             path.x = 0.75
         frame = rgba(video, i)
         found, scan = window.step(
-            tracker, lambda around, frame=frame: operations.detect(FACE, frame, "default", around)
+            tracker, lambda around, frame=frame: reference.detect(FACE, frame, "default", around)
         )
         scans.append(scan)
         # Every snapshot finds the face where it truly is, the one after the jump included.
@@ -86,5 +86,5 @@ def test_full_scan_cadence_and_refind_after_a_jump() -> None:
 def test_thesis_profile_scans_every_frame() -> None:
     assert FACE.thesis["fullScanEvery"] == 1
     tracker = window.Tracker(1)
-    tracker.record(operations.Detection(boxes=[(0, 0, 10, 10)], target=(5.0, 5.0)), "full")
+    tracker.record(reference.Detection(boxes=[(0, 0, 10, 10)], target=(5.0, 5.0)), "full")
     assert tracker.window() is None

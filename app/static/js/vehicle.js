@@ -3,6 +3,7 @@
 import { Controller, PROFILES } from './control.js';
 import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
+import { pickTypes } from './rosflavour.js';
 import { byTestId, fmt, Log, readConfig, show } from './ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
@@ -23,20 +24,19 @@ const status = {
   lastTwist: null,
   pose: null,
   rosConnected: false,
+  rosFlavour: null, // '1', '2' or 'jazzy' once connected
+  rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
 };
 window.autopilotStatus = status;
 
 /** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
 class Turtle {
-  constructor(url, rosVersion) {
+  constructor(url, setting, rosTypes) {
     this.url = url;
-    const ros2 = rosVersion === '2';
-    this.types = {
-      twist: ros2 ? 'geometry_msgs/msg/Twist' : 'geometry_msgs/Twist',
-      pose: ros2 ? 'turtlesim/msg/Pose' : 'turtlesim/Pose',
-      teleport: ros2 ? 'turtlesim/srv/TeleportAbsolute' : 'turtlesim/TeleportAbsolute',
-    };
+    this.setting = setting;
+    this.rosTypes = rosTypes;
+    this.types = null; // learnt on each connection
     this.ros = null;
     this.cmdVel = null;
     this.spawnDone = false;
@@ -52,9 +52,7 @@ class Turtle {
       this.reported = false;
       status.rosConnected = true;
       show('ros-state', 'connected');
-      this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: this.types.twist });
-      const pose = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: this.types.pose });
-      pose.subscribe((msg) => this.#pose(msg));
+      this.#learnTypes(ros);
     });
     // roslib throws on an 'error' nobody listens to; the 'close' that follows is what we report.
     ros.on('error', () => {});
@@ -69,6 +67,35 @@ class Turtle {
       this.cmdVel = null;
       show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
       setTimeout(() => this.connect(), ROS_RETRY_MS);
+    });
+  }
+
+  // The robot's own type names from rosapi topic_type; the ros= setting when it cannot say.
+  async #learnTypes(ros) {
+    const [pose, twist] = await Promise.all(
+      ['/turtle1/pose', '/turtle1/cmd_vel'].map((topic) => this.#topicType(ros, topic)),
+    );
+    if (this.ros !== ros) return; // reconnected meanwhile
+    const types = pickTypes(this.rosTypes, this.setting, pose, twist);
+    this.types = types;
+    status.rosFlavour = types.flavour;
+    status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
+    const from = types.fromRobot ? 'as its rosapi reports' : `from ros=${this.setting}: rosapi did not say`;
+    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.twist}) ${from}`);
+    show('ros-state', `connected (ROS ${types.flavour})`);
+    this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: types.twist });
+    const topic = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: types.pose });
+    topic.subscribe((msg) => this.#pose(msg));
+  }
+
+  #topicType(ros, topic) {
+    return new Promise((resolve) => {
+      const timer = setTimeout(() => resolve(null), this.rosTypes.detectTimeoutS * 1000);
+      const done = (type) => {
+        clearTimeout(timer);
+        resolve(type || null);
+      };
+      ros.getTopicType(topic, done, () => done(null));
     });
   }
 
@@ -101,7 +128,7 @@ class Turtle {
   }
 }
 
-const turtle = new Turtle(config.rosbridge, config.ros);
+const turtle = new Turtle(config.rosbridge, config.ros, config.rosTypes);
 /** Everything else this page holds, in one place. */
 const session = {
   channel: null, // the open `autopilot` data channel

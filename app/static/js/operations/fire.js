@@ -1,7 +1,7 @@
 // Fire tracking: an entirely different philosophy, no cascade. Flame colours are segmented in
 // HSV, cleaned with morphology, and the largest region wins; the target is its centroid.
 //
-// The steps match app/operations.py (_detect_colour) call for call: RGBA -> RGB, reduce to
+// The steps match app/vision/reference.py (_detect_colour) call for call: RGBA -> RGB, reduce to
 // detectWidth with INTER_AREA, RGB -> HSV, OR of inRange masks, open then close with an
 // elliptic kernel, connectedComponentsWithStats (8-connected), region scaled back.
 import { reduce, scaleBox } from './haar.js';

@@ -1,6 +1,6 @@
 // Shared Haar-cascade pipeline for the cascade operations (face.js, body.js).
 //
-// The steps match app/operations.py (_detect_cascade) call for call, so Python OpenCV on the
+// The steps match app/vision/reference.py (_detect_cascade) call for call, so Python OpenCV on the
 // same RGBA pixels finds the same rectangles: RGBA -> gray, reduce to detectWidth with
 // INTER_AREA, detectMultiScale per cascade, boxes scaled back to full-frame pixels. Given a box
 // to search around (detect, then track: ../window.js), only that window of the detection image

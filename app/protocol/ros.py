@@ -1,0 +1,163 @@
+"""ROS flavours and every ROS type name this project speaks, written once.
+
+Three flavours differ in how a type is spelled on the wire of a rosbridge server:
+
+* ``"1"``  ROS 1 (noetic): ``package/Name`` for messages and services alike.
+* ``"2"``  ROS 2 up to Iron: ``package/msg/Name`` and ``package/srv/Name``.
+* ``"jazzy"``  ROS 2 Jazzy and later: as ``"2"``, but turtlesim's own interfaces moved from the
+  ``turtlesim`` package to ``turtlesim_msgs`` (ros/ros_tutorials#169).
+
+rosbridge for ROS 2 also accepts the short ``package/Name`` spelling of a ROS 2 type; a ROS 1
+rosbridge accepts only ``package/Name``. :func:`spellings` says which spellings a server of one
+flavour accepts for a type.
+
+The simulator serves one flavour (``autopilot serve --ros``), the agent and the vehicle page
+learn a robot's flavour from rosapi ``topic_type`` and fall back to a setting.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Final, Literal, cast, get_args
+
+RosFlavour = Literal["1", "2", "jazzy"]
+ROS_FLAVOURS: Final[tuple[RosFlavour, ...]] = get_args(RosFlavour)
+DEFAULT_FLAVOUR: Final[RosFlavour] = "2"
+# What a client (vehicle page ``ros=``, agent ``--ros``) may be told: a flavour, or ``auto`` to
+# learn it from the robot's rosapi (the default).
+RosSetting = Literal["auto", "1", "2", "jazzy"]
+ROS_SETTINGS: Final[tuple[RosSetting, ...]] = get_args(RosSetting)
+AUTO: Final[RosSetting] = "auto"
+# How long a client waits for rosapi's topic_type before using its setting (a robot without
+# rosapi fails the call at once; this covers one that never answers).
+DETECT_TIMEOUT_S: Final = 3.0
+
+Kind = Literal["msg", "srv"]
+
+
+def type_name(flavour: RosFlavour, package: str, kind: Kind, name: str) -> str:
+    """How ``flavour`` spells the interface ``package``/``name`` (a ``msg`` or a ``srv``)."""
+    if flavour == "jazzy" and package == "turtlesim":
+        package = "turtlesim_msgs"
+    if flavour == "1":
+        return f"{package}/{name}"
+    return f"{package}/{kind}/{name}"
+
+
+def spellings(flavour: RosFlavour, canonical: str) -> frozenset[str]:
+    """Every spelling of the type ``canonical`` (as :class:`RosTypes` gives it) that a rosbridge
+    server of ``flavour`` accepts in ``advertise``, ``subscribe`` and ``call_service``."""
+    parts = canonical.split("/")
+    if flavour == "1" or len(parts) != 3:
+        return frozenset({canonical})
+    package, _kind, name = parts
+    return frozenset({canonical, f"{package}/{name}"})
+
+
+@dataclass(frozen=True)
+class RosTypes:
+    """The type names of one flavour, for everything the turtle stack publishes or serves."""
+
+    flavour: RosFlavour
+    # turtlesim's topics
+    twist: str
+    pose: str
+    color: str
+    # turtlesim's services
+    spawn: str
+    kill: str
+    empty: str
+    teleport_absolute: str
+    teleport_relative: str
+    set_pen: str
+    # the rest of a running graph (rosout, parameter events, rosbridge's client topics)
+    log: str
+    int32: str
+    connected_clients: str
+    parameter_event: str
+    # rosapi's services are named rosapi/<Name> (ROS 1) or rosapi_msgs/srv/<Name> (ROS 2)
+    rosapi_package: str
+
+    def rosapi(self, name: str) -> str:
+        """The type of rosapi's service ``name`` (``Topics``, ``GetParam``, ...)."""
+        return type_name(self.flavour, self.rosapi_package, "srv", name)
+
+    def as_json(self) -> dict[str, str]:
+        """The table as plain JSON, for a page's embedded config."""
+        return {k: v for k, v in asdict(self).items() if isinstance(v, str)}
+
+
+def _types(flavour: RosFlavour) -> RosTypes:
+    def msg(package: str, name: str) -> str:
+        return type_name(flavour, package, "msg", name)
+
+    def srv(package: str, name: str) -> str:
+        return type_name(flavour, package, "srv", name)
+
+    ros1 = flavour == "1"
+    return RosTypes(
+        flavour=flavour,
+        twist=msg("geometry_msgs", "Twist"),
+        pose=msg("turtlesim", "Pose"),
+        color=msg("turtlesim", "Color"),
+        spawn=srv("turtlesim", "Spawn"),
+        kill=srv("turtlesim", "Kill"),
+        empty=srv("std_srvs", "Empty"),
+        teleport_absolute=srv("turtlesim", "TeleportAbsolute"),
+        teleport_relative=srv("turtlesim", "TeleportRelative"),
+        set_pen=srv("turtlesim", "SetPen"),
+        log=msg("rosgraph_msgs", "Log") if ros1 else msg("rcl_interfaces", "Log"),
+        int32=msg("std_msgs", "Int32"),
+        connected_clients=msg("rosbridge_msgs", "ConnectedClients"),
+        parameter_event=msg("rcl_interfaces", "ParameterEvent"),
+        rosapi_package="rosapi" if ros1 else "rosapi_msgs",
+    )
+
+
+TYPES: Final[dict[RosFlavour, RosTypes]] = {flavour: _types(flavour) for flavour in ROS_FLAVOURS}
+
+
+def flavour_of_pose_type(reported: str) -> RosFlavour | None:
+    """The flavour whose turtlesim ``Pose`` type is ``reported`` (what rosapi ``topic_type``
+    answered for ``/turtleN/pose``), or None for an unknown or empty answer."""
+    for flavour, types in TYPES.items():
+        if reported == types.pose:
+            return flavour
+    return None
+
+
+@dataclass(frozen=True)
+class Detected:
+    """The type names a client uses on one robot, and where they came from."""
+
+    flavour: RosFlavour
+    pose: str
+    twist: str
+    # True when the robot's rosapi named the pose type; False when the setting was used.
+    from_robot: bool
+
+
+def detect(pose_reported: str | None, twist_reported: str | None, setting: RosSetting) -> Detected:
+    """Pick the types from what rosapi ``topic_type`` answered for ``/turtleN/pose`` and
+    ``/turtleN/cmd_vel`` (None: no answer), falling back to ``setting`` (``auto``: the default
+    flavour). A reported cmd_vel type is used as reported, whatever the flavour."""
+    reported = flavour_of_pose_type(pose_reported or "")
+    flavour: RosFlavour
+    if reported is not None:
+        flavour = reported
+    elif setting == AUTO:
+        flavour = DEFAULT_FLAVOUR
+    else:
+        flavour = cast(RosFlavour, setting)  # every setting but auto is a flavour
+    types = TYPES[flavour]
+    return Detected(flavour, types.pose, twist_reported or types.twist, reported is not None)
+
+
+def page_config() -> dict[str, object]:
+    """What the vehicle page needs to pick its type names, for its embedded config."""
+    return {
+        "default": DEFAULT_FLAVOUR,
+        "detectTimeoutS": DETECT_TIMEOUT_S,
+        "settings": list(ROS_SETTINGS),
+        "types": {flavour: types.as_json() for flavour, types in TYPES.items()},
+    }

@@ -1,0 +1,1 @@
+"""The web server: app factory, settings, pages, WebSocket adapters and HTTP routes."""

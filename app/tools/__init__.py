@@ -1,0 +1,1 @@
+"""Tools that drive Chromium or child processes: relay service, demo, parity, bench."""

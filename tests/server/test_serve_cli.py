@@ -1,0 +1,92 @@
+"""``autopilot serve`` refuses bad configuration with one line, not a traceback."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import websockets
+
+
+def _serve(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--port", "1"],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+@pytest.mark.parametrize(
+    ("env", "words"),
+    [
+        ({"AUTOPILOT_ENVIRONMENT": "production"}, "AUTOPILOT_TOKEN must be set"),
+        ({"AUTOPILOT_MAX_MESSAGE_BYTES": "lots"}, "max_message_bytes"),
+        ({"AUTOPILOT_OPERATIONS_SPEC": "/nonexistent/ops.json"}, "/nonexistent/ops.json"),
+        ({"AUTOPILOT_ROS": "3"}, "ros"),
+    ],
+)
+def test_bad_configuration_is_one_line_and_exit_1(env: dict[str, str], words: str) -> None:
+    result = _serve(env)
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert "cannot start" in lines[0] and words in lines[0]
+
+
+def test_broken_operations_spec_names_the_problem(tmp_path: Path) -> None:
+    spec = tmp_path / "ops.json"
+    spec.write_text("{not json")
+    result = _serve({"AUTOPILOT_OPERATIONS_SPEC": str(spec)})
+    assert result.returncode == 1
+    assert "not valid JSON" in result.stderr
+
+
+def test_ros_flavour_outside_the_choices_is_refused() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--ros", "4"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert "'1', '2', 'jazzy'" in result.stderr
+
+
+async def test_serve_ros_1_speaks_ros_1_type_names() -> None:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    server = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--ros", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        call = {
+            "op": "call_service",
+            "service": "/rosapi/topic_type",
+            "args": {"topic": "/turtle1/pose"},
+        }
+        async with asyncio.timeout(30):
+            while True:
+                try:
+                    ws = await websockets.connect(f"ws://127.0.0.1:{port}/rosbridge")
+                    break
+                except OSError:
+                    await asyncio.sleep(0.1)
+            async with ws:
+                await ws.send(json.dumps(call))
+                reply = json.loads(await ws.recv())
+        assert reply["values"] == {"type": "turtlesim/Pose"}
+    finally:
+        server.terminate()
+        server.wait(timeout=10)

@@ -1,0 +1,90 @@
+"""The vehicle page learns its robot's ROS flavour from rosapi, in headless Chromium.
+
+The server is started in each flavour; the page (roslib.js) asks its rosapi for the pose and
+cmd_vel types, subscribes with them, and its spawn step (a teleport_absolute of that flavour)
+turns the turtle to pi/2. The fallback rule is checked on the page's own module.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import AsyncIterator, Callable
+from typing import Any
+
+import pytest
+from playwright.async_api import Browser, async_playwright
+
+from app.protocol.ros import RosFlavour, page_config
+from app.server.config import Settings
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+
+POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
+
+
+@pytest.fixture
+async def browser() -> AsyncIterator[Browser]:
+    async with async_playwright() as playwright:
+        browser = await playwright.chromium.launch(
+            executable_path=chromium_path(), args=chromium_args()
+        )
+        try:
+            yield browser
+        finally:
+            await browser.close()
+
+
+@pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
+async def test_vehicle_page_learns_the_flavour_and_drives(
+    browser: Browser, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+) -> None:
+    robot = start_server(Settings(environment="development", token=None, ros=flavour))
+    page = await browser.new_page()
+    # No ros= in the query: the page's setting is "auto".
+    await page.goto(f"{robot.url}/vehicle?room=flavour-{flavour}")
+    await page.wait_for_function(
+        "() => { const s = window.autopilotStatus;"
+        " return s.pose !== null && Math.abs(s.pose.theta - Math.PI / 2) < 1e-3; }",
+        timeout=30_000,
+    )
+    status: dict[str, Any] = await page.evaluate("() => window.autopilotStatus")
+    assert (status["rosFlavour"], status["rosTypesFrom"]) == (flavour, "robot")
+    assert status["pose"]["theta"] == pytest.approx(math.pi / 2, abs=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("setting", "pose", "twist", "expected"),
+    [
+        ("auto", "turtlesim_msgs/msg/Pose", "geometry_msgs/msg/Twist", ("jazzy", True)),
+        ("1", "turtlesim/msg/Pose", None, ("2", True)),
+        ("jazzy", None, None, ("jazzy", False)),
+        ("auto", None, None, ("2", False)),
+        ("1", "", None, ("1", False)),
+    ],
+)
+async def test_pick_types_follows_the_python_rule(
+    browser: Browser,
+    server: RunningServer,
+    setting: str,
+    pose: str | None,
+    twist: str | None,
+    expected: tuple[str, bool],
+) -> None:
+    page = await browser.new_page()
+    await page.goto(f"{server.url}/healthz")
+    picked: dict[str, Any] = await page.evaluate(
+        """async ([table, setting, pose, twist]) => {
+          const { pickTypes } = await import('/static/js/rosflavour.js');
+          return pickTypes(table, setting, pose, twist);
+        }""",
+        [page_config(), setting, pose, twist],
+    )
+    flavour, from_robot = expected
+    assert (picked["flavour"], picked["fromRobot"]) == (flavour, from_robot)
+    types = page_config()["types"]
+    assert isinstance(types, dict)
+    assert picked["pose"] == types[flavour]["pose"] == POSE_TYPE[flavour]
+    assert picked["twist"] == (twist or types[flavour]["twist"])
+    assert picked["teleport"] == types[flavour]["teleport_absolute"]
