@@ -34,7 +34,6 @@ from app.protocol.constants import PROFILES, Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.tools.browser import chromium_args, chromium_path
-from app.vision import window
 from app.vision.reference import Detection, detect
 from app.vision.spec import CascadeOperation, Spec, load_spec
 
@@ -138,15 +137,21 @@ class Harness:
         self.spec = spec
 
     def run(
-        self, data: bytes, op_ids: Sequence[str], profile: Profile = "default"
+        self,
+        data: bytes,
+        op_ids: Sequence[str],
+        profile: Profile = "default",
+        window_ops: Sequence[str] = (),
     ) -> tuple[np.ndarray[Any, np.dtype[np.uint8]], dict[str, Any]]:
         """Decode ``data`` in the browser and run each op; the analysed RGBA and JS results.
 
-        Raises ``ValueError`` when the browser cannot decode the image.
+        Each op of ``window_ops`` that found something also searches the window around its
+        largest box; its result carries ``window: {around, boxes, target}``. Raises
+        ``ValueError`` when the browser cannot decode the image.
         """
         out = self.page.evaluate(
-            "([data, ops, profile]) => window.runImage(data, ops, profile)",
-            [base64.b64encode(data).decode("ascii"), list(op_ids), profile],
+            "([data, ops, profile, windowOps]) => window.runImage(data, ops, profile, windowOps)",
+            [base64.b64encode(data).decode("ascii"), list(op_ids), profile, list(window_ops)],
         )
         if "unreadable" in out:
             raise ValueError(f"the browser cannot decode it ({out['unreadable']})")
@@ -184,8 +189,9 @@ class Harness:
     ) -> None:
         """Check one image with every op in ``op_ids``; results are added to ``report``."""
         name = str(path)
+        cascades = [i for i in op_ids if isinstance(self.spec.op(i), CascadeOperation)]
         try:
-            rgba, results = self.run(path.read_bytes(), op_ids, profile)
+            rgba, results = self.run(path.read_bytes(), op_ids, profile, cascades)
         except (OSError, ValueError) as exc:
             report.unreadable[name] = f"cannot read image {name}: {exc}"
             return
@@ -195,12 +201,12 @@ class Harness:
             py = detect(op, rgba, profile)
             js = results[op_id]
             report.details.append(_pair(name, op_id, js, py))
-            largest = window.largest([tuple(b) for b in js["boxes"]])
-            if isinstance(op, CascadeOperation) and largest is not None:
-                # The windowed path: both sides search the window around the same box.
-                js = self.analyze_pixels(rgba, op_id, profile, around=largest)
-                py = detect(op, rgba, profile, around=largest)
-                report.details.append(_pair(name, op_id, js, py, around=list(largest)))
+            windowed = js.get("window")
+            if windowed is not None:
+                # The windowed path: both sides searched the window around the same box.
+                around = windowed["around"]
+                py = detect(op, rgba, profile, around=tuple(around))
+                report.details.append(_pair(name, op_id, windowed, py, around=around))
 
 
 def _pair(
