@@ -20,6 +20,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("app.tools.demo", "run the whole system on an embedded default"),
     "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
     "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
+    "token": ("app.tools.token_command", "mint a token for one role in one room"),
 }
 
 

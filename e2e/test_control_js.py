@@ -1,4 +1,8 @@
-"""The browser vehicle's control law (control.js) agrees with the Python agent's (control.py)."""
+"""The browser vehicle's control law (control.js) agrees with the Python agent's (control.py).
+
+control.js gets its numbers the way the vehicle page does, from ``page_constants()``, and is
+compared with the Python law on a grid of goals and poses and on scripted sessions.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +14,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
+from app.protocol.control import page_constants
 from app.server.serve import RunningServer
 from vehicle_agent import control
 
@@ -20,14 +25,21 @@ GOAL_PIXELS = [(x, y) for x in (0, 100, 319, 320, 321, 500, 639) for y in (0, 12
 POSES = [
     (5.544445, 5.544445, theta)
     for theta in (-math.pi, -2.0, -math.pi / 2, 0.0, 0.5, math.pi / 2, 3.0, math.pi)
-] + [(1.0, 9.0, 0.3), (10.5, 0.5, -2.9)]
+] + [(1.0, 9.0, 0.3), (10.5, 0.5, -2.9), (0.3, 5.0, math.pi), (10.9, 10.9, 0.8), (6.0, 2.0, -1.2)]
+PROFILE_NAMES = sorted(control.PROFILES)
 
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
     opened = browser.new_page()
     opened.goto(server.url + "/")
-    opened.evaluate("async () => { window.control = await import('/static/js/control.js'); }")
+    opened.evaluate(
+        """async (constants) => {
+             window.control = await import('/static/js/control.js');
+             window.law = new control.ControlLaw(constants);
+           }""",
+        page_constants(),
+    )
     yield opened
     opened.close()
 
@@ -39,12 +51,15 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
     ]
     js: list[dict[str, Any]] = page.evaluate(
         """cases => cases.map(({ goal, pose }) => {
-             const e = control.steeringError(goal, pose);
+             const e = law.steeringError(goal, pose);
              return {
-               terrain: control.pixelToTerrain(goal.x, goal.y, goal.w, goal.h),
+               terrain: law.pixelToTerrain(goal.x, goal.y, goal.w, goal.h),
                error: e,
-               default: e === null ? null : control.angularCommand(e, control.PROFILES.default),
-               thesis: e === null ? null : control.angularCommand(e, control.PROFILES.thesis),
+               default: e === null ? null : law.angularCommand(e, law.profiles.default),
+               thesis: e === null ? null : law.angularCommand(e, law.profiles.thesis),
+               follow: law.command(goal, pose, law.profiles.follow),
+               ahead: law.wallClearance(pose, true),
+               behind: law.wallClearance(pose, false),
              };
            })""",
         cases,
@@ -55,6 +70,11 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
         pose = control.Pose(p["x"], p["y"], p["theta"])
         tx, ty = control.pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
         assert got["terrain"]["x"] == pytest.approx(tx) and got["terrain"]["y"] == pytest.approx(ty)
+        linear, angular = control.follow_command(tx, ty, pose, control.PROFILES["follow"])
+        assert got["follow"]["linear"] == pytest.approx(linear, abs=1e-12), case
+        assert got["follow"]["angular"] == pytest.approx(angular, abs=1e-12), case
+        assert got["ahead"] == pytest.approx(control.wall_clearance(pose, True), abs=1e-12)
+        assert got["behind"] == pytest.approx(control.wall_clearance(pose, False), abs=1e-12)
         error = control.steering_error(goal, pose)
         if error is None:
             assert got["error"] is None, case
@@ -77,51 +97,64 @@ def test_a_face_on_the_left_turns_the_turtle_counter_clockwise(page: Page) -> No
     # The turtle faces up (θ = π/2) at the centre; a face left of centre, level with it, is
     # straight to its left: a quarter turn counter-clockwise (positive).
     error = page.evaluate(
-        "() => control.steeringError({x: 100, y: 240, w: 640, h: 480},"
+        "() => law.steeringError({x: 100, y: 240, w: 640, h: 480},"
         " {x: 5.544445, y: 5.544445, theta: Math.PI / 2})"
     )
     assert error == pytest.approx(math.pi / 2, abs=1e-6)
 
 
-@pytest.mark.parametrize("profile", ["default", "thesis"])
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
 def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) -> None:
-    # One scripted session on a fake clock (ms): goals, poses, ticks, a timeout and a stop.
-    # The 37 ms grid never lands exactly on a 50 or 1100 ms period boundary, where ms (JS) and
-    # s (Python) floating point could round either way.
+    # One scripted session on a fake clock (s, on both sides): goals, a moving turtle, ticks,
+    # a pause long enough for a timeout (and for follow, a search), a goal burst inside the
+    # command-rate cap, and stops.
     events: list[tuple[str, float, dict[str, float] | None]] = []
-    goal = {"x": 100.0, "y": 240.0, "w": W, "h": H}
+    goals = [{"x": 100.0, "y": 240.0, "w": W, "h": H}, {"x": 600.0, "y": 60.0, "w": W, "h": H}]
     t = 0.0
     for step in range(130):
-        t = step * 37.0
+        t = step * 0.037
         if step < 65 and step % 3 == 0:
+            goal = {**goals[(step // 21) % 2], "seq": step, "frame": 1000 + step}
             events.append(("goal", t, goal))
-        events.append(("pose", t + 5.3, {"x": 5.544445, "y": 5.544445, "theta": 0.02 * step}))
-        events.append(("tick", t + 10.7, None))
-    events.append(("goal", t + 100, goal))
-    events.append(("stop", t + 150, None))
-    events.append(("stop", t + 200, None))
+            if step % 9 == 0:  # a second goal right behind the first: rate-capped
+                events.append(("goal", t + 0.004, {**goal, "seq": step + 1}))
+        pose = {"x": 5.544445 + 0.01 * step, "y": 5.544445 - 0.006 * step, "theta": 0.02 * step}
+        events.append(("pose", t + 0.0053, pose))
+        events.append(("tick", t + 0.0107, None))
+    events.append(("goal", t + 0.1, {**goals[0], "seq": 500, "frame": 1500}))
+    events.append(("stop", t + 0.15, None))
+    events.append(("stop", t + 0.2, None))
 
     js = page.evaluate(
         """([profile, events]) => {
              let now = 0;
-             const c = new control.Controller(control.PROFILES[profile], () => now);
+             const c = new control.Controller(law, law.profiles[profile], () => now);
              return events.map(([kind, t, arg]) => {
                now = t;
                const twist = kind === 'goal' ? c.goal(arg) : kind === 'pose' ? c.pose(arg)
                  : kind === 'tick' ? c.tick() : c.stop();
-               return twist === null ? null : twist.angular;
+               return twist === null ? null : [twist.linear, twist.angular, twist.seq];
              });
            }""",
         [profile, events],
     )
     now = 0.0
     controller = control.Controller(control.PROFILES[profile], clock=lambda: now)
-    expected: list[float | None] = []
-    for kind, t_ms, arg in events:
-        now = t_ms / 1000
+    expected: list[list[float | int | None] | None] = []
+    for kind, t, arg in events:
+        now = t
         if kind == "goal":
             assert arg is not None
-            twist = controller.goal(control.Goal(arg["x"], arg["y"], int(arg["w"]), int(arg["h"])))
+            twist = controller.goal(
+                control.Goal(
+                    arg["x"],
+                    arg["y"],
+                    int(arg["w"]),
+                    int(arg["h"]),
+                    int(arg["seq"]),
+                    int(arg["frame"]),
+                )
+            )
         elif kind == "pose":
             assert arg is not None
             twist = controller.pose(control.Pose(**arg))
@@ -129,7 +162,17 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
             twist = controller.tick()
         else:
             twist = controller.stop()
-        expected.append(None if twist is None else twist.angular_z)
-    assert any(v is not None and v != 0 for v in expected), "the script never drove the turtle"
-    assert expected.count(0.0) >= 1, "the script never stopped the turtle"
-    assert js == pytest.approx(expected, abs=1e-12)
+        expected.append(None if twist is None else [twist.linear_x, twist.angular_z, twist.seq])
+    published = [e for e in expected if e is not None]
+    assert any(e[1] != 0 for e in published), "the script never drove the turtle"
+    assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"
+    if profile == "follow":
+        assert any(e[0] != 0 for e in published), "follow never drove forward or back"
+        assert any(e[2] is None and e[1] != 0 for e in published), "follow never searched"
+    assert len(js) == len(expected)
+    for got, want in zip(js, expected, strict=True):
+        if want is None:
+            assert got is None
+        else:
+            assert got is not None
+            assert got[:2] == pytest.approx(want[:2], abs=1e-12) and got[2] == want[2]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import ssl
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
@@ -20,13 +21,14 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from app.protocol.control import with_standoff
 from app.protocol.errors import describe
 from app.supervise import Backoff
-from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
+from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.signaling import SignalingClient, SignalingError
-from vehicle_agent.turtle import Turtle
+from vehicle_agent.turtle import Turtle, TurtleError
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +47,15 @@ class AgentConfig:
     name: str = "vehicle"
     profile: str = "default"
     goal_timeout_s: float | None = None
+    # The follow profile's distance from the target (None: the profile's own).
+    standoff_m: float | None = None
+    # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does.
+    spawn_step: bool = True
     ice_servers: list[RTCIceServer] = field(default_factory=list)
+    # A vehicle token for the room (``autopilot token``), when the server asks for one.
+    token: str | None = None
+    # Trust for an https:// server: None means the system's CAs.
+    tls: ssl.SSLContext | None = None
 
 
 class GoalMessage(BaseModel):
@@ -79,12 +89,14 @@ class Agent:
         profile = PROFILES[config.profile]
         if config.goal_timeout_s is not None:
             profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
+        profile = with_standoff(profile, config.standoff_m)
         self.config = config
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
         self.controller = Controller(profile)
         self.pose: Pose | None = None
+        self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
         self._link: RelayLink | None = None
         self._relay: str | None = None
@@ -121,12 +133,20 @@ class Agent:
 
     async def run(self) -> None:
         """Run until cancelled; raises :class:`SignalingError` if the first login fails."""
+        self._first_pose = asyncio.get_running_loop().create_future()
         await self.turtle.start(self._on_pose)
         ticker = asyncio.create_task(self._tick(), name="control-tick")
+        spawn = (
+            asyncio.create_task(self._spawn_step(), name="spawn-step")
+            if self.config.spawn_step
+            else None
+        )
         try:
             await self._signaling_loop()
         finally:
             ticker.cancel()
+            if spawn is not None:
+                spawn.cancel()
             await self._drop_link("agent stopping")
             self._publish(self.controller.stop())
             await self.turtle.close()
@@ -138,7 +158,13 @@ class Agent:
         backoff = Backoff()
         first = True
         while True:
-            client = SignalingClient(self.config.server, self.config.name, self.config.room)
+            client = SignalingClient(
+                self.config.server,
+                self.config.name,
+                self.config.room,
+                token=self.config.token,
+                tls=self.config.tls,
+            )
             try:
                 peers = await client.connect()
             except SignalingError as exc:
@@ -351,8 +377,24 @@ class Agent:
 
     # --- turtle ------------------------------------------------------------------------------
 
+    async def _spawn_step(self) -> None:
+        """The thesis's spawn step (section 5.7.6): turn turtle1 to face "up" where it stands."""
+        assert self._first_pose is not None
+        pose = await self._first_pose
+        try:
+            await self.turtle.teleport(pose.x, pose.y, SPAWN_THETA)
+        except TurtleError as exc:
+            # The robot may not offer teleport_absolute; driving works without the step.
+            log.warning("spawn step failed: %s", exc)
+            self.events.emit("spawn", ok=False, reason=str(exc))
+            return
+        log.info("spawn step: turtle turned to θ = %.4f rad", SPAWN_THETA)
+        self.events.emit("spawn", ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA)
+
     def _on_pose(self, pose: Pose) -> None:
         self.pose = pose
+        if self._first_pose is not None and not self._first_pose.done():
+            self._first_pose.set_result(pose)
         self._publish(self.controller.pose(pose))
         now = time.monotonic()
         if now - self._last_telemetry >= TELEMETRY_PERIOD_S:

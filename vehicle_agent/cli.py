@@ -6,7 +6,10 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
+import ssl
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
@@ -20,6 +23,9 @@ from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
+
+# Read when --token is not given, so the token stays out of the process list.
+TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -40,6 +46,16 @@ def _positive(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, not {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, not {text!r}")
     return value
 
 
@@ -78,7 +94,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
     parser.add_argument(
-        "--profile", choices=sorted(PROFILES), default="default", help="control timing profile"
+        "--profile",
+        choices=sorted(PROFILES),
+        default="default",
+        help="control profile: default (turn in place), thesis (1100 ms pacing), follow (drive)",
+    )
+    parser.add_argument(
+        "--standoff",
+        type=_non_negative,
+        metavar="M",
+        help=f"follow: distance kept from the target (default {PROFILES['follow'].standoff_m:g} m)",
+    )
+    parser.add_argument(
+        "--no-spawn-step",
+        dest="spawn_step",
+        action="store_false",
+        help="do not turn the turtle to face up (θ = π/2) at start",
     )
     parser.add_argument(
         "--goal-timeout",
@@ -96,6 +127,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--events", type=Path, metavar="PATH", help="append a JSON-lines event log here"
     )
+    parser.add_argument(
+        "--token",
+        default=os.environ.get(TOKEN_ENV),
+        help=f"vehicle token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
+    )
+    parser.add_argument(
+        "--ca-file",
+        type=Path,
+        metavar="PEM",
+        help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
+    )
+
+
+def tls_context(ca_file: Path | None) -> ssl.SSLContext:
+    """A client context trusting ``ca_file``, or the system's CAs; names are always checked."""
+    try:
+        return ssl.create_default_context(cafile=None if ca_file is None else str(ca_file))
+    except (OSError, ssl.SSLError) as exc:
+        raise OSError(f"cannot use --ca-file {ca_file}: {exc}") from exc
+
+
+def same_server(server: str, rosbridge: str) -> bool:
+    """True when ``rosbridge`` is the server's own ``/rosbridge`` (same host and port), the only
+    rosbridge the token is sent to."""
+    ours, theirs = urlsplit(server), urlsplit(rosbridge)
+    return (ours.hostname, ours.port) == (theirs.hostname, theirs.port)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -117,17 +174,28 @@ async def _main(args: argparse.Namespace) -> int:
         args.size,
         args.fps,
         on_frame=lambda info: events.emit(
-            "frame_sent", frame=info.frame, face_x=info.face_x, face_y=info.face_y
+            "frame_sent",
+            frame=info.frame,
+            face_x=info.face_x,
+            face_y=info.face_y,
+            jump=info.jump,
         ),
     )
-    turtle: Turtle = RosbridgeTurtle(args.rosbridge, args.ros) if args.rosbridge else SimTurtle()
+    turtle: Turtle = SimTurtle()
+    if args.rosbridge:
+        token = args.token if same_server(args.server, args.rosbridge) else None
+        turtle = RosbridgeTurtle(args.rosbridge, args.ros, token=token, ca_file=args.ca_file)
     config = AgentConfig(
         server=args.server,
         room=args.room,
         name=args.name,
         profile=args.profile,
         goal_timeout_s=args.goal_timeout,
+        standoff_m=args.standoff,
+        spawn_step=args.spawn_step,
         ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
+        token=args.token,
+        tls=tls_context(args.ca_file),
     )
     agent = Agent(config, video, turtle, events)
     task = asyncio.create_task(agent.run())

@@ -1,8 +1,9 @@
-"""The control law of DESIGN §5 and its two timing profiles (docs/contracts.md).
+"""The control law of DESIGN §5 and its profiles (docs/contracts.md).
 
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks and answers with the
-:class:`Twist` to publish, if any. The browser vehicle page's ``control.js`` implements the same
-law, so both vehicles behave alike.
+:class:`Twist` to publish, if any. The browser vehicle page's ``control.js`` is a port of this
+module, checked against it on a grid (``e2e/test_control_js.py``); the numbers both use live in
+:mod:`app.protocol.control`.
 
 Coordinate conventions: image pixels have their origin at the top-left corner with y growing
 downward; the turtlesim terrain has its origin at the bottom-left corner with y growing upward.
@@ -17,10 +18,33 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-TERRAIN_CENTRE = 5.544445
-# Below this distance the direction to the target is meaningless (the thesis's turtle sits at
-# the terrain centre, which is where a goal in the middle of the frame lands).
-MIN_TARGET_DISTANCE_M = 0.05
+from app.protocol.control import (
+    MIN_TARGET_DISTANCE_M,
+    PROFILES,
+    SPAWN_THETA,
+    TERRAIN_CENTRE,
+    WORLD_SIZE,
+    Profile,
+)
+
+__all__ = [
+    "PROFILES",
+    "SPAWN_THETA",
+    "TERRAIN_CENTRE",
+    "WORLD_SIZE",
+    "Controller",
+    "Goal",
+    "Pose",
+    "Profile",
+    "Twist",
+    "ZERO_TWIST",
+    "angular_command",
+    "follow_command",
+    "pixel_to_terrain",
+    "steering_error",
+    "wall_clearance",
+    "wrap_angle",
+]
 
 
 @dataclass(frozen=True)
@@ -62,45 +86,6 @@ class Twist:
 ZERO_TWIST = Twist(0.0, 0.0)
 
 
-@dataclass(frozen=True)
-class Profile:
-    """How often Twists go out and how the steering error becomes an angular velocity."""
-
-    name: str
-    # Minimum time between two Twists.
-    period_s: float
-    # True: a Twist is computed on every pose update (closed loop); False: on the clock alone.
-    on_pose: bool
-    gain: float
-    max_angular: float
-    deadband: float
-    goal_timeout_s: float
-
-
-PROFILES: dict[str, Profile] = {
-    "default": Profile(
-        name="default",
-        period_s=0.05,
-        on_pose=True,
-        gain=6.0,
-        max_angular=4.0,
-        deadband=0.01,
-        goal_timeout_s=0.75,
-    ),
-    # The thesis publishes the latest goal every 1100 ms; turtlesim runs a command for 1 s, so
-    # angular.z = e turns the turtle by e.
-    "thesis": Profile(
-        name="thesis",
-        period_s=1.1,
-        on_pose=False,
-        gain=1.0,
-        max_angular=math.inf,
-        deadband=0.0,
-        goal_timeout_s=2.5,
-    ),
-}
-
-
 def wrap_angle(angle: float) -> float:
     """``angle`` wrapped into (−π, π]."""
     wrapped = math.fmod(angle, 2 * math.pi)
@@ -111,6 +96,10 @@ def wrap_angle(angle: float) -> float:
     return wrapped
 
 
+def _clamp(value: float, low: float, high: float) -> float:
+    return max(low, min(high, value))
+
+
 def pixel_to_terrain(x: float, y: float, w: int, h: int) -> tuple[float, float]:
     """Map a goal pixel of a ``w``×``h`` frame to terrain metres (image y flipped)."""
     return x * TERRAIN_CENTRE / (w / 2), (h - y) * TERRAIN_CENTRE / (h / 2)
@@ -119,6 +108,10 @@ def pixel_to_terrain(x: float, y: float, w: int, h: int) -> tuple[float, float]:
 def steering_error(goal: Goal, pose: Pose) -> float | None:
     """Signed turn, in (−π, π], that makes the turtle face the goal; None when undefined."""
     tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
+    return _heading_error(tx, ty, pose)
+
+
+def _heading_error(tx: float, ty: float, pose: Pose) -> float | None:
     dx, dy = tx - pose.x, ty - pose.y
     if math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M:
         return None
@@ -130,16 +123,68 @@ def angular_command(error: float, profile: Profile) -> float:
     if abs(error) < profile.deadband:
         return 0.0
     command = profile.gain * error
-    return max(-profile.max_angular, min(profile.max_angular, command))
+    return _clamp(command, -profile.max_angular, profile.max_angular)
+
+
+def wall_clearance(pose: Pose, forward: bool) -> float:
+    """Metres the turtle can travel straight ahead (or straight back) before a wall."""
+    sign = 1.0 if forward else -1.0
+    clearance = math.inf
+    for position, component in (
+        (pose.x, sign * math.cos(pose.theta)),
+        (pose.y, sign * math.sin(pose.theta)),
+    ):
+        if component > 1e-12:
+            clearance = min(clearance, (WORLD_SIZE - position) / component)
+        elif component < -1e-12:
+            clearance = min(clearance, -position / component)
+    return max(0.0, clearance)
+
+
+def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[float, float]:
+    """(linear, angular) that take the turtle to ``profile.standoff_m`` from terrain point
+    (``tx``, ``ty``): turn towards it, drive as much as it faces it, slow near walls."""
+    margin = profile.wall_margin_m
+    # A target at the edge of the frame would lead the turtle into the wall; aim inside.
+    tx = _clamp(tx, margin, WORLD_SIZE - margin)
+    ty = _clamp(ty, margin, WORLD_SIZE - margin)
+    error = _heading_error(tx, ty, pose)
+    if error is None:
+        return 0.0, 0.0
+    angular = angular_command(error, profile)
+    distance = math.hypot(tx - pose.x, ty - pose.y)
+    linear = profile.linear_gain * (distance - profile.standoff_m)
+    linear = _clamp(linear, -profile.max_linear, profile.max_linear)
+    # Only the part of the heading that points at the target is worth driving along; facing
+    # away, the turtle turns first.
+    linear *= max(0.0, math.cos(error))
+    # The speed allowed shrinks with the clearance ahead (behind, when backing off) and is zero
+    # at the wall margin: the turtle never drives into a wall, and can always turn away.
+    allowed = max(0.0, profile.wall_gain * (wall_clearance(pose, linear >= 0) - margin))
+    return _clamp(linear, -allowed, allowed), angular
+
+
+def _command(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+    if profile.law == "follow":
+        tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
+        return follow_command(tx, ty, pose, profile)
+    error = steering_error(goal, pose)
+    # No defined heading: hold still rather than keep the last turn going.
+    return 0.0, 0.0 if error is None else angular_command(error, profile)
 
 
 class Controller:
-    """Turns goals into Twists with one profile; rotates in place (linear.x = 0).
+    """Turns goals into Twists with one profile.
 
     Call :meth:`goal` for each goal, :meth:`pose` for each pose update and :meth:`tick`
     regularly (every few tens of milliseconds); each returns the Twist to publish now, if any.
-    After a goal timeout or :meth:`stop` exactly one zero Twist is returned, then nothing until
-    the next goal.
+
+    Closed-loop profiles (``on_pose``) answer a new goal at once, as soon as the command-rate
+    cap (``min_interval_s`` since the previous Twist) allows, and between goals answer pose
+    updates every ``period_s``. The thesis profile publishes on its own clock. After a goal
+    timeout or :meth:`stop` exactly one zero Twist is returned, then nothing until the next
+    goal. The follow profile turns in place to search when no goal came for
+    ``search_after_s``.
     """
 
     def __init__(self, profile: Profile, clock: Callable[[], float] = time.monotonic) -> None:
@@ -147,6 +192,10 @@ class Controller:
         self._clock = clock
         self._goal: Goal | None = None
         self._goal_at = 0.0
+        # The latest goal has not produced a Twist yet.
+        self._unanswered = False
+        # The side the target was last seen on (+1 left, −1 right): where a search turns first.
+        self._last_side = 1.0
         self._pose: Pose | None = None
         self._last_publish: float | None = None
 
@@ -155,14 +204,20 @@ class Controller:
         """True while goals are arriving (the turtle is being piloted)."""
         return self._goal is not None
 
+    @property
+    def searching(self) -> bool:
+        """True while the follow profile has lost its target and turns to find it."""
+        return self._goal is not None and self._lost(self._clock())
+
     def goal(self, goal: Goal) -> Twist | None:
-        """Take a new goal; the thesis profile answers at once when its period has elapsed."""
+        """Take a new goal and answer it now when the profile's timing allows."""
         self._goal = goal
         self._goal_at = self._clock()
-        return None if self.profile.on_pose else self._due()
+        self._unanswered = True
+        return self._due()
 
     def pose(self, pose: Pose) -> Twist | None:
-        """Take a pose update; the default profile answers with a Twist when one is due."""
+        """Take a pose update; closed-loop profiles answer with a Twist when one is due."""
         self._pose = pose
         timed_out = self._check_timeout()
         if timed_out is not None:
@@ -181,8 +236,12 @@ class Controller:
         if self._goal is None:
             return None
         self._goal = None
+        self._unanswered = False
         self._last_publish = None
         return ZERO_TWIST
+
+    def _lost(self, now: float) -> bool:
+        return now - self._goal_at > self.profile.search_after_s
 
     def _check_timeout(self) -> Twist | None:
         if self._goal is not None and self._clock() - self._goal_at > self.profile.goal_timeout_s:
@@ -194,16 +253,26 @@ class Controller:
         if goal is None or pose is None:
             return None
         now = self._clock()
-        if self._last_publish is not None and now - self._last_publish < self.profile.period_s:
-            return None
         last = self._last_publish
-        # The clock-driven profile keeps a fixed cadence (like the thesis's setInterval) instead
-        # of drifting by the tick granularity; after a pause it starts a new grid.
-        if not self.profile.on_pose and last is not None and now - last < 2 * self.profile.period_s:
-            self._last_publish = last + self.profile.period_s
-        else:
+        profile = self.profile
+        if profile.on_pose:
+            gap = profile.min_interval_s if self._unanswered else profile.period_s
+            if last is not None and now - last < gap:
+                return None
             self._last_publish = now
-        error = steering_error(goal, pose)
-        # No defined heading: hold still rather than keep the last turn going.
-        angular = 0.0 if error is None else angular_command(error, self.profile)
-        return Twist(0.0, angular, seq=goal.seq, frame=goal.frame)
+        else:
+            if last is not None and now - last < profile.period_s:
+                return None
+            # The clock-driven profile keeps a fixed cadence (like the thesis's setInterval)
+            # instead of drifting by the tick granularity; after a pause it starts a new grid.
+            if last is not None and now - last < 2 * profile.period_s:
+                self._last_publish = last + profile.period_s
+            else:
+                self._last_publish = now
+        self._unanswered = False
+        if self._lost(now):
+            return Twist(0.0, self._last_side * profile.search_angular)
+        linear, angular = _command(goal, pose, profile)
+        if angular != 0.0:
+            self._last_side = 1.0 if angular > 0 else -1.0
+        return Twist(linear, angular, seq=goal.seq, frame=goal.frame)

@@ -3,13 +3,16 @@
 Each line is one object with ``ev`` and ``t`` (``time.monotonic()`` seconds, comparable across
 processes of one machine):
 
-* ``{"ev": "frame_sent", "frame", "face_x", "face_y", "t"}`` -- synthetic frame handed to the
-  encoder, with the true face centre in pixels;
+* ``{"ev": "frame_sent", "frame", "face_x", "face_y", "jump", "t"}`` -- synthetic frame handed
+  to the encoder, with the true face centre in pixels; ``jump`` is true on the first frame after
+  the face leapt across the frame (``SweepPath.jump_times``);
 * ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received;
 * ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
   (``seq``/``frame`` of the goal that caused it, null for a stop);
 * ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;
-* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay up or down.
+* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay up or down;
+* ``{"ev": "spawn", "ok", "t", ...}`` -- the spawn step turned the turtle (``x``, ``y``,
+  ``theta``) or failed (``reason``).
 """
 
 from __future__ import annotations

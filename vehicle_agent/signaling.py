@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import ssl
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -39,20 +40,36 @@ def ws_url(server: str) -> str:
 class SignalingClient:
     """One logged-in signaling connection; iterate over it for the server's messages."""
 
-    def __init__(self, server: str, name: str, room: str, role: str = "vehicle") -> None:
+    def __init__(
+        self,
+        server: str,
+        name: str,
+        room: str,
+        role: str = "vehicle",
+        token: str | None = None,
+        tls: ssl.SSLContext | None = None,
+    ) -> None:
         self.url = ws_url(server)
         self.name = name
         self.room = room
         self.role = role
+        self.token = token
+        # Only for wss://; None there means the system's trusted CAs.
+        self.tls = tls if self.url.startswith("wss:") else None
         self._ws: ClientConnection | None = None
 
     async def connect(self) -> list[Message]:
         """Open the socket and log in; returns the room's roster (``[{name, role}]``)."""
         try:
-            self._ws = await connect(self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20)
+            self._ws = await connect(
+                self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20, ssl=self.tls
+            )
         except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
             raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
-        await self.send({"type": "login", "name": self.name, "role": self.role, "room": self.room})
+        login: Message = {"type": "login", "name": self.name, "role": self.role, "room": self.room}
+        if self.token is not None:
+            login["token"] = self.token
+        await self.send(login)
         try:
             async with asyncio.timeout(LOGIN_TIMEOUT_S):
                 reply = await self._receive()

@@ -14,12 +14,24 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any, Protocol
+from urllib.parse import urlsplit
 
 import roslibpy
+from autobahn.twisted.websocket import connectWS
 from twisted.internet import reactor
+from twisted.internet import ssl as twisted_ssl
 
-from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, Detected, RosSetting, detect
+from app.protocol.ros import (
+    AUTO,
+    DETECT_TIMEOUT_S,
+    ROS_SETTINGS,
+    TYPES,
+    Detected,
+    RosSetting,
+    detect,
+)
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -42,6 +54,9 @@ class Turtle(Protocol):
 
     def publish(self, twist: Twist) -> None:
         """Send a velocity command (``cmd_vel``)."""
+
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Put the turtle at (x, y) facing theta (``teleport_absolute``); raises TurtleError."""
 
     async def close(self) -> None:
         """Disconnect and stop calling ``on_pose``."""
@@ -86,6 +101,10 @@ class SimTurtle:
         """Command the simulated turtle."""
         self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
 
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Teleport the simulated turtle."""
+        self.sim.teleport_absolute(self.name, x, y, theta)
+
     async def close(self) -> None:
         """Stop ticking."""
         if self._task is not None:
@@ -100,7 +119,14 @@ class RosbridgeTurtle:
     roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
     """
 
-    def __init__(self, url: str, ros: RosSetting = AUTO, name: str = "turtle1") -> None:
+    def __init__(
+        self,
+        url: str,
+        ros: RosSetting = AUTO,
+        name: str = "turtle1",
+        token: str | None = None,
+        ca_file: Path | None = None,
+    ) -> None:
         if not url.startswith(("ws://", "wss://")):
             raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
         if ros not in ROS_SETTINGS:
@@ -110,6 +136,9 @@ class RosbridgeTurtle:
         self.setting: RosSetting = ros
         # Known once connected: the types in use and whether the robot named them.
         self.types: Detected | None = None
+        # Sent as a bearer header on the handshake; the server's /rosbridge checks it.
+        self.headers = {"Authorization": f"Bearer {token}"} if token else None
+        self.ca_file = ca_file
         self._ros: roslibpy.Ros | None = None
         self._cmd_vel: roslibpy.Topic | None = None
         self._pose: roslibpy.Topic | None = None
@@ -117,7 +146,10 @@ class RosbridgeTurtle:
     async def start(self, on_pose: PoseCallback) -> None:
         """Connect, advertise ``cmd_vel`` and subscribe to ``pose``."""
         loop = asyncio.get_running_loop()
-        ros = roslibpy.Ros(host=self.url, transport="twisted")
+        if self.url.startswith("wss:"):
+            ros: roslibpy.Ros = _VerifiedRos(self.url, self.headers, _tls_options(self))
+        else:
+            ros = roslibpy.Ros(host=self.url, headers=self.headers, transport="twisted")
         try:
             await asyncio.to_thread(ros.run, CONNECT_TIMEOUT_S)
         except TimeoutError as exc:
@@ -182,6 +214,32 @@ class RosbridgeTurtle:
         if self._cmd_vel is not None:
             self._cmd_vel.publish(roslibpy.Message(twist_message(twist)))
 
+    async def teleport(self, x: float, y: float, theta: float) -> None:
+        """Call ``/turtleN/teleport_absolute`` and wait for the robot's answer."""
+        ros, types = self._ros, self.types
+        if ros is None or types is None:
+            raise TurtleError(f"not connected to rosbridge at {self.url}")
+        loop = asyncio.get_running_loop()
+        answered: asyncio.Future[str | None] = loop.create_future()
+
+        def settle(error: str | None) -> None:
+            if not answered.done():
+                answered.set_result(error)
+
+        teleport = TYPES[types.flavour].teleport_absolute
+        service = roslibpy.Service(ros, f"/{self.name}/teleport_absolute", teleport)
+        service.call(
+            roslibpy.ServiceRequest({"x": x, "y": y, "theta": theta}),
+            lambda _response: loop.call_soon_threadsafe(settle, None),
+            lambda error: loop.call_soon_threadsafe(settle, str(error)),
+        )
+        try:
+            error = await asyncio.wait_for(answered, CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            error = f"no answer within {CONNECT_TIMEOUT_S:g} s"
+        if error is not None:
+            raise TurtleError(f"/{self.name}/teleport_absolute failed: {error}")
+
     async def close(self) -> None:
         """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""
         ros, self._ros = self._ros, None
@@ -192,3 +250,35 @@ class RosbridgeTurtle:
         if self._cmd_vel is not None:
             self._cmd_vel.unadvertise()
         await asyncio.to_thread(ros.close)
+
+
+def _tls_options(turtle: RosbridgeTurtle) -> Any:
+    """Twisted TLS options that check the rosbridge's certificate and name: against
+    ``turtle.ca_file`` if given, else the system's trusted CAs."""
+    host = urlsplit(turtle.url).hostname or ""
+    if turtle.ca_file is None:
+        return twisted_ssl.optionsForClientTLS(host)
+    try:
+        root = twisted_ssl.Certificate.loadPEM(turtle.ca_file.read_bytes())
+    except OSError as exc:
+        raise TurtleError(f"cannot read --ca-file {turtle.ca_file}: {exc}") from exc
+    return twisted_ssl.optionsForClientTLS(host, trustRoot=root)
+
+
+class _VerifiedRos(roslibpy.Ros):  # type: ignore[misc]
+    """roslibpy's twisted transport connects wss:// without checking the certificate at all
+    (autobahn's default ``ClientContextFactory``); this one connects with ``options`` instead."""
+
+    def __init__(self, url: str, headers: dict[str, str] | None, options: Any) -> None:
+        self._tls = options
+        super().__init__(host=url, headers=headers, transport="twisted")
+
+    def connect(self) -> None:
+        factory = self.factory
+
+        def connect_verified() -> None:
+            factory.connector = connectWS(factory, contextFactory=self._tls)
+
+        # Ros.connect() queues factory._connect on the reactor thread; this replaces it.
+        factory._connect = connect_verified
+        super().connect()

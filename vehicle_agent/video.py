@@ -96,10 +96,18 @@ class FacePath(Protocol):
 
     def __call__(self, t: float) -> tuple[float, float]: ...
 
+    def jumped(self, t0: float, t1: float) -> bool:
+        """True when the face leapt (rather than moved) at some time in (``t0``, ``t1``]."""
+        ...
+
 
 @dataclass(frozen=True)
 class SweepPath:
-    """Hold on the left, glide right, hold on the right, glide back; repeats every cycle.
+    """Glides and leaps between a left and a right spot; repeats every :attr:`cycle_s`.
+
+    One cycle: hold on the left, glide right, hold, glide back, hold, then leap right, hold,
+    and leap back left (the cycle's end). The glides test steady tracking, the leaps how soon a
+    detector finds a face that jumped across the frame (:meth:`jumped` names their times).
 
     The face sits a little above the middle row so that, seen from the terrain centre, "left"
     and "right" are clearly ≈170° and ≈10° rather than a coin toss across ±180°.
@@ -111,19 +119,42 @@ class SweepPath:
     hold_s: float = 4.0
     glide_s: float = 2.0
 
+    @property
+    def cycle_s(self) -> float:
+        """Length of one cycle: four holds and two glides."""
+        return 4 * self.hold_s + 2 * self.glide_s
+
+    def jump_times(self) -> tuple[float, float]:
+        """Phases (s into a cycle) of the leap right and of the leap back left (the cycle end)."""
+        return 3 * self.hold_s + 2 * self.glide_s, self.cycle_s
+
     def __call__(self, t: float) -> tuple[float, float]:
-        cycle = 2 * (self.hold_s + self.glide_s)
-        phase = t % cycle
+        phase = t % self.cycle_s
         span = self.right - self.left
-        if phase < self.hold_s:
+        hold, glide = self.hold_s, self.glide_s
+        if phase < hold:
             x = self.left
-        elif phase < self.hold_s + self.glide_s:
-            x = self.left + span * _ease((phase - self.hold_s) / self.glide_s)
-        elif phase < 2 * self.hold_s + self.glide_s:
+        elif phase < hold + glide:
+            x = self.left + span * _ease((phase - hold) / glide)
+        elif phase < 2 * hold + glide:
             x = self.right
+        elif phase < 2 * hold + 2 * glide:
+            x = self.right - span * _ease((phase - 2 * hold - glide) / glide)
+        elif phase < self.jump_times()[0]:
+            x = self.left
         else:
-            x = self.right - span * _ease((phase - 2 * self.hold_s - self.glide_s) / self.glide_s)
+            x = self.right
         return x, self.y
+
+    def jumped(self, t0: float, t1: float) -> bool:
+        """True when a leap happened at some time in (``t0``, ``t1``]."""
+        cycle = self.cycle_s
+        for phase in self.jump_times():
+            # The latest leap of this kind at or before t1 (none before the path starts).
+            at = math.floor((t1 - phase) / cycle) * cycle + phase
+            if t0 < at <= t1 and at > 0:
+                return True
+        return False
 
 
 @dataclass
@@ -135,6 +166,10 @@ class FixedPath:
 
     def __call__(self, t: float) -> tuple[float, float]:
         return self.x, self.y
+
+    def jumped(self, t0: float, t1: float) -> bool:
+        """Never: a test that moves the face knows when it did."""
+        return False
 
 
 def _ease(u: float) -> float:
@@ -149,6 +184,8 @@ class FrameInfo:
     sent_at: float  # time.monotonic()
     face_x: float  # true face centre, pixels
     face_y: float
+    # The face leapt across the frame since the previous frame (see SweepPath).
+    jump: bool = False
 
 
 class _FaceSprite:
@@ -219,6 +256,51 @@ def _background(width: int, height: int) -> Image:
     return out
 
 
+# Where the scene's flame stands, as fractions of width and height: on the floor, well below
+# the face's path, so that the face and fire operations pick different targets.
+DEFAULT_FLAME = (0.62, 0.86)
+# Flame colours, outside in (RGB): red-orange, orange, yellow. All lie inside the fire
+# operation's HSV ranges (app/operations.json); a pale core would not.
+_FLAME_LAYERS = ((230, 60, 20), (255, 140, 20), (255, 215, 70))
+
+
+def _flame_height(height: int) -> int:
+    return max(12, height // 7)
+
+
+def draw_flame(rgb: Image, cx: float, cy: float, frame: int) -> None:
+    """A flickering flame centred on (``cx``, ``cy``) pixels, drawn into ``rgb`` in place.
+
+    A teardrop per colour layer, the tip swaying and the height breathing from frame to frame;
+    its centre stays put so the target it gives does not wander.
+    """
+    full = _flame_height(rgb.shape[0])
+    flicker = 1.0 + 0.08 * math.sin(frame * 1.3)
+    sway = 0.12 * math.sin(frame * 0.7)
+    for i, colour in enumerate(_FLAME_LAYERS):
+        scale = 1.0 - 0.28 * i
+        h = full * scale * flicker
+        w = 0.55 * full * scale
+        # The teardrop is heavier at the bottom: lift it so its centroid sits on (cx, cy).
+        base_y = cy + 0.38 * full - (full - h) * 0.1
+        bulb_y = base_y - 0.3 * h
+        tip = (cx + sway * w, base_y - h)
+        left = (cx - w / 2, bulb_y)
+        right = (cx + w / 2, bulb_y)
+        cv2.ellipse(
+            rgb,
+            (round(cx), round(bulb_y)),
+            (max(1, round(w / 2)), max(1, round(0.3 * h))),
+            0,
+            0,
+            360,
+            colour,
+            -1,
+        )
+        points = np.array([left, tip, right], dtype=np.float64).round().astype(np.int32)
+        cv2.fillPoly(rgb, [points], colour)
+
+
 class PacedVideoTrack(MediaStreamTrack):
     """A video track paced at ``fps`` (aiortc's ``VideoStreamTrack.next_timestamp`` is fixed
     at 30 fps); subclasses implement :meth:`make_frame`."""
@@ -264,7 +346,8 @@ class PacedVideoTrack(MediaStreamTrack):
 
 
 class SyntheticVideo(PacedVideoTrack):
-    """A face photo moving over a still scene along ``path``; every frame carries its tag."""
+    """A face photo moving over a still scene along ``path``, and a flame standing at ``flame``
+    (fractions of width and height; None for none); every frame carries its tag."""
 
     def __init__(
         self,
@@ -274,6 +357,7 @@ class SyntheticVideo(PacedVideoTrack):
         path: FacePath | None = None,
         photo: Path = DEFAULT_FACE,
         on_frame: Callable[[FrameInfo], None] | None = None,
+        flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
         if width < 2 * TAG_BLOCKS_PER_WIDTH or height < 48:
@@ -282,6 +366,7 @@ class SyntheticVideo(PacedVideoTrack):
             )
         self.width, self.height = width, height
         self.path: FacePath = path or SweepPath()
+        self.flame = flame
         self.on_frame = on_frame
         self._sprite = _FaceSprite(photo, face_px=max(24, height // 4))
         self._background = _background(width, height)
@@ -291,9 +376,22 @@ class SyntheticVideo(PacedVideoTrack):
         fx, fy = self.path(frame / self.fps)
         return fx * self.width, fy * self.height
 
+    def flame_centre(self) -> tuple[float, float] | None:
+        """Centre (pixels) of the flame, or None when the scene has none."""
+        if self.flame is None:
+            return None
+        return self.flame[0] * self.width, self.flame[1] * self.height
+
+    def jumped(self, frame: int) -> bool:
+        """True when the face leapt across the frame between frame ``frame`` − 1 and this one."""
+        return frame > 0 and self.path.jumped((frame - 1) / self.fps, frame / self.fps)
+
     def render(self, frame: int) -> Image:
         """Frame number ``frame`` as an RGB array (H×W×3)."""
         img = self._background.copy()
+        flame = self.flame_centre()
+        if flame is not None:
+            draw_flame(img, flame[0], flame[1], frame)
         cx, cy = self.face_centre(frame)
         sprite = self._sprite
         x0 = round(cx - sprite.cx)
@@ -312,7 +410,7 @@ class SyntheticVideo(PacedVideoTrack):
         frame = av.VideoFrame.from_ndarray(self.render(index), format="rgb24")
         if self.on_frame is not None:
             cx, cy = self.face_centre(index)
-            self.on_frame(FrameInfo(index, time.monotonic(), cx, cy))
+            self.on_frame(FrameInfo(index, time.monotonic(), cx, cy, self.jumped(index)))
         return frame
 
 

@@ -8,6 +8,8 @@ Role = Literal["vehicle", "relay", "client"]
 ROLES: Final[tuple[Role, ...]] = ("vehicle", "relay", "client")
 
 Profile = Literal["default", "thesis"]
-# Relay and vehicle timing profiles: ``thesis`` reproduces the 2017 system's pacing.
+# Relay timing profiles: ``thesis`` reproduces the 2017 system's pacing. The vehicle profiles
+# (these two and ``follow``, which the relay paces as ``default``) are
+# ``app.protocol.control.PROFILES``.
 PROFILES: Final[tuple[Profile, ...]] = ("default", "thesis")
 DEFAULT_PROFILE: Final[Profile] = "default"

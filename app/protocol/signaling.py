@@ -7,16 +7,35 @@ the sender's name on everything it relays, whatever the peer wrote there.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, TypeAdapter, ValidationError
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    TypeAdapter,
+    ValidationError,
+)
 
 from app.protocol.constants import Role
 from app.protocol.errors import describe
 
-# Names and rooms show up in logs and on pages; keep them short and non-empty.
-Name = Annotated[str, StringConstraints(min_length=1, max_length=64)]
+# Names and rooms show up in logs and on pages; keep them short, non-empty, and free of control
+# characters and line separators (a name must never start a forged log line).
+_UNPRINTABLE = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def _printable(text: str) -> str:
+    if _UNPRINTABLE.search(text):
+        raise ValueError("must not contain control characters or line breaks")
+    return text
+
+
+Name = Annotated[str, StringConstraints(min_length=1, max_length=64), AfterValidator(_printable)]
 
 
 class _Incoming(BaseModel):

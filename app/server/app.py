@@ -10,6 +10,8 @@ from fastapi.staticfiles import StaticFiles
 
 from app.resources import STATIC_DIR
 from app.server.config import Settings
+from app.server.headers import SecurityHeaders
+from app.server.origins import OriginGuard
 from app.server.pages import router as pages_router
 from app.server.rosbridge import Simulator
 from app.server.rosbridge import router as rosbridge_router
@@ -31,8 +33,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await app.state.simulator.stop()
 
-    app = FastAPI(title="webrtc-autopilot", lifespan=lifespan)
+    docs = settings.docs_enabled
+    app = FastAPI(
+        title="webrtc-autopilot",
+        lifespan=lifespan,
+        docs_url="/docs" if docs else None,
+        redoc_url="/redoc" if docs else None,
+        openapi_url="/openapi.json" if docs else None,
+    )
     app.state.settings = settings
+    # The middleware added last runs first: the security headers go on every HTTP response,
+    # the origin guard's refusals included; a foreign origin reaches no route.
+    app.add_middleware(OriginGuard, allowed=settings.allowed_origins)
+    app.add_middleware(SecurityHeaders)
     # Validated here so that a bad operations spec stops the server before it serves anything.
     app.state.operations = load_spec(settings.operations_spec)
     app.include_router(vision_router)

@@ -9,7 +9,9 @@ from pydantic import BaseModel, Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
+from app.protocol.tokens import check_secret
 from app.resources import OPERATIONS_SPEC
+from app.server.origins import normalise
 
 
 class IceServer(BaseModel):
@@ -30,15 +32,34 @@ class Settings(BaseSettings):
     port: int = 8000
     # No public STUN by default: nothing leaves the machine unless an operator asks for it.
     ice_servers: list[IceServer] = Field(default_factory=list)
-    # When set, every login must carry this token.
-    token: str | None = None
+    # Signs the room- and role-scoped tokens (app.server.tokens); every login, /rosbridge
+    # connection and state read must then carry one. Unset only in development.
+    secret: str | None = Field(default=None, repr=False)
+    # Origins besides the server's own whose pages may open /ws and /rosbridge.
+    allowed_origins: list[str] = Field(default_factory=list)
+    # The single shared login token of earlier versions; refused, so that an operator who still
+    # sets it is told it no longer protects anything.
+    token: str | None = Field(default=None, repr=False)
     max_message_bytes: int = 64 * 1024
     operations_spec: Path = OPERATIONS_SPEC
     sim_tick_s: float = 0.016
     ros: RosFlavour = DEFAULT_FLAVOUR
 
+    @property
+    def docs_enabled(self) -> bool:
+        """The OpenAPI pages (/docs, /redoc, /openapi.json) are served in development only."""
+        return self.environment == "development"
+
     @model_validator(mode="after")
     def _refuse_unsafe(self) -> Settings:
-        if self.environment == "production" and not self.token:
-            raise ValueError("AUTOPILOT_TOKEN must be set when AUTOPILOT_ENVIRONMENT=production")
+        if self.token is not None:
+            raise ValueError(
+                "AUTOPILOT_TOKEN is no longer used: set AUTOPILOT_SECRET and give each peer "
+                "its own token from `autopilot token` (see docs/deploying.md)"
+            )
+        if self.environment == "production" and not self.secret:
+            raise ValueError("AUTOPILOT_SECRET must be set when AUTOPILOT_ENVIRONMENT=production")
+        if self.secret is not None:
+            check_secret(self.secret)
+        self.allowed_origins = [normalise(origin) for origin in self.allowed_origins]
         return self

@@ -3,22 +3,26 @@
 Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
 ES modules need no globals: ICE servers from :class:`~app.server.config.Settings`, the
 signaling path, the default rosbridge URL (this server's ``/rosbridge``) and what the query
-string asks for.
+string asks for. The token is not among them: the page reads it from its URL fragment, which
+no server sees.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.protocol.constants import PROFILES, ROLES, Role
+from app.protocol.constants import ROLES, Role
+from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR
 from app.server.config import Settings
+from app.server.tls import insecure_rosbridge
 
 router = APIRouter()
 templates = Jinja2Templates(directory=TEMPLATES_DIR)
@@ -34,22 +38,49 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     """What a role page needs to run on its own, ``?auto=1`` included."""
     settings: Settings = request.app.state.settings
     query = request.query_params
-    profile = query.get("profile", "default")
+    asked = query.get("profile", DEFAULT_PROFILE)
+    # An unknown profile falls back to the default rather than breaking the page.
+    profile = PROFILES[asked if asked in PROFILES else DEFAULT_PROFILE]
+    own_rosbridge = f"{_ws_base(request)}/rosbridge"
+    rosbridge = query.get("rosbridge") or own_rosbridge
     return {
         "role": role,
         "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
         "wsPath": "/ws",
         "room": query.get("room", "default"),
         "name": query.get("name", ""),
-        "token": query.get("token"),
         "auto": query.get("auto") in ("1", "true", "yes"),
-        # An unknown profile falls back to the default rather than breaking the page.
-        "profile": profile if profile in PROFILES else "default",
-        "rosbridge": query.get("rosbridge") or f"{_ws_base(request)}/rosbridge",
+        # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
+        "profile": profile.relay_profile if role == "relay" else profile.name,
+        "control": _control(query.get("standoff")),
+        # The vehicle page's spawn step (turn to face up at start); ?spawn=0 switches it off.
+        "spawnStep": query.get("spawn") not in ("0", "false", "no"),
+        "rosbridge": rosbridge,
+        # The page's token (read from the URL fragment) goes only to this server's rosbridge.
+        "rosbridgeAuth": rosbridge == own_rosbridge,
+        "rosbridgeError": insecure_rosbridge(rosbridge, request.url.scheme),
         # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
         "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
         "rosTypes": ros_page_config(),
     }
+
+
+def _standoff(text: str | None) -> float | None:
+    """``?standoff=M`` in metres; None (the profile's own) when absent or not a distance >= 0,
+    just as an unknown profile falls back to the default."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) and value >= 0 else None
+
+
+def _control(standoff: str | None) -> dict[str, Any]:
+    """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance."""
+    profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
+    return page_constants(profiles)
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:

@@ -9,16 +9,18 @@ one slow client never holds up the tick or the other clients.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
 from dataclasses import asdict
 from typing import Any
 
-from fastapi import APIRouter, Request, WebSocket
+from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
+from app.server.access import CLOSE_POLICY_VIOLATION, RosbridgeGate, bearer_token, state_refusal
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -122,7 +124,12 @@ class Simulator:
 
 @router.get("/turtlesim/state")
 async def turtlesim_state(request: Request) -> dict[str, Any]:
-    """Read-only view of the simulator: poses, pens and pen strokes."""
+    """Read-only view of the simulator: poses, pens and pen strokes (a token of any role)."""
+    refusal = state_refusal(
+        request.app.state.settings.secret, bearer_token(request.headers), time.time()
+    )
+    if refusal is not None:
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, refusal, {"WWW-Authenticate": "Bearer"})
     simulator: Simulator = request.app.state.simulator
     return simulator.state()
 
@@ -131,6 +138,12 @@ async def turtlesim_state(request: Request) -> dict[str, Any]:
 async def rosbridge(websocket: WebSocket) -> None:
     """One rosbridge v2 client (roslibpy, roslib.js): JSON text frames both ways."""
     simulator: Simulator = websocket.app.state.simulator
+    gate = RosbridgeGate(websocket.app.state.settings.secret)
+    refusal = gate.handshake(bearer_token(websocket.headers), time.time())
+    if refusal is not None:
+        log.info("rosbridge handshake refused: %s", refusal)
+        await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
+        return
     await websocket.accept()
     session, outbox = simulator.open()
     writer = asyncio.create_task(_write(websocket, outbox), name="rosbridge-writer")
@@ -142,6 +155,7 @@ async def rosbridge(websocket: WebSocket) -> None:
                 break
             text = frame.get("text")
             size = len(text.encode()) if text is not None else 0
+            closing: tuple[int, str] | None = None
             if text is None:
                 replies = session.error("binary frames are not supported: send JSON text")
             elif size > simulator.max_message_bytes:
@@ -149,13 +163,29 @@ async def rosbridge(websocket: WebSocket) -> None:
                     f"message of {size} bytes exceeds the limit of {simulator.max_message_bytes}"
                 )
             else:
-                replies = session.receive(text)
+                decision = gate.check(text, time.time())
+                replies = session.receive(text) if decision.forward else []
+                if decision.reply is not None:
+                    replies.append(decision.reply)
+                closing = decision.close
             for reply in replies:
                 outbox.put_nowait(json.dumps(reply))
+            if closing is not None:
+                await _drain(outbox)  # the refusal's reason first, then the close
+                await websocket.close(*closing)
+                break
     finally:
         simulator.forget(session)
         writer.cancel()
         await asyncio.gather(writer, return_exceptions=True)
+
+
+async def _drain(outbox: asyncio.Queue[str], timeout_s: float = 1.0) -> None:
+    """Give the writer a moment to send what is queued (a refusal's reason) before closing."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(timeout_s):
+            while not outbox.empty():
+                await asyncio.sleep(0.01)
 
 
 def _report_crash(task: asyncio.Task[None]) -> None:

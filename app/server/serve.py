@@ -16,6 +16,7 @@ from app.protocol.constants import ROLES
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
+from app.server import tls
 from app.server.app import create_app
 from app.server.config import Settings
 from app.vision.spec import SpecError
@@ -33,6 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="ROS flavour the simulated robot speaks: 1, 2 (up to Iron) or jazzy "
         f"(default: AUTOPILOT_ROS or {DEFAULT_FLAVOUR})",
     )
+    tls.add_arguments(parser)
 
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
@@ -51,12 +53,25 @@ def run(args: argparse.Namespace) -> int:
     except SpecError as exc:
         log.error("cannot start: %s", exc)
         return 1
+    try:
+        files = tls.from_arguments(args)
+    except ValueError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
     host = args.host or settings.host
     port = args.port or settings.port
-    base = f"http://{reachable_host(host)}:{port}"
+    scheme = "http" if files is None else "https"
+    base = f"{scheme}://{reachable_host(host)}:{port}"
     for role, url in page_urls(base).items():
         log.info("%s page: %s", role, url)
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    uvicorn.run(
+        app,
+        host=host,
+        port=port,
+        log_level="info",
+        ssl_certfile=None if files is None else str(files.certfile),
+        ssl_keyfile=None if files is None else str(files.keyfile),
+    )
     return 0
 
 
@@ -70,7 +85,7 @@ class RunningServer:
 
     @property
     def ws_url(self) -> str:
-        """The signaling endpoint."""
+        """The signaling endpoint (``wss://`` when served over HTTPS)."""
         return ws_endpoint(self.url)
 
     def stop(self) -> None:
@@ -84,6 +99,7 @@ def start_in_thread(
     host: str = "127.0.0.1",
     port: int = 0,
     log_level: str = "warning",
+    tls_files: tls.TlsFiles | None = None,
 ) -> RunningServer:
     """Start the app in a daemon thread (``port=0``: a free one); returns once it accepts
     connections. Raises ``OSError`` when the address cannot be bound."""
@@ -91,7 +107,13 @@ def start_in_thread(
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     port = sock.getsockname()[1]
-    config = uvicorn.Config(create_app(settings), log_level=log_level, lifespan="on")
+    config = uvicorn.Config(
+        create_app(settings),
+        log_level=log_level,
+        lifespan="on",
+        ssl_certfile=None if tls_files is None else str(tls_files.certfile),
+        ssl_keyfile=None if tls_files is None else str(tls_files.keyfile),
+    )
     server = uvicorn.Server(config)
     thread = threading.Thread(
         target=lambda: asyncio.run(server.serve(sockets=[sock])), daemon=True, name="uvicorn"
@@ -103,4 +125,5 @@ def start_in_thread(
         threading.Event().wait(0.01)
     else:
         raise RuntimeError("server did not start within 5 s")
-    return RunningServer(url=f"http://{host}:{port}", server=server, thread=thread)
+    scheme = "http" if tls_files is None else "https"
+    return RunningServer(url=f"{scheme}://{host}:{port}", server=server, thread=thread)

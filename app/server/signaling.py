@@ -48,7 +48,7 @@ class Switchboard:
     @classmethod
     def from_settings(cls, settings: Settings) -> Switchboard:
         """A switchboard around a fresh hub configured by ``settings``."""
-        return cls(Hub(token=settings.token, max_message_bytes=settings.max_message_bytes))
+        return cls(Hub(secret=settings.secret, max_message_bytes=settings.max_message_bytes))
 
     def open(self) -> tuple[ConnId, asyncio.Queue[_OutboxItem]]:
         """Register a connection with the hub and give it an outbox."""

@@ -8,12 +8,14 @@ shut. The hub never blocks and never touches the network, so every rule is testa
 
 from __future__ import annotations
 
-import hmac
 import itertools
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, assert_never
 
+from app.protocol import tokens
 from app.protocol.constants import Role
 from app.protocol.signaling import (
     Answer,
@@ -85,7 +87,8 @@ class _Connection:
 class Hub:
     """All rooms of one server. Synchronous and single-threaded: call it from one event loop."""
 
-    token: str | None = None
+    # Signs the tokens a login must carry (one for its room and role); None: no tokens asked.
+    secret: str | None = field(default=None, repr=False)
     max_message_bytes: int = 64 * 1024
     # A peer whose last this-many messages were all refused is closed as abusive.
     max_errors_in_a_row: int = 20
@@ -93,6 +96,8 @@ class Hub:
     # room -> name -> peer, in join order (rosters list peers in the order they joined).
     _rooms: dict[str, dict[str, _Peer]] = field(default_factory=dict, init=False)
     _ids: itertools.count[int] = field(default_factory=itertools.count, init=False)
+    # Unix seconds, for token expiry; tests pass their own.
+    clock: Callable[[], float] = time.time
 
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
@@ -174,10 +179,10 @@ class Hub:
         return actions
 
     def _login(self, connection: _Connection, login: Login) -> list[Action]:
-        if self.token is not None and not hmac.compare_digest(
-            (login.token or "").encode(), self.token.encode()
-        ):
-            return self._refuse_login(connection, "bad or missing token")
+        if self.secret is not None:
+            refusal = _token_refusal(self.secret, login, self.clock())
+            if refusal is not None:
+                return self._refuse_login(connection, refusal)
         # Only a successful login creates a room: refused ones must not leave empty rooms behind.
         room = self._rooms.get(login.room, {})
         if login.name in room:
@@ -268,7 +273,7 @@ class Hub:
         ]
         connection.errors_in_a_row += 1
         if connection.errors_in_a_row >= self.max_errors_in_a_row:
-            who = connection.peer.name if connection.peer else f"connection {connection.id}"
+            who = repr(connection.peer.name) if connection.peer else f"connection {connection.id}"
             log.warning("closing %s: %d bad messages in a row", who, connection.errors_in_a_row)
             connection.closing = True
             if connection.peer is not None:
@@ -282,7 +287,8 @@ class Hub:
                 )
             )
         else:
-            log.debug("refused %s from %s: %s", ref, connection.id, reason)
+            # %r: both may quote what the peer sent, and must not forge a log line.
+            log.debug("refused %r from %s: %r", ref, connection.id, reason)
         return actions
 
     def _refuse_login(self, connection: _Connection, reason: str) -> list[Action]:
@@ -298,3 +304,14 @@ def _relay_of(room: dict[str, _Peer]) -> _Peer | None:
 def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:
     """The message as the peer sent it (extra fields included), with the server's ``from``."""
     return {**message.model_dump(), "from": sender.name}
+
+
+def _token_refusal(secret: str, login: Login, now: float) -> str | None:
+    """Why ``login`` may not join: no token, or one not for its room and role; else None."""
+    if login.token is None:
+        return f"missing token: a {login.role} token for room {login.room!r} is required"
+    try:
+        tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
+    except tokens.TokenError as exc:
+        return str(exc)
+    return None

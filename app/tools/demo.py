@@ -14,16 +14,24 @@ import asyncio
 import contextlib
 import logging
 import os
+import secrets
 import signal
 import sys
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
 
-from app.protocol.constants import PROFILES
+from pydantic import ValidationError
+
+from app.protocol import tokens
+from app.protocol.control import DEFAULT_PROFILE, PROFILES
 from app.protocol.urls import page_url, reachable_host
+from app.server import tls
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path
+from app.tools.relay_service import TOKEN_ENV
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +40,10 @@ RESTART_FIRST_S = 1.0
 RESTART_CAP_S = 30.0
 # A child that ran this long before dying is restarted from the first backoff delay again.
 HEALTHY_RUN_S = 60.0
+# The demo's tokens last as long as a demo may plausibly run; without AUTOPILOT_SECRET they are
+# signed with a secret made for this run, so they end with it anyway.
+DEMO_TOKEN_TTL_S = 30 * 24 * 3600
+ANY_ADDRESS = ("0.0.0.0", "::")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,10 +53,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", default="default", help="room (default: default)")
     parser.add_argument(
         "--profile",
-        choices=PROFILES,
-        default="default",
-        help="relay and agent profile",
+        choices=sorted(PROFILES),
+        default=DEFAULT_PROFILE,
+        help="vehicle profile: default (turn in place), thesis (1100 ms), follow (drive to the"
+        " target and keep a standoff; see docs/demo.md)",
     )
+    tls.add_arguments(parser)
 
 
 @dataclass
@@ -53,16 +67,47 @@ class Child:
 
     name: str
     argv: list[str]
+    # Added to the demo's environment: the child's token travels here, not in its argv.
+    env: dict[str, str] = field(default_factory=dict)
     process: asyncio.subprocess.Process | None = None
 
 
-def children_for(base_url: str, room: str, profile: str) -> list[Child]:
-    """The relay service and the vehicle agent pointed at the server at ``base_url``."""
+def children_for(
+    base_url: str,
+    room: str,
+    profile: str,
+    secret: str | None = None,
+    ca_file: Path | None = None,
+) -> list[Child]:
+    """The relay service and the vehicle agent pointed at the server at ``base_url``, each
+    with a token for its role in ``room`` when there is a ``secret``."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
-    common = ["--server", base_url, "--room", room, "--profile", profile]
+    common = ["--server", base_url, "--room", room]
+    if ca_file is not None:
+        common += ["--ca-file", str(ca_file)]
+
+    def token_env(role: tokens.Role) -> dict[str, str]:
+        if secret is None:
+            return {}
+        now = time.time()
+        return {TOKEN_ENV: tokens.sign(secret, room, role, now=now, ttl_s=DEMO_TOKEN_TTL_S)}
+
     return [
-        Child("relay", [python, "-m", "app.cli", "relay", *common]),
+        # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+        Child(
+            "relay",
+            [
+                python,
+                "-m",
+                "app.cli",
+                "relay",
+                *common,
+                "--profile",
+                PROFILES[profile].relay_profile,
+            ],
+            token_env("relay"),
+        ),
         Child(
             "vehicle",
             [
@@ -71,11 +116,14 @@ def children_for(base_url: str, room: str, profile: str) -> list[Child]:
                 "app.cli",
                 "vehicle",
                 *common,
+                "--profile",
+                profile,
                 "--video",
                 "synthetic",
                 "--rosbridge",
                 rosbridge,
             ],
+            token_env("vehicle"),
         ),
     ]
 
@@ -88,7 +136,9 @@ async def supervise(child: Child, stop: asyncio.Event) -> None:
         started = loop.time()
         # A session of its own: signals to the demo's terminal do not reach it directly, and
         # the whole group (Chromium under the relay included) can be ended at once.
-        child.process = await asyncio.create_subprocess_exec(*child.argv, start_new_session=True)
+        child.process = await asyncio.create_subprocess_exec(
+            *child.argv, start_new_session=True, env={**os.environ, **child.env}
+        )
         log.info("started %s (pid %d)", child.name, child.process.pid)
         waiting = asyncio.create_task(child.process.wait())
         stopping = asyncio.create_task(stop.wait())
@@ -131,34 +181,69 @@ def _kill_group(pgid: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Start everything, print the client URL, run until SIGINT/SIGTERM."""
+    # Listening beyond this machine means pages opened elsewhere: they need HTTPS for a camera.
+    if args.host in ANY_ADDRESS and not args.certfile:
+        args.self_signed = True
     try:
         chromium_path()
-        server = start_in_thread(Settings(), host=args.host, port=args.port, log_level="info")
-    except BrowserNotFound as exc:
-        log.error("%s", exc)
+        files = tls.from_arguments(args)
+        settings = Settings()
+        # The demo mints its own tokens: with a secret made for this run when none is set.
+        if settings.secret is None:
+            settings = Settings(secret=secrets.token_urlsafe(32))
+        server = start_in_thread(
+            settings, host=args.host, port=args.port, log_level="info", tls_files=files
+        )
+    except (BrowserNotFound, ValueError) as exc:
+        log.error("%s", exc if not isinstance(exc, ValidationError) else _first_error(exc))
         return 1
     except OSError as exc:
         log.error("cannot listen on %s:%s: %s", args.host, args.port, exc.strerror or exc)
         return 1
     try:
-        asyncio.run(_main(server, args))
+        asyncio.run(_main(server, args, settings, files))
     finally:
         server.stop()
     log.info("demo stopped")
     return 0
 
 
-async def _main(server: RunningServer, args: argparse.Namespace) -> None:
+def _first_error(exc: ValidationError) -> str:
+    return "cannot start: " + "; ".join(e["msg"] for e in exc.errors())
+
+
+def client_urls(scheme: str, host: str, port: str, room: str, token: str | None) -> list[str]:
+    """The client page URLs to print: every address of this machine when bound to all of them
+    (the loopback ones last), else the bound address."""
+    hosts = [host]
+    if host in ANY_ADDRESS:
+        _, addresses = tls.machine_names()
+        ordered = sorted(addresses, key=lambda a: (a.is_loopback, a.version))
+        hosts = [str(a) if a.version == 4 else f"[{a}]" for a in ordered]
+    fragment = f"#token={token}" if token else ""
+    return [page_url(f"{scheme}://{h}:{port}", "client", room) + fragment for h in hosts]
+
+
+async def _main(
+    server: RunningServer, args: argparse.Namespace, settings: Settings, files: tls.TlsFiles | None
+) -> None:
+    scheme = "https" if files is not None else "http"
     port = server.url.rsplit(":", 1)[1]
-    base = f"http://{reachable_host(args.host)}:{port}"
+    base = f"{scheme}://{reachable_host(args.host)}:{port}"
     stop = asyncio.Event()
     on_stop_signals(stop.set)
-    children = children_for(base, args.room, args.profile)
+    ca_file = files.ca_file if files is not None else None
+    children = children_for(base, args.room, args.profile, settings.secret, ca_file)
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
+    token = None
+    if settings.secret is not None:
+        token = tokens.sign(
+            settings.secret, args.room, "client", now=time.time(), ttl_s=DEMO_TOKEN_TTL_S
+        )
+    urls = "\n".join(f"    {url}" for url in client_urls(scheme, args.host, port, args.room, token))
     # The one line a newcomer needs, on stdout rather than in the log.
     sys.stdout.write(
-        f"\nwebrtc-autopilot demo is running. Open the client page:\n\n"
-        f"    {page_url(base, 'client', args.room)}\n\n"
+        f"\nwebrtc-autopilot demo is running. Open the client page:\n\n{urls}\n\n"
         f"then press Start Piloting. Ctrl-C stops everything.\n\n"
     )
     sys.stdout.flush()

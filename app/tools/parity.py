@@ -243,8 +243,10 @@ def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
                 page = browser.new_page()
                 page.on("console", lambda m: log.debug("page console: %s", m.text))
                 page.goto(f"{server.url}/parity")
+                # A function, not an expression: Playwright evals a bare expression inside the
+                # page, which the page's CSP (no 'unsafe-eval') refuses.
                 page.wait_for_function(
-                    "document.body.dataset.ready", timeout=READY_TIMEOUT_MS, polling=100
+                    "() => document.body.dataset.ready", timeout=READY_TIMEOUT_MS, polling=100
                 )
                 if page.evaluate("document.body.dataset.ready") != "true":
                     raise RuntimeError(f"parity page: {page.text_content('#state')}")

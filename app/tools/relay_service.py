@@ -11,14 +11,18 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
+import ssl
 import urllib.error
 import urllib.request
+from pathlib import Path
 
 from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
 from app.protocol.constants import PROFILES
 from app.protocol.urls import ServerUrlError, page_url, server_base
+from app.server.tls import spki_sha256
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
 
@@ -27,25 +31,31 @@ log = logging.getLogger(__name__)
 RESTART_FIRST_S = 1.0
 RESTART_CAP_S = 15.0
 PAGE_LOAD_TIMEOUT_MS = 30_000
+# Read when --token is not given, so the token stays out of the process list.
+TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 class RelayServiceError(RuntimeError):
     """The relay cannot start at all (no browser, server unreachable)."""
 
 
-def relay_url(server: str, room: str, name: str, profile: str) -> str:
-    """The relay page URL that joins ``room`` unattended."""
-    return page_url(server, "relay", room, name=name, auto=1, profile=profile)
+def relay_url(server: str, room: str, name: str, profile: str, token: str | None = None) -> str:
+    """The relay page URL that joins ``room`` unattended; the token rides in the fragment,
+    which never reaches the server's access log."""
+    url = page_url(server, "relay", room, name=name, auto=1, profile=profile)
+    return url + (f"#token={token}" if token else "")
 
 
-def check_server(server: str) -> None:
-    """Fail fast, with the reason, when ``server`` does not answer ``/healthz``."""
+def check_server(server: str, ca_file: Path | None = None) -> None:
+    """Fail fast, with the reason, when ``server`` does not answer ``/healthz`` (over HTTPS:
+    with a certificate the system or ``ca_file`` trusts)."""
     try:
         base = server_base(server)
     except ServerUrlError as exc:
         raise RelayServiceError(str(exc)) from None
     try:
-        with urllib.request.urlopen(f"{base}/healthz", timeout=10) as response:
+        context = ssl.create_default_context(cafile=None if ca_file is None else str(ca_file))
+        with urllib.request.urlopen(f"{base}/healthz", timeout=10, context=context) as response:
             response.read()
     except (urllib.error.URLError, OSError) as exc:
         raise RelayServiceError(f"cannot reach the server at {server}: {exc}") from exc
@@ -55,9 +65,22 @@ class RelayService:
     """Keeps one headless relay page running in ``room``."""
 
     def __init__(
-        self, server: str, room: str = "default", name: str = "relay", profile: str = "default"
+        self,
+        server: str,
+        room: str = "default",
+        name: str = "relay",
+        profile: str = "default",
+        token: str | None = None,
+        ca_file: Path | None = None,
     ) -> None:
-        self.url = relay_url(server, room, name, profile)
+        self.url = relay_url(server, room, name, profile, token)
+        # Chromium cannot be handed a CA file; pinning the CA's key admits exactly the
+        # certificates it signed (the server presents the CA with its certificate).
+        self.browser_args = chromium_args()
+        if ca_file is not None:
+            self.browser_args.append(
+                f"--ignore-certificate-errors-spki-list={spki_sha256(ca_file)}"
+            )
         self.page: Page | None = None
         self.starts = 0  # pages started, the first included
         self.started = asyncio.Event()  # set each time a page has loaded
@@ -80,7 +103,7 @@ class RelayService:
 
     async def _run_browser(self, playwright: Playwright, stop: asyncio.Event) -> str:
         browser = await playwright.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args(), headless=True
+            executable_path=chromium_path(), args=self.browser_args, headless=True
         )
         try:
             return await self._run_page(browser, stop)
@@ -102,11 +125,12 @@ class RelayService:
         try:
             await page.goto(self.url, timeout=PAGE_LOAD_TIMEOUT_MS)
         except PlaywrightError as exc:
-            return f"could not load {self.url}: {exc.message.splitlines()[0]}"
+            address = self.url.split("#", 1)[0]
+            return f"could not load {address}: {exc.message.splitlines()[0]}"
         self.page = page
         self.starts += 1
         self.started.set()
-        log.info("relay page running: %s", self.url)
+        log.info("relay page running: %s", self.url.split("#", 1)[0])
         stopping = asyncio.create_task(stop.wait())
         dying = asyncio.create_task(ended.get())
         try:
@@ -135,17 +159,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", default="default", help="room to join (default: default)")
     parser.add_argument("--name", default="relay", help="peer name (default: relay)")
     parser.add_argument("--profile", choices=PROFILES, default="default", help="relay profile")
+    parser.add_argument(
+        "--token",
+        default=os.environ.get(TOKEN_ENV),
+        help=f"relay token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
+    )
+    parser.add_argument(
+        "--ca-file", type=Path, metavar="PEM", help="trust this CA for an https:// server"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the headless relay until SIGINT/SIGTERM."""
     try:
-        check_server(args.server)
+        check_server(args.server, args.ca_file)
         chromium_path()
+        service = RelayService(
+            args.server, args.room, args.name, args.profile, args.token, args.ca_file
+        )
     except (RelayServiceError, BrowserNotFound) as exc:
         log.error("%s", exc)
         return 1
-    asyncio.run(_main(RelayService(args.server, args.room, args.name, args.profile)))
+    except (OSError, ValueError) as exc:
+        log.error("cannot use --ca-file %s: %s", args.ca_file, exc)
+        return 1
+    asyncio.run(_main(service))
     log.info("relay stopped")
     return 0
 

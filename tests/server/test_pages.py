@@ -11,6 +11,7 @@ from typing import Any
 import httpx
 import pytest
 
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, WORLD_SIZE
 from app.protocol.ros import page_config as ros_page_config
 from app.server.config import IceServer, Settings
 from app.server.serve import RunningServer
@@ -98,6 +99,47 @@ def test_an_unknown_ros_setting_falls_back_to_auto(server: RunningServer) -> Non
 def test_an_unknown_profile_falls_back_to_default(server: RunningServer) -> None:
     config = embedded_config(httpx.get(f"{server.url}/relay?profile=turbo").text)
     assert config["profile"] == "default"
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_control_law_numbers_reach_every_page_from_python(server: RunningServer, role: str) -> None:
+    config = embedded_config(httpx.get(f"{server.url}/{role}").text)
+    control = config["control"]
+    assert control["worldSize"] == WORLD_SIZE and control["terrainCentre"] == TERRAIN_CENTRE
+    assert sorted(control["profiles"]) == sorted(PROFILES)
+    follow = control["profiles"]["follow"]
+    python = PROFILES["follow"]
+    assert follow["standoffM"] == python.standoff_m
+    assert follow["wallMarginM"] == python.wall_margin_m
+    assert follow["searchAfterS"] == python.search_after_s
+    assert follow["linearGain"] == python.linear_gain
+    # JSON has no infinity: "no limit" travels as null.
+    assert control["profiles"]["thesis"]["maxAngular"] is None
+    assert control["profiles"]["default"]["searchAfterS"] is None
+
+
+def test_follow_on_the_vehicle_page_and_its_relay_pacing(server: RunningServer) -> None:
+    vehicle = embedded_config(httpx.get(f"{server.url}/vehicle?profile=follow").text)
+    relay = embedded_config(httpx.get(f"{server.url}/relay?profile=follow").text)
+    assert vehicle["profile"] == "follow"
+    # The relay has no follow pacing of its own: it snapshots as for the default profile.
+    assert relay["profile"] == PROFILES["follow"].relay_profile == "default"
+
+
+@pytest.mark.parametrize(("query", "standoff"), [("2.5", 2.5), ("0", 0.0), ("-1", 1.0), ("x", 1.0)])
+def test_standoff_from_the_query_or_the_profile(
+    server: RunningServer, query: str, standoff: float
+) -> None:
+    url = f"{server.url}/vehicle?profile=follow&standoff={query}"
+    config = embedded_config(httpx.get(url).text)
+    assert config["control"]["profiles"]["follow"]["standoffM"] == standoff
+    assert PROFILES["follow"].standoff_m == 1.0  # the fallback the last two cases expect
+
+
+def test_spawn_step_is_on_unless_switched_off(server: RunningServer) -> None:
+    on = embedded_config(httpx.get(f"{server.url}/vehicle").text)
+    off = embedded_config(httpx.get(f"{server.url}/vehicle?spawn=0").text)
+    assert (on["spawnStep"], off["spawnStep"]) == (True, False)
 
 
 def test_ice_servers_come_from_settings(turn_server: RunningServer) -> None:

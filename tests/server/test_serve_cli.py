@@ -27,7 +27,10 @@ def _serve(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize(
     ("env", "words"),
     [
-        ({"AUTOPILOT_ENVIRONMENT": "production"}, "AUTOPILOT_TOKEN must be set"),
+        ({"AUTOPILOT_ENVIRONMENT": "production"}, "AUTOPILOT_SECRET must be set"),
+        ({"AUTOPILOT_TOKEN": "old-shared-token"}, "AUTOPILOT_TOKEN is no longer used"),
+        ({"AUTOPILOT_SECRET": "short"}, "at least 16 characters"),
+        ({"AUTOPILOT_ALLOWED_ORIGINS": '["evil"]'}, "an origin looks like"),
         ({"AUTOPILOT_MAX_MESSAGE_BYTES": "lots"}, "max_message_bytes"),
         ({"AUTOPILOT_OPERATIONS_SPEC": "/nonexistent/ops.json"}, "/nonexistent/ops.json"),
         ({"AUTOPILOT_ROS": "3"}, "ros"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import AsyncExitStack
 from typing import Any
@@ -12,6 +13,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.server.signaling import Switchboard
@@ -235,13 +237,15 @@ async def test_an_abusive_peer_is_disconnected(new_peer: Connect) -> None:
 async def test_login_needs_the_token_when_the_server_has_one(
     start_server: Callable[[Settings], RunningServer],
 ) -> None:
-    server = start_server(Settings(token="s3cret"))
+    secret = "signaling-ws-test-secret"
+    server = start_server(Settings(secret=secret))
+    token = tokens.sign(secret, "default", "client", now=time.time())
     async for new_peer in open_peers(server):
         peer = await new_peer()
         refused = await peer.login("c", "client")
         assert refused["success"] is False and "token" in refused["reason"]
         assert (await peer.recv())["ref"] == "login"
-        await peer.send({"type": "login", "name": "c", "role": "client", "token": "s3cret"})
+        await peer.send({"type": "login", "name": "c", "role": "client", "token": token})
         assert (await peer.recv())["success"] is True
 
 

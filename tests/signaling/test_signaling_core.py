@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from app.protocol import tokens
 from app.server.config import Settings
 from app.server.signaling import Switchboard
 from app.signaling.hub import Action, Close, Hub, Outgoing
@@ -157,25 +158,60 @@ def test_bad_role_is_refused(h: Harness, role: str) -> None:
     assert h.hub.roster("default") == []
 
 
+SECRET = "signaling-core-test-secret"
+NOW = 1_800_000_000.0
+
+
+def _signed(room: str, role: tokens.Role, now: float = NOW) -> str:
+    return tokens.sign(SECRET, room, role, now=now, ttl_s=60)
+
+
 @pytest.mark.parametrize(
-    ("token", "accepted"), [(None, False), ("wrong", False), ("", False), ("s3cret", True)]
+    ("token", "words"),
+    [
+        (None, "missing token"),
+        ("", "malformed"),
+        ("wrong", "malformed"),
+        (_signed("lab", "client"), "wrong role"),  # a client token does not make a relay
+        (_signed("other", "relay"), "wrong room"),
+        (_signed("lab", "relay", now=NOW - 120), "expired"),
+        (tokens.sign("not-the-servers-secret", "lab", "relay", now=NOW), "bad signature"),
+    ],
 )
-def test_token_must_match_when_the_server_has_one(token: str | None, accepted: bool) -> None:
-    h = Harness(Hub(token="s3cret"))
+def test_login_needs_a_token_for_its_room_and_role(token: str | None, words: str) -> None:
+    h = Harness(Hub(secret=SECRET, clock=lambda: NOW))
     conn = h.hub.connect()
-    message: dict[str, Any] = {"type": "login", "name": "c", "role": "client"}
+    message: dict[str, Any] = {"type": "login", "name": "r", "role": "relay", "room": "lab"}
     if token is not None:
         message["token"] = token
     actions = h.send(conn, message)
     reply = to(conn, actions)[0]
-    assert reply["success"] is accepted
-    if not accepted:
-        assert_error(actions, conn, "login", "token")
+    assert reply["success"] is False and words in reply["reason"]
+    assert_error(actions, conn, "login", words)
+    assert h.hub.rooms() == []
 
 
-def test_hub_from_settings_enforces_token_and_size() -> None:
-    hub = Switchboard.from_settings(Settings(token="t", max_message_bytes=1000)).hub
-    assert hub.token == "t" and hub.max_message_bytes == 1000
+def test_a_relay_token_for_the_room_takes_the_relay_role() -> None:
+    h = Harness(Hub(secret=SECRET, clock=lambda: NOW))
+    h.login("r", "relay", room="lab", token=_signed("lab", "relay"))
+    assert [p.role for p in h.hub.roster("lab")] == ["relay"]
+
+
+def test_a_squatter_without_a_relay_token_cannot_take_the_relay_role() -> None:
+    # Issue 9: whoever logged in first as relay got the vehicle's offer.
+    h = Harness(Hub(secret=SECRET, clock=lambda: NOW))
+    squatter = h.hub.connect()
+    h.send(squatter, {"type": "login", "name": "relay", "role": "relay", "room": "lab"})
+    client = h.hub.connect()
+    forged = {"type": "login", "name": "relay", "role": "relay", "room": "lab"}
+    h.send(client, {**forged, "token": _signed("lab", "client")})
+    h.login("relay", "relay", room="lab", token=_signed("lab", "relay"))
+    assert [(p.name, p.role) for p in h.hub.roster("lab")] == [("relay", "relay")]
+
+
+def test_hub_from_settings_enforces_tokens_and_size() -> None:
+    hub = Switchboard.from_settings(Settings(secret=SECRET, max_message_bytes=1000)).hub
+    assert hub.secret == SECRET and hub.max_message_bytes == 1000
 
 
 def test_login_twice_is_an_error_and_the_first_login_stands(
@@ -335,7 +371,7 @@ def test_last_peer_leaving_empties_the_room(h: Harness) -> None:
 
 
 def test_refused_logins_leave_no_rooms_behind() -> None:
-    h = Harness(Hub(token="t"))
+    h = Harness(Hub(secret=SECRET))
     for n in range(5):
         conn = h.hub.connect()
         h.send(conn, {"type": "login", "name": "x", "role": "client", "room": f"r{n}"})

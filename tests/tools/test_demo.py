@@ -6,12 +6,14 @@ Run inside the private network namespace: ``scripts/in-netns python -m pytest te
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
 import re
 import signal
 import socket
+import ssl
 import subprocess
 import sys
 import threading
@@ -24,28 +26,43 @@ from queue import Empty, Queue
 import pytest
 from playwright.sync_api import sync_playwright
 
+from app.server import tls
+from app.tools import relay_service
 from app.tools.browser import chromium_args, chromium_path
+from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
+from vehicle_agent import cli as agent_cli
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-def turtle_theta(base: str) -> float:
-    with urllib.request.urlopen(f"{base}/turtlesim/state", timeout=10) as response:
+def turtle_theta(base: str, token: str, context: ssl.SSLContext | None = None) -> float:
+    request = urllib.request.Request(
+        f"{base}/turtlesim/state", headers={"Authorization": f"Bearer {token}"}
+    )
+    with urllib.request.urlopen(request, timeout=10, context=context) as response:
         state = json.load(response)
     turtle = next(t for t in state["turtles"] if t["name"] == "turtle1")
     return float(turtle["theta"])
 
 
-@pytest.fixture
-def demo() -> Iterator[tuple[subprocess.Popen[str], Queue[str]]]:
+# On loopback the demo serves plain HTTP; bound to every address it serves HTTPS with its own
+# local CA (kept in --state-dir), so that the URLs it prints work from another machine.
+SETUPS = {"loopback": [], "any-address": ["--host", "0.0.0.0"]}
+
+
+@pytest.fixture(params=list(SETUPS))
+def demo(
+    request: pytest.FixtureRequest, tmp_path: Path
+) -> Iterator[tuple[subprocess.Popen[str], Queue[str], Path]]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
+    extra = [*SETUPS[request.param], "--state-dir", str(tmp_path)]
     process = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "demo", "--port", str(port)],
+        [sys.executable, "-m", "app.cli", "demo", "--port", str(port), *extra],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -60,7 +77,7 @@ def demo() -> Iterator[tuple[subprocess.Popen[str], Queue[str]]]:
 
     threading.Thread(target=pump, daemon=True).start()
     try:
-        yield process, lines
+        yield process, lines, tmp_path
     finally:
         if process.poll() is None:
             for pid in descendants(process.pid):
@@ -94,18 +111,29 @@ def wait_for_line(lines: Queue[str], pattern: str, timeout: float) -> re.Match[s
 
 
 def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
-    demo: tuple[subprocess.Popen[str], Queue[str]],
+    demo: tuple[subprocess.Popen[str], Queue[str], Path],
 ) -> None:
-    process, lines = demo
-    url = wait_for_line(lines, r"(http://\S+/client\?room=default)", 60).group(1)
+    process, lines, state_dir = demo
+    # The demo mints its own tokens; the client's rides in the URL fragment.
+    url = wait_for_line(lines, r"(https?://\S+/client\?room=default#token=\S+)", 60).group(1)
     base = url.split("/client")[0]
-    with urllib.request.urlopen(url, timeout=10) as response:
+    token = url.split("#token=", 1)[1]
+    context = None
+    browser_args = chromium_args()
+    if url.startswith("https://"):
+        # The first URL printed is the machine's first non-loopback address (in-netns: 10.203.0.1),
+        # and its certificate is the demo's own CA's.
+        assert not base.startswith("https://127."), url
+        ca_file = state_dir / "ca.pem"
+        context = ssl.create_default_context(cafile=str(ca_file))
+        browser_args.append(f"--ignore-certificate-errors-spki-list={tls.spki_sha256(ca_file)}")
+    with urllib.request.urlopen(url, timeout=10, context=context) as response:
         assert response.status == 200
         assert "Start Piloting" in response.read().decode()
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args(), headless=True
+            executable_path=chromium_path(), args=browser_args, headless=True
         )
         try:
             page = browser.new_page()
@@ -120,15 +148,15 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
             page.wait_for_function(
                 "() => !document.querySelector('[data-action=start]').disabled", timeout=120_000
             )
-            before = turtle_theta(base)
+            before = turtle_theta(base, token, context)
             page.get_by_role("button", name="Start Piloting").click()
             clicked = time.monotonic()
             # Goals reach the agent, whose Twists turn the server's turtle through /rosbridge.
-            while abs(math.remainder(turtle_theta(base) - before, math.tau)) < 0.3:
+            while abs(math.remainder(turtle_theta(base, token, context) - before, math.tau)) < 0.3:
                 assert time.monotonic() - clicked < 30, "the turtle did not turn after Start"
                 time.sleep(0.1)
             (REPO / "artifacts").mkdir(exist_ok=True)
-            page.screenshot(path=str(REPO / "artifacts" / "demo-client.png"))
+            page.screenshot(path=str(REPO / "artifacts" / f"demo-client-{base.split(':')[0]}.png"))
         finally:
             browser.close()
 
@@ -138,3 +166,23 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=60) == 0
     assert wait_all_gone(children) == []
+
+
+@pytest.mark.parametrize(
+    ("profile", "relay_profile"), [("follow", "default"), ("thesis", "thesis")]
+)
+def test_demo_profile_drives_the_vehicle_and_paces_the_relay(
+    profile: str, relay_profile: str
+) -> None:
+    relay, vehicle = children_for("http://127.0.0.1:8000", "r", profile)
+    assert relay.argv[relay.argv.index("--profile") + 1] == relay_profile
+    assert vehicle.argv[vehicle.argv.index("--profile") + 1] == profile
+    # Both command lines are ones the relay and the agent accept.
+    for child, add_arguments in (
+        (relay, relay_service.add_arguments),
+        (vehicle, agent_cli.add_arguments),
+    ):
+        parser = argparse.ArgumentParser()
+        add_arguments(parser)
+        args = parser.parse_args(child.argv[child.argv.index(child.name) + 1 :])
+        assert args.profile in (profile, relay_profile)

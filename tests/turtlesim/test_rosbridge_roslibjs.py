@@ -132,6 +132,9 @@ async def test_roslibjs_rosapi_helpers(
     page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
 ) -> None:
     robot = start_server(Settings(environment="development", token=None, ros=flavour))
+    # The page must come from the robot's own origin: its /rosbridge refuses other sites.
+    await page.goto(robot.url + "/healthz")
+    await page.add_script_tag(url=robot.url + "/static/vendor/roslib.min.js")
     url = robot.url.replace("http", "ws", 1) + "/rosbridge"
     seen: dict[str, Any] = await page.evaluate(ROSAPI_SCRIPT, url)
     listed = dict(zip(seen["topics"]["topics"], seen["topics"]["types"], strict=True))

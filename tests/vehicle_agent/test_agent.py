@@ -122,7 +122,8 @@ async def test_agent_streams_tagged_video_and_pose_telemetry(server: RunningServ
 async def test_goals_turn_the_turtle_to_the_face_and_stop_zeroes(server: RunningServer) -> None:
     async with running_agent(server.url) as run, relay_in(server) as relay:
         await connected(relay)
-        assert run.heading_deg() == pytest.approx(0.0)
+        # The spawn step turned the turtle to face up before any goal came.
+        await eventually(lambda: run.heading_deg() == pytest.approx(90.0))
         # Face on the left, a little above the middle: the turtle turns to look left-up.
         await pilot_until(relay, LEFT, lambda: 150 < run.heading_deg() <= 180)
         # The face moves to the right: the turtle follows, the short way back.
@@ -143,7 +144,7 @@ async def test_goal_timeout_stops_the_turtle(server: RunningServer) -> None:
     async with running_agent(server.url) as run, relay_in(server) as relay:
         await connected(relay)
         # Keep the face far from where the turtle looks, so it is still turning when goals stop.
-        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 60)
+        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
         last_goal = asyncio.get_running_loop().time()
         await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
         stopped_after = asyncio.get_running_loop().time() - last_goal
@@ -173,7 +174,7 @@ async def test_malformed_channel_messages_get_an_error_and_are_dropped(
         assert errors[3]["ref"] == "goal" and "w" in errors[3]["reason"]
         assert run.twists() == []
         # The link survives bad input: a good goal still turns the turtle.
-        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+        await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
 
 
 async def test_relay_leaving_stops_the_turtle_and_a_new_relay_pilots_again(
@@ -182,7 +183,7 @@ async def test_relay_leaving_stops_the_turtle_and_a_new_relay_pilots_again(
     async with running_agent(server.url) as run:
         async with relay_in(server) as relay:
             await connected(relay)
-            await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+            await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
             left_at = asyncio.get_running_loop().time()
         # The relay left while goals were flowing: zero Twist at once, not after the timeout.
         await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
@@ -211,7 +212,7 @@ async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None
         async with running_agent(first.url) as run:
             async with relay_in(first) as relay:
                 await connected(relay)
-                await pilot_until(relay, LEFT, lambda: run.heading_deg() > 30)
+                await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
                 await asyncio.to_thread(first.stop)
                 await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
                 await eventually(lambda: not run.agent.logged_in.is_set(), timeout=5)

@@ -18,11 +18,13 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import Page, async_playwright
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
+from app.protocol.control import PROFILES
 from app.server.serve import RunningServer
 from app.tools.browser import chromium_args, chromium_path
 from app.tools.relay_service import RelayService
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
+from vehicle_agent.control import pixel_to_terrain
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
@@ -196,3 +198,86 @@ async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
         # Snapshots every 1.5 s; analysis time varies, so the goals' spacing jitters around it.
         goal_gaps = [b - a for a, b in zip(goals, goals[1:], strict=False)]
         assert statistics.median(goal_gaps) > 1.2, goal_gaps
+
+
+def terrain_distance(s: Scene, pixel: tuple[float, float]) -> float:
+    """Metres from the turtle to the terrain point of an image pixel."""
+    pose = s.turtle.sim.pose("turtle1")
+    tx, ty = pixel_to_terrain(pixel[0], pixel[1], W, H)
+    return math.hypot(tx - pose.x, ty - pose.y)
+
+
+def inside_world(s: Scene) -> bool:
+    pose = s.turtle.sim.pose("turtle1")
+    size = s.turtle.sim.WORLD_SIZE
+    return 0.0 < pose.x < size and 0.0 < pose.y < size
+
+
+async def held_at_standoff(s: Scene, pixel: tuple[float, float], what: str) -> float:
+    """Wait until the turtle has stayed within the standoff ± 0.3 m of ``pixel``'s terrain
+    point for a second; returns the distance then."""
+    standoff = PROFILES["follow"].standoff_m
+    since: list[float] = []
+
+    def held() -> bool:
+        now = asyncio.get_running_loop().time()
+        if abs(terrain_distance(s, pixel) - standoff) > 0.3:
+            since.clear()
+            return False
+        since[:] = since or [now]
+        return now - since[0] >= 1.0
+
+    await eventually(held, 90, what)
+    return terrain_distance(s, pixel)
+
+
+async def test_follow_drives_to_the_standoff_from_the_face(server: RunningServer) -> None:
+    """Issue 12: the turtle drives toward the face's terrain point and keeps its distance."""
+    async with scene(server, profile="follow") as s:
+        start = s.turtle.sim.pose("turtle1")
+        face = (s.path.x * W, s.path.y * H)
+        await s.start_piloting()
+        distance = await held_at_standoff(s, face, "the turtle to hold its standoff from the face")
+        assert distance == pytest.approx(PROFILES["follow"].standoff_m, abs=0.3)
+        assert inside_world(s)
+        end = s.turtle.sim.pose("turtle1")
+        driven = math.hypot(end.x - start.x, end.y - start.y)
+        assert driven > 1.5  # it drove there rather than turning in place
+        # The client draws the route it took: at least the straight line from start to end.
+        await page_until(
+            s.client,
+            f"() => window.autopilotStatus.routeM > {0.8 * driven}",
+            10,
+            "the client's route to show the drive",
+        )
+
+
+async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame(
+    server: RunningServer,
+) -> None:
+    """Issue 12: the demo scene's flame is elsewhere; face -> fire takes the turtle to it."""
+    async with scene(server, profile="follow") as s:
+        face = (s.path.x * W, s.path.y * H)
+        video = s.agent.video
+        assert isinstance(video, SyntheticVideo)
+        flame = video.flame_centre()
+        assert flame is not None
+
+        def last_goal() -> tuple[float, float] | None:
+            goal = next((e for e in reversed(s.events) if e["ev"] == "goal"), None)
+            return None if goal is None else (goal["x"], goal["y"])
+
+        def goal_near(point: tuple[float, float]) -> bool:
+            goal = last_goal()
+            return goal is not None and math.dist(goal, point) < 12
+
+        await s.start_piloting()
+        await eventually(lambda: goal_near(face), 90, "goals on the face")
+        await s.client.get_by_test_id("operation").select_option("fire")
+        await s.client.get_by_role("button", name="Set Operation").click()
+        await eventually(lambda: goal_near(flame), 30, "goals on the flame after Set Operation")
+        await held_at_standoff(s, flame, "the turtle to hold its standoff from the flame")
+        assert inside_world(s)
+        # The fire operation keeps pointing at the flame, never back at the face.
+        await asyncio.sleep(1.0)
+        assert goal_near(flame)

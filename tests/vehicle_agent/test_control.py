@@ -6,6 +6,8 @@ import math
 
 import pytest
 
+from app.protocol.control import with_standoff
+from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import (
     PROFILES,
     TERRAIN_CENTRE,
@@ -14,6 +16,7 @@ from vehicle_agent.control import (
     Pose,
     pixel_to_terrain,
     steering_error,
+    wall_clearance,
     wrap_angle,
 )
 
@@ -110,14 +113,13 @@ def test_default_profile_publishes_on_pose_updates_at_most_every_50_ms() -> None
 def test_default_profile_is_proportional_with_a_deadband() -> None:
     clock = FakeClock()
     control = Controller(PROFILES["default"], clock)
-    control.goal(pixel_towards(5))
-    twist = control.pose(CENTRE)
+    control.pose(CENTRE)
+    twist = control.goal(pixel_towards(5))
     assert twist is not None
     assert twist.angular_z == pytest.approx(6.0 * math.radians(5), rel=1e-6)
     clock.now += 0.1
     # Facing the target already: inside the 0.01 rad deadband, the command is zero.
-    control.goal(Goal(600, 240, 640, 480))
-    twist = control.pose(CENTRE)
+    twist = control.goal(Goal(600, 240, 640, 480))
     assert twist is not None and twist.angular_z == 0.0
 
 
@@ -188,3 +190,212 @@ def test_thesis_profile_times_out_after_2_5_s() -> None:
     clock.now += 0.2
     stop = control.tick()
     assert stop is not None and stop.is_zero
+
+
+def test_default_profile_answers_a_goal_at_once() -> None:
+    """Issue 13: a Twist as soon as a goal lands, not at the next pose update."""
+    clock = FakeClock()
+    control = Controller(PROFILES["default"], clock)
+    assert control.goal(Goal(320, 40, 640, 480, seq=1, frame=3)) is None  # no pose yet
+    control.pose(CENTRE)  # the first pose answers the waiting goal
+    clock.now += 0.2
+    twist = control.goal(Goal(600, 240, 640, 480, seq=2, frame=9))
+    assert twist is not None and (twist.seq, twist.frame) == (2, 9)
+    # Goals at 30 fps: every one is answered the moment it arrives, none waits for a pose.
+    for k in range(3, 13):
+        clock.now += 1 / 30
+        answer = control.goal(Goal(40, 240, 640, 480, seq=k, frame=k))
+        assert answer is not None and answer.seq == k, k
+
+
+def test_goal_answers_are_rate_capped_and_the_next_pose_delivers_a_capped_goal() -> None:
+    clock = FakeClock()
+    profile = PROFILES["default"]
+    control = Controller(profile, clock)
+    control.pose(CENTRE)
+    assert control.goal(Goal(320, 40, 640, 480, seq=1)) is not None
+    # A second goal well inside the command-rate cap is held back ...
+    clock.now += profile.min_interval_s / 4
+    assert control.goal(Goal(40, 240, 640, 480, seq=2)) is None
+    # ... and a pose before the cap has passed does not send it either ...
+    clock.now += profile.min_interval_s / 4
+    assert control.pose(CENTRE) is None
+    # ... but the first pose after the cap does, well before the 50 ms pose period.
+    clock.now += profile.min_interval_s
+    assert clock.now - 100.0 < profile.period_s
+    twist = control.pose(CENTRE)
+    assert twist is not None and twist.seq == 2
+    # Answered: poses go back to the 50 ms period.
+    clock.now += 0.016
+    assert control.pose(CENTRE) is None
+
+
+def test_thesis_profile_keeps_its_pacing_when_goals_arrive() -> None:
+    clock = FakeClock()
+    control = Controller(PROFILES["thesis"], clock)
+    control.pose(CENTRE)
+    assert control.goal(Goal(320, 40, 640, 480, seq=1)) is not None
+    for k in range(2, 30):  # goals at 30 fps for ~1 s: none is answered on arrival
+        clock.now += 1 / 30
+        assert control.goal(Goal(320, 40, 640, 480, seq=k)) is None
+        assert control.pose(CENTRE) is None
+    clock.now = 100.0 + 1.11
+    assert control.tick() is not None
+
+
+# --- the follow profile ------------------------------------------------------------------------
+
+
+def terrain_goal(tx: float, ty: float, seq: int = 0) -> Goal:
+    """The goal pixel of a 640×480 frame whose terrain point is (tx, ty)."""
+    return Goal(tx * 320 / TERRAIN_CENTRE, 480 - ty * 240 / TERRAIN_CENTRE, 640, 480, seq=seq)
+
+
+def drive(control: Controller, sim: TurtleSim, clock: FakeClock, seconds: float) -> None:
+    """Run the simulator and the controller together, one turtlesim tick at a time."""
+    for _ in range(round(seconds / TurtleSim.TICK_S)):
+        clock.now += TurtleSim.TICK_S
+        sim.step()
+        p = sim.pose("turtle1")
+        twist = control.pose(Pose(p.x, p.y, p.theta)) or control.tick()
+        if twist is not None:
+            sim.cmd_vel("turtle1", twist.linear_x, twist.angular_z)
+
+
+def follow_world() -> tuple[Controller, TurtleSim, FakeClock]:
+    clock = FakeClock()
+    sim = TurtleSim(clock=clock)
+    return Controller(PROFILES["follow"], clock), sim, clock
+
+
+def test_follow_drives_to_the_standoff_from_the_target() -> None:
+    control, sim, clock = follow_world()
+    target = (2.0, 8.0)
+    for k in range(150):  # goals at 30 fps for 5 s
+        control.goal(terrain_goal(*target, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    p = sim.pose("turtle1")
+    distance = math.hypot(p.x - target[0], p.y - target[1])
+    assert distance == pytest.approx(PROFILES["follow"].standoff_m, abs=0.05)
+    # It faces the target it stopped short of.
+    error = steering_error(terrain_goal(*target), Pose(p.x, p.y, p.theta))
+    assert error is not None and abs(error) < 0.05
+
+
+def test_follow_backs_off_when_the_target_comes_too_close() -> None:
+    control, sim, clock = follow_world()
+    centre = TurtleSim.CENTRE
+    target = (centre + 0.4, centre)  # straight ahead, inside the 1 m standoff
+    control.pose(Pose(centre, centre, 0.0))
+    twist = control.goal(terrain_goal(*target))
+    assert twist is not None and twist.linear_x < 0
+    for k in range(90):
+        control.goal(terrain_goal(*target, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    p = sim.pose("turtle1")
+    assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(1.0, abs=0.05)
+
+
+def test_follow_standoff_is_settable() -> None:
+    clock = FakeClock()
+    sim = TurtleSim(clock=clock)
+    control = Controller(with_standoff(PROFILES["follow"], 2.5), clock)
+    target = (9.0, 5.544445)
+    for k in range(150):
+        control.goal(terrain_goal(*target, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    p = sim.pose("turtle1")
+    assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(2.5, abs=0.05)
+
+
+@pytest.mark.parametrize(
+    "target", [(11.088889, 5.5), (0.0, 0.0), (5.5, 11.088889), (11.088889, 11.088889)]
+)
+def test_follow_never_pins_itself_against_a_wall(target: tuple[float, float]) -> None:
+    """A target on the edge of the world (a face at the edge of the frame)."""
+    profile = PROFILES["follow"]
+    control, sim, clock = follow_world()
+    closest = math.inf
+    for k in range(240):
+        control.goal(terrain_goal(*target, seq=k))
+        drive(control, sim, clock, 1 / 30)
+        p = sim.pose("turtle1")
+        closest = min(closest, p.x, p.y, sim.WORLD_SIZE - p.x, sim.WORLD_SIZE - p.y)
+    # It stopped short of the wall and was never clamped onto it.
+    assert closest >= profile.wall_margin_m - 0.05
+    # Still free to move: it turns away when the target moves back into the world.
+    inside = (TurtleSim.CENTRE, TurtleSim.CENTRE)
+    for k in range(150):
+        control.goal(terrain_goal(*inside, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    p = sim.pose("turtle1")
+    assert math.hypot(p.x - inside[0], p.y - inside[1]) == pytest.approx(1.0, abs=0.1)
+
+
+def test_follow_slows_near_a_wall() -> None:
+    profile = PROFILES["follow"]
+
+    def speed(pose: Pose, target: tuple[float, float]) -> float:
+        control = Controller(profile, FakeClock())
+        control.pose(pose)
+        twist = control.goal(terrain_goal(*target))
+        assert twist is not None
+        return twist.linear_x
+
+    # The same 3 m to go, facing the target: in the open the turtle drives at full speed,
+    # towards a target at the wall it is already slowing down.
+    open_speed = speed(Pose(3.0, 5.5, 0.0), (6.0, 5.5))
+    wall_target = (TurtleSim.WORLD_SIZE, 5.5)
+    inside = TurtleSim.WORLD_SIZE - profile.wall_margin_m  # the target is kept this far in
+    wall_speed = speed(Pose(inside - 3.0, 5.5, 0.0), wall_target)
+    assert open_speed == pytest.approx(profile.max_linear)
+    assert 0.0 < wall_speed < open_speed
+    # Backing off from a target that came too close, with a wall behind: slower and slower,
+    # and not at all inside the wall margin.
+    backing = [speed(Pose(x, 5.5, 0.0), (x + 0.5, 5.5)) for x in (3.0, 1.0, 0.6, 0.45)]
+    assert backing[0] < 0.0
+    assert backing[0] <= backing[1] < backing[2] < backing[3] == 0.0
+
+
+def test_follow_searches_in_place_when_the_target_is_lost() -> None:
+    profile = PROFILES["follow"]
+    control, sim, clock = follow_world()
+    # Seen on the left (counter-clockwise side), then lost.
+    for k in range(30):
+        control.goal(terrain_goal(3.0, 8.0, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    assert not control.searching
+    drive(control, sim, clock, profile.search_after_s * 0.9)
+    assert not control.searching
+    drive(control, sim, clock, profile.search_after_s * 0.2)
+    assert control.searching
+    before = sim.pose("turtle1")
+    drive(control, sim, clock, 1.0)
+    after = sim.pose("turtle1")
+    # Turning in place, towards the side the target was last seen on.
+    assert (after.x, after.y) == pytest.approx((before.x, before.y), abs=1e-9)
+    assert wrap_angle(after.theta - before.theta) > 0.5 * profile.search_angular
+    # A new goal ends the search at once.
+    twist = control.goal(terrain_goal(3.0, 8.0, seq=99))
+    assert twist is not None and twist.seq == 99
+    assert not control.searching
+
+
+def test_follow_stops_after_searching_for_the_goal_timeout() -> None:
+    profile = PROFILES["follow"]
+    control, sim, clock = follow_world()
+    control.goal(terrain_goal(3.0, 8.0))
+    drive(control, sim, clock, profile.goal_timeout_s + 0.1)
+    assert not control.active
+    theta = sim.pose("turtle1").theta
+    drive(control, sim, clock, 1.5)  # the zero Twist holds; turtlesim's own timeout too
+    assert sim.pose("turtle1").theta == pytest.approx(theta, abs=1e-9)
+
+
+def test_wall_clearance_along_and_against_the_heading() -> None:
+    size = TurtleSim.WORLD_SIZE
+    assert wall_clearance(Pose(3.0, 5.0, 0.0), forward=True) == pytest.approx(size - 3.0)
+    assert wall_clearance(Pose(3.0, 5.0, 0.0), forward=False) == pytest.approx(3.0)
+    assert wall_clearance(Pose(3.0, 5.0, math.pi / 2), forward=True) == pytest.approx(size - 5.0)
+    diagonal = wall_clearance(Pose(1.0, 1.0, -3 * math.pi / 4), forward=True)
+    assert diagonal == pytest.approx(math.sqrt(2.0))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import fractions
+import math
 from pathlib import Path
 
 import av
@@ -10,6 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
+from app.resources import OPERATIONS_SPEC
+from app.vision.reference import detect
+from app.vision.spec import load_spec
 from vehicle_agent.video import (
     FileVideo,
     FixedPath,
@@ -66,6 +70,76 @@ def test_sweep_path_visits_both_sides() -> None:
     path = SweepPath()
     assert path(1.0)[0] < 0.3 and path(7.0)[0] > 0.7 and path(13.0)[0] < 0.3
     assert path(5.0)[0] == pytest.approx(0.5)  # halfway through the glide
+
+
+def test_sweep_path_leaps_across_the_frame_at_its_jump_times() -> None:
+    path = SweepPath()
+    leap_right, leap_left = path.jump_times()
+    dt = 1e-3
+    for cycle in range(3):
+        base = cycle * path.cycle_s
+        for at, before, after in (
+            (leap_right, path.left, path.right),
+            (leap_left, path.right, path.left),
+        ):
+            t = base + at
+            assert path(t - dt)[0] == pytest.approx(before)
+            assert path(t)[0] == pytest.approx(after)
+            assert path.jumped(t - dt, t)
+    # The glides are not leaps, nor is the start of the path.
+    assert not path.jumped(0.0, leap_right - dt)
+    assert not path.jumped(-1.0, 0.0)
+
+
+def test_synthetic_frames_flag_exactly_the_jumps() -> None:
+    fps = 30.0
+    infos: list[FrameInfo] = []
+    video = SyntheticVideo(320, 240, fps=fps, on_frame=infos.append)
+    path = video.path
+    assert isinstance(path, SweepPath)
+    try:
+        frames = range(round(2 * path.cycle_s * fps) + 2)
+        jumps = [f for f in frames if video.jumped(f)]
+        # Two leaps per cycle, each flagged on one frame only: the first that shows it.
+        assert len(jumps) == 4
+        for f in jumps:
+            (x0, _), (x1, _) = video.face_centre(f - 1), video.face_centre(f)
+            assert abs(x1 - x0) > 0.5 * 320
+        steps = [abs(video.face_centre(f)[0] - video.face_centre(f - 1)[0]) for f in frames[1:]]
+        assert max(s for f, s in zip(frames[1:], steps, strict=True) if f not in jumps) < 10
+    finally:
+        video.stop()
+
+
+def test_the_scene_has_a_flame_apart_from_the_face() -> None:
+    """Face and fire operations pick different targets in the same frames (issue 12)."""
+    spec = load_spec(OPERATIONS_SPEC)
+    video = SyntheticVideo(640, 480, fps=30)
+    try:
+        flame = video.flame_centre()
+        assert flame is not None
+        for frame in (0, 150, 300, 479, 480, 530):
+            rgba = cv2.cvtColor(video.render(frame), cv2.COLOR_RGB2RGBA)
+            fire = detect(spec.op("fire"), rgba)
+            face = detect(spec.op("face"), rgba)
+            assert fire.target is not None and face.target is not None, frame
+            # Each target lies within a few pixels of the thing it should find ...
+            assert math.dist(fire.target, flame) < 6, (frame, fire.target, flame)
+            assert math.dist(face.target, video.face_centre(frame)) < 6, frame
+            # ... and the two are far apart: switching operation moves the target.
+            assert math.dist(fire.target, face.target) > 150
+    finally:
+        video.stop()
+
+
+def test_a_scene_without_a_flame_gives_the_fire_operation_nothing() -> None:
+    spec = load_spec(OPERATIONS_SPEC)
+    video = SyntheticVideo(640, 480, fps=30, flame=None)
+    try:
+        rgba = cv2.cvtColor(video.render(0), cv2.COLOR_RGB2RGBA)
+        assert detect(spec.op("fire"), rgba).target is None
+    finally:
+        video.stop()
 
 
 async def test_synthetic_track_paces_tags_and_reports_frames() -> None:

@@ -1,6 +1,6 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
-import { pixelToTerrain } from './control.js';
+import { ControlLaw } from './control.js';
 import { BadMessage, preferLowLatency, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
@@ -14,7 +14,8 @@ const room = new RoomSession(config, log);
 const video = byTestId('video');
 const overlay = byTestId('overlay');
 const select = byTestId('operation');
-const turtleView = new TurtleView(byTestId('turtle-view'));
+const law = new ControlLaw(config.control);
+const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
 
 /** The page's one session object, read-only for tests. */
 const status = {
@@ -25,6 +26,7 @@ const status = {
   lastDetections: null,
   pose: null,
   poses: 0,
+  routeM: 0, // metres the turtle drove while this page watched (the drawn route)
   videoTracks: 0, // how many times a (new) relayed video track arrived
 };
 window.autopilotStatus = status;
@@ -77,7 +79,7 @@ function onDetections(msg) {
     show('ms-per-snapshot', fmt(median(session.recentMs)));
   }
   if (typeof msg.goalsPerS === 'number') show('goals-per-s', fmt(msg.goalsPerS));
-  const target = msg.target && msg.w && msg.h ? pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
+  const target = msg.target && msg.w && msg.h ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
   turtleView.setTarget(target);
 }
 
@@ -86,7 +88,9 @@ function onPose(msg) {
   status.pose = pose;
   status.poses += 1;
   turtleView.addPose(pose);
+  status.routeM = turtleView.routeLength;
   show('pose', `x ${fmt(pose.x, 2)} m   y ${fmt(pose.y, 2)} m   θ ${fmt(pose.theta, 3)} rad`);
+  show('route', `route ${fmt(status.routeM, 1)} m driven`);
 }
 
 function median(values) {

@@ -1,27 +1,40 @@
-// A turtlesim look-alike drawn from pose telemetry: the blue terrain (11.088889 m square,
-// 45 px per metre at 500 px), the pen trail, and the turtle itself.
-import { WORLD_SIZE } from './control.js';
+// A turtlesim look-alike drawn from pose telemetry: the blue terrain (the world size comes from
+// the page config, 45 px per metre at 500 px), the pen trail (the route), and the turtle itself.
 
 const BACKGROUND = 'rgb(69, 86, 255)'; // turtlesim's default background
 const PEN = 'rgb(179, 184, 255)'; // turtlesim's default pen
 const TRAIL_LIMIT = 20000;
 
-/** Draws the turtle and its route on a square canvas. */
+/** Draws the turtle and its route on a square canvas `worldSize` metres wide. */
 export class TurtleView {
   #trail = [];
   #pose = null;
   #target = null;
+  #routeM = 0;
 
-  constructor(canvas) {
+  constructor(canvas, worldSize) {
     this.canvas = canvas;
+    this.worldSize = worldSize;
     this.draw();
+  }
+
+  /** Metres driven since the view opened (turning in place adds nothing). */
+  get routeLength() {
+    return this.#routeM;
+  }
+
+  /** Points of the drawn route. */
+  get routePoints() {
+    return this.#trail.length;
   }
 
   /** Add a pose {x, y, theta} (terrain metres, radians) and redraw. */
   addPose(pose) {
     const last = this.#trail.at(-1);
     // The pen only draws when the turtle moves; rotating in place leaves no mark.
-    if (last === undefined || Math.hypot(pose.x - last.x, pose.y - last.y) > 0.005) {
+    const step = last === undefined ? 0 : Math.hypot(pose.x - last.x, pose.y - last.y);
+    if (last === undefined || step > 0.005) {
+      this.#routeM += step;
       this.#trail.push({ x: pose.x, y: pose.y });
       if (this.#trail.length > TRAIL_LIMIT) this.#trail.splice(0, this.#trail.length - TRAIL_LIMIT);
     }
@@ -38,7 +51,7 @@ export class TurtleView {
   draw() {
     const { canvas } = this;
     const ctx = canvas.getContext('2d');
-    const scale = canvas.width / WORLD_SIZE;
+    const scale = canvas.width / this.worldSize;
     const px = (x) => x * scale;
     const py = (y) => canvas.height - y * scale;
     ctx.fillStyle = BACKGROUND;

@@ -1,8 +1,14 @@
 // Small DOM helpers shared by the role pages: configuration, the log, text fields, the overlay.
 
-/** The page's configuration, embedded by the server as JSON in <script id="config">. */
+/**
+ * The page's configuration, embedded by the server as JSON in <script id="config">, plus the
+ * token from the URL fragment (`#token=…`): a fragment never leaves the browser, so the token
+ * stays out of every request line and access log.
+ */
 export function readConfig() {
-  return JSON.parse(document.getElementById('config').textContent);
+  const config = JSON.parse(document.getElementById('config').textContent);
+  config.token = new URLSearchParams(location.hash.slice(1)).get('token');
+  return config;
 }
 
 /** The element with `data-testid=id` (throws if the template lacks it: a bug, not bad input). */

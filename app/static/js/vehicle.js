@@ -1,6 +1,6 @@
 // The vehicle page: camera to the relay, goals from the `autopilot` data channel turned into
 // Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to the relay.
-import { Controller, PROFILES } from './control.js';
+import { ControlLaw, Controller } from './control.js';
 import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
 import { pickTypes } from './rosflavour.js';
@@ -13,8 +13,9 @@ const ROS_RETRY_MS = 2000;
 const config = readConfig();
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
-const profile = PROFILES[config.profile];
-const controller = new Controller(profile);
+const law = new ControlLaw(config.control);
+const profile = law.profiles[config.profile];
+const controller = new Controller(law, profile);
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
@@ -32,10 +33,12 @@ window.autopilotStatus = status;
 
 /** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
 class Turtle {
-  constructor(url, setting, rosTypes) {
+  /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
+  constructor(url, setting, rosTypes, token) {
     this.url = url;
     this.setting = setting;
     this.rosTypes = rosTypes;
+    this.token = token;
     this.types = null; // learnt on each connection
     this.ros = null;
     this.cmdVel = null;
@@ -47,6 +50,8 @@ class Turtle {
   connect() {
     const ros = new ROSLIB.Ros({ url: this.url });
     this.ros = ros;
+    // Queued for the moment the socket opens, ahead of the subscriptions made on 'connection'.
+    if (this.token) ros.callOnConnection({ op: 'auth', token: this.token });
     ros.on('connection', () => {
       log.info(`rosbridge connected: ${this.url}`);
       this.reported = false;
@@ -115,20 +120,23 @@ class Turtle {
 
   // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
   #spawnStep(pose) {
+    if (!config.spawnStep) return;
     const service = new ROSLIB.Service({
       ros: this.ros,
       name: '/turtle1/teleport_absolute',
       serviceType: this.types.teleport,
     });
     service.callService(
-      { x: pose.x, y: pose.y, theta: Math.PI / 2 },
+      { x: pose.x, y: pose.y, theta: law.spawnTheta },
       () => log.info('spawn step: turtle1 turned to π/2'),
       (err) => log.error(`spawn step failed: ${err}`),
     );
   }
 }
 
-const turtle = new Turtle(config.rosbridge, config.ros, config.rosTypes);
+const turtle = new Turtle(
+  config.rosbridge, config.ros, config.rosTypes, config.rosbridgeAuth ? config.token : null,
+);
 /** Everything else this page holds, in one place. */
 const session = {
   channel: null, // the open `autopilot` data channel
@@ -147,8 +155,9 @@ function publish(twist, why) {
   session.rosWarned = false;
   status.twistsPublished += 1;
   status.lastTwist = { ...twist, t: Date.now() };
-  show('twist', `angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
-  if (twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
+  const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
+  show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
+  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
 }
 
 function halt(reason) {
@@ -242,7 +251,12 @@ room.addEventListener('roster', showState);
 room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') halt('left the room');
 });
-turtle.connect();
+if (config.rosbridgeError) {
+  log.error(config.rosbridgeError);
+  show('ros-state', 'refused: insecure rosbridge URL');
+} else {
+  turtle.connect();
+}
 const stream = await startCamera();
 const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: (peer) => setupPeer(peer, stream) });
 link.addEventListener('lost', (event) => {

@@ -20,10 +20,10 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.protocol.constants import PROFILES
+from app.protocol.control import PROFILES
 from app.resources import APP_DIR
 from app.tools.bench import report
-from app.tools.bench.results import FIGURE_KEYS, ProfileRun, results
+from app.tools.bench.results import FIGURE_KEYS, POSITION_KEYS, ProfileRun, results
 
 if TYPE_CHECKING:
     from playwright.async_api import Browser
@@ -38,8 +38,9 @@ REEXEC_ENV = "AUTOPILOT_BENCH_REEXEC"
 # performance.memory with real numbers, and window.gc() so heap samples follow a collection.
 MEMORY_FLAGS = ["--enable-precise-memory-info", "--js-flags=--expose-gc"]
 
-QUICK = {"default_s": 25.0, "thesis_s": 30.0, "frames": 13}
-FULL = {"default_s": 60.0, "thesis_s": 60.0, "frames": 43}
+QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "frames": 13}
+# The follow run spans three cycles of the synthetic face's path (20 s each).
+FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "frames": 43}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     missing = [key for key in FIGURE_KEYS if obj[key] is None or obj["thesis"][key] is None]
+    missing += [f"follow {key}" for key in POSITION_KEYS if obj["follow"][key] is None]
     if missing:
         log.error("not measured: %s (reasons in %s)", ", ".join(missing), args.out / "report.md")
         return 1
@@ -124,7 +126,11 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                 executable_path=chromium_path(), args=chromium_args() + MEMORY_FLAGS
             )
             try:
-                durations = {"default": default_s, "thesis": plan["thesis_s"]}
+                durations = {
+                    "default": default_s,
+                    "thesis": plan["thesis_s"],
+                    "follow": plan["follow_s"],
+                }
                 runs = await _run_profiles(browser, server.url, durations, args.fps)
                 # After the stack is down, so that neither side shares its core with the video.
                 await _compare_detection(browser, server.url, runs, int(plan["frames"]))
@@ -144,10 +150,12 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
         "size": "640x480",
         "default_s": default_s,
         "thesis_s": plan["thesis_s"],
+        "follow_s": plan["follow_s"],
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
-        "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s",
+        "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s,"
+        f" follow profile {plan['follow_s']:.0f} s",
     }
-    obj = results(runs["default"], runs["thesis"], run_info)
+    obj = results(runs["default"], runs["thesis"], run_info, runs["follow"])
     report.write(args.out, obj, runs["default"], runs["thesis"])
     return obj
 
@@ -178,17 +186,25 @@ async def _compare_detection(
     """OpenCV.js against Python on the same frames, per profile, into ``runs``."""
     from app.tools.bench.jsnative import compare, synthetic_frames
 
+    # Detection runs with the relay profile a vehicle profile pairs with (follow: default's).
+    relay_profiles = {name: PROFILES[name].relay_profile for name in runs}
     try:
-        comparisons = await compare(browser, server_url, synthetic_frames(frames), PROFILES)
+        comparisons = await compare(
+            browser,
+            server_url,
+            synthetic_frames(frames),
+            tuple(sorted(set(relay_profiles.values()))),
+        )
     except RuntimeError as exc:
         log.error("OpenCV.js against Python: %s", exc)
         for run in runs.values():
             run.problems.setdefault("js_over_native_ratio", str(exc))
         return
-    for profile, comparison in comparisons.items():
-        runs[profile].js_ms = comparison.js_ms
-        runs[profile].native_ms = comparison.native_ms
-        runs[profile].js_window_ms = comparison.js_window_ms
+    for name, run in runs.items():
+        comparison = comparisons[relay_profiles[name]]
+        run.js_ms = comparison.js_ms
+        run.native_ms = comparison.native_ms
+        run.js_window_ms = comparison.js_window_ms
 
 
 def _all(reason: str) -> dict[str, str]:

@@ -66,7 +66,7 @@ def synthetic_frames(count: int, width: int = 640, height: int = 480) -> list[Rg
 
     fps = 15.0
     path = SweepPath()
-    cycle_frames = int(2 * (path.hold_s + path.glide_s) * fps)
+    cycle_frames = int(path.cycle_s * fps)
     video = SyntheticVideo(width, height, fps, path=path)
     frames = []
     for i in range(count):
@@ -89,7 +89,10 @@ async def compare(
     page = await browser.new_page()
     try:
         await page.goto(f"{base_url}/parity")
-        await page.wait_for_function("document.body.dataset.ready !== undefined", timeout=180_000)
+        # A function, not an expression, which the page's CSP would refuse to eval.
+        await page.wait_for_function(
+            "() => document.body.dataset.ready !== undefined", timeout=180_000
+        )
         if await page.evaluate("document.body.dataset.ready") != "true":
             state = await page.text_content("#state")
             raise RuntimeError(f"the parity page's analyzer did not start: {state}")

@@ -17,6 +17,8 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from app.tools.bench.results import (  # noqa: E402
     FIGURE_KEYS,
+    FOLLOW_TARGET,
+    POSITION_KEYS,
     SOAK_TARGET_MINUTES,
     TARGETS,
     THESIS_PERIOD_S,
@@ -45,6 +47,8 @@ LABELS = {
     "js_over_native_ratio": "OpenCV.js / Python OpenCV",
     "memory_growth_pct": "relay memory growth (%)",
     "recall_after_jump_pct": "goals within 3 frames of a jump (%)",
+    "position_error_m_p50": "follow position error p50 (m)",
+    "position_error_m_p95": "follow position error p95 (m)",
 }
 
 
@@ -320,6 +324,30 @@ def _limits(key: str, results: dict[str, Any]) -> str:
     return ""
 
 
+def _follow_section(results: dict[str, Any]) -> list[str]:
+    """The follow profile's position error, when it ran."""
+    follow = results.get("follow")
+    if follow is None:
+        return []
+    p50, p95 = (follow[key] for key in POSITION_KEYS)
+    verdict = "not measured" if p50 is None else ("met" if FOLLOW_TARGET.met(p50) else "missed")
+    return [
+        "",
+        "## Follow profile",
+        "",
+        "The turtle drives toward the face's terrain point and holds a standoff from it, while"
+        " the synthetic face glides and leaps along its path. Position error: at each pose, the"
+        " absolute difference between the standoff and the distance from the turtle to the face's"
+        " true terrain point, after a"
+        " 1 s settle; it includes the time the turtle needs to catch up after each glide and"
+        " leap.",
+        "",
+        f"- p50 {_fmt(p50)} m, p95 {_fmt(p95)} m; **{FOLLOW_TARGET.text}**: {verdict}.",
+        f"- Glass-to-command p50 {_fmt(follow['glass_to_command_ms_p50'])} ms,"
+        f" {_fmt(follow['goals_per_s'])} goals/s.",
+    ]
+
+
 def markdown(results: dict[str, Any]) -> str:
     """The report as Markdown: figures against the thesis and the targets, then the plots."""
     run = results["run"]
@@ -396,6 +424,8 @@ def markdown(results: dict[str, Any]) -> str:
             f"- **{target.text}**: {_fmt(value)}, {_verdict(target.key, value, results)}."
             f" What limits it: {_limits(target.key, results)}."
         )
+
+    lines += _follow_section(results)
 
     missing = {p: m for p, m in results["unmeasured"].items() if m}
     if missing:

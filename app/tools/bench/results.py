@@ -68,6 +68,12 @@ TARGETS = (
 
 SOAK_TARGET_MINUTES = 10.0
 
+# The follow profile's own figures (issue 12): turtle to target point, minus the standoff.
+POSITION_KEYS = ("position_error_m_p50", "position_error_m_p95")
+FOLLOW_TARGET = Target(
+    "position_error_m_p50", 0.3, True, "follow: position error p50 <= 0.3 m (face moving)"
+)
+
 
 @dataclass(frozen=True)
 class MemorySample:
@@ -110,6 +116,13 @@ class ProfileRun:
     memory_baseline_at: float | None = None
     # Why a measurement is missing, keyed by figure name; filled by the runner as it goes.
     problems: dict[str, str] = field(default_factory=dict)
+    # Follow profile: (time, metres off the standoff from the true target point) per pose.
+    position_error: list[tuple[float, float]] = field(default_factory=list)
+
+    def position_error_summary(self) -> Summary | None:
+        """Distribution of the follow profile's position error after the settle time."""
+        after = self.settle_at if self.settle_at is not None else float("-inf")
+        return summarize([m for t, m in self.position_error if t >= after])
 
     def processing_summary(self) -> Summary | None:
         """Distribution of the snapshot -> goal-sent delay."""
@@ -224,6 +237,18 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
     return values, missing
 
 
+def follow_figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
+    """The follow profile's figures (every profile figure plus its position error)."""
+    values, missing = figures(run)
+    summary = run.position_error_summary()
+    for name in ("p50", "p95"):
+        key = f"position_error_m_{name}"
+        values[key] = getattr(summary, name) if summary is not None else None
+        if summary is None:
+            missing[key] = run.problems.get(key, "no pose after the settle time with a known face")
+    return values, missing
+
+
 def details(run: ProfileRun) -> dict[str, Any]:
     """Distributions behind the headline figures, for results.json and the report."""
 
@@ -253,6 +278,9 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "js_window_detect_ms": summary(run.js_window_ms),
         "native_detect_ms": summary(run.native_ms),
         "heading_samples": len(run.heading),
+        "position_error_m": (
+            s.as_dict() if (s := run.position_error_summary()) is not None else None
+        ),
         "memory_start": vars(first) if first else None,
         "memory_end": vars(last) if last else None,
         "memory_growth_pct": memory_growths(run),
@@ -264,17 +292,31 @@ def details(run: ProfileRun) -> dict[str, Any]:
     }
 
 
-def results(default: ProfileRun, thesis: ProfileRun, run_info: dict[str, Any]) -> dict[str, Any]:
+def results(
+    default: ProfileRun,
+    thesis: ProfileRun,
+    run_info: dict[str, Any],
+    follow: ProfileRun | None = None,
+) -> dict[str, Any]:
     """The results object: default-profile figures at the top, the thesis profile's under
-    ``thesis``, distributions under ``details`` and reasons for any missing figure."""
+    ``thesis`` (and the follow profile's under ``follow`` when it ran), distributions under
+    ``details`` and reasons for any missing figure."""
     default_values, default_missing = figures(default)
     thesis_values, thesis_missing = figures(thesis)
+    extra: dict[str, Any] = {}
+    unmeasured = {"default": default_missing, "thesis": thesis_missing}
+    more_details = {}
+    if follow is not None:
+        extra["follow"], unmeasured["follow"] = follow_figures(follow)
+        more_details["follow"] = details(follow)
+    targets = (*TARGETS, FOLLOW_TARGET) if follow is not None else TARGETS
     return {
         **default_values,
         "thesis": thesis_values,
-        "unmeasured": {"default": default_missing, "thesis": thesis_missing},
-        "details": {"default": details(default), "thesis": details(thesis)},
-        "targets": {t.key: {"limit": t.limit, "upper": t.upper, "text": t.text} for t in TARGETS},
+        **extra,
+        "unmeasured": unmeasured,
+        "details": {"default": details(default), "thesis": details(thesis), **more_details},
+        "targets": {t.key: {"limit": t.limit, "upper": t.upper, "text": t.text} for t in targets},
         "thesis_reference": {
             "processing_ms_mean": THESIS_PROCESSING_MEAN_MS,
             "processing_ms_sd": THESIS_PROCESSING_SD_MS,

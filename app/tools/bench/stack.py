@@ -25,9 +25,16 @@ from playwright.async_api import Browser, ConsoleMessage, Page, Worker
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
+from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
 from app.tools.bench.results import MemorySample, ProfileRun
-from app.tools.bench.stats import FaceSample, PoseSample, TruthSample, heading_track
+from app.tools.bench.stats import (
+    FaceSample,
+    PoseSample,
+    TruthSample,
+    heading_track,
+    standoff_errors,
+)
 from vehicle_agent.control import pixel_to_terrain
 
 log = logging.getLogger(__name__)
@@ -308,5 +315,8 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
     window = run.window or (float("-inf"), float("inf"))
     poses = [p for p in poses if window[0] <= p.t <= window[1]]
     run.heading = heading_track(poses, truth, pixel_to_terrain)
+    if PROFILES[options.profile].law == "follow":
+        standoff = PROFILES[options.profile].standoff_m
+        run.position_error = standoff_errors(poses, truth, pixel_to_terrain, standoff)
     if first_command is not None:
         run.settle_at = max(first_command, window[0]) + SETTLE_S

@@ -221,3 +221,25 @@ def recall_after_jump_pct(
             for f in after
         )
     return (100.0 * hits / total if total else None), total
+
+def standoff_errors(
+    poses: Sequence[PoseSample],
+    truth: Sequence[TruthSample],
+    to_terrain: Callable[[float, float, int, int], tuple[float, float]],
+    standoff_m: float,
+) -> list[tuple[float, float]]:
+    """``(t, error)`` per pose: how far the turtle is from holding ``standoff_m`` off the true
+    target point shown at that moment, in metres (the follow profile's position error).
+
+    ``truth`` must be sorted by time; a pose before the first truth sample is skipped.
+    """
+    times = [s.t for s in truth]
+    errors: list[tuple[float, float]] = []
+    for pose in poses:
+        i = bisect.bisect_right(times, pose.t) - 1
+        if i < 0:
+            continue
+        shown = truth[i]
+        tx, ty = to_terrain(shown.x, shown.y, shown.w, shown.h)
+        errors.append((pose.t, abs(math.hypot(tx - pose.x, ty - pose.y) - standoff_m)))
+    return errors

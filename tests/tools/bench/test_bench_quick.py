@@ -62,7 +62,7 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
         [sys.executable, "-m", "app.cli", "bench", "--quick", "--json", "--out", str(out)],
         capture_output=True,
         text=True,
-        timeout=280,
+        timeout=360,
         check=False,
     )
     assert done.returncode == 0, done.stderr[-4000:]
@@ -72,6 +72,13 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
     check_plausible(printed["thesis"], "thesis")
     # The thesis profile snapshots every 1.5 s: far fewer goals than the default profile.
     assert printed["thesis"]["goals_per_s"] < printed["goals_per_s"]
+    # The follow profile: the common figures, and how far off its standoff the turtle was.
+    follow = printed["follow"]
+    check_plausible(follow, "follow")
+    p50, p95 = follow["position_error_m_p50"], follow["position_error_m_p95"]
+    assert isinstance(p50, float) and isinstance(p95, float)
+    # Within the world's diagonal (11.09 m * sqrt 2): the turtle never leaves the terrain.
+    assert 0 <= p50 <= p95 < 15.7
 
     assert json.loads((out / "results.json").read_text()) == printed
     report = (out / "report.md").read_text()

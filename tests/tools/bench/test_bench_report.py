@@ -9,7 +9,15 @@ from pathlib import Path
 import pytest
 
 from app.tools.bench import report
-from app.tools.bench.results import FIGURE_KEYS, MemorySample, ProfileRun, figures, results
+from app.tools.bench.results import (
+    FIGURE_KEYS,
+    POSITION_KEYS,
+    MemorySample,
+    ProfileRun,
+    figures,
+    follow_figures,
+    results,
+)
 from app.tools.bench.stats import FaceSample, HeadingSample
 
 
@@ -90,3 +98,29 @@ def test_write_produces_json_markdown_and_plots(tmp_path: Path) -> None:
     assert "not measured" in text  # the empty thesis run says so instead of showing numbers
     # 8.5 ms p50 against a 15 ms target.
     assert "- **processing p50 <= 15 ms**: 8.5, met." in text
+
+
+def test_follow_figures_and_report_section(tmp_path: Path) -> None:
+    follow = synthetic_run("follow", 8.0)
+    # Before the settle time (1 s) the turtle is still driving off: those samples do not count.
+    follow.position_error = [(0.5, 5.0)] + [(1.0 + k / 10, 0.1 * (k % 5)) for k in range(50)]
+    values, missing = follow_figures(follow)
+    assert missing == {}
+    assert values["position_error_m_p50"] == pytest.approx(0.2)
+    assert values["position_error_m_p95"] == pytest.approx(0.4)
+    assert values["goals_per_s"] == pytest.approx(30.0)  # the common figures come along
+
+    default, thesis = synthetic_run("default", 8.0), ProfileRun("thesis")
+    obj = results(default, thesis, {"started": "now"}, follow)
+    assert obj["follow"]["position_error_m_p50"] == pytest.approx(0.2)
+    assert obj["details"]["follow"]["position_error_m"]["n"] == 50
+    report.write(tmp_path, obj, default, thesis)
+    text = (tmp_path / "report.md").read_text()
+    assert "## Follow profile" in text
+    assert (
+        "p50 0.2 m, p95 0.4 m; **follow: position error p50 <= 0.3 m (face moving)**: met." in text
+    )
+
+    empty_values, empty_missing = follow_figures(ProfileRun("follow"))
+    assert all(empty_values[key] is None for key in POSITION_KEYS)
+    assert set(POSITION_KEYS) <= set(empty_missing)

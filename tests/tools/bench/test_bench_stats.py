@@ -17,6 +17,7 @@ from app.tools.bench.stats import (
     heading_track,
     rate_per_s,
     recall_after_jump_pct,
+    standoff_errors,
     summarize,
     wrap_angle,
 )
@@ -157,3 +158,19 @@ def test_recall_without_any_jump_is_not_measured() -> None:
     assert recall_after_jump_pct(track, {}, 640, 480) == (None, 0)
     # A jump too close to the end of the track to see 3 frames after it is not counted.
     assert recall_after_jump_pct(leaping_face(12, (10,)), {}, 640, 480) == (None, 0)
+
+def test_standoff_error_is_the_distance_off_the_standoff_from_the_target_shown() -> None:
+    def identity(x: float, y: float, w: int, h: int) -> tuple[float, float]:
+        return x, y
+
+    # The target sits at (0, 0) until t = 1, then leaps to (10, 0).
+    truth = [TruthSample(0.0, 0.0, 0.0, 1, 1), TruthSample(1.0, 10.0, 0.0, 1, 1)]
+    poses = [
+        PoseSample(-0.5, 1.0, 0.0, 0.0),  # before the first frame: skipped
+        PoseSample(0.5, 1.0, 0.0, 0.0),  # exactly at the 1 m standoff
+        PoseSample(0.9, 0.0, 3.0, 0.0),  # 3 m off the target: 2 m too far
+        PoseSample(1.5, 9.5, 0.0, 0.0),  # 0.5 m from the leapt target: 0.5 m too close
+    ]
+    errors = standoff_errors(poses, truth, identity, 1.0)
+    assert [t for t, _ in errors] == [0.5, 0.9, 1.5]
+    assert [e for _, e in errors] == pytest.approx([0.0, 2.0, 0.5])

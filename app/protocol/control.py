@@ -1,0 +1,158 @@
+"""The control law's numbers: terrain geometry and the vehicle profiles.
+
+Written once here and read by both vehicles: the Python agent's law
+(:mod:`vehicle_agent.control`) imports them, and the browser vehicle page's ``control.js``
+receives them through its embedded config (:func:`page_constants`), so neither re-types a gain,
+a distance or a profile name.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any, Literal
+
+from app.protocol.constants import DEFAULT_PROFILE
+from app.protocol.constants import Profile as RelayProfile
+
+# turtlesim's square world (metres) and its centre, where turtle1 starts.
+WORLD_SIZE = 11.088889
+TERRAIN_CENTRE = 5.544445
+# Below this distance the direction to the target is meaningless (the thesis's turtle sits at
+# the terrain centre, which is where a goal in the middle of the frame lands).
+MIN_TARGET_DISTANCE_M = 0.05
+# The spawn step of the thesis's vehicle (section 5.7.6): turtle1 first turns to face "up".
+SPAWN_THETA = math.pi / 2
+
+Law = Literal["rotate", "follow"]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """How a vehicle turns goals into Twists: timing, the law, and the law's numbers.
+
+    Times are seconds, distances metres, angles radians. A field that does not apply to a law
+    keeps its neutral default (``math.inf`` for "never", 0 for "none").
+    """
+
+    name: str
+    # "rotate": turn in place to face the target; "follow": also drive to a standoff from it.
+    law: Law
+    # Minimum time between two Twists computed on pose updates (or on the clock, see on_pose).
+    period_s: float
+    # True: closed loop, a Twist on a new goal and on pose updates; False: on the clock alone.
+    on_pose: bool
+    # The command-rate cap: a Twist answering a new goal waits at least this long after the
+    # previous Twist, so a burst of goals cannot flood cmd_vel.
+    min_interval_s: float
+    gain: float
+    max_angular: float
+    deadband: float
+    # No goal for this long: the vehicle stops (one zero Twist).
+    goal_timeout_s: float
+    # The relay profile (snapshot pacing and detector parameters) this vehicle profile pairs with.
+    relay_profile: RelayProfile
+    # --- follow only -------------------------------------------------------------------------
+    # Forward speed per metre beyond the standoff, and its limit (m/s).
+    linear_gain: float = 0.0
+    max_linear: float = 0.0
+    # The distance kept from the target point.
+    standoff_m: float = 0.0
+    # Clearance from a wall at which forward (or backward) travel towards it has stopped; the
+    # target point itself is kept this far inside the world.
+    wall_margin_m: float = 0.0
+    # Speed allowed per metre of clearance beyond the margin (1/s): the vehicle slows near walls.
+    wall_gain: float = 0.0
+    # No goal for this long: the target counts as lost and the vehicle turns in place to search.
+    search_after_s: float = math.inf
+    search_angular: float = 0.0
+
+
+PROFILES: dict[str, Profile] = {
+    "default": Profile(
+        name="default",
+        law="rotate",
+        period_s=0.05,
+        on_pose=True,
+        min_interval_s=0.02,
+        gain=6.0,
+        max_angular=4.0,
+        deadband=0.01,
+        goal_timeout_s=0.75,
+        relay_profile="default",
+    ),
+    # The thesis publishes the latest goal every 1100 ms; turtlesim runs a command for 1 s, so
+    # angular.z = e turns the turtle by e.
+    "thesis": Profile(
+        name="thesis",
+        law="rotate",
+        period_s=1.1,
+        on_pose=False,
+        min_interval_s=1.1,
+        gain=1.0,
+        max_angular=math.inf,
+        deadband=0.0,
+        goal_timeout_s=2.5,
+        relay_profile="thesis",
+    ),
+    # Drive towards the target's terrain point and hold a standoff from it.
+    "follow": Profile(
+        name="follow",
+        law="follow",
+        period_s=0.05,
+        on_pose=True,
+        min_interval_s=0.02,
+        gain=6.0,
+        max_angular=5.0,
+        deadband=0.01,
+        # Searching stops after this long without any goal: the relay may be gone.
+        goal_timeout_s=10.0,
+        relay_profile="default",
+        linear_gain=3.0,
+        max_linear=4.0,
+        standoff_m=1.0,
+        wall_margin_m=0.5,
+        wall_gain=1.0,
+        search_after_s=1.0,
+        search_angular=1.0,
+    ),
+}
+__all__ = ["DEFAULT_PROFILE", "PROFILES", "Profile", "page_constants", "with_standoff"]
+
+
+def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
+    """``profile`` with another standoff distance (None keeps the profile's own)."""
+    if standoff_m is None:
+        return profile
+    if not math.isfinite(standoff_m) or standoff_m < 0:
+        raise ValueError(f"standoff must be a finite distance >= 0 m, not {standoff_m}")
+    return replace(profile, standoff_m=standoff_m)
+
+
+def _camel(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(part.capitalize() for part in rest)
+
+
+def _json_number(value: Any) -> Any:
+    # JSON has no infinity: null stands for "no limit" / "never" on the page.
+    if isinstance(value, float) and math.isinf(value):
+        return None
+    return value
+
+
+def profile_constants(profile: Profile) -> dict[str, Any]:
+    """One profile as the page sees it: camelCase keys, infinities as null."""
+    return {_camel(f.name): _json_number(getattr(profile, f.name)) for f in fields(profile)}
+
+
+def page_constants(profiles: dict[str, Profile] | None = None) -> dict[str, Any]:
+    """Everything ``control.js`` needs, JSON-ready, for a page's embedded config."""
+    chosen = PROFILES if profiles is None else profiles
+    return {
+        "worldSize": WORLD_SIZE,
+        "terrainCentre": TERRAIN_CENTRE,
+        "minTargetDistanceM": MIN_TARGET_DISTANCE_M,
+        "spawnTheta": SPAWN_THETA,
+        "profiles": {name: profile_constants(p) for name, p in chosen.items()},
+    }

@@ -1,0 +1,80 @@
+// The parity harness page, driven by `autopilot parity` through window.runImage (and by the
+// windowed-path tests and the bench through window.runPixels and window.analyzer).
+import { createAnalyzer } from './vision.js';
+import { largest } from './window.js';
+
+const state = document.getElementById('state');
+
+/** Base64 of a byte array, in chunks small enough for String.fromCharCode. */
+function toBase64(bytes) {
+  let text = '';
+  for (let i = 0; i < bytes.length; i += 0x8000) {
+    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+  }
+  return btoa(text);
+}
+
+/** The bytes of a base64 string (decoded here: the page's CSP allows no fetch of data: URLs). */
+function fromBase64(text) {
+  const binary = atob(text);
+  const bytes = new Uint8Array(binary.length);
+  for (let i = 0; i < binary.length; i += 1) bytes[i] = binary.charCodeAt(i);
+  return bytes;
+}
+
+/**
+ * Decode an image (base64 file bytes) in the browser and run each op on it; each op of
+ * `windowOps` that found something runs again on the window around its largest box (the
+ * detect-then-track path). Returns {width, height, rgba: base64 of the pixels analysed,
+ * results: {opId: {boxes, target, window?: {around, boxes, target}}}}, or {unreadable: reason}
+ * when the browser cannot decode the bytes.
+ */
+async function runImage(base64, opIds, profile, windowOps = []) {
+  const blob = new Blob([fromBase64(base64)]);
+  const decode = () => createImageBitmap(blob, { colorSpaceConversion: 'none' });
+  try {
+    (await decode()).close();
+  } catch (error) {
+    return { unreadable: error.message };
+  }
+  const results = {};
+  let pixels = null;
+  for (const opId of opIds) {
+    const result = await window.analyzer.analyze(await decode(), opId, {
+      profile,
+      returnPixels: pixels === null,
+    });
+    if (pixels === null) pixels = { width: result.w, height: result.h, rgba: result.rgba };
+    results[opId] = { boxes: result.boxes, target: result.target };
+    const around = largest(result.boxes);
+    if (windowOps.includes(opId) && around !== null) {
+      const windowed = await window.analyzer.analyze(await decode(), opId, { profile, around });
+      results[opId].window = { around, boxes: windowed.boxes, target: windowed.target };
+    }
+  }
+  return { width: pixels.width, height: pixels.height, rgba: toBase64(pixels.rgba), results };
+}
+
+/**
+ * Run one op on raw RGBA pixels (base64) exactly as given, with the analyzer's options
+ * (around: the windowed search; track: detect, then track). Returns the analyzer's result.
+ */
+async function runPixels(base64, width, height, opId, options) {
+  const data = new Uint8ClampedArray(fromBase64(base64).buffer);
+  const { boxes, target, scan, region } = await window.analyzer.analyze({ width, height, data }, opId, options);
+  return { boxes, target, scan, region };
+}
+
+createAnalyzer().then(
+  (analyzer) => {
+    window.analyzer = analyzer;
+    window.runImage = runImage;
+    window.runPixels = runPixels;
+    state.textContent = `ready: ${analyzer.ops.map((op) => op.id).join(', ')}`;
+    document.body.dataset.ready = 'true';
+  },
+  (error) => {
+    state.textContent = `failed: ${error.message}`;
+    document.body.dataset.ready = 'failed';
+  },
+);

@@ -1,0 +1,85 @@
+"""Room- and role-scoped tokens: what they grant, and each reason one is refused."""
+
+from __future__ import annotations
+
+import base64
+import json
+
+import pytest
+
+from app.protocol import tokens
+from app.protocol.tokens import TokenError
+
+SECRET = "a-secret-of-sufficient-length"
+NOW = 1_800_000_000.0
+
+
+def test_a_token_grants_its_role_in_its_room_until_it_expires() -> None:
+    token = tokens.sign(SECRET, "lab", "relay", now=NOW, ttl_s=60)
+    claims = tokens.verify(SECRET, token, now=NOW + 59, room="lab", roles=("relay",))
+    assert (claims.room, claims.role, claims.exp) == ("lab", "relay", int(NOW + 60))
+
+
+def test_any_room_and_role_when_the_caller_does_not_restrict() -> None:
+    token = tokens.sign(SECRET, "lab", "client", now=NOW)
+    assert tokens.verify(SECRET, token, now=NOW).role == "client"
+
+
+@pytest.mark.parametrize(
+    ("check", "reason"),
+    [
+        ({"now": NOW + 61}, "expired"),
+        ({"now": NOW + 60}, "expired"),
+        ({"now": NOW, "room": "other"}, "wrong room"),
+        ({"now": NOW, "roles": ("vehicle",)}, "wrong role"),
+        ({"now": NOW, "roles": ("vehicle", "client")}, "wrong role"),
+    ],
+)
+def test_refusals_name_their_reason(check: dict[str, object], reason: str) -> None:
+    token = tokens.sign(SECRET, "lab", "relay", now=NOW, ttl_s=60)
+    with pytest.raises(TokenError) as refused:
+        tokens.verify(SECRET, token, **check)  # type: ignore[arg-type]
+    assert refused.value.reason == reason
+    assert reason in str(refused.value)
+
+
+def test_another_secret_or_an_altered_payload_is_a_bad_signature() -> None:
+    token = tokens.sign(SECRET, "lab", "client", now=NOW)
+    with pytest.raises(TokenError) as refused:
+        tokens.verify("another-secret-of-some-length", token, now=NOW)
+    assert refused.value.reason == "bad signature"
+    # Promote oneself to relay by rewriting the payload and keeping the signature.
+    body, signature = token.split(".")
+    claims = json.loads(base64.urlsafe_b64decode(body + "=" * (-len(body) % 4)))
+    claims["role"] = "relay"
+    forged = base64.urlsafe_b64encode(json.dumps(claims).encode()).rstrip(b"=").decode()
+    with pytest.raises(TokenError) as refused:
+        tokens.verify(SECRET, f"{forged}.{signature}", now=NOW)
+    assert refused.value.reason == "bad signature"
+
+
+@pytest.mark.parametrize(
+    "token", ["", "nodot", "a.b.c", "x" * 5000, "e30.!!!", "e30." + "A" * 43, "\u00e9.\u00e9"]
+)
+def test_garbage_is_refused_without_crashing(token: str) -> None:
+    with pytest.raises(TokenError) as refused:
+        tokens.verify(SECRET, token, now=NOW)
+    assert refused.value.reason in ("malformed", "bad signature")
+
+
+def test_a_signed_payload_that_is_not_ours_is_malformed() -> None:
+    # Correctly signed, but missing the fields a token must have.
+    body = base64.urlsafe_b64encode(b'{"room":"lab"}').rstrip(b"=").decode()
+    signature = base64.urlsafe_b64encode(tokens._mac(SECRET, body)).rstrip(b"=").decode()
+    with pytest.raises(TokenError) as refused:
+        tokens.verify(SECRET, f"{body}.{signature}", now=NOW)
+    assert refused.value.reason == "malformed"
+
+
+def test_signing_needs_a_real_secret_a_known_role_and_a_positive_ttl() -> None:
+    with pytest.raises(ValueError, match="at least"):
+        tokens.sign("short", "lab", "client", now=NOW)
+    with pytest.raises(ValueError, match="role"):
+        tokens.sign(SECRET, "lab", "admin", now=NOW)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="ttl"):
+        tokens.sign(SECRET, "lab", "client", now=NOW, ttl_s=0)
