@@ -222,6 +222,7 @@ def recall_after_jump_pct(
         )
     return (100.0 * hits / total if total else None), total
 
+
 def standoff_errors(
     poses: Sequence[PoseSample],
     truth: Sequence[TruthSample],

@@ -159,6 +159,7 @@ def test_recall_without_any_jump_is_not_measured() -> None:
     # A jump too close to the end of the track to see 3 frames after it is not counted.
     assert recall_after_jump_pct(leaping_face(12, (10,)), {}, 640, 480) == (None, 0)
 
+
 def test_standoff_error_is_the_distance_off_the_standoff_from_the_target_shown() -> None:
     def identity(x: float, y: float, w: int, h: int) -> tuple[float, float]:
         return x, y
