@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
     "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
     "token": ("app.tools.token_command", "mint a token for one role in one room"),
+    "lab": ("app.tools.lab.cli", "build the field lab: NATs, TURN and network conditions"),
 }
 
 

@@ -26,7 +26,8 @@ async ({wsUrl, room}) => {
       const msg = JSON.parse(event.data);
       if (msg.type === 'error') relay.errors.push(msg);
     };
-    channel.onopen = () => { relay.channel = channel; };
+    // Bad messages and goals go on the reliable channel (the vehicle serves goals on both).
+    if (channel.label === 'autopilot') channel.onopen = () => { relay.channel = channel; };
   };
   pc.onicecandidate = ({ candidate }) => {
     if (!candidate) return;
@@ -79,8 +80,9 @@ def test_vehicle_answers_bad_messages_with_errors_and_stops_when_the_relay_leave
 
         # The vehicle still works: good goals are taken and turned into Twists.
         relay.evaluate(
-            """goal => { window.fakeRelay.timer = setInterval(() => window.fakeRelay.channel.send(
-                   JSON.stringify({ ...goal, t: Date.now() })), 100); }""",
+            """goal => { let seq = goal.seq;
+                       window.fakeRelay.timer = setInterval(() => window.fakeRelay.channel.send(
+                   JSON.stringify({ ...goal, seq: seq++, t: Date.now() })), 100); }""",
             GOAL,
         )
         vehicle.wait_for_function(

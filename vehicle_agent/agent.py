@@ -26,6 +26,7 @@ from app.protocol.errors import describe
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
+from vehicle_agent.freshness import GoalGate
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.signaling import SignalingClient, SignalingError
 from vehicle_agent.turtle import Turtle, TurtleError
@@ -95,6 +96,8 @@ class Agent:
         self.turtle = turtle
         self.events = events or EventLog()
         self.controller = Controller(profile)
+        # Latest-wins on the lossy goal channel; reset for every new link.
+        self.goal_gate = GoalGate()
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
@@ -290,17 +293,36 @@ class Agent:
         client = self._client
         if client is None:
             return
+        ice_servers = [
+            RTCIceServer(urls=s.urls, username=s.username, credential=s.credential)
+            for s in client.ice_servers
+        ]
         link = RelayLink(
             self._relay,
             self._media.subscribe(self.video, buffered=False),
             client.send,
             self._on_channel_message,
             self._link_failed,
-            self.config.ice_servers,
+            ice_servers + self.config.ice_servers,
+            client.ice_transport_policy,
         )
+        link.on_up = self._on_link_up
         self._link = link
+        self.goal_gate.reset()
+        self.events.emit("link", state="offer", relay=link.relay)
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
+
+    def _on_link_up(self, link: RelayLink) -> None:
+        candidates = link.local_candidate_types()
+        log.info("link to %s up (local candidates: %s)", link.relay, ", ".join(candidates))
+        self.events.emit(
+            "link",
+            state="up",
+            relay=link.relay,
+            local_candidates=candidates,
+            selected=link.selected_candidate_type(),
+        )
 
     def _check_connected(self, link: RelayLink) -> None:
         if link is self._link and not link.connected.is_set():
@@ -361,6 +383,10 @@ class Agent:
         except ValidationError as exc:
             self._reject(link, f"bad goal: {describe(exc)}", "goal")
             return
+        verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
+        if verdict != "fresh":
+            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
+            return
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
         )
@@ -400,7 +426,7 @@ class Agent:
         if now - self._last_telemetry >= TELEMETRY_PERIOD_S:
             self._last_telemetry = now
             link = self._link
-            sent = link is not None and link.send(
+            sent = link is not None and link.send_state(
                 {
                     "type": "pose",
                     "x": pose.x,

@@ -6,11 +6,15 @@ processes of one machine):
 * ``{"ev": "frame_sent", "frame", "face_x", "face_y", "jump", "t"}`` -- synthetic frame handed
   to the encoder, with the true face centre in pixels; ``jump`` is true on the first frame after
   the face leapt across the frame (``SweepPath.jump_times``);
-* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received;
+* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received and applied;
+* ``{"ev": "goal_dropped", "seq", "frame", "why", "t"}`` -- goal refused by the latest-wins
+  rule (``why``: ``old`` seq or ``stale``);
 * ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
   (``seq``/``frame`` of the goal that caused it, null for a stop);
 * ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;
-* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay up or down;
+* ``{"ev": "link", "state", "relay", "t"}`` -- connection to the relay offered, up (with
+  ``local_candidates``: the candidate types gathered, and ``selected``: this side's candidate
+  type in the nominated pair, or null) or down (with ``reason``);
 * ``{"ev": "spawn", "ok", "t", ...}`` -- the spawn step turned the turtle (``x``, ``y``,
   ``theta``) or failed (``reason``).
 """

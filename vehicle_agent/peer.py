@@ -1,7 +1,8 @@
 """The vehicle's RTCPeerConnection to the room's relay (aiortc).
 
-The vehicle is always the offerer (DESIGN §2): it adds its video track, opens the ``autopilot``
-data channel and sends an offer; the relay answers and trickles its candidates. aiortc gathers
+The vehicle is always the offerer (DESIGN §2): it adds its video track, opens the reliable
+``autopilot`` and the lossy ``autopilot-state`` data channels (``app.protocol.channels``) and
+sends an offer; the relay answers and trickles its candidates. aiortc gathers
 its own candidates before the offer goes out, so they ride inside the SDP. A link is used once:
 when it fails or the relay goes away the agent closes it and makes a new one.
 """
@@ -17,15 +18,25 @@ from typing import Any
 from aiortc import (
     MediaStreamTrack,
     RTCConfiguration,
+    RTCDataChannel,
     RTCIceServer,
+    RTCIceTransportPolicy,
     RTCPeerConnection,
     RTCSessionDescription,
 )
 from aiortc.sdp import candidate_from_sdp
 
+from app.protocol.channels import (
+    CONTROL_CHANNEL,
+    STATE_CHANNEL,
+    STATE_CHANNEL_MAX_RETRANSMITS,
+    STATE_CHANNEL_ORDERED,
+)
+from app.protocol.signaling import IceTransportPolicy
+
 log = logging.getLogger(__name__)
 
-CHANNEL_LABEL = "autopilot"
+CHANNEL_LABEL = CONTROL_CHANNEL
 
 SendSignal = Callable[[dict[str, Any]], Awaitable[None]]
 
@@ -33,8 +44,9 @@ SendSignal = Callable[[dict[str, Any]], Awaitable[None]]
 class RelayLink:
     """One peer connection from the vehicle to the relay named ``relay``.
 
-    ``on_message(link, text)`` gets each data-channel message; ``on_down(link, reason)`` is
-    called once when the connection fails, closes or the channel closes.
+    ``on_message(link, text)`` gets each data-channel message (either channel);
+    ``on_down(link, reason)`` is called once when the connection fails, closes or the reliable
+    channel closes. ``ice_transport_policy="relay"`` keeps to relayed candidates (TURN).
     """
 
     def __init__(
@@ -45,6 +57,7 @@ class RelayLink:
         on_message: Callable[[RelayLink, str], None],
         on_down: Callable[[RelayLink, str], None],
         ice_servers: list[RTCIceServer] | None = None,
+        ice_transport_policy: IceTransportPolicy = "all",
     ) -> None:
         self.relay = relay
         self._send_signal = send_signal
@@ -54,15 +67,35 @@ class RelayLink:
         self._pending_candidates: list[dict[str, Any] | None] = []
         # An explicit empty list: aiortc's default is a public STUN server, and nothing here
         # may talk to the outside world unless the operator configured it.
-        self.pc = RTCPeerConnection(RTCConfiguration(iceServers=list(ice_servers or [])))
+        self.pc = RTCPeerConnection(
+            RTCConfiguration(
+                iceServers=list(ice_servers or []),
+                iceTransportPolicy=RTCIceTransportPolicy(ice_transport_policy),
+            )
+        )
         self.pc.addTrack(track)
         self.channel = self.pc.createDataChannel(CHANNEL_LABEL)
+        self.state_channel = self.pc.createDataChannel(
+            STATE_CHANNEL,
+            ordered=STATE_CHANNEL_ORDERED,
+            maxRetransmits=STATE_CHANNEL_MAX_RETRANSMITS,
+        )
         self.connected = asyncio.Event()
+        # Called once when the reliable channel opens (the agent records the link as up).
+        self.on_up: Callable[[RelayLink], None] | None = None
+
+        @self.state_channel.on("message")
+        def _state_message(message: str | bytes) -> None:
+            if isinstance(message, bytes):
+                message = message.decode("utf-8", errors="replace")
+            self._on_message(self, message)
 
         @self.channel.on("open")
         def _open() -> None:
             log.info("data channel %r to %s open", CHANNEL_LABEL, relay)
             self.connected.set()
+            if self.on_up is not None:
+                self.on_up(self)
 
         @self.channel.on("message")
         def _message(message: str | bytes) -> None:
@@ -121,12 +154,33 @@ class RelayLink:
             candidate.sdpMLineIndex = 0
         await self.pc.addIceCandidate(candidate)
 
+    def local_candidate_types(self) -> list[str]:
+        """Types of the candidates this side gathered (``relay`` only under the relay policy)."""
+        ice = self.pc.sctp.transport.transport if self.pc.sctp is not None else None
+        if ice is None:
+            return []
+        return sorted({c.type for c in ice.iceGatherer.getLocalCandidates()})
+
+    def selected_candidate_type(self) -> str | None:
+        """Type of this side's candidate in the nominated pair (host/srflx/relay), or None.
+
+        aiortc exposes no selected pair, so this reads aioice's nominated pair (a private
+        attribute): None when it is not there, never a guess.
+        """
+        ice = self.pc.sctp.transport.transport if self.pc.sctp is not None else None
+        connection = getattr(ice, "_connection", None)
+        pair = getattr(connection, "_nominated", {}).get(1)
+        local = getattr(pair, "local_candidate", None)
+        kind = getattr(local, "type", None)
+        return kind if isinstance(kind, str) else None
+
     def send(self, message: dict[str, Any]) -> bool:
-        """Send a JSON message on the data channel; False when it is not open."""
-        if self.channel.readyState != "open":
-            return False
-        self.channel.send(json.dumps(message))
-        return True
+        """Send a JSON message on the reliable channel; False when it is not open."""
+        return _send(self.channel, message)
+
+    def send_state(self, message: dict[str, Any]) -> bool:
+        """Send a JSON message on the lossy state channel; False when it is not open."""
+        return _send(self.state_channel, message)
 
     def _fail(self, reason: str) -> None:
         if not self._down:
@@ -139,3 +193,10 @@ class RelayLink:
         # aiortc's close() swallows a cancellation that lands inside it; shielded, the caller
         # still sees its own cancellation while the close completes in the background.
         await asyncio.shield(self.pc.close())
+
+
+def _send(channel: RTCDataChannel, message: dict[str, Any]) -> bool:
+    if channel.readyState != "open":
+        return False
+    channel.send(json.dumps(message))
+    return True

@@ -9,9 +9,11 @@ import ssl
 from collections.abc import AsyncIterator
 from typing import Any
 
+from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 
+from app.protocol.signaling import IceServer, IceTransportPolicy, LoginReply
 from app.protocol.urls import ServerUrlError, ws_endpoint
 
 log = logging.getLogger(__name__)
@@ -57,6 +59,10 @@ class SignalingClient:
         # Only for wss://; None there means the system's trusted CAs.
         self.tls = tls if self.url.startswith("wss:") else None
         self._ws: ClientConnection | None = None
+        # From the login reply: the ICE servers (TURN credentials minted for this login) and
+        # the transport policy every new peer connection uses.
+        self.ice_servers: list[IceServer] = []
+        self.ice_transport_policy: IceTransportPolicy = "all"
 
     async def connect(self) -> list[Message]:
         """Open the socket and log in; returns the room's roster (``[{name, role}]``)."""
@@ -82,8 +88,14 @@ class SignalingClient:
         if not reply.get("success"):
             await self.close()
             raise LoginRefused(f"login refused by {self.url}: {reply.get('reason')}")
-        peers = reply.get("peers", [])
-        return [p for p in peers if isinstance(p, dict)]
+        try:
+            parsed = LoginReply.model_validate(reply)
+        except ValidationError as exc:
+            await self.close()
+            raise SignalingError(f"malformed login answer from {self.url}: {exc}") from exc
+        self.ice_servers = parsed.iceServers or []
+        self.ice_transport_policy = parsed.iceTransportPolicy or "all"
+        return [p.model_dump() for p in parsed.peers]
 
     async def send(self, message: Message) -> None:
         """Send one message; a closed connection is left to the reader to notice."""

@@ -119,14 +119,32 @@ class PeerInfo(BaseModel):
     role: Role
 
 
+IceTransportPolicy = Literal["all", "relay"]
+
+
+class IceServer(BaseModel):
+    """One entry of RTCConfiguration.iceServers."""
+
+    urls: list[str]
+    username: str | None = None
+    credential: str | None = None
+
+
 class LoginReply(BaseModel):
-    """The server's answer to ``login``: success with the room's roster, or a reason."""
+    """The server's answer to ``login``: success with the room's roster, or a reason.
+
+    A successful reply carries the peer's ICE configuration: ``iceServers`` (TURN entries with
+    credentials minted for this login, valid for a limited time) and ``iceTransportPolicy``, so
+    a page or an agent never holds a long-lived TURN password.
+    """
 
     type: Literal["login"] = "login"
     success: bool
     room: str | None = None
     peers: list[PeerInfo] = Field(default_factory=list)
     reason: str | None = None
+    iceServers: list[IceServer] | None = None  # noqa: N815 (the WebRTC spelling)
+    iceTransportPolicy: IceTransportPolicy | None = None  # noqa: N815
 
 
 class Peers(BaseModel):

@@ -5,25 +5,26 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
+from app.protocol.signaling import IceServer
 from app.protocol.tokens import check_secret
 from app.resources import OPERATIONS_SPEC
 from app.server.origins import normalise
+from app.server.turn import TurnSettings
+
+__all__ = ["IceServer", "Settings"]
 
 
-class IceServer(BaseModel):
-    """One entry of RTCConfiguration.iceServers, handed to every page and to the agent."""
+class Settings(TurnSettings, BaseSettings):
+    """Server configuration. Tests build one directly; the CLI reads the environment.
 
-    urls: list[str]
-    username: str | None = None
-    credential: str | None = None
-
-
-class Settings(BaseSettings):
-    """Server configuration. Tests build one directly; the CLI reads the environment."""
+    The TURN/STUN fields come from :class:`TurnSettings` (``AUTOPILOT_TURN_URLS``,
+    ``AUTOPILOT_STUN_URLS``, ``AUTOPILOT_TURN_SECRET``, ``AUTOPILOT_ICE_TRANSPORT_POLICY``,
+    ``AUTOPILOT_TURN_CREDENTIAL_TTL_S``).
+    """
 
     model_config = SettingsConfigDict(env_prefix="AUTOPILOT_", env_nested_delimiter="__")
 
@@ -31,6 +32,7 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = 8000
     # No public STUN by default: nothing leaves the machine unless an operator asks for it.
+    # Extra ICE servers handed out as they are (TURN belongs in turn_urls: minted per login).
     ice_servers: list[IceServer] = Field(default_factory=list)
     # Signs the room- and role-scoped tokens (app.server.tokens); every login, /rosbridge
     # connection and state read must then carry one. Unset only in development.

@@ -1,10 +1,10 @@
 """The role pages (vehicle, relay, client) and an index linking them.
 
 Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
-ES modules need no globals: ICE servers from :class:`~app.server.config.Settings`, the
-signaling path, the default rosbridge URL (this server's ``/rosbridge``) and what the query
-string asks for. The token is not among them: the page reads it from its URL fragment, which
-no server sees.
+ES modules need no globals: the signaling path, the default rosbridge URL (this server's
+``/rosbridge``) and what the query string asks for. ICE servers are not in it: each login
+reply carries them, with TURN credentials minted for that login. Nor is the token: the page
+reads it from its URL fragment, which no server sees.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
+from app.protocol.channels import page_channels
 from app.protocol.constants import ROLES, Role
 from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR
-from app.server.config import Settings
 from app.server.tls import insecure_rosbridge
 
 router = APIRouter()
@@ -36,7 +36,6 @@ def _ws_base(request: Request) -> str:
 
 def page_config(request: Request, role: Role) -> dict[str, Any]:
     """What a role page needs to run on its own, ``?auto=1`` included."""
-    settings: Settings = request.app.state.settings
     query = request.query_params
     asked = query.get("profile", DEFAULT_PROFILE)
     # An unknown profile falls back to the default rather than breaking the page.
@@ -45,7 +44,6 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     rosbridge = query.get("rosbridge") or own_rosbridge
     return {
         "role": role,
-        "iceServers": [s.model_dump(exclude_none=True) for s in settings.ice_servers],
         "wsPath": "/ws",
         "room": query.get("room", "default"),
         "name": query.get("name", ""),
@@ -62,6 +60,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
         "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
         "rosTypes": ros_page_config(),
+        "channels": page_channels(),
     }
 
 

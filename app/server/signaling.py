@@ -10,13 +10,16 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
 from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
+from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
+from app.server.turn import ice_servers_for
 from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
 
 log = logging.getLogger(__name__)
@@ -48,7 +51,18 @@ class Switchboard:
     @classmethod
     def from_settings(cls, settings: Settings) -> Switchboard:
         """A switchboard around a fresh hub configured by ``settings``."""
-        return cls(Hub(secret=settings.secret, max_message_bytes=settings.max_message_bytes))
+
+        def ice(name: str) -> tuple[list[IceServer], IceTransportPolicy]:
+            servers = ice_servers_for(settings, settings.ice_servers, name, time.time())
+            return servers, settings.ice_transport_policy
+
+        return cls(
+            Hub(
+                secret=settings.secret,
+                max_message_bytes=settings.max_message_bytes,
+                ice=ice,
+            )
+        )
 
     def open(self) -> tuple[ConnId, asyncio.Queue[_OutboxItem]]:
         """Register a connection with the hub and give it an outbox."""

@@ -22,6 +22,8 @@ from app.protocol.signaling import (
     Candidate,
     Error,
     GetOps,
+    IceServer,
+    IceTransportPolicy,
     Incoming,
     Leave,
     Login,
@@ -85,10 +87,15 @@ class _Connection:
 
 @dataclass
 class Hub:
-    """All rooms of one server. Synchronous and single-threaded: call it from one event loop."""
+    """All rooms of one server. Synchronous and single-threaded: call it from one event loop.
+
+    ``ice(name)`` gives the ICE configuration of a successful login (the server mints TURN
+    credentials there); without it logins get no ICE servers and the ``all`` policy.
+    """
 
     # Signs the tokens a login must carry (one for its room and role); None: no tokens asked.
     secret: str | None = field(default=None, repr=False)
+    ice: Callable[[str], tuple[list[IceServer], IceTransportPolicy]] | None = None
     max_message_bytes: int = 64 * 1024
     # A peer whose last this-many messages were all refused is closed as abusive.
     max_errors_in_a_row: int = 20
@@ -200,7 +207,14 @@ class Hub:
         connection.peer = peer
         connection.errors_in_a_row = 0
         log.info("%s %r joined room %r", peer.role, peer.name, peer.room)
-        reply = LoginReply(success=True, room=peer.room, peers=[p.info() for p in others])
+        ice_servers, policy = self.ice(peer.name) if self.ice is not None else ([], "all")
+        reply = LoginReply(
+            success=True,
+            room=peer.room,
+            peers=[p.info() for p in others],
+            iceServers=ice_servers,
+            iceTransportPolicy=policy,
+        )
         # The others learn about the newcomer from their roster update.
         return [
             Outgoing(connection.id, reply.model_dump(exclude_none=True)),

@@ -1,1 +1,1 @@
-"""Tools that drive Chromium or child processes: relay service, demo, parity, bench."""
+"""Tools that drive Chromium or child processes: relay service, demo, parity, bench, field lab."""

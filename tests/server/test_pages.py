@@ -10,6 +10,7 @@ from typing import Any
 
 import httpx
 import pytest
+from pydantic import SecretStr
 
 from app.protocol.control import PROFILES, TERRAIN_CENTRE, WORLD_SIZE
 from app.protocol.ros import page_config as ros_page_config
@@ -17,6 +18,7 @@ from app.server.config import IceServer, Settings
 from app.server.serve import RunningServer
 
 ROLES = ("vehicle", "relay", "client")
+TURN_SECRET = "shared-with-coturn"
 
 
 def embedded_config(html: str) -> dict[str, Any]:
@@ -52,8 +54,12 @@ class Buttons(HTMLParser):
 def turn_server(
     start_server: Callable[[Settings], RunningServer], settings: Settings
 ) -> RunningServer:
-    ice = [IceServer(urls=["turn:turn.example:3478"], username="u", credential="c")]
-    return start_server(settings.model_copy(update={"ice_servers": ice}))
+    turn = {
+        "ice_servers": [IceServer(urls=["stun:stun.example:3478"])],
+        "turn_urls": ["turn:turn.example:3478"],
+        "turn_secret": SecretStr(TURN_SECRET),
+    }
+    return start_server(settings.model_copy(update=turn))
 
 
 def test_index_links_the_three_pages_for_the_room(server: RunningServer) -> None:
@@ -70,7 +76,7 @@ def test_defaults_no_ice_servers_and_this_servers_rosbridge(
     assert response.status_code == 200
     config = embedded_config(response.text)
     assert config["role"] == role
-    assert config["iceServers"] == []  # nothing leaves the machine unless configured
+    assert "iceServers" not in config  # ICE comes with the login reply
     assert config["wsPath"] == "/ws"
     assert config["room"] == "default"
     assert config["auto"] is False
@@ -142,11 +148,13 @@ def test_spawn_step_is_on_unless_switched_off(server: RunningServer) -> None:
     assert (on["spawnStep"], off["spawnStep"]) == (True, False)
 
 
-def test_ice_servers_come_from_settings(turn_server: RunningServer) -> None:
-    config = embedded_config(httpx.get(f"{turn_server.url}/client").text)
-    assert config["iceServers"] == [
-        {"urls": ["turn:turn.example:3478"], "username": "u", "credential": "c"}
-    ]
+@pytest.mark.parametrize("role", ROLES)
+def test_a_page_holds_no_ice_servers_and_no_turn_secret(
+    turn_server: RunningServer, role: str
+) -> None:
+    html = httpx.get(f"{turn_server.url}/{role}").text
+    assert "iceServers" not in embedded_config(html)
+    assert TURN_SECRET not in html and "turn.example" not in html
 
 
 def test_query_text_cannot_break_out_of_the_config_script(server: RunningServer) -> None:

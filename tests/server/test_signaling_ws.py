@@ -79,6 +79,8 @@ async def test_login_reply_and_roster_updates(new_peer: Connect) -> None:
         "success": True,
         "room": "lab",
         "peers": [],
+        "iceServers": [],
+        "iceTransportPolicy": "all",
     }
     vehicle = await new_peer()
     reply = await vehicle.login("v", "vehicle", "lab")

@@ -83,7 +83,14 @@ def test_login_reply_lists_the_others_and_they_get_a_roster(h: Harness) -> None:
     actions = h.send(vehicle, {"type": "login", "name": "v", "role": "vehicle", "room": "lab"})
 
     assert to(vehicle, actions) == [
-        {"type": "login", "success": True, "room": "lab", "peers": [{"name": "r", "role": "relay"}]}
+        {
+            "type": "login",
+            "success": True,
+            "room": "lab",
+            "peers": [{"name": "r", "role": "relay"}],
+            "iceServers": [],
+            "iceTransportPolicy": "all",
+        }
     ]
     assert to(relay, actions) == [
         {"type": "peers", "room": "lab", "peers": [{"name": "v", "role": "vehicle"}]}

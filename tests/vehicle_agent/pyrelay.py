@@ -18,6 +18,7 @@ from aiortc.mediastreams import MediaStreamError, MediaStreamTrack
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+from app.protocol.channels import CONTROL_CHANNEL
 from vehicle_agent.video import read_frame_tag
 
 log = logging.getLogger(__name__)
@@ -74,7 +75,9 @@ class PyRelay:
 
         @pc.on("datachannel")
         def _channel(channel: Any) -> None:
-            self.channel = channel
+            # The reliable channel; the lossy state channel's pose lands in messages too.
+            if channel.label == CONTROL_CHANNEL:
+                self.channel = channel
 
             @channel.on("message")
             def _message(text: str) -> None:

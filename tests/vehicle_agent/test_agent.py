@@ -9,6 +9,7 @@ import asyncio
 import contextlib
 import math
 import socket
+import time
 from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -100,7 +101,8 @@ async def pilot_until(
                     "y": target[1],
                     "w": W,
                     "h": H,
-                    "t": 0,
+                    # The relay's clock at sending: goals held back too long are stale.
+                    "t": time.time() * 1000,
                     "frame": relay.tags[-1] if relay.tags else None,
                 }
             )

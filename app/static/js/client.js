@@ -197,7 +197,7 @@ room.addEventListener('phase', (event) => {
   if (event.detail === 'joined' && room.relay !== undefined) room.send({ type: 'getOps' });
 });
 room.addEventListener('roster', showState);
-const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: setupPeer });
+const link = new RelayLink(room, { log, setup: setupPeer });
 link.addEventListener('lost', () => {
   status.relay = null;
   clearDetections();

@@ -20,13 +20,13 @@ export class Peer extends EventTarget {
    * @param {string} options.remote name of the remote peer (signaling `to`)
    * @param {boolean} options.polite the polite side yields on offer collisions
    * @param {boolean} options.mayOffer false on the relay: the server refuses its offers
-   * @param {RTCIceServer[]} options.iceServers from the page config only
+   * @param {{iceServers: RTCIceServer[], iceTransportPolicy: string}} options.ice from the login reply
    * @param {(msg: object) => void} options.send sends a signaling message
    * @param {import('./ui.js').Log} options.log
    * @param {(pc: RTCPeerConnection) => Promise<void>} [options.beforeAnswer] runs between
    *   applying a remote offer and creating the answer (the relay sets its send tracks there)
    */
-  constructor({ remote, polite, mayOffer, iceServers, send, log, beforeAnswer }) {
+  constructor({ remote, polite, mayOffer, ice, send, log, beforeAnswer }) {
     super();
     this.remote = remote;
     this.polite = polite;
@@ -34,7 +34,7 @@ export class Peer extends EventTarget {
     this.send = send;
     this.log = log;
     this.beforeAnswer = beforeAnswer;
-    this.pc = new RTCPeerConnection({ iceServers });
+    this.pc = new RTCPeerConnection({ iceServers: ice.iceServers, iceTransportPolicy: ice.iceTransportPolicy });
     this.pc.addEventListener('icecandidate', ({ candidate }) => {
       // The end-of-candidates null is not needed by the other side and not worth a message.
       if (candidate) this.#signal({ type: 'candidate', to: remote, candidate: candidate.toJSON() });
@@ -196,10 +196,9 @@ export class RelayLink extends EventTarget {
   #syncing = false;
   #again = false;
 
-  constructor(room, { iceServers, log, setup }) {
+  constructor(room, { log, setup }) {
     super();
     this.room = room;
-    this.iceServers = iceServers;
     this.log = log;
     this.setup = setup;
     this.peer = null;
@@ -238,7 +237,7 @@ export class RelayLink extends EventTarget {
       remote: relay.name,
       polite: false,
       mayOffer: true,
-      iceServers: this.iceServers,
+      ice: this.room.ice,
       send: (msg) => this.room.send(msg),
       log: this.log,
     });

@@ -128,12 +128,12 @@ function createPeer(name, role) {
     remote: name,
     polite: true,
     mayOffer: false,
-    iceServers: config.iceServers,
+    ice: room.ice,
     send: (msg) => room.send(msg),
     log,
     beforeAnswer: role === 'client' ? (pc) => sendVideoOn(pc) : undefined,
   });
-  const entry = { peer, role, channel: null };
+  const entry = { peer, role, channel: null, stateChannel: null };
   peer.addEventListener('track', (event) => {
     if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail);
   });
@@ -226,7 +226,18 @@ function onVehicleTrack({ track, receiver }) {
 
 function onDataChannel(entry, channel) {
   const name = entry.peer.remote;
-  if (entry.role === 'vehicle' && channel.label === 'autopilot') {
+  if (entry.role === 'vehicle' && channel.label === config.channels.state.label) {
+    // Goals go out and pose comes in here: unordered, never retransmitted, latest wins.
+    serveChannel(channel, { pose: (msg) => onPose(msg) }, log);
+    channel.addEventListener('open', () => {
+      entry.stateChannel = channel;
+    });
+    channel.addEventListener('close', () => {
+      if (entry.stateChannel === channel) entry.stateChannel = null;
+    });
+    return;
+  }
+  if (entry.role === 'vehicle' && channel.label === config.channels.control) {
     serveChannel(channel, { pose: (msg) => onPose(msg) }, log);
     channel.addEventListener('open', () => {
       entry.channel = channel;
@@ -424,7 +435,8 @@ async function analyzeOnce(decoded) {
       t: Date.now(),
     };
     if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
-    if (sendJson(vehicleEntry()?.channel, goal)) {
+    const vehicle = vehicleEntry();
+    if (sendJson(vehicle?.stateChannel ?? vehicle?.channel, goal)) {
       status.goalsSent += 1;
       status.lastGoal = goal;
       status.goalTimes.push(performance.now());

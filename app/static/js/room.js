@@ -58,6 +58,8 @@ export class RoomSession extends EventTarget {
     const reply = await this.signaling.login({ name, role: this.role, room, token: this.config.token });
     this.name = name;
     this.room = reply.room || room;
+    // ICE for this login (TURN credentials minted for it); every new connection uses it.
+    this.ice = { iceServers: reply.iceServers || [], iceTransportPolicy: reply.iceTransportPolicy || 'all' };
     this.log.info(`joined room ${this.room} as ${this.role} ${name}`);
     // Roster first, so that listeners of the `joined` phase already see who is there.
     this.#setRoster(reply.peers || []);

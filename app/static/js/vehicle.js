@@ -1,6 +1,8 @@
-// The vehicle page: camera to the relay, goals from the `autopilot` data channel turned into
-// Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to the relay.
+// The vehicle page: camera to the relay, goals from the lossy `autopilot-state` data channel
+// (latest wins) turned into Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to
+// the relay on the same channel; `stop` on the reliable `autopilot` channel.
 import { ControlLaw, Controller } from './control.js';
+import { GoalGate } from './freshness.js';
 import { BadMessage, RelayLink, requireNumber, sendJson, serveChannel } from './peer.js';
 import { RoomSession } from './room.js';
 import { pickTypes } from './rosflavour.js';
@@ -16,6 +18,7 @@ const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
 const profile = law.profiles[config.profile];
 const controller = new Controller(law, profile);
+const goalGate = new GoalGate(config.channels.goalFreshness);
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
@@ -28,6 +31,7 @@ const status = {
   rosFlavour: null, // '1', '2' or 'jazzy' once connected
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
+  goalsDropped: { old: 0, stale: 0 }, // refused by the latest-wins rule
 };
 window.autopilotStatus = status;
 
@@ -139,7 +143,8 @@ const turtle = new Turtle(
 );
 /** Everything else this page holds, in one place. */
 const session = {
-  channel: null, // the open `autopilot` data channel
+  channel: null, // the open `autopilot` data channel (reliable)
+  stateChannel: null, // the open `autopilot-state` data channel (unordered, no retransmits)
   lastPoseSent: 0,
   rosWarned: false, // a lost Twist has been reported for this outage
 };
@@ -177,7 +182,7 @@ turtle.onPose = (pose) => {
   drive(() => controller.pose(pose));
   const now = performance.now();
   if (now - session.lastPoseSent < POSE_FORWARD_MS) return;
-  if (sendJson(session.channel, { type: 'pose', ...pose, t: Date.now() })) session.lastPoseSent = now;
+  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now() })) session.lastPoseSent = now;
 };
 
 setInterval(() => drive(() => controller.tick()), TICK_MS);
@@ -193,6 +198,11 @@ function onGoal(msg) {
     op: typeof msg.op === 'string' ? msg.op : null,
   };
   if (goal.w <= 0 || goal.h <= 0) throw new BadMessage('"goal" needs a positive frame size w, h');
+  const verdict = goalGate.admit(requireNumber(msg, 'seq'), requireNumber(msg, 't'), performance.now() / 1000);
+  if (verdict !== 'fresh') {
+    status.goalsDropped[verdict] += 1;
+    return;
+  }
   if (!controller.active) log.info(`piloting: first goal${goal.op ? ` (${goal.op})` : ''}`);
   status.goalsReceived += 1;
   status.lastGoal = { ...goal, t: msg.t ?? null };
@@ -202,8 +212,18 @@ function onGoal(msg) {
 
 function setupPeer(peer, stream) {
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
-  const dc = peer.pc.createDataChannel('autopilot');
+  const dc = peer.pc.createDataChannel(config.channels.control);
   serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log);
+  // A new link: the relay's seq starts again.
+  goalGate.reset();
+  const state = peer.pc.createDataChannel(config.channels.state.label, config.channels.state.options);
+  serveChannel(state, { goal: onGoal }, log);
+  state.addEventListener('open', () => {
+    session.stateChannel = state;
+  });
+  state.addEventListener('close', () => {
+    if (session.stateChannel === state) session.stateChannel = null;
+  });
   dc.addEventListener('open', () => {
     session.channel = dc;
     status.relayChannelOpen = true;
@@ -258,7 +278,7 @@ if (config.rosbridgeError) {
   turtle.connect();
 }
 const stream = await startCamera();
-const link = new RelayLink(room, { iceServers: config.iceServers, log, setup: (peer) => setupPeer(peer, stream) });
+const link = new RelayLink(room, { log, setup: (peer) => setupPeer(peer, stream) });
 link.addEventListener('lost', (event) => {
   halt(event.detail);
   showState();

@@ -54,6 +54,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", action="store_true", help="print the results object on stdout")
     parser.add_argument(
+        "--field",
+        action="store_true",
+        help="run the stack in the field lab under each network condition (root)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -66,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.soak is not None and args.soak <= 0:
         log.error("--soak must be a positive number of minutes, not %s", args.soak)
         return 2
+    if args.field:
+        return _field(args)
     if _can_enter_netns():
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
@@ -77,6 +84,23 @@ def run(args: argparse.Namespace) -> int:
     missing += [f"follow {key}" for key in POSITION_KEYS if obj["follow"][key] is None]
     if missing:
         log.error("not measured: %s (reasons in %s)", ", ".join(missing), args.out / "report.md")
+        return 1
+    return 0
+
+
+def _field(args: argparse.Namespace) -> int:
+    # The lab builds namespaces of its own: no re-run inside the private one is needed.
+    from app.tools.bench import field
+
+    if os.geteuid() != 0:
+        log.error("the field bench builds network namespaces: run it as root")
+        return 2
+    obj = field.run(args.out, args.quick)
+    if args.json:
+        sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+    unmeasured = [(r["condition"], k) for r in obj["field"] for k in r["problems"]]
+    if unmeasured or None in obj["link_drop"].values():
+        log.error("not all measured (reasons in %s)", args.out / "field.md")
         return 1
     return 0
 

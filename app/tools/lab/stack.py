@@ -1,0 +1,123 @@
+"""The whole system placed in the field lab, for tests and the field bench.
+
+The server (with the lab's STUN/TURN and the condition's ICE policy) and the relay service run
+in the cloud, the Python agent (synthetic face video, JSON-lines event log) at the robot site,
+and a headless client page at the operator site, driven by Playwright through a Chromium
+launcher that enters the operator's namespace.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import subprocess
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from playwright.sync_api import Browser, Page, Playwright
+from playwright.sync_api import Error as PlaywrightError
+
+from app.tools.browser import chromium_args, chromium_path
+from app.tools.lab.lab import CLOUD, Lab
+
+PORT = 8000
+SERVER = f"http://{CLOUD}:{PORT}"
+ROOM = "field"
+START_ENABLED_TIMEOUT_MS = 120_000
+
+
+@dataclass
+class FieldStack:
+    """The running system; :meth:`events` reads what the agent recorded so far."""
+
+    lab: Lab
+    agent: subprocess.Popen[Any]
+    events_path: Path
+    client: Page
+    console: list[str]
+
+    def events(self, kind: str | None = None) -> list[dict[str, Any]]:
+        """The agent's events (all, or of one kind), oldest first."""
+        text = self.events_path.read_text() if self.events_path.exists() else ""
+        # The last line may be half-written while the agent runs.
+        events = [json.loads(line) for line in text.splitlines() if line.endswith("}")]
+        return [e for e in events if kind is None or e["ev"] == kind]
+
+    def heading_deg(self) -> float | None:
+        """The turtle's last reported heading in [0, 360), or None before any pose."""
+        poses = self.events("pose")
+        return math.degrees(poses[-1]["theta"]) % 360 if poses else None
+
+    def start_piloting(self) -> None:
+        """Press Start Piloting on the client page once the relay is ready for it."""
+        self.client.wait_for_function(
+            "() => !document.querySelector('[data-action=start]').disabled",
+            timeout=START_ENABLED_TIMEOUT_MS,
+        )
+        self.client.get_by_role("button", name="Start Piloting").click()
+
+
+@contextlib.contextmanager
+def field_stack(
+    lab: Lab, playwright: Playwright, folder: Path, fps: float | None = None
+) -> Iterator[FieldStack]:
+    """Start everything under the lab's current condition; stop it all on exit.
+
+    ``folder`` receives the processes' logs and the agent's event log.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    events_path = folder / "agent-events.jsonl"
+    events_path.unlink(missing_ok=True)
+    started: list[subprocess.Popen[Any]] = []
+    browser: Browser | None = None
+    with contextlib.ExitStack() as files:
+        logs: dict[str, IO[str]] = {
+            name: files.enter_context((folder / f"{name}.log").open("w"))
+            for name in ("server", "relay", "agent")
+        }
+        try:
+            started.append(
+                lab.python(
+                    "cloud",
+                    ["-m", "app.cli", "serve", "--host", CLOUD, "--port", str(PORT)],
+                    env=lab.server_env(),
+                    stdout=logs["server"],
+                    stderr=subprocess.STDOUT,
+                )
+            )
+            lab.wait_for_tcp("cloud", (CLOUD, PORT))
+            started.append(
+                lab.python(
+                    "cloud",
+                    ["-m", "app.cli", "relay", "--server", SERVER, "--room", ROOM],
+                    stdout=logs["relay"],
+                    stderr=subprocess.STDOUT,
+                )
+            )
+            agent_args = ["-m", "app.cli", "vehicle", "--server", SERVER, "--room", ROOM]
+            agent_args += ["--events", str(events_path)]
+            if fps is not None:
+                agent_args += ["--fps", str(fps)]
+            agent = lab.python("robot", agent_args, stdout=logs["agent"], stderr=subprocess.STDOUT)
+            started.append(agent)
+            browser = playwright.chromium.launch(
+                executable_path=str(lab.chromium("operator", chromium_path())),
+                args=chromium_args(),
+                headless=True,
+            )
+            client = browser.new_page()
+            console: list[str] = []
+            client.on("console", lambda message: console.append(f"{message.type}: {message.text}"))
+            client.goto(f"{SERVER}/client?room={ROOM}&name=client&auto=1")
+            yield FieldStack(lab, agent, events_path, client, console)
+            with contextlib.suppress(PlaywrightError):  # a page that died still leaves its logs
+                client.screenshot(path=str(folder / "client.png"), full_page=True)
+            (folder / "client.console.log").write_text("\n".join(console) + "\n")
+        finally:
+            if browser is not None:
+                browser.close()
+            for process in reversed(started):
+                lab.stop(process)

@@ -1,0 +1,65 @@
+"""The field bench's figures from an agent event log (keys and plausibility; no timings)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from app.tools.bench.field import figures, link_drop_times, stale_goals_applied, write
+
+
+def _log() -> list[dict[str, Any]]:
+    """A link that comes up, then 40 frames at 20/s, each turned into a goal and a Twist 60 ms
+    later, with the turtle facing the face (160, 240 px: straight left of the centre)."""
+    events: list[dict[str, Any]] = [
+        {"ev": "link", "state": "offer", "t": 0.0},
+        {"ev": "link", "state": "up", "t": 0.25, "selected": "relay", "local_candidates": []},
+    ]
+    for i in range(40):
+        t = 1.0 + i * 0.05
+        events.append({"ev": "frame_sent", "frame": i, "face_x": 160, "face_y": 240, "t": t})
+        events.append({"ev": "goal", "seq": i + 1, "frame": i, "t": t + 0.04})
+        events.append({"ev": "twist", "seq": i + 1, "frame": i, "angular": 1.0, "t": t + 0.06})
+        events.append({"ev": "pose", "x": 5.544445, "y": 5.544445, "theta": 3.14159, "t": t + 0.07})
+    return events
+
+
+def test_figures_have_every_key_and_plausible_values() -> None:
+    row = figures("turn_only", _log(), (1.0, 3.0))
+    assert row.candidate_type == "relay"
+    assert row.connect_ms == 250.0
+    assert row.glass_to_command_ms_p50 == 60.0 and row.glass_to_command_ms_p95 == 60.0
+    assert 19 <= (row.goals_per_s or 0) <= 20
+    assert row.heading_error_deg_median is not None and row.heading_error_deg_median < 1
+    assert row.stale_goals_applied == 0
+    assert row.problems == {}
+
+
+def test_a_goal_applied_after_a_newer_one_counts_as_stale_until_the_next_link() -> None:
+    events = _log()
+    events.append({"ev": "goal", "seq": 12, "frame": 11, "t": 4.0})  # older than seq 40
+    events.append({"ev": "link", "state": "up", "t": 5.0})
+    events.append({"ev": "goal", "seq": 1, "frame": 50, "t": 5.1})  # a new link counts again
+    assert stale_goals_applied(events) == 1
+
+
+def test_link_drop_times_from_the_last_goal_and_from_the_link_coming_back() -> None:
+    events: list[dict[str, Any]] = [
+        {"ev": "goal", "seq": 1, "t": 10.0},
+        {"ev": "twist", "seq": None, "angular": 0, "t": 10.8},
+        {"ev": "goal", "seq": 2, "t": 13.6},
+    ]
+    assert link_drop_times(events, dark_at=10.2, back_at=13.2) == {
+        "stop_after_s": 0.8,
+        "resume_after_s": 0.4,
+    }
+
+
+def test_a_run_without_a_link_says_why(tmp_path: Path) -> None:
+    row = figures("clean", [], (0.0, 1.0))
+    assert "connect_ms" in row.problems and "glass_to_command_ms_p50" in row.problems
+    obj = {"field": [row.__dict__], "link_drop": {"stop_after_s": None, "resume_after_s": None}}
+    write(tmp_path, {**obj, "window_s": 1.0, "quick": True})
+    report = (tmp_path / "field.md").read_text()
+    assert "clean connect_ms: the link never came up" in report
+    assert (tmp_path / "field-latency.png").stat().st_size > 0
