@@ -5,6 +5,10 @@ Every image is decoded in headless Chromium and sent through the analyzer the re
 RGBA pixels that the worker analysed come back and :func:`app.vision.spec.detect` runs on exactly
 those pixels, so decoding differences between browser and Python cannot hide or fake a mismatch.
 
+The windowed path (detect, then track: ``app/vision/window.py``) is checked too: for every
+cascade operation that found a target, both sides search the window around the same box on the
+same pixels, and must agree by the same rule.
+
 Agreement rule: both sides find the same number of boxes, and the JS boxes can be paired with
 distinct Python boxes so that every pair overlaps with IoU >= 0.9. For Haar cascades the boxes are
 expected to be identical; the tolerance only absorbs last-bit differences in colour conversion.
@@ -30,8 +34,8 @@ from app.protocol.constants import PROFILES, Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.tools.browser import chromium_args, chromium_path
-from app.vision.reference import detect
-from app.vision.spec import Spec, load_spec
+from app.vision.reference import Detection, detect
+from app.vision.spec import CascadeOperation, Spec, load_spec
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +87,8 @@ class Pair:
     js_target: list[float] | None
     py_target: list[float] | None
     agree: bool
+    # The full-frame box whose window both sides searched; None for a full-frame scan.
+    around: list[int] | None = None
 
 
 @dataclass
@@ -131,48 +137,97 @@ class Harness:
         self.spec = spec
 
     def run(
-        self, data: bytes, op_ids: Sequence[str], profile: Profile = "default"
+        self,
+        data: bytes,
+        op_ids: Sequence[str],
+        profile: Profile = "default",
+        window_ops: Sequence[str] = (),
     ) -> tuple[np.ndarray[Any, np.dtype[np.uint8]], dict[str, Any]]:
         """Decode ``data`` in the browser and run each op; the analysed RGBA and JS results.
 
-        Raises ``ValueError`` when the browser cannot decode the image.
+        Each op of ``window_ops`` that found something also searches the window around its
+        largest box; its result carries ``window: {around, boxes, target}``. Raises
+        ``ValueError`` when the browser cannot decode the image.
         """
         out = self.page.evaluate(
-            "([data, ops, profile]) => window.runImage(data, ops, profile)",
-            [base64.b64encode(data).decode("ascii"), list(op_ids), profile],
+            "([data, ops, profile, windowOps]) => window.runImage(data, ops, profile, windowOps)",
+            [base64.b64encode(data).decode("ascii"), list(op_ids), profile, list(window_ops)],
         )
         if "unreadable" in out:
             raise ValueError(f"the browser cannot decode it ({out['unreadable']})")
         rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
         return rgba.reshape(out["height"], out["width"], 4), out["results"]
 
+    def analyze_pixels(
+        self,
+        rgba: np.ndarray[Any, np.dtype[np.uint8]],
+        op_id: str,
+        profile: str = "default",
+        *,
+        around: Sequence[int] | None = None,
+        track: bool = False,
+    ) -> dict[str, Any]:
+        """Run ``op_id`` in the browser on exactly these RGBA pixels (H×W×4).
+
+        ``around``: search only the window around this full-frame box; ``track``: detect,
+        then track across the calls that set it. Returns ``{boxes, target, scan, region}``.
+        """
+        height, width = rgba.shape[:2]
+        options = {"profile": profile, "track": track, "around": list(around) if around else None}
+        result: dict[str, Any] = self.page.evaluate(
+            "([data, w, h, op, options]) => window.runPixels(data, w, h, op, options)",
+            [base64.b64encode(rgba.tobytes()).decode("ascii"), width, height, op_id, options],
+        )
+        return result
+
+    def reset_tracking(self) -> None:
+        """Forget the analyzer's tracked targets: the next tracked call is a full scan."""
+        self.page.evaluate("() => window.analyzer.resetTracking()")
+
     def check(
         self, path: Path, op_ids: Sequence[str], report: Report, profile: Profile = "default"
     ) -> None:
         """Check one image with every op in ``op_ids``; results are added to ``report``."""
         name = str(path)
+        cascades = [i for i in op_ids if isinstance(self.spec.op(i), CascadeOperation)]
         try:
-            rgba, results = self.run(path.read_bytes(), op_ids, profile)
+            rgba, results = self.run(path.read_bytes(), op_ids, profile, cascades)
         except (OSError, ValueError) as exc:
             report.unreadable[name] = f"cannot read image {name}: {exc}"
             return
         report.images.append(name)
         for op_id in op_ids:
-            py = detect(self.spec.op(op_id), rgba, profile)
+            op = self.spec.op(op_id)
+            py = detect(op, rgba, profile)
             js = results[op_id]
-            js_target = js["target"]
-            py_boxes = [list(b) for b in py.boxes]
-            report.details.append(
-                Pair(
-                    image=name,
-                    op=op_id,
-                    js_boxes=js["boxes"],
-                    py_boxes=py_boxes,
-                    js_target=[js_target["x"], js_target["y"]] if js_target else None,
-                    py_target=list(py.target) if py.target else None,
-                    agree=boxes_agree(js["boxes"], py_boxes),
-                )
-            )
+            report.details.append(_pair(name, op_id, js, py))
+            windowed = js.get("window")
+            if windowed is not None:
+                # The windowed path: both sides searched the window around the same box.
+                around = windowed["around"]
+                py = detect(op, rgba, profile, around=tuple(around))
+                report.details.append(_pair(name, op_id, windowed, py, around=around))
+
+
+def _pair(
+    image: str,
+    op_id: str,
+    js: dict[str, Any],
+    py: Detection,
+    around: list[int] | None = None,
+) -> Pair:
+    js_target = js["target"]
+    py_boxes = [list(b) for b in py.boxes]
+    return Pair(
+        image=image,
+        op=op_id,
+        js_boxes=js["boxes"],
+        py_boxes=py_boxes,
+        js_target=[js_target["x"], js_target["y"]] if js_target else None,
+        py_target=list(py.target) if py.target else None,
+        agree=boxes_agree(js["boxes"], py_boxes),
+        around=around,
+    )
 
 
 @contextmanager
@@ -259,8 +314,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         for pair in report.details:
             verdict = "agree" if pair.agree else "DISAGREE"
+            where = " (window around ({},{},{},{}))".format(*pair.around) if pair.around else ""
             sys.stdout.write(
-                f"{pair.image} {pair.op}: {verdict}\n"
+                f"{pair.image} {pair.op}{where}: {verdict}\n"
                 f"    js     {_format_boxes(pair.js_boxes)}\n"
                 f"    python {_format_boxes(pair.py_boxes)}\n"
             )

@@ -14,6 +14,7 @@ import numpy.typing as npt
 from cv2.typing import MatLike
 
 from app.protocol.constants import PROFILES, Profile
+from app.vision import window
 from app.vision.spec import (
     CASCADE_DIR,
     CascadeOperation,
@@ -33,6 +34,8 @@ class Detection:
 
     boxes: list[Box]
     target: tuple[float, float] | None
+    # The window searched, in detection-image pixels; None for a full-frame scan.
+    region: Box | None = None
 
 
 def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, int] | None:
@@ -86,8 +89,17 @@ def _classifier(name: str) -> cv2.CascadeClassifier:
     return _classifiers[name]
 
 
-def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
+def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> Detection:
     gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
+    region = None
+    ox = oy = 0
+    if around is not None:
+        height, width = gray.shape[:2]
+        region = window.search_region(around, factor, width, height, params.window_margin)
+        if region is None:
+            return Detection(boxes=[], target=None, region=region)
+        ox, oy = region[:2]
+        gray = window.crop(gray, region)
     boxes: list[Box] = []
     for name in params.cascades:
         found = _classifier(name).detectMultiScale(
@@ -99,9 +111,9 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
             maxSize=params.max_size,
         )
         for x, y, w, h in found:
-            boxes.append(_scale_box((int(x), int(y), int(w), int(h)), factor))
+            boxes.append(_scale_box((int(x) + ox, int(y) + oy, int(w), int(h)), factor))
     boxes.sort()
-    return Detection(boxes=boxes, target=_centre_of_largest(boxes))
+    return Detection(boxes=boxes, target=_centre_of_largest(boxes), region=region)
 
 
 def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
@@ -128,13 +140,21 @@ def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
 
 
 def detect(
-    op: CascadeOperation | ColourOperation, rgba: Rgba, profile: Profile = "default"
+    op: CascadeOperation | ColourOperation,
+    rgba: Rgba,
+    profile: Profile = "default",
+    around: Box | None = None,
 ) -> Detection:
-    """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does."""
+    """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does.
+
+    ``around`` (cascade operations only): search just the window around this full-frame box.
+    """
     if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
         raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
     if profile not in PROFILES:
         raise ValueError(f"unknown profile {profile!r}; expected one of {PROFILES}")
     if isinstance(op, CascadeOperation):
-        return _detect_cascade(op.params_for(profile), rgba)
+        return _detect_cascade(op.params_for(profile), rgba, around)
+    if around is not None:
+        raise ValueError(f"operation {op.id!r} is not a cascade; it has no windowed search")
     return _detect_colour(op.params_for(profile), rgba)

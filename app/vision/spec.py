@@ -61,6 +61,11 @@ class CascadeParams(_Model):
     max_size: tuple[int, int] = (0, 0)
     # The frame is reduced to this width before detection (INTER_AREA); null: full resolution.
     detect_width: int | None = Field(None, gt=0)
+    # Detect, then track (app/vision/window.py): after a hit, snapshots search a window around
+    # the last target grown by window_margin of its size on each side; the whole frame is
+    # scanned every full_scan_every snapshots and whenever the window finds nothing. 1: off.
+    full_scan_every: int = Field(1, ge=1)
+    window_margin: float = Field(0.5, gt=0.0)
 
 
 class HsvRange(_Model):

@@ -12,13 +12,16 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import pytest
 
 from app.resources import OPERATIONS_SPEC
 from app.server.config import Settings
 from app.tools import parity
-from app.vision.spec import load_spec
+from app.vision import reference, window
+from app.vision.spec import CascadeOperation, load_spec
 from tests.vision.frames import FACES, write_generated_frames
+from vehicle_agent.video import FixedPath, SyntheticVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -48,10 +51,16 @@ def test_every_shared_photo_with_every_operation(harness: parity.Harness) -> Non
     for path in images:
         harness.check(path, ALL_OPS, report)
     assert report.ok, describe(report)
-    assert len(report.details) == len(images) * len(ALL_OPS)
+    full = [p for p in report.details if p.around is None]
+    assert len(full) == len(images) * len(ALL_OPS)
     # Parity of empty lists proves nothing: the photos must exercise the detectors.
-    found = {op: sum(bool(p.js_boxes) for p in report.details if p.op == op) for op in ALL_OPS}
+    found = {op: sum(bool(p.js_boxes) for p in full if p.op == op) for op in ALL_OPS}
     assert found["face"] >= len(images) // 2, found
+    # Every cascade hit was checked again through the windowed path, which found it too.
+    windowed = [p for p in report.details if p.around is not None]
+    cascade_hits = [p for p in full if p.js_boxes and p.op != "fire"]
+    assert len(windowed) == len(cascade_hits)
+    assert sum(bool(p.js_boxes) for p in windowed) >= len(windowed) * 3 // 4
 
 
 def test_generated_frames_with_every_operation(harness: parity.Harness, tmp_path: Path) -> None:
@@ -73,6 +82,39 @@ def test_thesis_profile_on_a_few_photos(harness: parity.Harness) -> None:
     for name in ("obama-480p.jpg", "two_people.jpg", "alex-lacamoire.png"):
         harness.check(FACES / name, ALL_OPS, report, profile="thesis")
     assert report.ok, describe(report)
+
+
+def test_tracked_sequence_agrees_scan_for_scan(harness: parity.Harness) -> None:
+    """Detect, then track in the analyzer against window.step with the reference, frame by
+    frame on the same pixels: the same full/window decisions, the same boxes, the face found
+    again on the frame it jumped."""
+    op = SPEC.op("face")
+    assert isinstance(op, CascadeOperation)
+    every = op.params.full_scan_every
+    path = FixedPath(0.25, 0.42)
+    video = SyntheticVideo(path=path)
+    jump = every + 3
+    tracker = window.Tracker(every)
+    harness.reset_tracking()
+    js_scans, py_scans = [], []
+    for i in range(every + 6):
+        if i == jump:
+            path.x = 0.75
+        rgba = cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA)
+        js = harness.analyze_pixels(rgba, "face", track=True)
+        py, scan = window.step(
+            tracker, lambda box, rgba=rgba: reference.detect(op, rgba, around=box)
+        )
+        js_scans.append(js["scan"])
+        py_scans.append(scan)
+        assert parity.boxes_agree(js["boxes"], py.boxes), (i, js, py)
+        assert js["region"] == (list(py.region) if py.region else None), (i, js, py)
+        cx, cy = video.face_centre(i)
+        x, y, w, h = js["boxes"][0]
+        assert x <= cx <= x + w and y <= cy <= y + h, (i, js)
+    assert js_scans == py_scans
+    assert js_scans[: every + 1] == ["full"] + ["window"] * (every - 1) + ["full"]
+    assert js_scans[jump - 1 : jump + 2] == ["window", "full", "window"]
 
 
 def test_unreadable_image_is_reported_by_name(harness: parity.Harness, tmp_path: Path) -> None:
@@ -111,8 +153,12 @@ def test_cli_json_and_exit_status(tmp_path: Path) -> None:
     assert done.returncode == 1, done.stderr
     result = json.loads(done.stdout)
     assert result["images"] == [str(FACES / "obama-480p.jpg")]
-    assert (result["pairs"], result["agree"], result["disagree"]) == (1, 1, 0)
-    assert result["details"][0]["js_boxes"] == result["details"][0]["py_boxes"] != []
+    # The full-frame scan, then the windowed search around the face it found.
+    assert (result["pairs"], result["agree"], result["disagree"]) == (2, 2, 0)
+    full, windowed = result["details"]
+    assert full["js_boxes"] == full["py_boxes"] != [] and full["around"] is None
+    assert windowed["js_boxes"] == windowed["py_boxes"] != []
+    assert windowed["around"] in full["js_boxes"]
     assert "broken.jpg" in done.stderr
 
 
@@ -130,4 +176,6 @@ def test_cli_text_output_lists_both_box_lists() -> None:
     assert lines[0] == f"{FACES / 'two_people.jpg'} face: agree"
     js, python = lines[1].split(), lines[2].split()
     assert js[0] == "js" and python[0] == "python" and js[1:] == python[1:] != ["[]"]
-    assert lines[-1] == "1 images, 1 pairs: 1 agree, 0 disagree"
+    assert lines[3].startswith(f"{FACES / 'two_people.jpg'} face (window around (")
+    assert lines[3].endswith("): agree")
+    assert lines[-1] == "1 images, 2 pairs: 2 agree, 0 disagree"

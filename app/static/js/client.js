@@ -1,7 +1,7 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
 import { ControlLaw } from './control.js';
-import { RelayLink, sendJson, serveChannel } from './peer.js';
+import { preferLowLatency, RelayLink, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
@@ -110,6 +110,7 @@ function setupPeer(peer) {
   // it has one, with no renegotiation.
   peer.pc.addTransceiver('video', { direction: 'recvonly' });
   peer.addEventListener('track', (event) => {
+    preferLowLatency(event.detail.receiver);
     status.videoTracks += 1;
     video.srcObject = new MediaStream([event.detail.track]);
     log.info('relayed video track received');

@@ -1,5 +1,7 @@
-// The parity harness page, driven by `autopilot parity` through window.runImage.
+// The parity harness page, driven by `autopilot parity` through window.runImage (and by the
+// windowed-path tests and the bench through window.runPixels and window.analyzer).
 import { createAnalyzer } from './vision.js';
+import { largest } from './window.js';
 
 const state = document.getElementById('state');
 
@@ -21,11 +23,13 @@ function fromBase64(text) {
 }
 
 /**
- * Decode an image (base64 file bytes) in the browser and run each op on it. Returns
- * {width, height, rgba: base64 of the pixels analysed, results: {opId: {boxes, target}}},
- * or {unreadable: reason} when the browser cannot decode the bytes.
+ * Decode an image (base64 file bytes) in the browser and run each op on it; each op of
+ * `windowOps` that found something runs again on the window around its largest box (the
+ * detect-then-track path). Returns {width, height, rgba: base64 of the pixels analysed,
+ * results: {opId: {boxes, target, window?: {around, boxes, target}}}}, or {unreadable: reason}
+ * when the browser cannot decode the bytes.
  */
-async function runImage(base64, opIds, profile) {
+async function runImage(base64, opIds, profile, windowOps = []) {
   const blob = new Blob([fromBase64(base64)]);
   const decode = () => createImageBitmap(blob, { colorSpaceConversion: 'none' });
   try {
@@ -42,14 +46,30 @@ async function runImage(base64, opIds, profile) {
     });
     if (pixels === null) pixels = { width: result.w, height: result.h, rgba: result.rgba };
     results[opId] = { boxes: result.boxes, target: result.target };
+    const around = largest(result.boxes);
+    if (windowOps.includes(opId) && around !== null) {
+      const windowed = await window.analyzer.analyze(await decode(), opId, { profile, around });
+      results[opId].window = { around, boxes: windowed.boxes, target: windowed.target };
+    }
   }
   return { width: pixels.width, height: pixels.height, rgba: toBase64(pixels.rgba), results };
+}
+
+/**
+ * Run one op on raw RGBA pixels (base64) exactly as given, with the analyzer's options
+ * (around: the windowed search; track: detect, then track). Returns the analyzer's result.
+ */
+async function runPixels(base64, width, height, opId, options) {
+  const data = new Uint8ClampedArray(fromBase64(base64).buffer);
+  const { boxes, target, scan, region } = await window.analyzer.analyze({ width, height, data }, opId, options);
+  return { boxes, target, scan, region };
 }
 
 createAnalyzer().then(
   (analyzer) => {
     window.analyzer = analyzer;
     window.runImage = runImage;
+    window.runPixels = runPixels;
     state.textContent = `ready: ${analyzer.ops.map((op) => op.id).join(', ')}`;
     document.body.dataset.ready = 'true';
   },

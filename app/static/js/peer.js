@@ -277,3 +277,14 @@ export class RelayLink extends EventTarget {
     this.peer.handle(msg).catch((err) => this.log.error(`negotiation with ${msg.from} failed: ${err.message}`));
   }
 }
+
+/**
+ * Ask a video receiver to show each frame as soon as it is decoded: the smallest jitter buffer
+ * (jitterBufferTarget, standard) and no playout delay (playoutDelayHint, Chromium's older name,
+ * which also selects its low-latency renderer). A robot acts on the freshest frame, so a little
+ * smoothness is traded for latency.
+ */
+export function preferLowLatency(receiver) {
+  receiver.jitterBufferTarget = 0;
+  if ('playoutDelayHint' in receiver) receiver.playoutDelayHint = 0;
+}

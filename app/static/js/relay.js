@@ -3,7 +3,7 @@
 // show to the snapshot loop (snapshot-loop.js), whose goals go to the vehicle on the
 // `autopilot` channel and whose detections go to the clients on `control`. This module is the
 // page: connections, control messages, scheduling the frames and the DOM.
-import { BadMessage, Peer, sendJson, serveChannel } from './peer.js';
+import { BadMessage, Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { SnapshotLoop } from './snapshot-loop.js';
@@ -76,6 +76,7 @@ const session = {
   loop: null, // the SnapshotLoop, once the analyzer is ready
   timer: null, // a profile with a snapshot period: its interval
   frameCallback: null, // a snapshot per frame: the pending requestVideoFrameCallback
+  frameReader: null, // default profile: the reader of the vehicle track's decoded frames
 };
 
 const ANALYZER_SLOW_MS = 30000;
@@ -200,11 +201,16 @@ async function sendVideoOn(pc) {
 }
 
 function onVehicleTrack({ track, receiver }) {
-  // Goals are worth most when fresh: ask for the smallest jitter buffer WebRTC allows, so a
-  // decoded frame is shown (and analysed) as soon as it is complete.
-  receiver.jitterBufferTarget = 0;
+  // Goals are worth most when fresh: a decoded frame is shown (and analysed) at once.
+  preferLowLatency(receiver);
   session.vehicleTrack = track;
   status.vehicleTracks += 1;
+  // A new video starts with a full scan, not a window where the old one last saw its target.
+  session.analyzer?.resetTracking().catch((err) => log.error(`could not reset tracking: ${err.message}`));
+  if (status.piloting && session.timer === null) {
+    stopLoop();
+    startLoop();
+  }
   video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
@@ -333,6 +339,8 @@ function createLoop(analyzer) {
     analyzer,
     profile: config.profile,
     op: analyzer.defaultOp,
+    // Between full scans, search only around the last target (the spec's fullScanEvery).
+    track: true,
     // The lossy state channel when it is open (latest wins), else the reliable one.
     sendGoal: (goal) => {
       const vehicle = vehicleEntry();
@@ -358,6 +366,10 @@ function startLoop() {
     session.timer = setInterval(snapshot, SNAPSHOT_PERIOD_MS);
     return;
   }
+  if (typeof MediaStreamTrackProcessor === 'function') {
+    if (session.vehicleTrack !== null) readFrames(session.vehicleTrack);
+    return;
+  }
   const onFrame = () => {
     if (!status.piloting) return;
     session.frameCallback = video.requestVideoFrameCallback(onFrame);
@@ -366,20 +378,48 @@ function startLoop() {
   session.frameCallback = video.requestVideoFrameCallback(onFrame);
 }
 
+/**
+ * Default profile: each frame straight from the decoder (MediaStreamTrackProcessor), without
+ * waiting for the video element to present it. A frame that arrives while one is being
+ * analysed is dropped, so the next snapshot is always the freshest frame.
+ */
+async function readFrames(track) {
+  const reader = new MediaStreamTrackProcessor({ track }).readable.getReader();
+  session.frameReader = reader;
+  try {
+    for (;;) {
+      const { value: frame, done } = await reader.read();
+      if (done) return;
+      if (session.loop?.busy || !status.piloting || session.frameReader !== reader) frame.close();
+      else snapshot(frame);
+    }
+  } catch (err) {
+    log.error(`reading video frames failed: ${err.message}`);
+  }
+}
+
 function stopLoop() {
   session.loop?.stop();
   if (session.timer !== null) clearInterval(session.timer);
   if (session.frameCallback !== null) video.cancelVideoFrameCallback(session.frameCallback);
+  session.frameReader?.cancel().catch(() => {}); // the stream may have ended with its track
   session.timer = null;
   session.frameCallback = null;
+  session.frameReader = null;
 }
 
-/** Hand the loop the frame on show, unless it is still busy with the last one. */
-function snapshot() {
-  if (session.loop === null || session.loop.busy || video.videoWidth === 0) return;
-  // A VideoFrame of the frame on show wraps the decoded picture without copying it; the worker
-  // converts it to RGBA straight into OpenCV's memory.
-  session.loop.frame(new VideoFrame(video));
+/**
+ * Hand the loop a frame, unless it is still busy with the last one: `frame` is a decoded
+ * VideoFrame (owned from here on), or null for the frame the video element shows.
+ */
+function snapshot(frame = null) {
+  if (session.loop === null || session.loop.busy || (frame === null && video.videoWidth === 0)) {
+    frame?.close();
+    return;
+  }
+  // A VideoFrame wraps the decoded picture without copying it; the worker converts it to RGBA
+  // straight into OpenCV's memory.
+  session.loop.frame(frame ?? new VideoFrame(video));
 }
 
 // ---------------------------------------------------------------- page

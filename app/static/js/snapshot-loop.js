@@ -21,16 +21,21 @@ export class SnapshotLoop extends EventTarget {
    * @param {{analyze: Function}} options.analyzer from vision.js createAnalyzer()
    * @param {string} options.profile relay profile, passed to the analyzer
    * @param {string} options.op the operation to run (change it with `op` at any time)
+   * @param {boolean} [options.track] detect, then track: the analyzer searches a window around
+   *   the last target between full scans (window.js)
    * @param {(goal: object) => boolean} options.sendGoal sends a goal; false when it could not
    * @param {() => number} [options.clock] ms, for delays and rates (performance.now)
    * @param {() => number} [options.wallClock] ms since the epoch, the goal's `t` (Date.now)
    */
-  constructor({ analyzer, profile, op, sendGoal, clock = () => performance.now(), wallClock = () => Date.now() }) {
+  constructor({
+    analyzer, profile, op, sendGoal, track = false, clock = () => performance.now(), wallClock = () => Date.now(),
+  }) {
     super();
     this.analyzer = analyzer;
     this.profile = profile;
     this.op = op;
     this.sendGoal = sendGoal;
+    this.track = track;
     this.clock = clock;
     this.wallClock = wallClock;
     this.stats = new RelayStats();
@@ -80,7 +85,7 @@ export class SnapshotLoop extends EventTarget {
 
   async #analyze(source) {
     const started = this.clock();
-    const result = await this.analyzer.analyze(source, this.op, { profile: this.profile });
+    const result = await this.analyzer.analyze(source, this.op, { profile: this.profile, track: this.track });
     if (!this.running) return null;
     let goal = null;
     if (result.target) {

@@ -3,8 +3,8 @@
 //
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp} | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels}
-//                   {type: 'memory', id}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around}
+//                   {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
 'use strict';
 
@@ -18,7 +18,10 @@ const session = {
   cv: null,
   spec: null,
   modules: new Map(), // module file -> imported ES module
-  instances: new Map(), // `${opId}:${profile}` -> operation instance
+  // `${opId}:${profile}` -> {op: operation instance, windowed: whether it can search a window,
+  // tracker: its window.js Tracker for the snapshots analysed with `track`}
+  instances: new Map(),
+  window: null, // the imported window.js (detect, then track)
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
   ctx: null,
@@ -64,6 +67,7 @@ async function init() {
     session.cv.FS_createDataFile('/', name, bytes, true, false, false);
     session.files.push(name);
   }
+  session.window = await import('./window.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
       session.modules.set(op.module, await import(`./operations/${op.module}`));
@@ -87,7 +91,13 @@ function instanceFor(opId, profile) {
   const params = op.paramsByProfile[profile];
   if (!params) throw new Error(`unknown profile "${profile}"`);
   const spec = { ...op, params };
-  instance = session.modules.get(op.module).create(session.cv, spec, session.files);
+  // Cascade operations search a window around the last target between full scans.
+  const windowed = op.kind === 'cascade';
+  instance = {
+    op: session.modules.get(op.module).create(session.cv, spec, session.files),
+    windowed,
+    tracker: new session.window.Tracker(windowed ? params.fullScanEvery : 1),
+  };
   session.instances.set(key, instance);
   return instance;
 }
@@ -173,7 +183,28 @@ function describe(error) {
   return String(error?.message ?? error);
 }
 
-async function analyze({ source, opId, profile = PROTOCOL.defaultProfile, returnPixels = false }) {
+/**
+ * Run the operation on the frame: with `track`, its tracker picks a window around the last
+ * target or a full scan (window.js step); with `around` (a full-frame box, parity checks), the
+ * window around it alone is searched; otherwise the whole frame.
+ */
+function detectIn(instance, frame, track, around) {
+  if (around != null) {
+    if (!instance.windowed) throw new Error('this operation has no windowed search');
+    return { found: instance.op.detect(frame, around), scan: 'window' };
+  }
+  if (track) return session.window.step(instance.tracker, (box) => instance.op.detect(frame, box));
+  return { found: instance.op.detect(frame), scan: 'full' };
+}
+
+async function analyze({
+  source,
+  opId,
+  profile = PROTOCOL.defaultProfile,
+  returnPixels = false,
+  track = false,
+  around = null,
+}) {
   const started = performance.now();
   let instance;
   try {
@@ -184,7 +215,8 @@ async function analyze({ source, opId, profile = PROTOCOL.defaultProfile, return
   }
   const frame = await readPixels(source);
   const detectStarted = performance.now();
-  const { boxes, target } = instance.detect(frame);
+  const { found, scan } = detectIn(instance, frame, track, around);
+  const { boxes, target, region = null } = found;
   const done = performance.now();
   const { cols: width, rows: height } = frame;
   const result = {
@@ -196,6 +228,8 @@ async function analyze({ source, opId, profile = PROTOCOL.defaultProfile, return
     ms: done - detectStarted,
     workMs: done - started,
     frame: decodeFrameTag(width, height, frame.data),
+    scan,
+    region,
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
@@ -220,8 +254,12 @@ async function handle(message) {
         result: { wasmHeapBytes: session.cv.HEAPU8.length },
       });
       break;
+    case 'reset':
+      for (const instance of session.instances.values()) instance.tracker.reset();
+      self.postMessage({ type: 'result', id: message.id, result: {} });
+      break;
     case 'close':
-      for (const instance of session.instances.values()) instance.delete();
+      for (const instance of session.instances.values()) instance.op.delete();
       session.instances.clear();
       session.frame?.delete();
       session.frame = null;

@@ -62,12 +62,20 @@ export async function createAnalyzer() {
     /**
      * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so
      * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
-     * Options: profile (one of PROTOCOL.profiles.relay); returnPixels adds `rgba` (the pixels).
-     * Resolves to {op, boxes, target, w, h, ms, workMs, frame[, rgba]}.
+     * Options: profile (one of PROTOCOL.profiles.relay); returnPixels adds `rgba` (the pixels
+     * analysed); track: detect, then track (window.js) across the calls that set it, per operation
+     * and profile; around: a full-frame box [x, y, w, h] whose window alone is searched (parity).
+     * Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' | 'window',
+     * region: the window searched in detection-image pixels or null[, rgba]}.
      */
-    analyze(source, opId, { profile = PROTOCOL.defaultProfile, returnPixels = false } = {}) {
+    analyze(source, opId, { profile = PROTOCOL.defaultProfile, returnPixels = false, track = false, around = null } = {}) {
       const transfer = source.data ? [] : [source];
-      return call({ type: 'analyze', source, opId, profile, returnPixels }, transfer);
+      return call({ type: 'analyze', source, opId, profile, returnPixels, track, around }, transfer);
+    },
+
+    /** Forget every tracked target: the next tracked snapshot scans the whole frame. */
+    resetTracking() {
+      return call({ type: 'reset' });
     },
 
     /** {wasmHeapBytes}: size of the OpenCV WASM heap, for leak checks and benchmarks. */

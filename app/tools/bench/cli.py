@@ -228,6 +228,7 @@ async def _compare_detection(
         comparison = comparisons[relay_profiles[name]]
         run.js_ms = comparison.js_ms
         run.native_ms = comparison.native_ms
+        run.js_window_ms = comparison.js_window_ms
 
 
 def _all(reason: str) -> dict[str, str]:

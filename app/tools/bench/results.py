@@ -12,11 +12,13 @@ from typing import Any
 
 from app.protocol.constants import THESIS_SNAPSHOT_PERIOD_MS
 from app.tools.bench.stats import (
+    FaceSample,
     HeadingSample,
     Summary,
     glass_to_command_ms,
     growth_pct,
     heading_error_deg_median,
+    recall_after_jump_pct,
     summarize,
 )
 
@@ -35,6 +37,7 @@ FIGURE_KEYS = (
     "heading_error_deg_median",
     "js_over_native_ratio",
     "memory_growth_pct",
+    "recall_after_jump_pct",
 )
 
 
@@ -61,6 +64,7 @@ TARGETS = (
     Target("heading_error_deg_median", 5.0, True, "median heading error <= 5 deg"),
     Target("js_over_native_ratio", 1.3, True, "OpenCV.js / Python OpenCV <= 1.3"),
     Target("memory_growth_pct", 5.0, True, "memory growth <= 5 % over a 10-minute soak"),
+    Target("recall_after_jump_pct", 99.0, False, ">= 99 % goals within 3 frames of a face jump"),
 )
 
 SOAK_TARGET_MINUTES = 10.0
@@ -96,12 +100,18 @@ class ProfileRun:
     # Window over which goals were counted, while the face was in view.
     window: tuple[float, float] | None = None
     frame_sent: dict[int, float] = field(default_factory=dict)
+    # The true face centre of every frame sent, the frame size, and each goal's target by frame.
+    face: list[FaceSample] = field(default_factory=list)
+    frame_size: tuple[int, int] = (0, 0)
+    goal_points: dict[int, tuple[float, float]] = field(default_factory=dict)
     # Published Twists with the frame tag of the goal they were computed from.
     commands: list[tuple[float, int]] = field(default_factory=list)
     heading: list[HeadingSample] = field(default_factory=list)
     settle_at: float | None = None
     js_ms: list[float] = field(default_factory=list)
     native_ms: list[float] = field(default_factory=list)
+    # OpenCV.js detection in the tracking window around the face, same frames as js_ms.
+    js_window_ms: list[float] = field(default_factory=list)
     memory: list[MemorySample] = field(default_factory=list)
     # Growth is measured from the first memory sample at or after this time.
     memory_baseline_at: float | None = None
@@ -130,6 +140,12 @@ class ProfileRun:
             if frame is not None and frame not in received:
                 received[frame] = t
         return glass_to_command_ms(received, self.commands)
+
+    def recall(self) -> tuple[float | None, int]:
+        """Recall after the face appears or jumps, over the frames sent while measuring."""
+        start, end = self.window or (float("-inf"), float("inf"))
+        track = [s for s in self.face if start <= self.frame_sent.get(s.frame, start - 1) < end]
+        return recall_after_jump_pct(track, self.goal_points, *self.frame_size)
 
     def frame_to_goal_ms(self) -> list[float]:
         """Frame sent -> its goal received, in ms: video, relay and data channel together."""
@@ -210,6 +226,11 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
         # The worse of the two heaps: a leak in either one is a leak.
         values["memory_growth_pct"] = max(growths)
 
+    recall, jumps = run.recall()
+    if recall is None:
+        why("recall_after_jump_pct", "the face neither appeared nor jumped while measuring")
+    values["recall_after_jump_pct"] = recall
+
     for key, value in values.items():
         if value is not None and not math.isfinite(value):
             values[key] = None
@@ -253,7 +274,9 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "relay_goals_sent": run.relay_goals,
         "goals_received": len(run.goals),
         "goal_window_s": (run.window[1] - run.window[0]) if run.window else None,
+        "face_jumps": run.recall()[1],
         "js_detect_ms": summary(run.js_ms),
+        "js_window_detect_ms": summary(run.js_window_ms),
         "native_detect_ms": summary(run.native_ms),
         "heading_samples": len(run.heading),
         "position_error_m": (

@@ -28,7 +28,13 @@ from playwright.async_api import TimeoutError as PlaywrightTimeout
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
 from app.tools.bench.results import MemorySample, ProfileRun
-from app.tools.bench.stats import PoseSample, TruthSample, heading_track, standoff_errors
+from app.tools.bench.stats import (
+    FaceSample,
+    PoseSample,
+    TruthSample,
+    heading_track,
+    standoff_errors,
+)
 from vehicle_agent.control import pixel_to_terrain
 
 log = logging.getLogger(__name__)
@@ -273,6 +279,7 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
     if not path.exists():
         run.problems["glass_to_command_ms_p50"] = "the agent wrote no event log"
         return
+    run.frame_size = (options.width, options.height)
     poses: list[PoseSample] = []
     truth: list[TruthSample] = []
     first_command: float | None = None
@@ -281,11 +288,21 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
         kind, t = event["ev"], float(event["t"])
         if kind == "frame_sent":
             run.frame_sent[int(event["frame"])] = t
+            run.face.append(
+                FaceSample(
+                    int(event["frame"]),
+                    event["face_x"],
+                    event["face_y"],
+                    bool(event.get("jump", False)),
+                )
+            )
             truth.append(
                 TruthSample(t, event["face_x"], event["face_y"], options.width, options.height)
             )
         elif kind == "goal":
             run.goals.append((t, event.get("frame")))
+            if event.get("frame") is not None:
+                run.goal_points.setdefault(int(event["frame"]), (event["x"], event["y"]))
         elif kind == "twist" and event.get("frame") is not None:
             run.commands.append((t, int(event["frame"])))
             first_command = t if first_command is None else first_command

@@ -157,6 +157,68 @@ def growth_pct(start: float, end: float) -> float:
     return (end - start) / start * 100.0
 
 
+@dataclass(frozen=True)
+class FaceSample:
+    """Where the synthetic face truly was in one frame the agent sent (pixels)."""
+
+    frame: int
+    x: float
+    y: float
+    # The scene says the face leapt since the previous frame (absent in older event logs).
+    jump: bool = False
+
+
+# A face centre that moves more than this share of the frame width between two consecutive
+# frames jumped: the scene's glides move it about 1.5 % of the width per frame at 30 fps.
+JUMP_FRACTION = 0.1
+# Frames after an appearance or a jump within which a goal must come from the new place.
+RECALL_WITHIN_FRAMES = 3
+
+
+def face_events(track: Sequence[FaceSample], width: int, height: int) -> list[int]:
+    """Frames on which the face came into view or jumped across the frame."""
+
+    def in_view(s: FaceSample) -> bool:
+        return 0 <= s.x < width and 0 <= s.y < height
+
+    events: list[int] = []
+    for before, now in zip(track, track[1:], strict=False):
+        if not in_view(now) or now.frame != before.frame + 1:
+            continue
+        leap = math.hypot(now.x - before.x, now.y - before.y) > JUMP_FRACTION * width
+        if not in_view(before) or leap or now.jump:
+            events.append(now.frame)
+    return events
+
+
+def recall_after_jump_pct(
+    track: Sequence[FaceSample],
+    goals: Mapping[int, tuple[float, float]],
+    width: int,
+    height: int,
+) -> tuple[float | None, int]:
+    """Share (%) of appearances and jumps followed within RECALL_WITHIN_FRAMES frames by a goal
+    at the face's new place, and how many there were (None when there were none).
+
+    ``track`` holds the frames sent while measuring, ``goals`` maps a goal's frame tag to its
+    target point. A goal counts when it comes from one of the frames ``f .. f + 3`` and points
+    within half the jump distance of where the face truly was in that frame.
+    """
+    where = {s.frame: s for s in track}
+    near = JUMP_FRACTION * width / 2
+    hits = total = 0
+    for frame in face_events(track, width, height):
+        after = range(frame, frame + RECALL_WITHIN_FRAMES + 1)
+        if any(f not in where for f in after):
+            continue  # the measuring window ends before the 3 frames do
+        total += 1
+        hits += any(
+            f in goals and math.hypot(goals[f][0] - where[f].x, goals[f][1] - where[f].y) <= near
+            for f in after
+        )
+    return (100.0 * hits / total if total else None), total
+
+
 def standoff_errors(
     poses: Sequence[PoseSample],
     truth: Sequence[TruthSample],

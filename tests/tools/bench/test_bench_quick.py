@@ -27,6 +27,7 @@ KEYS = (
     "heading_error_deg_median",
     "js_over_native_ratio",
     "memory_growth_pct",
+    "recall_after_jump_pct",
 )
 PLOTS = (
     "processing_delay.png",
@@ -51,6 +52,7 @@ def check_plausible(figures: dict[str, object], profile: str) -> None:
     assert 0 <= values["heading_error_deg_median"] <= 180
     assert 0 < values["js_over_native_ratio"] < 100
     assert -100 < values["memory_growth_pct"] < 1000
+    assert 0 <= values["recall_after_jump_pct"] <= 100
 
 
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Debian's chromium")

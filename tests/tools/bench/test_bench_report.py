@@ -18,16 +18,21 @@ from app.tools.bench.results import (
     follow_figures,
     results,
 )
-from app.tools.bench.stats import HeadingSample
+from app.tools.bench.stats import FaceSample, HeadingSample
 
 
 def synthetic_run(profile: str, delay_ms: float) -> ProfileRun:
     """30 frames/s for 10 s; every frame becomes a goal 40 ms later and a Twist 10 ms after that;
-    the turtle is always 2 degrees off; the heaps grow by 1 % and 2 %."""
+    the turtle is always 2 degrees off; the heaps grow by 1 % and 2 %; the face leaps across the
+    640x480 frame at frame 150 and the goal of frame 151 finds it, the one of 150 does not."""
     run = ProfileRun(profile)
+    run.frame_size = (640, 480)
     for n in range(300):
         t = n / 30
         run.frame_sent[n] = t
+        face_x = 100.0 if n < 150 else 500.0
+        run.face.append(FaceSample(n, face_x, 200.0))
+        run.goal_points[n] = (100.0 if n <= 150 else 500.0, 200.0)
         run.goals.append((t + 0.040, n))
         run.commands.append((t + 0.050, n))
         run.processing.append((t, delay_ms + (n % 2)))  # alternating delay, delay + 1
@@ -49,6 +54,7 @@ def test_figures_of_a_known_run() -> None:
     assert values["heading_error_deg_median"] == pytest.approx(2.0)
     assert values["js_over_native_ratio"] == pytest.approx(1.2)
     assert values["memory_growth_pct"] == pytest.approx(2.0)  # the worse of the two heaps
+    assert values["recall_after_jump_pct"] == pytest.approx(100.0)
 
 
 def test_memory_growth_starts_at_the_baseline() -> None:

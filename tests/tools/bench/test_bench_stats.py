@@ -8,6 +8,7 @@ import pytest
 
 from app.protocol.angles import wrap_angle
 from app.tools.bench.stats import (
+    FaceSample,
     HeadingSample,
     PoseSample,
     TruthSample,
@@ -16,6 +17,7 @@ from app.tools.bench.stats import (
     heading_error_deg_median,
     heading_track,
     rate_per_s,
+    recall_after_jump_pct,
     standoff_errors,
     summarize,
 )
@@ -117,6 +119,45 @@ def test_growth_pct() -> None:
     assert growth_pct(200.0, 100.0) == pytest.approx(-50.0)
     with pytest.raises(ValueError):
         growth_pct(0.0, 1.0)
+
+
+def leaping_face(frames: int, leap_at: tuple[int, ...]) -> list[FaceSample]:
+    """A face at x = 100 px that leaps to 500 px (and back) at the given frames; 640x480."""
+    track, x = [], 100.0
+    for f in range(frames):
+        if f in leap_at:
+            x = 600.0 - x
+        track.append(FaceSample(f, x, 200.0))
+    return track
+
+
+def test_recall_counts_jumps_answered_within_three_frames_at_the_new_place() -> None:
+    track = leaping_face(40, (10, 20, 30))
+    goals = {f: (s.x + 3, s.y - 2) for s in track for f in [s.frame]}
+    # Every frame answered: every jump is caught.
+    assert recall_after_jump_pct(track, goals, 640, 480) == (100.0, 3)
+    # After the jump at 20 the goals of frames 20..23 are missing, the one of 24 is too late.
+    late = {f: p for f, p in goals.items() if not 20 <= f <= 23}
+    assert recall_after_jump_pct(track, late, 640, 480) == (pytest.approx(200 / 3), 3)
+    # A goal from frame 32 still pointing at the old place does not count for the jump at 30.
+    stale = {f: p for f, p in goals.items() if not 30 <= f <= 33} | {32: (100.0, 200.0)}
+    assert recall_after_jump_pct(track, stale, 640, 480)[0] == pytest.approx(200 / 3)
+
+
+def test_recall_counts_appearances_and_the_scene_jump_flag_but_not_glides() -> None:
+    # Out of view (x < 0) for 5 frames, then in view and gliding 10 px per frame.
+    track = [FaceSample(f, -50.0 if f < 5 else 10.0 * f, 200.0) for f in range(30)]
+    assert recall_after_jump_pct(track, {}, 640, 480) == (0.0, 1)
+    flagged = [FaceSample(s.frame, s.x, s.y, jump=s.frame == 15) for s in track]
+    goals = {f: (10.0 * f, 200.0) for f in range(5, 9)}
+    assert recall_after_jump_pct(flagged, goals, 640, 480) == (50.0, 2)
+
+
+def test_recall_without_any_jump_is_not_measured() -> None:
+    track = [FaceSample(f, 100.0 + f, 200.0) for f in range(30)]
+    assert recall_after_jump_pct(track, {}, 640, 480) == (None, 0)
+    # A jump too close to the end of the track to see 3 frames after it is not counted.
+    assert recall_after_jump_pct(leaping_face(12, (10,)), {}, 640, 480) == (None, 0)
 
 
 def test_standoff_error_is_the_distance_off_the_standoff_from_the_target_shown() -> None:

@@ -2,7 +2,10 @@
 //
 // The steps match app/vision/reference.py (_detect_cascade) call for call, so Python OpenCV on the
 // same RGBA pixels finds the same rectangles: RGBA -> gray, reduce to detectWidth with
-// INTER_AREA, detectMultiScale per cascade, boxes scaled back to full-frame pixels.
+// INTER_AREA, detectMultiScale per cascade, boxes scaled back to full-frame pixels. Given a box
+// to search around (detect, then track: ../window.js), only that window of the detection image
+// is searched, and its boxes are moved back by the window's origin before scaling.
+import { searchRegion } from '../window.js';
 
 /** Size of the detection image, or null when the frame is used as it is (see _reduction). */
 export function reduction(width, height, detectWidth) {
@@ -61,20 +64,37 @@ export function createCascadeOperation(cv, spec, files) {
   const maxSize = new cv.Size(p.maxSize[0], p.maxSize[1]);
 
   return {
-    /** Boxes [x, y, w, h] in full-frame pixels, sorted, and the target point or null. */
-    detect(rgba) {
+    /**
+     * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point or null, and the window
+     * searched (detection-image pixels) or null. `around`: a full-frame box whose window alone
+     * is searched, or null for the whole frame.
+     */
+    detect(rgba, around = null) {
       cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
       const { input, factor } = reduce(cv, gray, small, p.detectWidth);
+      let region = null;
+      if (around !== null) {
+        region = searchRegion(around, factor, input.cols, input.rows, p.windowMargin);
+        if (region === null) return { boxes: [], target: null, region };
+      }
       const boxes = [];
-      for (const c of classifiers) {
-        c.detectMultiScale(input, rects, p.scaleFactor, p.minNeighbors, 0, minSize, maxSize);
-        for (let i = 0; i < rects.size(); i += 1) {
-          const r = rects.get(i);
-          boxes.push(scaleBox([r.x, r.y, r.width, r.height], factor));
+      const searched = region === null ? input : input.roi(region);
+      const ox = region?.x ?? 0;
+      const oy = region?.y ?? 0;
+      try {
+        for (const c of classifiers) {
+          c.detectMultiScale(searched, rects, p.scaleFactor, p.minNeighbors, 0, minSize, maxSize);
+          for (let i = 0; i < rects.size(); i += 1) {
+            const r = rects.get(i);
+            boxes.push(scaleBox([r.x + ox, r.y + oy, r.width, r.height], factor));
+          }
         }
+      } finally {
+        if (searched !== input) searched.delete();
       }
       sortBoxes(boxes);
-      return { boxes, target: centreOfLargest(boxes) };
+      const searchedBox = region && [region.x, region.y, region.width, region.height];
+      return { boxes, target: centreOfLargest(boxes), region: searchedBox };
     },
     delete() {
       for (const c of classifiers) c.delete();

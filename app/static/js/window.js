@@ -1,0 +1,77 @@
+// Detect, then track: the search window around the last target, and when to scan it all.
+//
+// Once an operation has found its target, the next snapshots search only a window around the
+// last target box, in the same detection image (same reduction, same cascade, same
+// parameters). The whole frame is scanned again every `fullScanEvery` snapshots, and at once,
+// on the same snapshot, when the window finds nothing. The vision worker holds one Tracker per
+// operation and profile; cascade operations take the window through detect(rgba, around).
+//
+// The Python side is app/vision/window.py: the same window from the same doubles and the same
+// decisions, so `autopilot parity` compares the windowed path box for box.
+
+/**
+ * The window {x, y, width, height} in detection-image pixels around `around` (a full-frame box
+ * [x, y, w, h]), grown by `margin` of its size on each side and clipped to the `width` ×
+ * `height` detection image; null when empty. `factor` scales detection pixels to the full frame.
+ */
+export function searchRegion(around, factor, width, height, margin) {
+  const [x, y, w, h] = around.map((v) => v / factor);
+  const x0 = Math.max(0, Math.floor(x - w * margin));
+  const y0 = Math.max(0, Math.floor(y - h * margin));
+  const x1 = Math.min(width, Math.ceil(x + w + w * margin));
+  const y1 = Math.min(height, Math.ceil(y + h + h * margin));
+  if (x1 <= x0 || y1 <= y0) return null;
+  return { x: x0, y: y0, width: x1 - x0, height: y1 - y0 };
+}
+
+/** The largest box, the first of equal areas (the one whose centre is the target). */
+export function largest(boxes) {
+  let best = null;
+  for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
+  return best;
+}
+
+/** When to search a window and when the whole frame; fullScanEvery 1 turns tracking off. */
+export class Tracker {
+  constructor(fullScanEvery) {
+    this.fullScanEvery = fullScanEvery;
+    this.reset();
+  }
+
+  /** The full-frame box to search around on the next snapshot, or null for a full scan. */
+  window() {
+    if (this.last === null || this.windowed >= this.fullScanEvery - 1) return null;
+    return this.last;
+  }
+
+  /** Remember the target of a snapshot's search ('full' or 'window'). */
+  record({ boxes, target }, scan) {
+    this.last = target === null ? null : largest(boxes);
+    this.windowed = scan === 'window' ? this.windowed + 1 : 0;
+  }
+
+  /** Forget the target: the next snapshot is a full scan. */
+  reset() {
+    this.last = null; // full-frame box of the last target
+    this.windowed = 0; // snapshots searched in a window since the last full scan
+  }
+}
+
+/**
+ * One snapshot: search the window if there is one, the whole frame when it finds nothing.
+ * `detect(around)` runs the operation around a full-frame box, or on the whole frame for null.
+ * Returns {found, scan}.
+ */
+export function step(tracker, detect) {
+  const around = tracker.window();
+  if (around !== null) {
+    const found = detect(around);
+    if (found.target !== null) {
+      tracker.record(found, 'window');
+      return { found, scan: 'window' };
+    }
+  }
+  const found = detect(null);
+  tracker.record(found, 'full');
+  return { found, scan: 'full' };
+}

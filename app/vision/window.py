@@ -1,0 +1,114 @@
+"""Detect, then track: the search window around the last target, and when to scan it all.
+
+Once an operation has found its target, the next snapshots search only a window around the last
+target box, in the same detection image (same reduction, same cascade, same parameters), so the
+cascade runs over a fraction of the pixels. The whole frame is scanned again every
+``full_scan_every`` snapshots, and at once, on the same snapshot, when the window finds nothing.
+
+This module is the Python side of ``app/static/js/window.js``; both compute the same window from
+the same doubles and take the same decisions, so ``autopilot parity`` can compare the windowed
+path box for box. Pure numpy/OpenCV, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol, TypeVar
+
+from cv2.typing import MatLike
+
+Box = tuple[int, int, int, int]
+Scan = Literal["full", "window"]
+
+
+def search_region(around: Box, factor: float, width: int, height: int, margin: float) -> Box | None:
+    """The window ``(x, y, w, h)`` in detection-image pixels, or None when it is empty.
+
+    ``around`` is a full-frame box, ``factor`` scales detection-image pixels to full-frame
+    pixels, ``width`` × ``height`` is the detection image; the box is grown by ``margin`` of its
+    size on each side and clipped to the image. Floor and ceil are written out so JavaScript
+    computes the same integers from the same doubles.
+    """
+    x, y, w, h = (v / factor for v in around)
+    x0 = max(0, math.floor(x - w * margin))
+    y0 = max(0, math.floor(y - h * margin))
+    x1 = min(width, math.ceil(x + w + w * margin))
+    y1 = min(height, math.ceil(y + h + h * margin))
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def crop(image: MatLike, region: Box) -> MatLike:
+    """The part of ``image`` inside ``region`` (a view, no copy), as OpenCV.js's ``roi``."""
+    x, y, w, h = region
+    return image[y : y + h, x : x + w]
+
+
+def largest(boxes: Sequence[Box]) -> Box | None:
+    """The largest box, the first of equal areas (the one whose centre is the target)."""
+    best: Box | None = None
+    for box in boxes:
+        if best is None or box[2] * box[3] > best[2] * best[3]:
+            best = box
+    return best
+
+
+class Found(Protocol):
+    """What a detection returns: boxes in full-frame pixels and the target, if any."""
+
+    @property
+    def boxes(self) -> list[Box]: ...
+
+    @property
+    def target(self) -> tuple[float, float] | None: ...
+
+
+D = TypeVar("D", bound=Found)
+
+
+@dataclass
+class Tracker:
+    """When to search a window and when the whole frame; one per operation and profile.
+
+    ``full_scan_every`` = 1 scans every snapshot in full (tracking off).
+    """
+
+    full_scan_every: int
+    last: Box | None = None  # full-frame box of the last target
+    windowed: int = 0  # snapshots searched in a window since the last full scan
+
+    def window(self) -> Box | None:
+        """The box to search around on the next snapshot, or None for a full scan."""
+        if self.last is None or self.windowed >= self.full_scan_every - 1:
+            return None
+        return self.last
+
+    def record(self, found: Found, scan: Scan) -> None:
+        """Remember the target of a snapshot's search."""
+        self.last = largest(found.boxes) if found.target is not None else None
+        self.windowed = self.windowed + 1 if scan == "window" else 0
+
+    def reset(self) -> None:
+        """Forget the target: the next snapshot is a full scan."""
+        self.last = None
+        self.windowed = 0
+
+
+def step(tracker: Tracker, detect: Callable[[Box | None], D]) -> tuple[D, Scan]:
+    """One snapshot: search the window if there is one, the whole frame when it finds nothing.
+
+    ``detect(around)`` runs the operation around a full-frame box, or on the whole frame when
+    ``around`` is None.
+    """
+    around = tracker.window()
+    if around is not None:
+        found = detect(around)
+        if found.target is not None:
+            tracker.record(found, "window")
+            return found, "window"
+    found = detect(None)
+    tracker.record(found, "full")
+    return found, "full"

@@ -1,0 +1,90 @@
+"""Detect, then track (app/vision/window.py) with the Python reference on the synthetic scene."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from app.resources import OPERATIONS_SPEC
+from app.vision import reference, spec, window
+from vehicle_agent.video import FixedPath, SyntheticVideo
+
+SPEC = spec.load_spec(OPERATIONS_SPEC)
+FACE = SPEC.op("face")
+assert isinstance(FACE, spec.CascadeOperation)
+EVERY = FACE.params.full_scan_every
+
+
+def scene(path: FixedPath) -> tuple[SyntheticVideo, FixedPath]:
+    return SyntheticVideo(path=path), path
+
+
+def rgba(video: SyntheticVideo, frame: int) -> npt.NDArray[np.uint8]:
+    return cv2.cvtColor(video.render(frame), cv2.COLOR_RGB2RGBA)
+
+
+def contains(box: window.Box | None, point: tuple[float, float]) -> bool:
+    assert box is not None
+    x, y, w, h = box
+    return x <= point[0] <= x + w and y <= point[1] <= y + h
+
+
+def test_the_window_grows_the_box_and_stays_in_the_image() -> None:
+    # A 40-pixel box at (100, 100) of the full frame, detection image at half size.
+    assert window.search_region((100, 100, 40, 40), 2.0, 320, 240, 0.5) == (40, 40, 40, 40)
+    # Near a corner the window is clipped to the detection image.
+    assert window.search_region((0, 0, 40, 40), 2.0, 320, 240, 0.5) == (0, 0, 30, 30)
+    # A box wholly outside the image leaves nothing to search.
+    assert window.search_region((700, 500, 40, 40), 2.0, 320, 240, 0.5) is None
+
+
+def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:
+    video, _ = scene(FixedPath(0.3, 0.42))
+    frame = rgba(video, 0)
+    full = reference.detect(FACE, frame)
+    assert len(full.boxes) == 1
+    found = reference.detect(FACE, frame, around=full.boxes[0])
+    assert found.region is not None and full.region is None
+    assert len(found.boxes) == 1 and contains(found.boxes[0], video.face_centre(0))
+
+
+def test_a_window_away_from_the_face_finds_nothing() -> None:
+    video, _ = scene(FixedPath(0.25, 0.42))
+    frame = rgba(video, 0)
+    assert reference.detect(FACE, frame, around=(450, 150, 100, 100)).boxes == []
+
+
+def test_colour_operations_refuse_a_window() -> None:
+    frame = np.zeros((48, 80, 4), np.uint8)
+    with pytest.raises(ValueError, match="not a cascade"):
+        reference.detect(SPEC.op("fire"), frame, around=(0, 0, 10, 10))
+
+
+def test_full_scan_cadence_and_refind_after_a_jump() -> None:
+    video, path = scene(FixedPath(0.25, 0.42))
+    tracker = window.Tracker(EVERY)
+    scans: list[window.Scan] = []
+    jump = 2 * EVERY + 3
+    for i in range(3 * EVERY):
+        if i == jump:
+            path.x = 0.75
+        frame = rgba(video, i)
+        found, scan = window.step(
+            tracker, lambda around, frame=frame: reference.detect(FACE, frame, "default", around)
+        )
+        scans.append(scan)
+        # Every snapshot finds the face where it truly is, the one after the jump included.
+        assert contains(window.largest(found.boxes), video.face_centre(i)), (i, scan, found)
+    cadence = ["full"] + ["window"] * (EVERY - 1)
+    assert scans[:jump] == (cadence * 3)[:jump]
+    # The window around the old place is empty after the jump: a full scan at once, then windows.
+    assert scans[jump : jump + 2] == ["full", "window"]
+
+
+def test_thesis_profile_scans_every_frame() -> None:
+    assert FACE.thesis["fullScanEvery"] == 1
+    tracker = window.Tracker(1)
+    tracker.record(reference.Detection(boxes=[(0, 0, 10, 10)], target=(5.0, 5.0)), "full")
+    assert tracker.window() is None
