@@ -21,7 +21,7 @@ from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import CLOSE_POLICY_VIOLATION, RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
-from app.server.websocket import CLOSE_TRY_AGAIN_LATER, Outbox, SocketPolicy, oversize, serve
+from app.server.websocket import Outbox, SocketPolicy, oversize, refuse_if_full, serve
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -152,11 +152,7 @@ async def rosbridge(websocket: WebSocket) -> None:
         await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
         return
     await websocket.accept()
-    if simulator.full:
-        log.warning("refusing a rosbridge client: %d open", simulator.max_sessions)
-        await websocket.close(
-            CLOSE_TRY_AGAIN_LATER, f"server full: {simulator.max_sessions} rosbridge clients"
-        )
+    if await refuse_if_full(websocket, simulator.full, simulator.max_sessions, "rosbridge clients"):
         return
     session, outbox = simulator.open()
 

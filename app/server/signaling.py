@@ -16,7 +16,7 @@ from fastapi import APIRouter, WebSocket
 from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
 from app.server.turn import ice_servers_for
-from app.server.websocket import CLOSE_TRY_AGAIN_LATER, Outbox, SocketPolicy, serve
+from app.server.websocket import Outbox, SocketPolicy, refuse_if_full, serve
 from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
 
 log = logging.getLogger(__name__)
@@ -90,11 +90,7 @@ async def signaling(websocket: WebSocket) -> None:
     """One signaling connection: frames in to the hub, the hub's messages out."""
     board: Switchboard = websocket.app.state.signaling
     await websocket.accept()
-    if board.full:
-        log.warning("refusing a signaling connection: %d open", board.max_connections)
-        await websocket.close(
-            CLOSE_TRY_AGAIN_LATER, f"server full: {board.max_connections} connections"
-        )
+    if await refuse_if_full(websocket, board.full, board.max_connections, "connections"):
         return
     conn, outbox = board.open()
 

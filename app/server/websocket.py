@@ -143,6 +143,19 @@ def oversize(text: str, limit: int) -> str | None:
     return None
 
 
+async def refuse_if_full(websocket: WebSocket, full: bool, limit: int, what: str) -> bool:
+    """Close an accepted socket with 1013 when ``full``: ``limit`` ``what`` are open already.
+
+    True when the socket was refused; the route then returns without serving it.
+    """
+    if not full:
+        return False
+    reason = f"server full: {limit} {what}"
+    log.warning("refusing a connection: %s", reason)
+    await websocket.close(CLOSE_TRY_AGAIN_LATER, reason)
+    return True
+
+
 async def serve(
     websocket: WebSocket,
     outbox: Outbox,
