@@ -148,13 +148,8 @@ class Hub:
     def receive(self, conn: ConnId, text: str) -> list[Action]:
         """Handle one text frame from ``conn``."""
         connection = self._connections[conn]
-        if connection.closing:
-            return []
-        if not connection.spend(self.clock()):
-            # Refused before parsing: the flood costs its sender, not the peer it targets.
-            return self._refuse(
-                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
-            )
+        if (turned_away := self._turn_away(connection)) is not None:
+            return turned_away
         size = len(text.encode("utf-8"))
         if size > self.max_message_bytes:
             return self._refuse(
@@ -172,12 +167,8 @@ class Hub:
     def receive_binary(self, conn: ConnId) -> list[Action]:
         """Handle one binary frame from ``conn``: always refused, signaling is JSON text."""
         connection = self._connections[conn]
-        if connection.closing:
-            return []
-        if not connection.spend(self.clock()):
-            return self._refuse(
-                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
-            )
+        if (turned_away := self._turn_away(connection)) is not None:
+            return turned_away
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
 
     def disconnect(self, conn: ConnId) -> list[Action]:
@@ -188,6 +179,20 @@ class Hub:
         return self._remove(connection.peer)
 
     # -- dispatch -------------------------------------------------------------------------------
+
+    def _turn_away(self, connection: _Connection) -> list[Action] | None:
+        """What a frame gets before it is read: nothing while closing, a refusal over the rate.
+
+        None when the frame may be read.
+        """
+        if connection.closing:
+            return []
+        if not connection.spend(self.clock()):
+            # Refused before parsing: the flood costs its sender, not the peer it targets.
+            return self._refuse(
+                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+            )
+        return None
 
     def _dispatch(self, connection: _Connection, message: Incoming) -> list[Action]:
         peer = connection.peer
