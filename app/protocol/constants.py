@@ -36,6 +36,11 @@ AUTOPILOT_CHANNEL: Final = "autopilot"
 AUTOPILOT_STATE_CHANNEL: Final = "autopilot-state"
 CONTROL_CHANNEL: Final = "control"
 
+# WebSocket close codes (RFC 6455 §7.4.1) the server's sockets close with.
+CLOSE_NORMAL: Final = 1000
+CLOSE_POLICY_VIOLATION: Final = 1008
+CLOSE_TRY_AGAIN_LATER: Final = 1013
+
 # The turtlesim world: a square of this many metres, origin bottom-left, y up. The terrain
 # centre (where turtle1 spawns, and where a goal in the middle of the frame lands) is half of it,
 # written as turtlesim and the thesis write it.

@@ -26,6 +26,14 @@ class JsonEdgeError(ValueError):
     """A frame that is not JSON this system accepts; ``str(error)`` says why, for the peer."""
 
 
+def oversize(text: str, limit: int) -> str | None:
+    """Why a text frame is too large for ``limit`` bytes, or None when it fits."""
+    size = len(text.encode("utf-8"))
+    if size > limit:
+        return f"message of {size} bytes exceeds the limit of {limit} bytes"
+    return None
+
+
 def _refuse_constant(name: str) -> Any:
     raise JsonEdgeError(f"{name} is not valid JSON: numbers must be finite")
 

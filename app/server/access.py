@@ -17,11 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.constants import CLOSE_POLICY_VIOLATION, Role
 from app.protocol.tokens import Claims, TokenError
 
-# Close code for a connection that failed to authenticate (RFC 6455: policy violation).
-CLOSE_POLICY_VIOLATION = 1008
 # Ops that only read the simulator; everything else (publish, advertise, services) changes it.
 READ_ONLY_OPS = frozenset({"subscribe", "unsubscribe", "set_level"})
 READ_ONLY_SERVICE_PREFIX = "/rosapi/"

@@ -18,10 +18,12 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 
+from app.protocol.constants import CLOSE_POLICY_VIOLATION
+from app.protocol.jsonedge import oversize
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
-from app.server.access import CLOSE_POLICY_VIOLATION, RosbridgeGate, bearer_token, state_refusal
+from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
-from app.server.websocket import Outbox, SocketPolicy, oversize, refuse_if_full, serve
+from app.server.websocket import Outbox, SocketPolicy, refuse_if_full, serve
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 

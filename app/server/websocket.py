@@ -30,12 +30,10 @@ from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol import jsonedge
+from app.protocol.constants import CLOSE_POLICY_VIOLATION, CLOSE_TRY_AGAIN_LATER
 
 log = logging.getLogger(__name__)
 
-# WebSocket close codes (RFC 6455 §7.4.1).
-CLOSE_POLICY_VIOLATION: Final = 1008
-CLOSE_TRY_AGAIN_LATER: Final = 1013
 # After the close is queued, the writer has this long to deliver what precedes it; a peer that
 # does not read by then gets no more (its socket's own buffer is bounded by uvicorn).
 CLOSE_GRACE_S: Final = 2.0
@@ -133,14 +131,6 @@ class Outbox:
         except ValueError as exc:  # NaN or Infinity: a bug upstream, never sent to a browser
             log.error("not sending a %r message: %s", message.get("type", message.get("op")), exc)
             return None
-
-
-def oversize(text: str, limit: int) -> str | None:
-    """Why a text frame is too large for ``limit`` bytes, or None when it fits."""
-    size = len(text.encode("utf-8"))
-    if size > limit:
-        return f"message of {size} bytes exceeds the limit of {limit} bytes"
-    return None
 
 
 async def refuse_if_full(websocket: WebSocket, full: bool, limit: int, what: str) -> bool:

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any, Final, assert_never
 
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.constants import CLOSE_NORMAL, CLOSE_POLICY_VIOLATION, Role
+from app.protocol.jsonedge import oversize
 from app.protocol.signaling import (
     Answer,
     Candidate,
@@ -40,10 +41,6 @@ from app.protocol.signaling import (
 log = logging.getLogger(__name__)
 
 ConnId = str
-
-# WebSocket close codes (RFC 6455 §7.4.1).
-CLOSE_NORMAL = 1000
-CLOSE_POLICY_VIOLATION = 1008
 
 # Peers per room: a vehicle, a relay and clients. Also bounds each roster update, which every
 # join and leave sends to everyone in the room (N messages of N entries).
@@ -150,13 +147,8 @@ class Hub:
         connection = self._connections[conn]
         if (turned_away := self._turn_away(connection)) is not None:
             return turned_away
-        size = len(text.encode("utf-8"))
-        if size > self.max_message_bytes:
-            return self._refuse(
-                connection,
-                f"message of {size} bytes exceeds the limit of {self.max_message_bytes} bytes",
-                None,
-            )
+        if (too_large := oversize(text, self.max_message_bytes)) is not None:
+            return self._refuse(connection, too_large, None)
         message = parse(text)
         if isinstance(message, ParseError):
             if message.ref == "login" and connection.peer is None:

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from app.protocol import tokens
+from app.protocol.constants import CLOSE_POLICY_VIOLATION
 from app.server.access import (
-    CLOSE_POLICY_VIOLATION,
     Decision,
     RosbridgeGate,
     bearer_token,
