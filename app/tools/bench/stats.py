@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -116,6 +116,24 @@ class HeadingSample:
 MIN_TARGET_DISTANCE_M = 0.05
 
 
+def _with_shown_target(
+    poses: Sequence[PoseSample],
+    truth: Sequence[TruthSample],
+    to_terrain: Callable[[float, float, int, int], tuple[float, float]],
+) -> Iterator[tuple[PoseSample, tuple[float, float]]]:
+    """Each pose with the terrain point of the true target shown at that moment.
+
+    ``truth`` must be sorted by time; a pose before the first truth sample is skipped.
+    """
+    times = [s.t for s in truth]
+    for pose in poses:
+        i = bisect.bisect_right(times, pose.t) - 1
+        if i < 0:
+            continue
+        shown = truth[i]
+        yield pose, to_terrain(shown.x, shown.y, shown.w, shown.h)
+
+
 def heading_track(
     poses: Sequence[PoseSample],
     truth: Sequence[TruthSample],
@@ -127,14 +145,8 @@ def heading_track(
     on top of the turtle, is skipped. ``to_terrain`` is the control law's pixel-to-terrain map, so
     the truth is the direction a perfect detector plus that control law would steer to.
     """
-    times = [s.t for s in truth]
     track: list[HeadingSample] = []
-    for pose in poses:
-        i = bisect.bisect_right(times, pose.t) - 1
-        if i < 0:
-            continue
-        shown = truth[i]
-        tx, ty = to_terrain(shown.x, shown.y, shown.w, shown.h)
+    for pose, (tx, ty) in _with_shown_target(poses, truth, to_terrain):
         dx, dy = tx - pose.x, ty - pose.y
         if math.hypot(dx, dy) < MIN_TARGET_DISTANCE_M:
             continue
@@ -230,13 +242,7 @@ def standoff_errors(
 
     ``truth`` must be sorted by time; a pose before the first truth sample is skipped.
     """
-    times = [s.t for s in truth]
-    errors: list[tuple[float, float]] = []
-    for pose in poses:
-        i = bisect.bisect_right(times, pose.t) - 1
-        if i < 0:
-            continue
-        shown = truth[i]
-        tx, ty = to_terrain(shown.x, shown.y, shown.w, shown.h)
-        errors.append((pose.t, abs(math.hypot(tx - pose.x, ty - pose.y) - standoff_m)))
-    return errors
+    return [
+        (pose.t, abs(math.hypot(tx - pose.x, ty - pose.y) - standoff_m))
+        for pose, (tx, ty) in _with_shown_target(poses, truth, to_terrain)
+    ]
