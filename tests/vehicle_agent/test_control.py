@@ -7,6 +7,7 @@ import math
 import pytest
 
 from app.protocol.control import with_standoff
+from app.turtlesim.sim import Pose as SimPose
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import (
     PROFILES,
@@ -262,6 +263,16 @@ def drive(control: Controller, sim: TurtleSim, clock: FakeClock, seconds: float)
             sim.cmd_vel("turtle1", twist.linear_x, twist.angular_z)
 
 
+def chase(
+    control: Controller, sim: TurtleSim, clock: FakeClock, target: tuple[float, float], goals: int
+) -> SimPose:
+    """Goals at ``target`` at 30 fps, ``goals`` of them, driving in between; the pose after."""
+    for k in range(goals):
+        control.goal(terrain_goal(*target, seq=k))
+        drive(control, sim, clock, 1 / 30)
+    return sim.pose("turtle1")
+
+
 def follow_world() -> tuple[Controller, TurtleSim, FakeClock]:
     clock = FakeClock()
     sim = TurtleSim(clock=clock)
@@ -271,10 +282,7 @@ def follow_world() -> tuple[Controller, TurtleSim, FakeClock]:
 def test_follow_drives_to_the_standoff_from_the_target() -> None:
     control, sim, clock = follow_world()
     target = (2.0, 8.0)
-    for k in range(150):  # goals at 30 fps for 5 s
-        control.goal(terrain_goal(*target, seq=k))
-        drive(control, sim, clock, 1 / 30)
-    p = sim.pose("turtle1")
+    p = chase(control, sim, clock, target, goals=150)  # 5 s
     distance = math.hypot(p.x - target[0], p.y - target[1])
     assert distance == pytest.approx(PROFILES["follow"].standoff_m, abs=0.05)
     # It faces the target it stopped short of.
@@ -289,10 +297,7 @@ def test_follow_backs_off_when_the_target_comes_too_close() -> None:
     control.pose(Pose(centre, centre, 0.0))
     twist = control.goal(terrain_goal(*target))
     assert twist is not None and twist.linear_x < 0
-    for k in range(90):
-        control.goal(terrain_goal(*target, seq=k))
-        drive(control, sim, clock, 1 / 30)
-    p = sim.pose("turtle1")
+    p = chase(control, sim, clock, target, goals=90)
     assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(1.0, abs=0.05)
 
 
@@ -301,10 +306,7 @@ def test_follow_standoff_is_settable() -> None:
     sim = TurtleSim(clock=clock)
     control = Controller(with_standoff(PROFILES["follow"], 2.5), clock)
     target = (9.0, 5.544445)
-    for k in range(150):
-        control.goal(terrain_goal(*target, seq=k))
-        drive(control, sim, clock, 1 / 30)
-    p = sim.pose("turtle1")
+    p = chase(control, sim, clock, target, goals=150)
     assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(2.5, abs=0.05)
 
 
@@ -325,10 +327,7 @@ def test_follow_never_pins_itself_against_a_wall(target: tuple[float, float]) ->
     assert closest >= profile.wall_margin_m - 0.05
     # Still free to move: it turns away when the target moves back into the world.
     inside = (TurtleSim.CENTRE, TurtleSim.CENTRE)
-    for k in range(150):
-        control.goal(terrain_goal(*inside, seq=k))
-        drive(control, sim, clock, 1 / 30)
-    p = sim.pose("turtle1")
+    p = chase(control, sim, clock, inside, goals=150)
     assert math.hypot(p.x - inside[0], p.y - inside[1]) == pytest.approx(1.0, abs=0.1)
 
 
@@ -361,9 +360,7 @@ def test_follow_searches_in_place_when_the_target_is_lost() -> None:
     profile = PROFILES["follow"]
     control, sim, clock = follow_world()
     # Seen on the left (counter-clockwise side), then lost.
-    for k in range(30):
-        control.goal(terrain_goal(3.0, 8.0, seq=k))
-        drive(control, sim, clock, 1 / 30)
+    chase(control, sim, clock, (3.0, 8.0), goals=30)
     assert not control.searching
     drive(control, sim, clock, profile.search_after_s * 0.9)
     assert not control.searching
