@@ -31,12 +31,17 @@ def https_server(tmp_path: Path) -> Iterator[tuple[RunningServer, tls.TlsFiles]]
     running.stop()
 
 
+def wss_rosbridge(server: RunningServer) -> tuple[str, str]:
+    """The server's ``wss://`` rosbridge URL and a vehicle token for it."""
+    url = server.url.replace("https", "wss", 1) + "/rosbridge"
+    return url, tokens.sign(SECRET, "any-room", "vehicle", now=time.time(), ttl_s=60)
+
+
 async def test_a_vehicle_token_drives_over_verified_wss(
     https_server: tuple[RunningServer, tls.TlsFiles],
 ) -> None:
     server, files = https_server
-    url = server.url.replace("https", "wss", 1) + "/rosbridge"
-    token = tokens.sign(SECRET, "any-room", "vehicle", now=time.time(), ttl_s=60)
+    url, token = wss_rosbridge(server)
     await turn_and_stop(RosbridgeTurtle(url, token=token, ca_file=files.ca_file))
 
 
@@ -45,7 +50,6 @@ async def test_a_certificate_from_an_untrusted_ca_is_refused(
 ) -> None:
     # roslibpy alone would connect without checking anything; the agent checks the chain.
     server, _ = https_server
-    url = server.url.replace("https", "wss", 1) + "/rosbridge"
-    token = tokens.sign(SECRET, "any-room", "vehicle", now=time.time(), ttl_s=60)
+    url, token = wss_rosbridge(server)
     with pytest.raises(TurtleError, match="cannot connect to rosbridge"):
         await RosbridgeTurtle(url, token=token).start(lambda pose: None)
