@@ -239,20 +239,12 @@ def _background(width: int, height: int) -> Image:
     img[:horizon] = wall * (0.85 + 0.15 * rows[:horizon, :, None])
     img[horizon:] = floor
     out = img.astype(np.uint8)
-    cv2.rectangle(
-        out,
-        (int(width * 0.05), int(height * 0.2)),
-        (int(width * 0.12), int(height * 0.78)),
-        (90, 70, 60),
-        -1,
-    )
-    cv2.rectangle(
-        out,
-        (int(width * 0.86), int(height * 0.25)),
-        (int(width * 0.97), int(height * 0.5)),
-        (200, 210, 225),
-        -1,
-    )
+    # Two flat blocks, (left, top, right, bottom) as fractions of the frame, and their colours.
+    blocks = (((0.05, 0.2, 0.12, 0.78), (90, 70, 60)), ((0.86, 0.25, 0.97, 0.5), (200, 210, 225)))
+    for (left, top, right, bottom), colour in blocks:
+        corner = (int(width * left), int(height * top))
+        opposite = (int(width * right), int(height * bottom))
+        cv2.rectangle(out, corner, opposite, colour, -1)
     cv2.line(out, (0, horizon), (width, horizon), (70, 60, 50), 2)
     return out
 
