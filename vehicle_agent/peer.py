@@ -82,11 +82,9 @@ class RelayLink:
         # Called once when the reliable channel opens (the agent records the link as up).
         self.on_up: Callable[[RelayLink], None] | None = None
 
-        @self.state_channel.on("message")
-        def _state_message(message: str | bytes) -> None:
-            if isinstance(message, bytes):
-                message = message.decode("utf-8", errors="replace")
-            self._on_message(self, message)
+        # Both channels carry the relay's JSON messages; which one a message came by is no matter.
+        for channel in (self.channel, self.state_channel):
+            channel.on("message", self._receive)
 
         @self.channel.on("open")
         def _open() -> None:
@@ -94,12 +92,6 @@ class RelayLink:
             self.connected.set()
             if self.on_up is not None:
                 self.on_up(self)
-
-        @self.channel.on("message")
-        def _message(message: str | bytes) -> None:
-            if isinstance(message, bytes):
-                message = message.decode("utf-8", errors="replace")
-            self._on_message(self, message)
 
         @self.channel.on("close")
         def _channel_closed() -> None:
@@ -179,6 +171,11 @@ class RelayLink:
     def send_state(self, message: ChannelMessage) -> bool:
         """Send a JSON message on the lossy state channel; False when it is not open."""
         return _send(self.state_channel, message)
+
+    def _receive(self, message: str | bytes) -> None:
+        if isinstance(message, bytes):
+            message = message.decode("utf-8", errors="replace")
+        self._on_message(self, message)
 
     def _fail(self, reason: str) -> None:
         if not self._down:
