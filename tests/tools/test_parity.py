@@ -16,10 +16,10 @@ import cv2
 import pytest
 
 from app.resources import OPERATIONS_SPEC
-from app.server.config import Settings
 from app.tools import parity
 from app.vision import reference, window
 from app.vision.spec import CascadeOperation, load_spec
+from tests.helpers.harness import open_harness
 from tests.vision.frames import FACES, write_generated_frames
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -31,7 +31,7 @@ ALL_OPS = [o.id for o in SPEC.operations]
 
 @pytest.fixture(scope="module")
 def harness() -> Iterator[parity.Harness]:
-    with parity.open_harness(Settings(environment="development", token=None)) as opened:
+    with open_harness() as opened:
         yield opened
 
 

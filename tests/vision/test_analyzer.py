@@ -12,10 +12,9 @@ from playwright.sync_api import Page
 
 from app.protocol.constants import PROFILES
 from app.resources import OPERATIONS_SPEC
-from app.server.config import Settings
-from app.tools import parity
 from app.vision.reference import detect
 from app.vision.spec import load_spec
+from tests.helpers.harness import analyzer_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -48,9 +47,8 @@ window.flameVideoFrame = (width, height, box) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    with parity.open_harness(Settings(environment="development", token=None)) as harness:
-        harness.page.evaluate(PAGE_HELPERS)
-        yield harness.page
+    with analyzer_page(PAGE_HELPERS) as opened:
+        yield opened
 
 
 def analyze_raw(page: Page, rgba: np.ndarray, op: str, **options: Any) -> Any:

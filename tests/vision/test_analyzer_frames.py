@@ -20,10 +20,9 @@ import pytest
 from playwright.sync_api import Page
 
 from app.resources import OPERATIONS_SPEC
-from app.server.config import Settings
-from app.tools import parity
 from app.vision.reference import detect
 from app.vision.spec import load_spec
+from tests.helpers.harness import analyzer_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -61,9 +60,8 @@ window.analyzeAll = async (frames, op, options) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    with parity.open_harness(Settings(environment="development", token=None)) as harness:
-        harness.page.evaluate(PAGE_HELPERS)
-        yield harness.page
+    with analyzer_page(PAGE_HELPERS) as opened:
+        yield opened
 
 
 def flame_scene(box: tuple[int, int, int, int]) -> npt.NDArray[np.uint8]:

@@ -18,8 +18,7 @@ from playwright.sync_api import Page
 
 from app.protocol import channels
 from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL, DEFAULT_PROFILE
-from app.server.config import Settings
-from app.tools import parity
+from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
 from vehicle_agent.video import draw_frame_tag
 
@@ -63,8 +62,8 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    with parity.open_harness(Settings(environment="development", token=None)) as harness:
-        yield harness.page
+    with analyzer_page() as opened:
+        yield opened
 
 
 def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
