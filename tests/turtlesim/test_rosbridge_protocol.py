@@ -59,6 +59,14 @@ def only_error(replies: list[dict[str, Any]]) -> dict[str, Any]:
     return errors[0]
 
 
+def refusal(session: RosbridgeSession, words: str, **message: Any) -> dict[str, Any]:
+    """Send ``message``: the one error it gets names ``words`` and echoes the message's id."""
+    error = only_error(send(session, **message))
+    assert words in error["msg"]
+    assert error["id"] == message["id"]
+    return error
+
+
 def service_call(session: RosbridgeSession, service: str, **args: Any) -> dict[str, Any]:
     """Call a service and return its service_response."""
     replies = send(session, op="call_service", id="c1", service=service, args=args)
@@ -96,9 +104,7 @@ def test_malformed_frames_get_a_status_error(
 
 
 def test_unknown_op_names_it_and_echoes_the_id(session: RosbridgeSession) -> None:
-    error = only_error(send(session, op="fly", id="f1"))
-    assert "fly" in error["msg"]
-    assert error["id"] == "f1"
+    refusal(session, "fly", op="fly", id="f1")
 
 
 def test_integer_ids_are_echoed_too(session: RosbridgeSession) -> None:
@@ -135,10 +141,8 @@ def test_an_id_of_the_wrong_type_is_reported_and_not_echoed(session: RosbridgeSe
 def test_missing_and_mistyped_fields_are_named(
     session: RosbridgeSession, message: dict[str, Any], field: str
 ) -> None:
-    error = only_error(send(session, id="m1", **message))
-    assert field in error["msg"]
+    error = refusal(session, field, id="m1", **message)
     assert error["msg"].startswith(message["op"])
-    assert error["id"] == "m1"
 
 
 # -- subscribe / unsubscribe ------------------------------------------------------------------
@@ -252,9 +256,7 @@ def test_unsubscribe_of_what_was_not_subscribed_is_a_warning(session: RosbridgeS
 def test_subscribe_to_what_does_not_exist_is_an_error(
     session: RosbridgeSession, message: dict[str, Any], words: str
 ) -> None:
-    error = only_error(send(session, op="subscribe", id="s9", **message))
-    assert words in error["msg"]
-    assert error["id"] == "s9"
+    refusal(session, words, op="subscribe", id="s9", **message)
     assert session.subscribed_topics() == []
 
 
@@ -323,9 +325,7 @@ def test_advertise_then_publish_then_unadvertise(world: World, session: Rosbridg
 def test_bad_advertise_is_an_error(
     session: RosbridgeSession, message: dict[str, Any], words: str
 ) -> None:
-    error = only_error(send(session, op="advertise", id="a3", **message))
-    assert words in error["msg"]
-    assert error["id"] == "a3"
+    refusal(session, words, op="advertise", id="a3", **message)
 
 
 @pytest.mark.parametrize(
@@ -343,9 +343,7 @@ def test_bad_advertise_is_an_error(
 def test_bad_publish_is_an_error_and_changes_nothing(
     world: World, session: RosbridgeSession, message: dict[str, Any], words: str
 ) -> None:
-    error = only_error(send(session, op="publish", id="p1", **message))
-    assert words in error["msg"]
-    assert error["id"] == "p1"
+    refusal(session, words, op="publish", id="p1", **message)
     world.tick(5)
     pose = world.sim.pose("turtle1")
     assert (pose.x, pose.theta, pose.linear_velocity) == (pytest.approx(CENTRE), 0.0, 0.0)
