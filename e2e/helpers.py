@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,7 @@ import numpy.typing as npt
 from playwright.sync_api import Page
 
 from app.server.serve import RunningServer
+from tests.helpers import waiting
 
 FACES = Path(__file__).resolve().parents[1] / "tests" / "data" / "faces"
 
@@ -70,12 +70,11 @@ def turtle_state(server: RunningServer, name: str = "turtle1") -> dict[str, Any]
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
-    """Poll ``predicate`` until it holds; fail naming ``what`` after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
-        time.sleep(0.1)
+    """Poll ``predicate`` until it holds; fail naming ``what`` after ``timeout_s``.
+
+    Every 0.1 s: the end-to-end predicates ask a page or the server, so polling is not free.
+    """
+    waiting.wait_until(predicate, timeout_s, what, poll_s=0.1)
 
 
 VIDEO = "document.querySelector('[data-testid=video]')"

@@ -19,10 +19,12 @@ async def eventually(
         raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from None
 
 
-def wait_until(condition: Callable[[], bool], timeout: float, what: str) -> None:
+def wait_until(
+    condition: Callable[[], bool], timeout: float, what: str, *, poll_s: float = 0.01
+) -> None:
     """Poll ``condition`` from synchronous code until it holds; AssertionError after ``timeout``."""
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.01)
+        time.sleep(poll_s)
