@@ -10,6 +10,7 @@ import math
 import socket
 import subprocess
 import time
+from collections.abc import Iterator
 
 import pytest
 from aioice import stun
@@ -47,20 +48,30 @@ def test_udp_from_behind_a_nat_shows_the_nat_address_and_the_reply_comes_back(
         assert client.recvfrom(100) == (b"back", (CLOUD, PORT))
 
 
-def test_tcp_from_the_robot_arrives_from_its_nat(lab: Lab) -> None:
+@contextlib.contextmanager
+def _robot_to_cloud_tcp(
+    lab: Lab, timeout_s: float
+) -> Iterator[tuple[socket.socket, socket.socket, tuple[str, int]]]:
+    """A TCP connection from the robot to the cloud: its two ends and the source the cloud saw."""
     with lab.socket("cloud", socket.SOCK_STREAM) as listener:
         # The other TCP test's connection may still sit in TIME_WAIT on the same port.
         listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         listener.bind((CLOUD, PORT))
         listener.listen()
-        listener.settimeout(2)
+        listener.settimeout(timeout_s)
         with lab.socket("robot", socket.SOCK_STREAM) as client:
-            client.settimeout(2)
+            client.settimeout(timeout_s)
             client.connect((CLOUD, PORT))
             accepted, source = listener.accept()
             with accepted:
-                client.sendall(b"ping")
-                assert accepted.recv(4) == b"ping"
+                accepted.settimeout(timeout_s)
+                yield client, accepted, source
+
+
+def test_tcp_from_the_robot_arrives_from_its_nat(lab: Lab) -> None:
+    with _robot_to_cloud_tcp(lab, timeout_s=2) as (client, accepted, source):
+        client.sendall(b"ping")
+        assert accepted.recv(4) == b"ping"
     assert source[0] == ROBOT_NAT
 
 
@@ -179,24 +190,13 @@ def test_a_dead_run_namespaces_are_removed_by_the_next_lab() -> None:
 def test_cap_1mbit_holds_the_robot_uplink_to_its_rate(lab: Lab) -> None:
     applied = lab.apply("cap_1mbit")
     payload = b"x" * 125_000  # one second's worth at 1 Mbit/s
-    with lab.socket("cloud", socket.SOCK_STREAM) as listener:
-        # The other TCP test's connection may still sit in TIME_WAIT on the same port.
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((CLOUD, PORT))
-        listener.listen()
-        listener.settimeout(10)
-        with lab.socket("robot", socket.SOCK_STREAM) as client:
-            client.settimeout(10)
-            client.connect((CLOUD, PORT))
-            accepted, _ = listener.accept()
-            with accepted:
-                accepted.settimeout(10)
-                started = time.monotonic()
-                client.sendall(payload)
-                received = 0
-                while received < len(payload):
-                    received += len(accepted.recv(65536))
-                elapsed = time.monotonic() - started
+    with _robot_to_cloud_tcp(lab, timeout_s=10) as (client, accepted, _):
+        started = time.monotonic()
+        client.sendall(payload)
+        received = 0
+        while received < len(payload):
+            received += len(accepted.recv(65536))
+        elapsed = time.monotonic() - started
     # A lower bound only: the bytes cannot cross faster than the cap (less the token bucket's
     # burst), however fast the machine is.
     assert elapsed >= 0.6 * len(payload) * 8 / (applied.uplink_kbit * 1000), elapsed
