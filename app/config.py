@@ -34,6 +34,9 @@ class Settings(BaseSettings):
     max_message_bytes: int = 64 * 1024
     operations_spec: Path = PACKAGE_DIR / "operations.json"
     sim_tick_s: float = 0.016
+    # When set (redis://host:port/db), instances sharing it form one signaling service
+    # (app.server.fleet); unset, the hub runs embedded in this one process.
+    redis_url: str | None = None
 
     @model_validator(mode="after")
     def _refuse_unsafe(self) -> Settings:

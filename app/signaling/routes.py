@@ -11,7 +11,7 @@ import asyncio
 import json
 import logging
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
@@ -36,11 +36,21 @@ class _Shut:
 _OutboxItem = dict[str, Any] | _Shut
 
 
+class HubPort(Protocol):
+    """What the route needs of a hub: :class:`Hub`, or the fleet's Redis-backed one, which
+    returns what it can decide at once and hands later actions to :meth:`Switchboard.dispatch`."""
+
+    def connect(self) -> ConnId: ...
+    def receive(self, conn: ConnId, text: str) -> list[Action]: ...
+    def receive_binary(self, conn: ConnId) -> list[Action]: ...
+    def disconnect(self, conn: ConnId) -> list[Action]: ...
+
+
 @dataclass
 class Switchboard:
     """The hub plus the outbox of every open connection; lives on ``app.state.signaling``."""
 
-    hub: Hub
+    hub: HubPort
     # Messages waiting for a slow reader; past this the reader is closed rather than buffered.
     outbox_limit: int = 256
     _outboxes: dict[ConnId, asyncio.Queue[_OutboxItem]] = field(default_factory=dict, init=False)

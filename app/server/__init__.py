@@ -1,0 +1,1 @@
+"""The server: app factory, configuration, pages, WebSocket adapter and the fleet layer."""
