@@ -9,22 +9,16 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
-import socket
 import signal
-import subprocess
-import sys
-import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import AsyncExitStack
-from pathlib import Path
 
-import httpx
 import pytest
 from websockets.asyncio.client import connect
 
 from app.serve import RunningServer
 from app.server.fleet import keys
+from tests.fleet.conftest import ServeProcess
 from tests.signaling.test_signaling_ws import (
     Connect,
     Peer,
@@ -51,8 +45,6 @@ __all__ = [
     "test_offer_answer_and_candidates_are_relayed_between_two_peers",
 ]
 
-REPO = Path(__file__).resolve().parents[2]
-
 
 @pytest.fixture
 async def new_peer(start_instance: Callable[[], RunningServer]) -> AsyncIterator[Connect]:
@@ -70,50 +62,8 @@ async def new_peer(start_instance: Callable[[], RunningServer]) -> AsyncIterator
         yield open_peer
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-@pytest.fixture
-def serve_process(redis_url: str, tmp_path: Path) -> Iterator[Callable[[], tuple[str, subprocess.Popen[bytes]]]]:
-    """Start ``autopilot serve`` as its own process (so that it can be SIGKILLed)."""
-    processes: list[subprocess.Popen[bytes]] = []
-
-    def start() -> tuple[str, subprocess.Popen[bytes]]:
-        port = _free_port()
-        env = {**os.environ, "AUTOPILOT_REDIS_URL": redis_url, "AUTOPILOT_TOKEN": "",
-               "AUTOPILOT_ENVIRONMENT": "development"}
-        env.pop("AUTOPILOT_TOKEN")
-        with (tmp_path / f"serve-{port}.log").open("wb") as log:
-            process = subprocess.Popen(
-                [sys.executable, "-m", "app.cli", "serve", "--port", str(port)],
-                cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
-            )
-        processes.append(process)
-        url = f"http://127.0.0.1:{port}"
-        for _ in range(200):
-            try:
-                if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
-                    return url, process
-            except httpx.HTTPError:
-                pass
-            if process.poll() is not None:
-                break
-            time.sleep(0.1)
-        raise RuntimeError(f"autopilot serve did not start: {(tmp_path / f'serve-{port}.log').read_text()}")
-
-    yield start
-    for process in processes:
-        if process.poll() is None:
-            process.terminate()
-            process.wait(timeout=10)
-
-
 async def test_a_killed_instance_s_peers_leave_their_rooms_everywhere_else(
-    serve_process: Callable[[], tuple[str, subprocess.Popen[bytes]]],
+    serve_process: ServeProcess,
 ) -> None:
     first_url, first = serve_process()
     second_url, _ = serve_process()
@@ -147,7 +97,8 @@ async def test_a_killed_instance_s_peers_leave_their_rooms_everywhere_else(
         again = await joined(lambda: peer_on(second_url), "v", "vehicle", "a")
         assert (await client_a.recv())["peers"] == [{"name": "v", "role": "vehicle"}]
         await client_a.send({"type": "candidate", "to": "v", "candidate": None})
-        assert await again.recv() == {"type": "candidate", "to": "v", "candidate": None, "from": "c"}
+        expected = {"type": "candidate", "to": "v", "candidate": None, "from": "c"}
+        assert await again.recv() == expected
 
 
 async def _until_roster(peer: Peer, roster: list[dict[str, str]]) -> dict[str, object]:

@@ -31,12 +31,25 @@ def redis_server(workdir: Path) -> Iterator[str]:
     """Run ``redis-server`` (no persistence) until the block ends; yields its ``redis://`` URL."""
     binary = shutil.which("redis-server")
     if binary is None:
-        raise RuntimeError("redis-server not found: run scripts/setup (apt-get install redis-server)")
+        raise RuntimeError("redis-server not found: run scripts/setup (it installs redis-server)")
     for _ in range(ATTEMPTS):
         port = _free_port()
         process = subprocess.Popen(
-            [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly",
-             "no", "--dir", str(workdir), "--loglevel", "warning"],
+            [
+                binary,
+                "--port",
+                str(port),
+                "--bind",
+                "127.0.0.1",
+                "--save",
+                "",
+                "--appendonly",
+                "no",
+                "--dir",
+                str(workdir),
+                "--loglevel",
+                "warning",
+            ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
