@@ -12,6 +12,7 @@ from app import operations
 from app.config import PACKAGE_DIR, Settings
 from app.pages import router as pages_router
 from app.server.fleet.bus import FleetHub
+from app.server.fleet.page import router as fleet_router
 from app.signaling.routes import Switchboard
 from app.signaling.routes import router as signaling_router
 from app.turtlesim.routes import Simulator
@@ -49,6 +50,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.fleet_hub = fleet
     app.include_router(signaling_router)
     app.include_router(pages_router)
+    app.include_router(fleet_router)
     app.state.simulator = Simulator(settings.sim_tick_s, settings.max_message_bytes)
     app.state.turtlesim = app.state.simulator.sim
     app.include_router(turtlesim_router)

@@ -18,6 +18,7 @@ import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
+import httpx
 import pytest
 import redis.asyncio as aioredis
 from playwright.async_api import async_playwright
@@ -134,6 +135,21 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
             await eventually(lambda: goals() > goals_before + 5, 90, "goals from pool B's relay")
             await eventually(lambda: 0 < heading() < 30, 60, "the turtle to face right")
             assert await client.evaluate("() => window.autopilotStatus.wantPiloting") is True
+
+            # The fleet page's table, from either instance, shows the room as pool B runs it.
+            def fleet_row() -> dict[str, object]:
+                table = httpx.get(f"{first.url}/fleet/rooms", timeout=10).json()
+                row: dict[str, object] = next(r for r in table if r["room"] == "default")
+                return row
+
+            await eventually(
+                lambda: (row := fleet_row())["pool"] == "pool-b" and row["piloting"] is True,
+                10,
+                "the fleet table to show pool B piloting",
+            )
+            row = fleet_row()
+            assert row["vehicles"] == ["vehicle"] and row["clients"] == ["client"], row
+            assert row["relay"] == "relay" and row["op"], row
             await client.screenshot(path=str(tmp_path / "client.png"))
             await browser.close()
     finally:

@@ -1,0 +1,112 @@
+"""``/fleet``: one row per room, live. ``/fleet/rooms`` is the same table as JSON.
+
+Rows come from Redis when this instance is part of a fleet (every room of every instance: the
+rooms set, each room's member list, its relay lease and the status its pool publishes), else
+from the embedded hub (rooms of this process; no pool, so no piloting figures).
+
+Access: every route here depends on :func:`require_fleet_access`, the one place where a
+credential check belongs (it allows everyone until access control exists).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+from urllib.parse import urlencode
+
+import redis.asyncio as aioredis
+from fastapi import APIRouter, Depends, Request
+from fastapi.responses import HTMLResponse
+from fastapi.templating import Jinja2Templates
+from pydantic import BaseModel
+
+from app.config import PACKAGE_DIR
+from app.server.fleet import keys
+from app.server.fleet.bus import FleetHub
+from app.signaling.core import Hub
+
+templates = Jinja2Templates(directory=PACKAGE_DIR / "templates")
+
+
+def require_fleet_access(request: Request) -> None:
+    """HOOK for access control: raise ``HTTPException(401/403)`` here to refuse a request.
+
+    The fleet page shows every room of the service, so once clients need a credential this must
+    check the same one (e.g. the ``token`` query parameter or a header against
+    ``request.app.state.settings``). Until then it allows everyone.
+    """
+
+
+router = APIRouter(dependencies=[Depends(require_fleet_access)])
+
+
+class RoomRow(BaseModel):
+    """One room of the fleet as the page shows it."""
+
+    room: str
+    vehicles: list[str]
+    relay: str | None
+    pool: str | None  # the relay pool serving the room, when its relay comes from one
+    clients: list[str]
+    piloting: bool | None  # None: unknown (a relay not run by a pool)
+    op: str | None
+    goals_per_s: float | None
+    ms_per_snapshot: float | None
+    client_url: str
+
+
+def _row(room: str, members: list[dict[str, str]], status: dict[str, Any] | None) -> RoomRow:
+    def named(role: str) -> list[str]:
+        return [m["name"] for m in members if m["role"] == role]
+
+    relays = named("relay")
+    status = status or {}
+    return RoomRow(
+        room=room,
+        vehicles=named("vehicle"),
+        relay=relays[0] if relays else None,
+        pool=status.get("pool"),
+        clients=named("client"),
+        piloting=status.get("piloting"),
+        op=status.get("op"),
+        goals_per_s=status.get("goals_per_s"),
+        ms_per_snapshot=status.get("ms_per_snapshot"),
+        client_url=f"/client?{urlencode({'room': room, 'name': 'client'})}",
+    )
+
+
+async def fleet_rows(redis: aioredis.Redis) -> list[RoomRow]:
+    """Every room of the fleet, sorted by name, from Redis."""
+    rows = []
+    for room in sorted(str(r) for r in await redis.smembers(keys.ROOMS)):
+        stored = await redis.hgetall(keys.room_members(room))
+        entries = sorted((json.loads(v) for v in stored.values()), key=lambda e: int(e["seq"]))
+        members = [{"name": e["login"]["name"], "role": e["login"]["role"]} for e in entries]
+        if not members:
+            continue  # claimed a moment ago, or emptied and about to be released
+        raw_status = await redis.get(keys.relay_status(room))
+        rows.append(_row(room, members, json.loads(raw_status) if raw_status else None))
+    return rows
+
+
+def hub_rows(hub: Hub) -> list[RoomRow]:
+    """Every room of the embedded hub, sorted by name."""
+    return [
+        _row(room, [p.model_dump() for p in hub.roster(room)], None) for room in sorted(hub.rooms())
+    ]
+
+
+@router.get("/fleet/rooms")
+async def fleet_rooms(request: Request) -> list[RoomRow]:
+    """The fleet table as JSON."""
+    hub = request.app.state.signaling.hub
+    if isinstance(hub, FleetHub):
+        return await fleet_rows(hub.redis)
+    assert isinstance(hub, Hub)
+    return hub_rows(hub)
+
+
+@router.get("/fleet", response_class=HTMLResponse)
+async def fleet_page(request: Request) -> HTMLResponse:
+    """The fleet table, refreshed live by ``/static/js/fleet.js``."""
+    return templates.TemplateResponse(request, "fleet.html", {"refresh_ms": 1000})
