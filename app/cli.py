@@ -8,17 +8,18 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import sys
 from collections.abc import Sequence
 
+from app.supervise import configure_logging
+
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "serve": ("app.serve", "run the signaling server, role pages and simulated turtle"),
-    "relay": ("app.relay_service", "run the relay page in headless Chromium"),
+    "serve": ("app.server.serve", "run the signaling server, role pages and simulated turtle"),
+    "relay": ("app.tools.relay_service", "run the relay page in headless Chromium"),
     "vehicle": ("vehicle_agent.cli", "run the Python vehicle agent (aiortc)"),
-    "demo": ("app.demo", "run the whole system on an embedded default"),
-    "parity": ("app.parity", "compare OpenCV.js detections with Python OpenCV"),
-    "bench": ("bench.cli", "measure the running system and write a report"),
+    "demo": ("app.tools.demo", "run the whole system on an embedded default"),
+    "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
+    "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
 }
 
 
@@ -38,10 +39,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == chosen:
             importlib.import_module(module_name).add_arguments(p)
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.INFO,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
+    configure_logging(args.verbose)
     module = importlib.import_module(SUBCOMMANDS[args.command][0])
     status: int = module.run(args)
     return status

@@ -1,6 +1,6 @@
 """Fixtures for the end-to-end tests: the server, headless Chromium, a fake camera video.
 
-Pages run in Debian's Chromium through Playwright (``app.browser``). The vehicle gets its own
+Pages run in Debian's Chromium through Playwright (``app.tools.browser``). The vehicle gets its own
 browser because the fake-camera file is a per-browser flag. Every page's screenshot and console
 are kept under ``artifacts/<test>/`` whether the test passes or fails.
 """
@@ -16,9 +16,9 @@ from urllib.parse import urlencode
 import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect, sync_playwright
 
-from app.browser import chromium_args, chromium_path
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
+from app.server.config import Settings
+from app.server.serve import RunningServer, start_in_thread
+from app.tools.browser import chromium_args, chromium_path
 from e2e.helpers import FACES, FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]

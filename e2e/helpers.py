@@ -14,9 +14,9 @@ import numpy as np
 import numpy.typing as npt
 from playwright.sync_api import Page
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 
-FACES = Path(__file__).resolve().parents[2] / "shared" / "data" / "faces"
+FACES = Path(__file__).resolve().parents[1] / "tests" / "data" / "faces"
 
 WIDTH, HEIGHT, FPS = 640, 480, 15
 

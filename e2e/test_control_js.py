@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from vehicle_agent import control
 
 pytestmark = [pytest.mark.browser]

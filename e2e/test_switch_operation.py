@@ -10,8 +10,8 @@ import cv2
 import pytest
 from playwright.sync_api import Browser, Playwright, expect
 
-from app.browser import chromium_args, chromium_path
-from app.serve import RunningServer
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
 from e2e.conftest import OpenRole, artifacts_dir
 from e2e.helpers import (
     FACES,

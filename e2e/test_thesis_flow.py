@@ -8,7 +8,7 @@ import time
 import pytest
 from playwright.sync_api import Browser, expect
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, artifacts_dir
 from e2e.helpers import status, turtle_state, wait_until
 

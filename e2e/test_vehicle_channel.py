@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import Browser, expect
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from e2e.conftest import OpenRole
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser]

@@ -6,8 +6,8 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
+from app.server.config import Settings
+from app.server.serve import RunningServer, start_in_thread
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 
 
 def autopilot(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:

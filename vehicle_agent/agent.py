@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import random
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
@@ -21,6 +20,8 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from app.protocol.errors import describe
+from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -45,24 +46,6 @@ class AgentConfig:
     profile: str = "default"
     goal_timeout_s: float | None = None
     ice_servers: list[RTCIceServer] = field(default_factory=list)
-
-
-class Backoff:
-    """Exponential backoff with jitter: 0.5 s, 1 s, 2 s ... up to ``cap``."""
-
-    def __init__(self, first: float = 0.5, cap: float = 8.0) -> None:
-        self.first, self.cap = first, cap
-        self._next = first
-
-    def next(self) -> float:
-        """The delay to wait now; the following one doubles."""
-        delay = self._next
-        self._next = min(self.cap, self._next * 2)
-        return delay * random.uniform(0.9, 1.1)
-
-    def reset(self) -> None:
-        """After a success, start again from the first delay."""
-        self._next = self.first
 
 
 class GoalMessage(BaseModel):
@@ -350,9 +333,7 @@ class Agent:
         try:
             goal = GoalMessage.model_validate(message)
         except ValidationError as exc:
-            first = exc.errors()[0]
-            where = ".".join(str(p) for p in first["loc"])
-            self._reject(link, f"bad goal: {where}: {first['msg']}", "goal")
+            self._reject(link, f"bad goal: {describe(exc)}", "goal")
             return
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h

@@ -6,11 +6,11 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import signal
 from pathlib import Path
 
 from aiortc import RTCIceServer
 
+from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -126,9 +126,7 @@ async def _main(args: argparse.Namespace) -> int:
     )
     agent = Agent(config, video, turtle, events)
     task = asyncio.create_task(agent.run())
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, task.cancel)
+    on_stop_signals(task.cancel)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task

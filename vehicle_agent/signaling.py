@@ -7,10 +7,11 @@ import json
 import logging
 from collections.abc import AsyncIterator
 from typing import Any
-from urllib.parse import urlsplit, urlunsplit
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
+
+from app.protocol.urls import ServerUrlError, ws_endpoint
 
 log = logging.getLogger(__name__)
 
@@ -29,14 +30,10 @@ class LoginRefused(SignalingError):
 
 def ws_url(server: str) -> str:
     """The ``/ws`` endpoint for a server base URL (``http://host:port`` or ``ws://.../ws``)."""
-    parts = urlsplit(server)
-    scheme = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}.get(parts.scheme)
-    if scheme is None or not parts.netloc:
-        raise SignalingError(f"server URL must look like http://host:port, not {server!r}")
-    path = parts.path.rstrip("/")
-    if not path.endswith("/ws"):
-        path += "/ws"
-    return urlunsplit((scheme, parts.netloc, path, parts.query, ""))
+    try:
+        return ws_endpoint(server)
+    except ServerUrlError as exc:
+        raise SignalingError(str(exc)) from None
 
 
 class SignalingClient:

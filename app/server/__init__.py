@@ -1,1 +1,2 @@
-"""The server: app factory, configuration, pages, WebSocket adapter and the fleet layer."""
+"""The web server: app factory, settings, pages, WebSocket adapters and HTTP routes, and
+the fleet layer on Redis (:mod:`app.server.fleet`)."""

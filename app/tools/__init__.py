@@ -1,1 +1,1 @@
-"""Tools that drive the system from outside: browser, relay service and pool, demo, bench."""
+"""Tools that drive Chromium or child processes: relay service and pool, demo, parity, bench."""

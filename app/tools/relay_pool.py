@@ -20,7 +20,6 @@ import contextlib
 import json
 import logging
 import os
-import signal
 import socket
 import uuid
 from dataclasses import dataclass
@@ -30,9 +29,10 @@ import redis.asyncio as aioredis
 from playwright.async_api import Browser, Page, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
-from app.browser import BrowserNotFound, chromium_args, chromium_path
-from app.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
 from app.server.fleet import keys
+from app.supervise import on_stop_signals
+from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
+from app.tools.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
 
 log = logging.getLogger(__name__)
 
@@ -235,7 +235,5 @@ def run(args: argparse.Namespace) -> int:
 
 async def _main(pool: RelayPool) -> None:
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    on_stop_signals(stop.set)
     await pool.run(stop)

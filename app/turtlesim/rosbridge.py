@@ -34,6 +34,7 @@ from pydantic import (
     field_validator,
 )
 
+from app.protocol.errors import describe
 from app.turtlesim.sim import TurtleSim
 
 log = logging.getLogger(__name__)
@@ -206,10 +207,7 @@ def _parse(model: type[_Model], data: object, what: str = "") -> _Model:
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or 'message'}: {err['msg']}"
-            for err in exc.errors()
-        )
+        problems = describe(exc)
         raise ProtocolError(f"{what}: {problems}" if what else problems) from None
 
 

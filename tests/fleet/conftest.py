@@ -13,8 +13,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from app.config import Settings
-from app.serve import RunningServer
+from app.server.config import Settings
+from app.server.serve import RunningServer
 from tests.helpers.redis_server import redis_server
 
 

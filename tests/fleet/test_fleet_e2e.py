@@ -23,12 +23,13 @@ import pytest
 import redis.asyncio as aioredis
 from playwright.async_api import async_playwright
 
-from app.browser import chromium_args, chromium_path
-from app.serve import RunningServer
 from app.server.fleet import keys
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
 from app.tools.relay_pool import RelayPool, room_members
 from tests.fleet.conftest import REPO
-from tests.vehicle_agent.test_agent_pages import H, W, eventually, page_until
+from tests.helpers.waiting import eventually
+from tests.vehicle_agent.test_agent_pages import H, W, page_until
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle

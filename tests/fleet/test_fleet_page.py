@@ -11,9 +11,9 @@ import pytest
 from playwright.async_api import Page, async_playwright
 from websockets.asyncio.client import connect
 
-from app.browser import chromium_args, chromium_path
-from app.serve import RunningServer
-from tests.signaling.test_signaling_ws import Peer, joined
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
+from tests.server.test_signaling_ws import Peer, joined
 
 pytestmark = [pytest.mark.browser]
 

@@ -16,10 +16,10 @@ from contextlib import AsyncExitStack
 import pytest
 from websockets.asyncio.client import connect
 
-from app.serve import RunningServer
 from app.server.fleet import keys
+from app.server.serve import RunningServer
 from tests.fleet.conftest import ServeProcess
-from tests.signaling.test_signaling_ws import (
+from tests.server.test_signaling_ws import (
     Connect,
     Peer,
     joined,

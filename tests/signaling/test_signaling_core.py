@@ -7,8 +7,9 @@ from typing import Any
 
 import pytest
 
-from app.config import Settings
-from app.signaling.core import Action, Close, Hub, Outgoing
+from app.server.config import Settings
+from app.server.signaling import Switchboard
+from app.signaling.hub import Action, Close, Hub, Outgoing
 
 
 class Harness:
@@ -173,7 +174,7 @@ def test_token_must_match_when_the_server_has_one(token: str | None, accepted: b
 
 
 def test_hub_from_settings_enforces_token_and_size() -> None:
-    hub = Hub.from_settings(Settings(token="t", max_message_bytes=1000))
+    hub = Switchboard.from_settings(Settings(token="t", max_message_bytes=1000)).hub
     assert hub.token == "t" and hub.max_message_bytes == 1000
 
 

@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 from playwright.async_api import Page, async_playwright
 
-from app.browser import chromium_args, chromium_path
-from app.serve import RunningServer
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
 from app.turtlesim.sim import TurtleSim
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]

@@ -21,9 +21,9 @@ import pytest
 import roslibpy
 import websockets
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
-from app.turtlesim.routes import Simulator
+from app.server.config import Settings
+from app.server.rosbridge import Simulator
+from app.server.serve import RunningServer, start_in_thread
 from app.turtlesim.sim import TurtleSim
 
 pytestmark = pytest.mark.timeout(120)
@@ -68,14 +68,6 @@ def fresh_world(ros: roslibpy.Ros) -> None:
     roslibpy.Service(ros, "/reset", "std_srvs/Empty").call(
         roslibpy.ServiceRequest({}), timeout=WAIT_S
     )
-
-
-def wait_for(condition: Callable[[], bool], what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 def state(server: RunningServer) -> dict[str, Any]:

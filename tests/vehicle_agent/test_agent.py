@@ -15,8 +15,9 @@ from typing import Any
 
 import pytest
 
-from app.config import Settings
-from app.serve import RunningServer, start_in_thread
+from app.server.config import Settings
+from app.server.serve import RunningServer, start_in_thread
+from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
@@ -105,12 +106,6 @@ async def pilot_until(
             )
             await asyncio.sleep(0.05)
     return seq
-
-
-async def eventually(condition: Callable[[], bool], timeout: float = 10.0) -> None:
-    async with asyncio.timeout(timeout):
-        while not condition():
-            await asyncio.sleep(0.02)
 
 
 async def test_agent_streams_tagged_video_and_pose_telemetry(server: RunningServer) -> None:

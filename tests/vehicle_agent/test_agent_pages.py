@@ -10,7 +10,7 @@ import asyncio
 import contextlib
 import math
 import statistics
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -18,9 +18,10 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import Page, async_playwright
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
-from app.browser import chromium_args, chromium_path
-from app.relay_service import RelayService
-from app.serve import RunningServer
+from app.server.serve import RunningServer
+from app.tools.browser import chromium_args, chromium_path
+from app.tools.relay_service import RelayService
+from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
@@ -30,15 +31,6 @@ pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
 W, H = 640, 480
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
-
-
-async def eventually(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    try:
-        async with asyncio.timeout(timeout):
-            while not condition():
-                await asyncio.sleep(0.05)
-    except TimeoutError:
-        raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from None
 
 
 async def page_until(page: Page, expression: str, timeout: float, what: str) -> None:
@@ -194,8 +186,12 @@ async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
         # tick stretches one gap and shortens the next, but the mean stays at 1.1 s.
         assert all(gap > 0.9 for gap in gaps), gaps
         assert statistics.mean(gaps) == pytest.approx(1.1, abs=0.1), gaps
-        goals = [e["t"] for e in s.events if e["ev"] == "goal"]
-        assert len(goals) >= 2
+        def goal_times() -> list[float]:
+            return [e["t"] for e in s.events if e["ev"] == "goal"]
+
+        # Enough goals that one late snapshot (a loaded machine) cannot move the median.
+        await eventually(lambda: len(goal_times()) >= 5, 30, "five thesis-profile goals")
+        goals = goal_times()
         # Snapshots every 1.5 s; analysis time varies, so the goals' spacing jitters around it.
         goal_gaps = [b - a for a, b in zip(goals, goals[1:], strict=False)]
         assert statistics.median(goal_gaps) > 1.2, goal_gaps

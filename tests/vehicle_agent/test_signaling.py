@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from vehicle_agent.signaling import LoginRefused, SignalingClient, SignalingError, ws_url
 
 

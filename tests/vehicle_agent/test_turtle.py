@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from app.serve import RunningServer
+from app.server.serve import RunningServer
 from vehicle_agent.control import Pose, Twist
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 

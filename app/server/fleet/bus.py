@@ -41,10 +41,10 @@ from typing import Any
 
 import redis.asyncio as aioredis
 
-from app.config import Settings
+from app.protocol.signaling import Login, ParseError, parse
+from app.server.config import Settings
 from app.server.fleet import keys
-from app.signaling.core import Action, Close, ConnId, Hub, Outgoing
-from app.signaling.messages import Login, ParseError, parse
+from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
 
 log = logging.getLogger(__name__)
 

@@ -11,21 +11,21 @@ credential check belongs (it allows everyone until access control exists).
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlencode
 
-import redis.asyncio as aioredis
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import HTMLResponse
-from fastapi.templating import Jinja2Templates
 from pydantic import BaseModel
 
-from app.config import PACKAGE_DIR
 from app.server.fleet import keys
-from app.server.fleet.bus import FleetHub
-from app.signaling.core import Hub
+from app.server.pages import templates
+from app.signaling.hub import Hub
 
-templates = Jinja2Templates(directory=PACKAGE_DIR / "templates")
+if TYPE_CHECKING:  # the fleet extra: imported only where Redis is configured
+    import redis.asyncio as aioredis
+
+    from app.server.fleet.bus import FleetHub
 
 
 def require_fleet_access(request: Request) -> None:
@@ -99,11 +99,10 @@ def hub_rows(hub: Hub) -> list[RoomRow]:
 @router.get("/fleet/rooms")
 async def fleet_rooms(request: Request) -> list[RoomRow]:
     """The fleet table as JSON."""
-    hub = request.app.state.signaling.hub
-    if isinstance(hub, FleetHub):
-        return await fleet_rows(hub.redis)
-    assert isinstance(hub, Hub)
-    return hub_rows(hub)
+    hub: Hub | FleetHub = request.app.state.signaling.hub
+    if isinstance(hub, Hub):
+        return hub_rows(hub)
+    return await fleet_rows(hub.redis)
 
 
 @router.get("/fleet", response_class=HTMLResponse)

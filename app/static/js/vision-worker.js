@@ -55,7 +55,7 @@ async function init() {
   session.spec = await (await fetchOk('/operations.json')).json();
   const cascades = new Set();
   for (const op of session.spec.operations) {
-    for (const params of [op.params, { ...op.params, ...op.thesis }]) {
+    for (const params of Object.values(op.paramsByProfile)) {
       for (const name of params.cascades ?? []) cascades.add(name);
     }
   }
@@ -83,8 +83,10 @@ function instanceFor(opId, profile) {
   if (instance) return instance;
   const op = session.spec.operations.find((o) => o.id === opId);
   if (!op) throw new Error(`unknown operation "${opId}"`);
-  if (profile !== 'default' && profile !== 'thesis') throw new Error(`unknown profile "${profile}"`);
-  const spec = profile === 'thesis' ? { ...op, params: { ...op.params, ...op.thesis } } : op;
+  // The server merged each profile's parameters (app/vision/spec.py); nothing is merged here.
+  const params = op.paramsByProfile[profile];
+  if (!params) throw new Error(`unknown profile "${profile}"`);
+  const spec = { ...op, params };
   instance = session.modules.get(op.module).create(session.cv, spec, session.files);
   session.instances.set(key, instance);
   return instance;

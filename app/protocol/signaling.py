@@ -1,0 +1,157 @@
+"""The signaling messages of DESIGN §2 as pydantic models, parsed once at the edge.
+
+Peers may add fields of their own (they are relayed as sent), except ``from``: the server stamps
+the sender's name on everything it relays, whatever the peer wrote there.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal, get_args
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, TypeAdapter, ValidationError
+
+from app.protocol.constants import Role
+from app.protocol.errors import describe
+
+# Names and rooms show up in logs and on pages; keep them short and non-empty.
+Name = Annotated[str, StringConstraints(min_length=1, max_length=64)]
+
+
+class _Incoming(BaseModel):
+    # strict: a number is not a name; extra: pages may carry fields of their own.
+    model_config = ConfigDict(extra="allow", strict=True, frozen=True)
+
+
+class Login(_Incoming):
+    """A peer introduces itself; must be the first message on a connection."""
+
+    type: Literal["login"]
+    name: Name
+    role: Role
+    room: Name = "default"
+    token: str | None = None
+
+
+class Offer(_Incoming):
+    """An SDP offer from a vehicle or client to another peer (normally the room's relay)."""
+
+    type: Literal["offer"]
+    to: Name
+    sdp: str
+
+
+class Answer(_Incoming):
+    """An SDP answer from the relay to a vehicle or client."""
+
+    type: Literal["answer"]
+    to: Name
+    sdp: str
+
+
+class Candidate(_Incoming):
+    """A trickled ICE candidate (RTCIceCandidateInit), or null at the end of candidates."""
+
+    type: Literal["candidate"]
+    to: Name
+    candidate: dict[str, Any] | None
+
+
+class Leave(_Incoming):
+    """The sender leaves its room; the server tells the others and closes the connection."""
+
+    type: Literal["leave"]
+
+
+class Start(_Incoming):
+    """A client asks the room's relay to start piloting."""
+
+    type: Literal["start"]
+
+
+class Stop(_Incoming):
+    """A client asks the room's relay to stop piloting."""
+
+    type: Literal["stop"]
+
+
+class GetOps(_Incoming):
+    """A client asks the room's relay for its list of operations."""
+
+    type: Literal["getOps"]
+
+
+Incoming = Annotated[
+    Login | Offer | Answer | Candidate | Leave | Start | Stop | GetOps,
+    Field(discriminator="type"),
+]
+INCOMING_TYPES: frozenset[str] = frozenset(
+    get_args(model.model_fields["type"].annotation)[0]  # each model's one Literal value
+    for model in get_args(get_args(Incoming)[0])
+)
+_incoming_adapter: TypeAdapter[Incoming] = TypeAdapter(Incoming)
+
+
+class PeerInfo(BaseModel):
+    """One entry of a roster."""
+
+    name: str
+    role: Role
+
+
+class LoginReply(BaseModel):
+    """The server's answer to ``login``: success with the room's roster, or a reason."""
+
+    type: Literal["login"] = "login"
+    success: bool
+    room: str | None = None
+    peers: list[PeerInfo] = Field(default_factory=list)
+    reason: str | None = None
+
+
+class Peers(BaseModel):
+    """Roster update sent to the others in a room whenever someone joins or leaves."""
+
+    type: Literal["peers"] = "peers"
+    room: str
+    peers: list[PeerInfo]
+
+
+class Error(BaseModel):
+    """Why the server refused a message; ``ref`` is the offending message's type, if known."""
+
+    type: Literal["error"] = "error"
+    reason: str
+    ref: str | None = None
+
+
+@dataclass(frozen=True)
+class ParseError:
+    """A text frame that is not a valid incoming message."""
+
+    reason: str
+    ref: str | None
+
+
+def parse(text: str) -> Incoming | ParseError:
+    """Parse one text frame into its message model, or say precisely why it is not one."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        return ParseError(f"malformed JSON: {exc.msg} at position {exc.pos}", None)
+    except RecursionError:
+        # 64 KiB of "[" is valid-looking input that exhausts the parser's recursion.
+        return ParseError("malformed JSON: nested too deeply", None)
+    if not isinstance(data, dict):
+        return ParseError(f"expected a JSON object, got {type(data).__name__}", None)
+    kind = data.get("type")
+    if not isinstance(kind, str):
+        return ParseError("missing or non-string field 'type'", None)
+    if kind not in INCOMING_TYPES:
+        return ParseError(f"unknown message type {kind!r}", kind)
+    try:
+        return _incoming_adapter.validate_python(data)
+    except ValidationError as exc:
+        # The first element of loc is the union tag (the message type); the rest is the field.
+        return ParseError(describe(exc, skip=1), kind)

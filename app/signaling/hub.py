@@ -1,0 +1,300 @@
+"""Sans-I/O signaling hub: rooms, roles and relay rules of DESIGN §2, with no sockets in it.
+
+The transport calls :meth:`Hub.connect` for each new connection, :meth:`Hub.receive` for each
+text frame and :meth:`Hub.disconnect` when the socket goes away. Each returns the actions to
+carry out, in order: :class:`Outgoing` messages to deliver and :class:`Close` for connections to
+shut. The hub never blocks and never touches the network, so every rule is testable directly.
+"""
+
+from __future__ import annotations
+
+import hmac
+import itertools
+import logging
+from dataclasses import dataclass, field
+from typing import Any, assert_never
+
+from app.protocol.constants import Role
+from app.protocol.signaling import (
+    Answer,
+    Candidate,
+    Error,
+    GetOps,
+    Incoming,
+    Leave,
+    Login,
+    LoginReply,
+    Offer,
+    ParseError,
+    PeerInfo,
+    Peers,
+    Start,
+    Stop,
+    parse,
+)
+
+log = logging.getLogger(__name__)
+
+ConnId = str
+
+# WebSocket close codes (RFC 6455 §7.4.1).
+CLOSE_NORMAL = 1000
+CLOSE_POLICY_VIOLATION = 1008
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """Deliver ``message`` (a JSON object) to connection ``conn``."""
+
+    conn: ConnId
+    message: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Close:
+    """Close connection ``conn`` once the messages queued before this action are delivered."""
+
+    conn: ConnId
+    code: int
+    reason: str
+
+
+Action = Outgoing | Close
+
+
+@dataclass(frozen=True)
+class _Peer:
+    conn: ConnId
+    name: str
+    role: Role
+    room: str
+
+    def info(self) -> PeerInfo:
+        return PeerInfo(name=self.name, role=self.role)
+
+
+@dataclass
+class _Connection:
+    id: ConnId
+    peer: _Peer | None = None
+    errors_in_a_row: int = 0
+    closing: bool = False
+
+
+@dataclass
+class Hub:
+    """All rooms of one server. Synchronous and single-threaded: call it from one event loop."""
+
+    token: str | None = None
+    max_message_bytes: int = 64 * 1024
+    # A peer whose last this-many messages were all refused is closed as abusive.
+    max_errors_in_a_row: int = 20
+    _connections: dict[ConnId, _Connection] = field(default_factory=dict, init=False)
+    # room -> name -> peer, in join order (rosters list peers in the order they joined).
+    _rooms: dict[str, dict[str, _Peer]] = field(default_factory=dict, init=False)
+    _ids: itertools.count[int] = field(default_factory=itertools.count, init=False)
+
+    def connect(self) -> ConnId:
+        """Register a new connection and return its opaque id."""
+        conn = f"c{next(self._ids)}"
+        self._connections[conn] = _Connection(conn)
+        return conn
+
+    def rooms(self) -> list[str]:
+        """Names of the rooms that have anyone in them."""
+        return list(self._rooms)
+
+    def roster(self, room: str) -> list[PeerInfo]:
+        """Who is in ``room`` now, in join order."""
+        return [peer.info() for peer in self._rooms.get(room, {}).values()]
+
+    def receive(self, conn: ConnId, text: str) -> list[Action]:
+        """Handle one text frame from ``conn``."""
+        connection = self._connections[conn]
+        if connection.closing:
+            return []
+        size = len(text.encode("utf-8"))
+        if size > self.max_message_bytes:
+            return self._refuse(
+                connection,
+                f"message of {size} bytes exceeds the limit of {self.max_message_bytes} bytes",
+                None,
+            )
+        message = parse(text)
+        if isinstance(message, ParseError):
+            if message.ref == "login" and connection.peer is None:
+                return self._refuse_login(connection, message.reason)
+            return self._refuse(connection, message.reason, message.ref)
+        return self._dispatch(connection, message)
+
+    def receive_binary(self, conn: ConnId) -> list[Action]:
+        """Handle one binary frame from ``conn``: always refused, signaling is JSON text."""
+        connection = self._connections[conn]
+        if connection.closing:
+            return []
+        return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
+
+    def disconnect(self, conn: ConnId) -> list[Action]:
+        """The socket of ``conn`` is gone: a closed socket counts as ``leave``."""
+        connection = self._connections.pop(conn, None)
+        if connection is None or connection.peer is None:
+            return []
+        return self._remove(connection.peer)
+
+    # -- dispatch -------------------------------------------------------------------------------
+
+    def _dispatch(self, connection: _Connection, message: Incoming) -> list[Action]:
+        peer = connection.peer
+        if isinstance(message, Login):
+            if peer is not None:
+                return self._refuse(
+                    connection,
+                    f"already logged in as {peer.name!r} in room {peer.room!r}",
+                    "login",
+                )
+            return self._login(connection, message)
+        if peer is None:
+            return self._refuse(connection, "log in first", message.type)
+        match message:
+            case Offer():
+                actions = self._relay_to(peer, message, message.to, ("vehicle", "client"))
+            case Answer():
+                actions = self._relay_to(peer, message, message.to, ("relay",))
+            case Candidate():
+                actions = self._relay_to(peer, message, message.to, ("vehicle", "relay", "client"))
+            case Start() | Stop() | GetOps():
+                actions = self._to_relay(peer, message)
+            case Leave():
+                actions = self._leave(connection, peer)
+            case _:
+                assert_never(message)
+        if isinstance(actions, str):
+            return self._refuse(connection, actions, message.type)
+        connection.errors_in_a_row = 0
+        return actions
+
+    def _login(self, connection: _Connection, login: Login) -> list[Action]:
+        if self.token is not None and not hmac.compare_digest(
+            (login.token or "").encode(), self.token.encode()
+        ):
+            return self._refuse_login(connection, "bad or missing token")
+        # Only a successful login creates a room: refused ones must not leave empty rooms behind.
+        room = self._rooms.get(login.room, {})
+        if login.name in room:
+            return self._refuse_login(
+                connection, f"name {login.name!r} is already taken in room {login.room!r}"
+            )
+        relay = _relay_of(room)
+        if login.role == "relay" and relay is not None:
+            return self._refuse_login(
+                connection, f"room {login.room!r} already has a relay ({relay.name!r})"
+            )
+        others = list(room.values())
+        peer = _Peer(connection.id, login.name, login.role, login.room)
+        self._rooms.setdefault(login.room, room)[peer.name] = peer
+        connection.peer = peer
+        connection.errors_in_a_row = 0
+        log.info("%s %r joined room %r", peer.role, peer.name, peer.room)
+        reply = LoginReply(success=True, room=peer.room, peers=[p.info() for p in others])
+        # The others learn about the newcomer from their roster update.
+        return [
+            Outgoing(connection.id, reply.model_dump(exclude_none=True)),
+            *self._rosters(peer.room, skip=connection.id),
+        ]
+
+    def _relay_to(
+        self, sender: _Peer, message: Offer | Answer | Candidate, to: str, roles: tuple[Role, ...]
+    ) -> list[Action] | str:
+        if sender.role not in roles:
+            return (
+                f"{message.type} may only be sent by {' or '.join(roles)}, not by a {sender.role}"
+            )
+        target = self._rooms[sender.room].get(to)
+        if target is None:
+            return f"no peer named {to!r} in room {sender.room!r}"
+        if target is sender:
+            return f"cannot send {message.type} to yourself"
+        log.debug(
+            "relaying %s from %r to %r in room %r", message.type, sender.name, to, sender.room
+        )
+        return [Outgoing(target.conn, _stamped(message, sender))]
+
+    def _to_relay(self, sender: _Peer, message: Start | Stop | GetOps) -> list[Action] | str:
+        if sender.role != "client":
+            return f"{message.type} may only be sent by a client, not by a {sender.role}"
+        relay = _relay_of(self._rooms[sender.room])
+        if relay is None:
+            return f"no relay in room {sender.room!r}"
+        log.debug("relaying %s from %r to relay %r", message.type, sender.name, relay.name)
+        return [Outgoing(relay.conn, _stamped(message, sender))]
+
+    def _leave(self, connection: _Connection, peer: _Peer) -> list[Action]:
+        connection.closing = True
+        connection.peer = None
+        return [*self._remove(peer), Close(connection.id, CLOSE_NORMAL, "left")]
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def _remove(self, peer: _Peer) -> list[Action]:
+        """Take ``peer`` out of its room and tell the others (``leave`` then a roster update)."""
+        room = self._rooms[peer.room]
+        del room[peer.name]
+        log.info("%s %r left room %r", peer.role, peer.name, peer.room)
+        if not room:
+            del self._rooms[peer.room]
+            return []
+        left = {"type": "leave", "from": peer.name}
+        return [Outgoing(other.conn, dict(left)) for other in room.values()] + self._rosters(
+            peer.room
+        )
+
+    def _rosters(self, room_name: str, *, skip: ConnId | None = None) -> list[Action]:
+        """A ``peers`` message to everyone in the room, each listing the others."""
+        room = self._rooms[room_name]
+        actions: list[Action] = []
+        for recipient in room.values():
+            if recipient.conn == skip:
+                continue
+            others = [p.info() for p in room.values() if p is not recipient]
+            actions.append(
+                Outgoing(recipient.conn, Peers(room=room_name, peers=others).model_dump())
+            )
+        return actions
+
+    def _refuse(self, connection: _Connection, reason: str, ref: str | None) -> list[Action]:
+        """An ``error`` reply; closes the connection after too many refusals in a row."""
+        actions: list[Action] = [
+            Outgoing(connection.id, Error(reason=reason, ref=ref).model_dump())
+        ]
+        connection.errors_in_a_row += 1
+        if connection.errors_in_a_row >= self.max_errors_in_a_row:
+            who = connection.peer.name if connection.peer else f"connection {connection.id}"
+            log.warning("closing %s: %d bad messages in a row", who, connection.errors_in_a_row)
+            connection.closing = True
+            if connection.peer is not None:
+                actions += self._remove(connection.peer)
+                connection.peer = None
+            actions.append(
+                Close(
+                    connection.id,
+                    CLOSE_POLICY_VIOLATION,
+                    f"abusive: {connection.errors_in_a_row} bad messages in a row",
+                )
+            )
+        else:
+            log.debug("refused %s from %s: %s", ref, connection.id, reason)
+        return actions
+
+    def _refuse_login(self, connection: _Connection, reason: str) -> list[Action]:
+        """A failed login reply, followed by the ``error`` every refused message gets."""
+        reply = LoginReply(success=False, reason=reason).model_dump(exclude_none=True)
+        return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login")]
+
+
+def _relay_of(room: dict[str, _Peer]) -> _Peer | None:
+    return next((peer for peer in room.values() if peer.role == "relay"), None)
+
+
+def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:
+    """The message as the peer sent it (extra fields included), with the server's ``from``."""
+    return {**message.model_dump(), "from": sender.name}

@@ -1,0 +1,217 @@
+"""``autopilot bench``: run the real stack, measure it, write report.md, results.json and plots.
+
+Runs itself inside a private network namespace (``scripts/in-netns``) when the machine allows it,
+so that every WebRTC connection stays on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import datetime
+import json
+import logging
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from app.protocol.constants import PROFILES
+from app.resources import APP_DIR
+from app.tools.bench import report
+from app.tools.bench.results import FIGURE_KEYS, ProfileRun, results
+
+if TYPE_CHECKING:
+    from playwright.async_api import Browser
+
+log = logging.getLogger(__name__)
+
+# Present in a source checkout (the repository root holds app/ and scripts/).
+IN_NETNS = APP_DIR.parent / "scripts" / "in-netns"
+# Set on the re-executed command so that a failed namespace set-up can never loop.
+REEXEC_ENV = "AUTOPILOT_BENCH_REEXEC"
+
+# performance.memory with real numbers, and window.gc() so heap samples follow a collection.
+MEMORY_FLAGS = ["--enable-precise-memory-info", "--js-flags=--expose-gc"]
+
+QUICK = {"default_s": 25.0, "thesis_s": 30.0, "frames": 13}
+FULL = {"default_s": 60.0, "thesis_s": 60.0, "frames": 43}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``autopilot bench``."""
+    parser.add_argument("--quick", action="store_true", help="short run (under 3 minutes)")
+    parser.add_argument(
+        "--soak",
+        type=float,
+        metavar="MINUTES",
+        help="run the default profile this long to measure memory growth",
+    )
+    parser.add_argument("--json", action="store_true", help="print the results object on stdout")
+    parser.add_argument(
+        "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
+    )
+    parser.add_argument(
+        "--fps", type=float, default=30.0, help="frame rate of the synthetic video (30)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark; 0 when every figure was measured, 1 when some could not be."""
+    if args.soak is not None and args.soak <= 0:
+        log.error("--soak must be a positive number of minutes, not %s", args.soak)
+        return 2
+    if _can_enter_netns():
+        _reexec_in_netns(args)
+    if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
+        log.warning("no private network namespace here: WebRTC runs on the host's interfaces")
+    obj = asyncio.run(_bench(args))
+    if args.json:
+        sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+    missing = [key for key in FIGURE_KEYS if obj[key] is None or obj["thesis"][key] is None]
+    if missing:
+        log.error("not measured: %s (reasons in %s)", ", ".join(missing), args.out / "report.md")
+        return 1
+    return 0
+
+
+def _can_enter_netns() -> bool:
+    if os.environ.get("AUTOPILOT_IN_NETNS") == "1" or os.environ.get(REEXEC_ENV) == "1":
+        return False
+    if not IN_NETNS.is_file() or os.geteuid() != 0 or shutil.which("unshare") is None:
+        return False
+    probe = subprocess.run(["unshare", "-n", "true"], capture_output=True, check=False)
+    return probe.returncode == 0
+
+
+def _reexec_in_netns(args: argparse.Namespace) -> None:
+    argv = [str(IN_NETNS), sys.executable, "-m", "app.cli"]
+    if args.verbose:
+        argv.append("--verbose")
+    argv.append("bench")
+    if args.quick:
+        argv.append("--quick")
+    if args.soak is not None:
+        argv += ["--soak", str(args.soak)]
+    if args.json:
+        argv.append("--json")
+    argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
+    log.info("re-running inside a private network namespace")
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
+
+
+async def _bench(args: argparse.Namespace) -> dict[str, Any]:
+    # Imported here: they pull in Playwright, aiortc and the server, which --help does not need.
+    from playwright.async_api import async_playwright
+
+    from app.server.serve import start_in_thread
+    from app.tools.browser import chromium_args, chromium_path
+
+    plan = QUICK if args.quick else FULL
+    default_s = args.soak * 60.0 if args.soak else plan["default_s"]
+    started = datetime.datetime.now(datetime.UTC)
+    load_before = os.getloadavg()[0]
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(
+                executable_path=chromium_path(), args=chromium_args() + MEMORY_FLAGS
+            )
+            try:
+                durations = {"default": default_s, "thesis": plan["thesis_s"]}
+                runs = await _run_profiles(browser, server.url, durations, args.fps)
+                # After the stack is down, so that neither side shares its core with the video.
+                await _compare_detection(browser, server.url, runs, int(plan["frames"]))
+                browser_version = browser.version
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    run_info = {
+        "started": started.isoformat(timespec="seconds"),
+        "machine": _machine(),
+        "cores": os.cpu_count(),
+        "command": _command(args),
+        "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
+        "chromium": browser_version,
+        "fps": args.fps,
+        "size": "640x480",
+        "default_s": default_s,
+        "thesis_s": plan["thesis_s"],
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+        "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s",
+    }
+    obj = results(runs["default"], runs["thesis"], run_info)
+    report.write(args.out, obj, runs["default"], runs["thesis"])
+    return obj
+
+
+async def _run_profiles(
+    browser: Browser, server_url: str, durations: dict[str, float], fps: float
+) -> dict[str, ProfileRun]:
+    """One stack run per profile; a profile whose stack fails keeps the reason, not numbers."""
+    from app.tools.bench.stack import StackError, StackOptions, run_profile
+
+    runs: dict[str, ProfileRun] = {}
+    with tempfile.TemporaryDirectory(prefix="autopilot-bench-") as tmp:
+        for profile, seconds in durations.items():
+            # A soak samples memory every 30 s; short runs every 10 s.
+            every = 30.0 if seconds >= 300 else 10.0
+            options = StackOptions(profile, seconds, fps=fps, memory_every_s=every)
+            try:
+                runs[profile] = await run_profile(browser, server_url, options, Path(tmp))
+            except StackError as exc:
+                log.error("%s profile: %s", profile, exc)
+                runs[profile] = ProfileRun(profile, problems=_all(str(exc)))
+    return runs
+
+
+async def _compare_detection(
+    browser: Browser, server_url: str, runs: dict[str, ProfileRun], frames: int
+) -> None:
+    """OpenCV.js against Python on the same frames, per profile, into ``runs``."""
+    from app.tools.bench.jsnative import compare, synthetic_frames
+
+    try:
+        comparisons = await compare(browser, server_url, synthetic_frames(frames), PROFILES)
+    except RuntimeError as exc:
+        log.error("OpenCV.js against Python: %s", exc)
+        for run in runs.values():
+            run.problems.setdefault("js_over_native_ratio", str(exc))
+        return
+    for profile, comparison in comparisons.items():
+        runs[profile].js_ms = comparison.js_ms
+        runs[profile].native_ms = comparison.native_ms
+
+
+def _all(reason: str) -> dict[str, str]:
+    return dict.fromkeys(FIGURE_KEYS, reason)
+
+
+def _machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass  # not Linux: the platform name above will do
+    return f"{os.cpu_count()} x {model}, Python {platform.python_version()}"
+
+
+def _command(args: argparse.Namespace) -> str:
+    parts = ["autopilot bench"]
+    if args.quick:
+        parts.append("--quick")
+    if args.soak:
+        parts.append(f"--soak {args.soak:g}")
+    if args.fps != 30.0:
+        parts.append(f"--fps {args.fps:g}")
+    return " ".join(parts)

@@ -1,0 +1,130 @@
+"""OpenCV.js against Python OpenCV: the same frames, the same operation parameters, one thread each.
+
+The JS side is the relay's own analyzer (Web Worker) on the parity page; its ``ms`` covers the
+operation's ``detect`` on a ready RGBA Mat. The Python side times ``app.vision.spec.detect`` on the
+same RGBA array with ``cv2.setNumThreads(1)``. Both pipelines start from RGBA (grey conversion,
+reduction and detection included) so the ratio compares like with like. The two run one after
+the other, never at the same time, so neither steals the other's core; each frame is timed a few
+times on each side and the fastest run kept.
+"""
+
+from __future__ import annotations
+
+import base64
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from playwright.async_api import Browser
+
+from app.protocol.constants import PROFILES, Profile
+from app.server.config import Settings
+from app.vision.reference import detect
+from app.vision.spec import load_spec
+
+log = logging.getLogger(__name__)
+
+Rgba = npt.NDArray[np.uint8]
+
+# First calls on either side pay for JIT tier-up, cascade caches and allocation: not counted.
+WARMUP_FRAMES = 3
+# Each frame is timed this many times on each side and the fastest kept: on a machine shared with
+# other work, the minimum is the estimate least disturbed by what else runs (as timeit does).
+REPEATS = 3
+
+# Defined in the parity page: decode base64 RGBA and run the analyzer on it.
+_ANALYZE_JS = """async ([b64, width, height, opId, profile]) => {
+  const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+  const data = new Uint8ClampedArray(bytes.buffer);
+  const r = await window.analyzer.analyze({ width, height, data }, opId, { profile });
+  return { ms: r.ms, boxes: r.boxes };
+}"""
+
+
+@dataclass
+class Comparison:
+    """Per-frame detection times on both sides and how often their boxes agreed."""
+
+    profile: str
+    js_ms: list[float] = field(default_factory=list)
+    native_ms: list[float] = field(default_factory=list)
+    same_boxes: int = 0
+    frames: int = 0
+
+
+def synthetic_frames(count: int, width: int = 640, height: int = 480) -> list[Rgba]:
+    """``count`` frames of the agent's synthetic scene spread over one cycle of the face's path."""
+    from vehicle_agent.video import SweepPath, SyntheticVideo
+
+    fps = 15.0
+    path = SweepPath()
+    cycle_frames = int(2 * (path.hold_s + path.glide_s) * fps)
+    video = SyntheticVideo(width, height, fps, path=path)
+    frames = []
+    for i in range(count):
+        rgb = video.render(i * cycle_frames // count)
+        frames.append(np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2RGBA), dtype=np.uint8))
+    return frames
+
+
+async def compare(
+    browser: Browser,
+    base_url: str,
+    frames: list[Rgba],
+    profiles: tuple[Profile, ...] = PROFILES,
+    op_id: str = "face",
+    settings: Settings | None = None,
+) -> dict[str, Comparison]:
+    """Time ``op_id`` on every frame in OpenCV.js (in ``browser``) and in Python, per profile."""
+    spec = load_spec((settings or Settings()).operations_spec)
+    op = spec.op(op_id)
+    page = await browser.new_page()
+    try:
+        await page.goto(f"{base_url}/parity")
+        await page.wait_for_function("document.body.dataset.ready !== undefined", timeout=180_000)
+        if await page.evaluate("document.body.dataset.ready") != "true":
+            state = await page.text_content("#state")
+            raise RuntimeError(f"the parity page's analyzer did not start: {state}")
+        results: dict[str, Comparison] = {}
+        threads = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        try:
+            for profile in profiles:
+                comparison = Comparison(profile)
+                for i, rgba in enumerate(frames):
+                    height, width = rgba.shape[:2]
+                    payload = base64.b64encode(rgba.tobytes()).decode("ascii")
+                    js_ms, native_ms = [], []
+                    for _ in range(REPEATS):
+                        js: dict[str, Any] = await page.evaluate(
+                            _ANALYZE_JS, [payload, width, height, op_id, profile]
+                        )
+                        js_ms.append(float(js["ms"]))
+                        started = time.perf_counter()
+                        native = detect(op, rgba, profile)
+                        native_ms.append((time.perf_counter() - started) * 1000.0)
+                    if i < WARMUP_FRAMES:
+                        continue
+                    comparison.frames += 1
+                    comparison.js_ms.append(min(js_ms))
+                    comparison.native_ms.append(min(native_ms))
+                    js_boxes = sorted(tuple(int(v) for v in box) for box in js["boxes"])
+                    if js_boxes == sorted(native.boxes):
+                        comparison.same_boxes += 1
+                log.info(
+                    "%s profile: OpenCV.js %.1f ms, Python %.1f ms (median of %d frames)",
+                    profile,
+                    float(np.median(comparison.js_ms)),
+                    float(np.median(comparison.native_ms)),
+                    comparison.frames,
+                )
+                results[profile] = comparison
+        finally:
+            cv2.setNumThreads(threads)
+        return results
+    finally:
+        await page.close()

@@ -1,0 +1,301 @@
+"""Run the real stack under one profile and collect its samples.
+
+Server (already running), a headless relay page, the Python vehicle agent with the synthetic
+video as a subprocess writing its JSON-lines event log, and a headless client page that presses
+Start Piloting. The relay's numbers come from its read-only ``window.autopilotStatus``; the
+vehicle's from its event log. Agent events and this process share one clock
+(``time.monotonic()``, CLOCK_MONOTONIC is system-wide), so windows set here cut the agent's log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import signal
+import sys
+import time
+from collections.abc import Awaitable
+from contextlib import AsyncExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from playwright.async_api import Browser, ConsoleMessage, Page, Worker
+from playwright.async_api import Error as PlaywrightError
+from playwright.async_api import TimeoutError as PlaywrightTimeout
+
+from app.protocol.urls import page_url
+from app.tools.bench.results import MemorySample, ProfileRun
+from app.tools.bench.stats import PoseSample, TruthSample, heading_track
+from vehicle_agent.control import pixel_to_terrain
+
+log = logging.getLogger(__name__)
+
+# Generous: a loaded 2-core machine compiles the 11 MB OpenCV.js slowly.
+ANALYZER_TIMEOUT_S = 180.0
+CONNECT_TIMEOUT_S = 120.0
+FIRST_GOAL_TIMEOUT_S = 90.0
+AGENT_EXIT_TIMEOUT_S = 15.0
+SETTLE_S = 1.0
+POLL_S = 2.0
+# Memory is first sampled this long after goals start (caches and JIT code settle first).
+MEMORY_FIRST_SAMPLE_S = 5.0
+# Growth is measured from the first sample after this share of the run (at most 2 minutes): the
+# relay's bounded buffers (its latest 2000 processing samples, about 100 s at 20 snapshots/s)
+# fill up first, and filling a bounded buffer is not a leak. Every sample stays in the plot.
+MEMORY_BASELINE_SHARE = 0.2
+MEMORY_BASELINE_MAX_S = 120.0
+
+# New processing samples since the last poll (the relay keeps a bounded ring of them).
+_POLL_JS = """(seen) => {
+  const s = window.autopilotStatus;
+  const k = Math.min(s.snapshots - seen, s.processingMs.length);
+  const ms = k > 0 ? s.processingMs.slice(-k) : [];
+  return { snapshots: s.snapshots, goalsSent: s.goalsSent, ms };
+}"""
+
+# JS heap after a full collection when the browser exposes gc (--js-flags=--expose-gc), so that
+# garbage not yet collected is not mistaken for growth.
+_JS_HEAP_JS = """() => {
+  if (typeof window.gc === 'function') window.gc();
+  return performance.memory ? performance.memory.usedJSHeapSize : null;
+}"""
+
+# The analyzer's memory() reports cv.HEAPU8.length; the relay keeps its analyzer private, so the
+# bench asks the worker itself for the same number.
+_WASM_HEAP_JS = "session.cv ? session.cv.HEAPU8.length : null"
+
+
+@dataclass(frozen=True)
+class StackOptions:
+    """How long and how to run one profile."""
+
+    profile: str
+    duration_s: float
+    width: int = 640
+    height: int = 480
+    fps: float = 30.0
+    memory_every_s: float = 10.0
+
+
+class StackError(RuntimeError):
+    """The stack did not come up far enough to measure; the message says which step failed."""
+
+
+async def run_profile(
+    browser: Browser, server_url: str, options: StackOptions, workdir: Path
+) -> ProfileRun:
+    """Bring the stack up under ``options.profile``, pilot for ``duration_s``, take it down."""
+    run = ProfileRun(options.profile)
+    room = f"bench-{options.profile}"
+    events_path = workdir / f"events-{options.profile}.jsonl"
+    agent_log = workdir / f"agent-{options.profile}.log"
+    async with AsyncExitStack() as stack:
+        relay = await _open_page(stack, browser, "relay")
+        await relay.goto(
+            page_url(server_url, "relay", room, name="relay", auto=1, profile=options.profile)
+        )
+        await _wait(
+            relay,
+            "window.autopilotStatus?.analyzerReady === true",
+            ANALYZER_TIMEOUT_S,
+            "the relay's OpenCV.js analyzer did not become ready",
+        )
+        agent = await _start_agent(server_url, room, options, events_path, agent_log)
+        stack.push_async_callback(_stop_agent, agent, agent_log)
+        client = await _open_page(stack, browser, "client")
+        await client.goto(page_url(server_url, "client", room, name="client", auto=1))
+        start = client.get_by_role("button", name="Start Piloting")
+        await _unless_agent_exits(
+            agent,
+            agent_log,
+            _step(
+                start.click(timeout=CONNECT_TIMEOUT_S * 1000),
+                "the client never reached the relay (Start Piloting stayed disabled)",
+            ),
+        )
+        await _unless_agent_exits(
+            agent,
+            agent_log,
+            _wait(
+                relay,
+                "window.autopilotStatus.goalsSent > 0",
+                FIRST_GOAL_TIMEOUT_S,
+                "piloting started but the relay sent no goal",
+            ),
+        )
+        log.info(
+            "%s profile: goals flowing, measuring for %.0f s", options.profile, options.duration_s
+        )
+        run.window = await _measure(relay, options, run)
+        await client.get_by_role("button", name="Stop Piloting").click()
+    _read_events(run, events_path, options)
+    return run
+
+
+async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple[float, float]:
+    """Poll the relay's samples and memory for ``duration_s``; returns the window measured."""
+    begin = time.monotonic()
+    wasm_worker = _vision_worker(relay)
+    first = await relay.evaluate(_POLL_JS, 0)
+    seen = first["snapshots"]
+    next_memory = begin + MEMORY_FIRST_SAMPLE_S
+    run.memory_baseline_at = begin + max(
+        MEMORY_FIRST_SAMPLE_S,
+        min(MEMORY_BASELINE_MAX_S, MEMORY_BASELINE_SHARE * options.duration_s),
+    )
+    while (now := time.monotonic()) < begin + options.duration_s:
+        if now >= next_memory:
+            run.memory.append(await _memory(relay, wasm_worker, run))
+            next_memory += options.memory_every_s
+        await asyncio.sleep(POLL_S)
+        seen = (await _collect(relay, seen, run))["snapshots"]
+    last = await _collect(relay, seen, run)
+    run.snapshots = last["snapshots"] - first["snapshots"]
+    run.relay_goals = last["goalsSent"] - first["goalsSent"]
+    run.memory.append(await _memory(relay, wasm_worker, run))
+    return begin, time.monotonic()
+
+
+async def _step(action: Awaitable[Any], failure: str) -> None:
+    try:
+        await action
+    except PlaywrightTimeout as exc:
+        raise StackError(failure) from exc
+
+
+async def _unless_agent_exits(
+    agent: asyncio.subprocess.Process, log_path: Path, step: Awaitable[None]
+) -> None:
+    """Run ``step``, failing at once with the agent's last words if the agent dies meanwhile."""
+    step_task = asyncio.ensure_future(step)
+    exit_task = asyncio.ensure_future(agent.wait())
+    await asyncio.wait({step_task, exit_task}, return_when=asyncio.FIRST_COMPLETED)
+    if step_task.done():
+        exit_task.cancel()
+        step_task.result()
+        return
+    step_task.cancel()
+    await asyncio.gather(step_task, return_exceptions=True)
+    tail = " | ".join(log_path.read_text(errors="replace").splitlines()[-5:])
+    raise StackError(f"the vehicle agent exited with status {agent.returncode}: {tail}")
+
+
+async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page:
+    context = await browser.new_context()
+    stack.push_async_callback(context.close)
+    page = await context.new_page()
+
+    def on_console(message: ConsoleMessage) -> None:
+        if message.type == "error":
+            log.warning("%s page: %s", role, message.text)
+
+    page.on("console", on_console)
+    page.on("pageerror", lambda error: log.error("%s page error: %s", role, error))
+    return page
+
+
+async def _wait(page: Page, condition: str, timeout_s: float, failure: str) -> None:
+    try:
+        await page.wait_for_function(condition, timeout=timeout_s * 1000, polling=250)
+    except PlaywrightTimeout as exc:
+        raise StackError(f"{failure} within {timeout_s:.0f} s") from exc
+
+
+async def _start_agent(
+    server_url: str, room: str, options: StackOptions, events: Path, log_path: Path
+) -> asyncio.subprocess.Process:
+    command = [
+        sys.executable, "-m", "vehicle_agent",
+        "--server", server_url, "--room", room, "--name", "vehicle",
+        "--video", "synthetic", "--size", f"{options.width}x{options.height}",
+        "--fps", f"{options.fps:g}", "--profile", options.profile, "--events", str(events),
+    ]  # fmt: skip
+    log.debug("starting the agent: %s", " ".join(command))
+    with log_path.open("wb") as out:
+        return await asyncio.create_subprocess_exec(
+            *command, stdin=asyncio.subprocess.DEVNULL, stdout=out, stderr=out
+        )
+
+
+async def _stop_agent(agent: asyncio.subprocess.Process, log_path: Path) -> None:
+    if agent.returncode is None:
+        agent.send_signal(signal.SIGTERM)
+        try:
+            await asyncio.wait_for(agent.wait(), AGENT_EXIT_TIMEOUT_S)
+        except TimeoutError:
+            log.warning("the agent ignored SIGTERM for %.0f s: killing it", AGENT_EXIT_TIMEOUT_S)
+            agent.kill()
+            await agent.wait()
+    # The agent exits 0 on SIGTERM; anything else means it failed on its own.
+    if agent.returncode not in (0, -signal.SIGTERM):
+        tail = log_path.read_text(errors="replace").splitlines()[-15:]
+        log.error(
+            "the agent exited with %s; its last lines:\n%s", agent.returncode, "\n".join(tail)
+        )
+
+
+def _vision_worker(page: Page) -> Worker | None:
+    return next((w for w in page.workers if w.url.endswith("vision-worker.js")), None)
+
+
+async def _collect(relay: Page, seen: int, run: ProfileRun) -> dict[str, Any]:
+    """Append the processing samples taken since snapshot ``seen``; returns the relay's counters."""
+    polled: dict[str, Any] = await relay.evaluate(_POLL_JS, seen)
+    now = time.monotonic()
+    run.processing.extend((now, float(ms)) for ms in polled["ms"])
+    return polled
+
+
+async def _memory(relay: Page, worker: Worker | None, run: ProfileRun) -> MemorySample:
+    js_heap = await relay.evaluate(_JS_HEAP_JS)
+    if js_heap is None:
+        run.problems.setdefault(
+            "memory_growth_pct",
+            "performance.memory is missing (needs --enable-precise-memory-info)",
+        )
+    wasm_heap = None
+    if worker is None:
+        run.problems.setdefault("memory_growth_pct", "the relay's vision worker was not found")
+    else:
+        try:
+            wasm_heap = await worker.evaluate(_WASM_HEAP_JS)
+        except PlaywrightError as exc:
+            # The worker's internals changed: say so in the report rather than stop the run.
+            run.problems.setdefault("memory_growth_pct", f"cannot read the WASM heap: {exc}")
+    return MemorySample(
+        time.monotonic(),
+        float(js_heap) if js_heap is not None else None,
+        float(wasm_heap) if wasm_heap is not None else None,
+    )
+
+
+def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
+    """Fill ``run`` from the agent's event log (see ``vehicle_agent/events.py``)."""
+    if not path.exists():
+        run.problems["glass_to_command_ms_p50"] = "the agent wrote no event log"
+        return
+    poses: list[PoseSample] = []
+    truth: list[TruthSample] = []
+    first_command: float | None = None
+    for line in path.read_text().splitlines():
+        event = json.loads(line)
+        kind, t = event["ev"], float(event["t"])
+        if kind == "frame_sent":
+            run.frame_sent[int(event["frame"])] = t
+            truth.append(
+                TruthSample(t, event["face_x"], event["face_y"], options.width, options.height)
+            )
+        elif kind == "goal":
+            run.goals.append((t, event.get("frame")))
+        elif kind == "twist" and event.get("frame") is not None:
+            run.commands.append((t, int(event["frame"])))
+            first_command = t if first_command is None else first_command
+        elif kind == "pose":
+            poses.append(PoseSample(t, event["x"], event["y"], event["theta"]))
+    window = run.window or (float("-inf"), float("inf"))
+    poses = [p for p in poses if window[0] <= p.t <= window[1]]
+    run.heading = heading_track(poses, truth, pixel_to_terrain)
+    if first_command is not None:
+        run.settle_at = max(first_command, window[0]) + SETTLE_S

@@ -1,0 +1,271 @@
+"""``autopilot parity``: OpenCV.js in the relay's analyzer against the Python OpenCV reference.
+
+Every image is decoded in headless Chromium and sent through the analyzer the relay uses
+(``vision.js``: ImageBitmap -> worker -> OffscreenCanvas -> cv.Mat -> the operation module). The
+RGBA pixels that the worker analysed come back and :func:`app.vision.spec.detect` runs on exactly
+those pixels, so decoding differences between browser and Python cannot hide or fake a mismatch.
+
+Agreement rule: both sides find the same number of boxes, and the JS boxes can be paired with
+distinct Python boxes so that every pair overlaps with IoU >= 0.9. For Haar cascades the boxes are
+expected to be identical; the tolerance only absorbs last-bit differences in colour conversion.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import logging
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from playwright.sync_api import Page, sync_playwright
+
+from app.protocol.constants import PROFILES, Profile
+from app.server.config import Settings
+from app.server.serve import start_in_thread
+from app.tools.browser import chromium_args, chromium_path
+from app.vision.reference import detect
+from app.vision.spec import Spec, load_spec
+
+log = logging.getLogger(__name__)
+
+IOU_THRESHOLD = 0.9
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".webp", ".gif"}
+# Loading the 11 MB OpenCV.js and every cascade on a busy 2-core machine can take a while.
+READY_TIMEOUT_MS = 180_000
+
+Box = tuple[int, int, int, int]
+
+
+def iou(a: Sequence[int], b: Sequence[int]) -> float:
+    """Intersection over union of two ``(x, y, w, h)`` boxes."""
+    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    union = a[2] * a[3] + b[2] * b[3] - inter
+    return inter / union if union > 0 else 0.0
+
+
+def boxes_agree(js: Sequence[Sequence[int]], py: Sequence[Sequence[int]]) -> bool:
+    """Same count, and a one-to-one pairing in which every pair has IoU >= 0.9."""
+    if len(js) != len(py):
+        return False
+    edges = [[j for j, p in enumerate(py) if iou(b, p) >= IOU_THRESHOLD] for b in js]
+    partner: dict[int, int] = {}  # python index -> js index
+
+    def augment(i: int, seen: set[int]) -> bool:
+        # Kuhn's augmenting path: greedy pairing can fail where a perfect pairing exists.
+        for j in edges[i]:
+            if j not in seen:
+                seen.add(j)
+                if j not in partner or augment(partner[j], seen):
+                    partner[j] = i
+                    return True
+        return False
+
+    return all(augment(i, set()) for i in range(len(js)))
+
+
+@dataclass
+class Pair:
+    """One image checked with one operation."""
+
+    image: str
+    op: str
+    js_boxes: list[list[int]]
+    py_boxes: list[list[int]]
+    js_target: list[float] | None
+    py_target: list[float] | None
+    agree: bool
+
+
+@dataclass
+class Report:
+    """Everything a parity run found."""
+
+    images: list[str] = field(default_factory=list)
+    unreadable: dict[str, str] = field(default_factory=dict)
+    details: list[Pair] = field(default_factory=list)
+
+    @property
+    def agree(self) -> int:
+        """Pairs that agree."""
+        return sum(p.agree for p in self.details)
+
+    @property
+    def disagree(self) -> int:
+        """Pairs that do not."""
+        return len(self.details) - self.agree
+
+    @property
+    def ok(self) -> bool:
+        """Every image read and every pair agreed."""
+        return not self.unreadable and self.disagree == 0
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``--json`` object."""
+        return {
+            "images": self.images,
+            "pairs": len(self.details),
+            "agree": self.agree,
+            "disagree": self.disagree,
+            "unreadable": self.unreadable,
+            "details": [asdict(p) for p in self.details],
+        }
+
+
+class Harness:
+    """The ``/parity`` page in headless Chromium, with the server behind it.
+
+    Use :func:`open_harness`; one harness serves a whole batch of images.
+    """
+
+    def __init__(self, page: Page, spec: Spec) -> None:
+        self.page = page
+        self.spec = spec
+
+    def run(
+        self, data: bytes, op_ids: Sequence[str], profile: Profile = "default"
+    ) -> tuple[np.ndarray[Any, np.dtype[np.uint8]], dict[str, Any]]:
+        """Decode ``data`` in the browser and run each op; the analysed RGBA and JS results.
+
+        Raises ``ValueError`` when the browser cannot decode the image.
+        """
+        out = self.page.evaluate(
+            "([data, ops, profile]) => window.runImage(data, ops, profile)",
+            [base64.b64encode(data).decode("ascii"), list(op_ids), profile],
+        )
+        if "unreadable" in out:
+            raise ValueError(f"the browser cannot decode it ({out['unreadable']})")
+        rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
+        return rgba.reshape(out["height"], out["width"], 4), out["results"]
+
+    def check(
+        self, path: Path, op_ids: Sequence[str], report: Report, profile: Profile = "default"
+    ) -> None:
+        """Check one image with every op in ``op_ids``; results are added to ``report``."""
+        name = str(path)
+        try:
+            rgba, results = self.run(path.read_bytes(), op_ids, profile)
+        except (OSError, ValueError) as exc:
+            report.unreadable[name] = f"cannot read image {name}: {exc}"
+            return
+        report.images.append(name)
+        for op_id in op_ids:
+            py = detect(self.spec.op(op_id), rgba, profile)
+            js = results[op_id]
+            js_target = js["target"]
+            py_boxes = [list(b) for b in py.boxes]
+            report.details.append(
+                Pair(
+                    image=name,
+                    op=op_id,
+                    js_boxes=js["boxes"],
+                    py_boxes=py_boxes,
+                    js_target=[js_target["x"], js_target["y"]] if js_target else None,
+                    py_target=list(py.target) if py.target else None,
+                    agree=boxes_agree(js["boxes"], py_boxes),
+                )
+            )
+
+
+@contextmanager
+def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
+    """Start the server and headless Chromium on the parity page; stop both afterwards."""
+    settings = settings or Settings()
+    spec = load_spec(settings.operations_spec)
+    server = start_in_thread(settings)
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium_path(), args=chromium_args())
+            try:
+                page = browser.new_page()
+                page.on("console", lambda m: log.debug("page console: %s", m.text))
+                page.goto(f"{server.url}/parity")
+                page.wait_for_function(
+                    "document.body.dataset.ready", timeout=READY_TIMEOUT_MS, polling=100
+                )
+                if page.evaluate("document.body.dataset.ready") != "true":
+                    raise RuntimeError(f"parity page: {page.text_content('#state')}")
+                yield Harness(page, spec)
+            finally:
+                browser.close()
+    finally:
+        server.stop()
+
+
+def expand(paths: Sequence[Path]) -> tuple[list[Path], dict[str, str]]:
+    """Image files named directly or found (non-recursively) in folders, and missing paths."""
+    images: list[Path] = []
+    missing: dict[str, str] = {}
+    for path in paths:
+        if path.is_dir():
+            images.extend(p for p in sorted(path.iterdir()) if p.suffix.lower() in IMAGE_SUFFIXES)
+        elif path.exists():
+            images.append(path)
+        else:
+            missing[str(path)] = f"cannot read image {path}: no such file or folder"
+    return images, missing
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``autopilot parity``."""
+    parser.add_argument("paths", nargs="*", type=Path, metavar="PATH", help="images or folders")
+    parser.add_argument("--op", default="all", help="operation id, or 'all' (default)")
+    parser.add_argument(
+        "--profile",
+        choices=PROFILES,
+        default="default",
+        help="relay profile whose parameters to check (default: default)",
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _format_boxes(boxes: Sequence[Sequence[int]]) -> str:
+    return "[" + " ".join("({},{},{},{})".format(*b) for b in boxes) + "]"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Check every image with the chosen operations; non-zero when anything disagrees."""
+    if not args.paths:
+        sys.stderr.write(
+            "usage: autopilot parity PATH... [--op ID|all] [--json]\n"
+            "autopilot parity: error: give at least one image or folder\n"
+        )
+        return 2
+    settings = Settings()
+    spec = load_spec(settings.operations_spec)
+    known = [op.id for op in spec.operations]
+    if args.op != "all" and args.op not in known:
+        sys.stderr.write(f"autopilot parity: unknown operation {args.op!r}; known: {known}\n")
+        return 2
+    op_ids = known if args.op == "all" else [args.op]
+    images, missing = expand(args.paths)
+    report = Report(unreadable=dict(missing))
+    if images:
+        with open_harness(settings) as harness:
+            for path in images:
+                harness.check(path, op_ids, report, args.profile)
+    if args.json:
+        sys.stdout.write(json.dumps(report.as_json(), indent=2) + "\n")
+    else:
+        for pair in report.details:
+            verdict = "agree" if pair.agree else "DISAGREE"
+            sys.stdout.write(
+                f"{pair.image} {pair.op}: {verdict}\n"
+                f"    js     {_format_boxes(pair.js_boxes)}\n"
+                f"    python {_format_boxes(pair.py_boxes)}\n"
+            )
+        sys.stdout.write(
+            f"{len(report.images)} images, {len(report.details)} pairs: "
+            f"{report.agree} agree, {report.disagree} disagree\n"
+        )
+    for message in report.unreadable.values():
+        sys.stderr.write(f"autopilot parity: {message}\n")
+    return 0 if report.ok else 1

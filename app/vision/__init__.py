@@ -1,0 +1,1 @@
+"""The vision side: the operations spec both languages read, and the Python reference pipeline."""

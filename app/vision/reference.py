@@ -1,0 +1,140 @@
+"""The Python reference pipeline: the same OpenCV calls as ``app/static/js/operations/``.
+
+Parity checks run it on the exact pixels the relay's worker saw and compare the boxes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from cv2.typing import MatLike
+
+from app.protocol.constants import PROFILES, Profile
+from app.vision.spec import (
+    CASCADE_DIR,
+    CascadeOperation,
+    CascadeParams,
+    ColourOperation,
+    ColourParams,
+    SpecError,
+)
+
+Rgba = npt.NDArray[np.uint8]
+Box = tuple[int, int, int, int]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Boxes ``(x, y, w, h)`` in full-frame pixels, sorted; the target point or None."""
+
+    boxes: list[Box]
+    target: tuple[float, float] | None
+
+
+def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, int] | None:
+    """Size of the detection image, or None when the frame is used as it is.
+
+    Rounding is written out (floor of x + 0.5) because JavaScript's Math.round and Python's
+    round() differ on halves; both sides compute the same doubles.
+    """
+    if detect_width is None or width <= detect_width:
+        return None
+    return detect_width, math.floor(height * detect_width / width + 0.5)
+
+
+def _reduce(image: MatLike, detect_width: int | None) -> tuple[MatLike, float]:
+    """The detection image (reduced with INTER_AREA when wider than ``detect_width``) and the
+    factor that scales its coordinates back to the full frame."""
+    height, width = image.shape[:2]
+    size = _reduction(width, height, detect_width)
+    if size is None:
+        return image, 1.0
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), width / size[0]
+
+
+def _scale_box(box: Box, factor: float) -> Box:
+    x, y, w, h = box
+    return (
+        math.floor(x * factor + 0.5),
+        math.floor(y * factor + 0.5),
+        math.floor(w * factor + 0.5),
+        math.floor(h * factor + 0.5),
+    )
+
+
+def _centre_of_largest(boxes: list[Box]) -> tuple[float, float] | None:
+    if not boxes:
+        return None
+    # max() keeps the first of equal areas, as the JS loop with a strict '>' does.
+    x, y, w, h = max(boxes, key=lambda b: b[2] * b[3])
+    return x + w / 2, y + h / 2
+
+
+_classifiers: dict[str, cv2.CascadeClassifier] = {}
+
+
+def _classifier(name: str) -> cv2.CascadeClassifier:
+    if name not in _classifiers:
+        classifier = cv2.CascadeClassifier(str(CASCADE_DIR / name))
+        if classifier.empty():
+            raise SpecError(f"cascade {name!r} could not be loaded from {CASCADE_DIR}")
+        _classifiers[name] = classifier
+    return _classifiers[name]
+
+
+def _detect_cascade(params: CascadeParams, rgba: Rgba) -> Detection:
+    gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
+    boxes: list[Box] = []
+    for name in params.cascades:
+        found = _classifier(name).detectMultiScale(
+            gray,
+            scaleFactor=params.scale_factor,
+            minNeighbors=params.min_neighbors,
+            flags=0,
+            minSize=params.min_size,
+            maxSize=params.max_size,
+        )
+        for x, y, w, h in found:
+            boxes.append(_scale_box((int(x), int(y), int(w), int(h)), factor))
+    boxes.sort()
+    return Detection(boxes=boxes, target=_centre_of_largest(boxes))
+
+
+def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
+    rgb, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), params.detect_width)
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    mask = np.zeros(hsv.shape[:2], np.uint8)
+    for r in params.hsv_ranges:
+        mask = cv2.bitwise_or(mask, cv2.inRange(hsv, np.array(r.lower), np.array(r.upper)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.kernel, params.kernel))
+    if params.open_iterations:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel, iterations=params.open_iterations)
+    if params.close_iterations:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel, iterations=params.close_iterations)
+    count, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count < 2:  # label 0 is the background
+        return Detection(boxes=[], target=None)
+    # argmax keeps the first of equal areas, as the JS loop with a strict '>' does.
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < params.min_area:
+        return Detection(boxes=[], target=None)
+    x, y, w, h = (int(v) for v in stats[best, :4])
+    cx, cy = (float(v) for v in centroids[best])
+    return Detection(boxes=[_scale_box((x, y, w, h), factor)], target=(cx * factor, cy * factor))
+
+
+def detect(
+    op: CascadeOperation | ColourOperation, rgba: Rgba, profile: Profile = "default"
+) -> Detection:
+    """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does."""
+    if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
+        raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; expected one of {PROFILES}")
+    if isinstance(op, CascadeOperation):
+        return _detect_cascade(op.params_for(profile), rgba)
+    return _detect_colour(op.params_for(profile), rgba)
