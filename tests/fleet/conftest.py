@@ -15,7 +15,7 @@ import pytest
 
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from tests.helpers.redis_server import redis_server
+from app.tools.redis_server import redis_server
 
 
 @pytest.fixture
@@ -27,7 +27,7 @@ def redis_url(tmp_path: Path) -> Iterator[str]:
 
 @pytest.fixture
 def start_instance(
-    start_server: Callable[[Settings], RunningServer], redis_url: str
+    redis_url: str, start_server: Callable[[Settings], RunningServer]
 ) -> Callable[[], RunningServer]:
     """Start one more instance of the service on the test's Redis (in this process)."""
 

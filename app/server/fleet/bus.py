@@ -31,7 +31,6 @@ Design (docs/scaling.md has the long form):
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import uuid
@@ -40,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import redis.asyncio as aioredis
+from redis.asyncio.client import PubSub
 
 from app.protocol.signaling import Login, ParseError, parse
 from app.server.config import Settings
@@ -53,6 +53,8 @@ log = logging.getLogger(__name__)
 OWNER_WAIT_S = 10.0
 # A frame forwarded to an instance that no longer owns the room is sent on at most this often.
 MAX_HOPS = 3
+# Redis connections the sockets' pumps may use at once (the client's pool holds 100).
+PUMP_CONNECTIONS = 64
 
 Deliver = Callable[[list[Action]], None]
 
@@ -116,13 +118,20 @@ class FleetHub:
         self.max_message_bytes = max_message_bytes
         self.deliver: Deliver = _drop
         self.redis: aioredis.Redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
+        # Every socket's pump talks to Redis at once under load, and the client's pool refuses
+        # its 101st concurrent command: pumps take turns for a share of it instead.
+        self._pump_slots = asyncio.Semaphore(PUMP_CONNECTIONS)
         self._lobby = Hub(token=token, max_message_bytes=max_message_bytes)
         self._locals: dict[ConnId, _Local] = {}
         self._owned: dict[str, _Room] = {}
+        # Rooms emptied here whose lease is still being given back (see _release_room).
+        self._releasing: set[str] = set()
         # Owner -> other instances, in order: one task publishes them all.
         self._outbound: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._tasks: list[asyncio.Task[None]] = []
+        self._pubsub: PubSub | None = None
         self._forwarding: set[asyncio.Task[None]] = set()
+        self._pumps: set[asyncio.Task[None]] = set()
         self._renew = self.redis.register_script(keys.RENEW_LUA)
         self._release = self.redis.register_script(keys.RELEASE_LUA)
 
@@ -138,10 +147,10 @@ class FleetHub:
     async def start(self) -> None:
         """Announce this instance and listen on its channel; returns once messages can arrive."""
         await self.redis.set(keys.instance(self.id), self.id, px=keys.INSTANCE_TTL_MS)
-        pubsub = self.redis.pubsub()
-        await pubsub.subscribe(keys.inbox(self.id))
+        self._pubsub = self.redis.pubsub()
+        await self._pubsub.subscribe(keys.inbox(self.id))
         self._tasks = [
-            asyncio.create_task(self._listen(pubsub), name=f"fleet-listen-{self.id}"),
+            asyncio.create_task(self._listen(self._pubsub), name=f"fleet-listen-{self.id}"),
             asyncio.create_task(self._publish(), name=f"fleet-publish-{self.id}"),
             asyncio.create_task(self._watch(), name=f"fleet-watch-{self.id}"),
         ]
@@ -149,17 +158,21 @@ class FleetHub:
 
     async def stop(self) -> None:
         """Leave the fleet: rooms and peers of this instance are taken over or told at once."""
-        for local in self._locals.values():
-            if local.pump is not None:
-                local.pump.cancel()
-        for task in self._tasks:
+        # Pumps of closed sockets may still be sending their last frames: stop them all.
+        running = [*self._tasks, *self._pumps, *self._forwarding]
+        for task in running:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
-        with contextlib.suppress(aioredis.RedisError):
+        await asyncio.gather(*running, return_exceptions=True)
+        try:
             await self.redis.delete(keys.instance(self.id))
             for room in list(self._owned):
                 await self._release(keys=[keys.room_owner(room)], args=[self.id])
-        await self.redis.aclose()
+        except aioredis.RedisError as exc:
+            log.warning("could not leave the fleet cleanly (others will time us out): %s", exc)
+        finally:
+            if self._pubsub is not None:
+                await self._pubsub.aclose()  # type: ignore[no-untyped-call]  # untyped in redis-py
+            await self.redis.aclose()
 
     # -- the hub's transport API ----------------------------------------------------------------
 
@@ -168,6 +181,8 @@ class FleetHub:
         conn = self._lobby.connect()
         local = _Local(conn)
         local.pump = asyncio.create_task(self._pump(local), name=f"fleet-pump-{conn}")
+        self._pumps.add(local.pump)
+        local.pump.add_done_callback(self._pumps.discard)
         self._locals[conn] = local
         return conn
 
@@ -218,7 +233,8 @@ class FleetHub:
                 return
             op = {"op": "room", "conn": self._global(local.id), **item}
             try:
-                await self._to_owner(item["room"], op, hops=0)
+                async with self._pump_slots:
+                    await self._to_owner(item["room"], op, hops=0)
             except aioredis.RedisError as exc:
                 log.error("cannot forward a frame of %s: %s", local.id, exc)
             if item.get("gone"):
@@ -234,6 +250,14 @@ class FleetHub:
                 self._on_room_op(owned, op)
                 return
             owner = _text(await self.redis.get(keys.room_owner(room)))
+            if owner == self.id and room in self._releasing:
+                # Emptied a moment ago and the lease is still ours: run it again, empty as it
+                # was (its member list may still hold entries about to be deleted).
+                self._releasing.discard(room)
+                owned = self._new_room(room)
+                self._owned[room] = owned
+                self._on_room_op(owned, op)
+                return
             if owner is None:
                 owned = await self._claim(room)
                 if owned is not None:
@@ -252,6 +276,14 @@ class FleetHub:
                 return
             await asyncio.sleep(0.1)
 
+    async def _forward(self, op: dict[str, Any]) -> None:
+        """A frame that reached us after we gave its room up: on to the room's owner."""
+        try:
+            async with self._pump_slots:
+                await self._to_owner(op["room"], op, op["hops"])
+        except aioredis.RedisError as exc:
+            log.error("cannot forward a frame of %s: %s", op["conn"], exc)
+
     # -- owner side -----------------------------------------------------------------------------
 
     async def _claim(self, room: str) -> _Room | None:
@@ -259,7 +291,7 @@ class FleetHub:
         taken = await self.redis.set(keys.room_owner(room), self.id, nx=True, px=keys.ROOM_LEASE_MS)
         if not taken:
             return None
-        owned = _Room(room, Hub(token=self.token, max_message_bytes=self.max_message_bytes))
+        owned = self._new_room(room)
         await self.redis.sadd(keys.ROOMS, room)
         stored = await self.redis.hgetall(keys.room_members(room))
         members = sorted(
@@ -278,6 +310,9 @@ class FleetHub:
             log.info("took over room %r with %d members", room, len(members))
             await self._drop_dead_members(owned)
         return owned
+
+    def _new_room(self, room: str) -> _Room:
+        return _Room(room, Hub(token=self.token, max_message_bytes=self.max_message_bytes))
 
     def _on_room_op(self, owned: _Room, op: dict[str, Any]) -> None:
         """One forwarded frame or disconnect of ``op['conn']`` through the room's hub."""
@@ -361,6 +396,7 @@ class FleetHub:
 
     def _release_room(self, owned: _Room) -> None:
         del self._owned[owned.name]
+        self._releasing.add(owned.name)
         self._outbound.put_nowait(("release", owned.name))
 
     async def _drop_dead_members(self, owned: _Room) -> None:
@@ -393,7 +429,7 @@ class FleetHub:
             actions.append(Outgoing(local.id, message))
         self.deliver(actions)
 
-    async def _listen(self, pubsub: Any) -> None:
+    async def _listen(self, pubsub: PubSub) -> None:
         """Everything sent to this instance: frames for rooms it owns, deliveries to its sockets."""
         async for message in pubsub.listen():
             if message["type"] != "message":
@@ -405,7 +441,7 @@ class FleetHub:
                     if owned is not None:
                         self._on_room_op(owned, data)
                     else:  # released or never ours: find the owner again
-                        task = asyncio.create_task(self._to_owner(data["room"], data, data["hops"]))
+                        task = asyncio.create_task(self._forward(data))
                         self._forwarding.add(task)
                         task.add_done_callback(self._forwarding.discard)
                 elif data["op"] == "deliver":
@@ -436,7 +472,8 @@ class FleetHub:
             await self.redis.hdel(keys.room_members(room), conn)
         elif kind == "release":
             room = payload
-            if room not in self._owned:
+            if room in self._releasing:  # not taken up again meanwhile
+                self._releasing.discard(room)
                 await self.redis.delete(keys.room_members(room))
                 await self.redis.srem(keys.ROOMS, room)
                 await self._release(keys=[keys.room_owner(room)], args=[self.id])
