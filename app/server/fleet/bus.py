@@ -126,13 +126,15 @@ class FleetHub:
         self._owned: dict[str, _Room] = {}
         # Rooms emptied here whose lease is still being given back (see _release_room).
         self._releasing: set[str] = set()
+        # Owner of each room our sockets are in, as last seen (saves a GET per frame).
+        self._owners: dict[str, str] = {}
         # Owner -> other instances, in order: one task publishes them all.
         self._outbound: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._tasks: list[asyncio.Task[None]] = []
         self._pubsub: PubSub | None = None
         self._forwarding: set[asyncio.Task[None]] = set()
         self._pumps: set[asyncio.Task[None]] = set()
-        self._renew = self.redis.register_script(keys.RENEW_LUA)
+        self._renew_many = self.redis.register_script(keys.RENEW_MANY_LUA)
         self._release = self.redis.register_script(keys.RELEASE_LUA)
 
     @classmethod
@@ -249,6 +251,13 @@ class FleetHub:
             if owned is not None:
                 self._on_room_op(owned, op)
                 return
+            message = json.dumps({**op, "hops": hops + 1})
+            cached = self._owners.get(room)
+            if cached is not None and hops < MAX_HOPS:
+                # One round trip per frame: a stale owner still forwards it on (see _listen).
+                if await self.redis.publish(keys.inbox(cached), message) > 0:
+                    return
+                self._owners.pop(room, None)  # dead: ask Redis who owns the room now
             owner = _text(await self.redis.get(keys.room_owner(room)))
             if owner == self.id and room in self._releasing:
                 # Emptied a moment ago and the lease is still ours: run it again, empty as it
@@ -265,8 +274,8 @@ class FleetHub:
                     return
                 continue  # another instance claimed it first: send it there
             if owner != self.id and hops < MAX_HOPS:
-                message = json.dumps({**op, "hops": hops + 1})
                 if await self.redis.publish(keys.inbox(owner), message) > 0:
+                    self._owners[room] = owner
                     return
             # The owner is dead (nobody heard), is us while we still rebuild, or bounces it.
             if loop.time() > deadline:
@@ -308,7 +317,7 @@ class FleetHub:
         self._owned[room] = owned
         if members:
             log.info("took over room %r with %d members", room, len(members))
-            await self._drop_dead_members(owned)
+            await self._drop_dead_members([owned])
         return owned
 
     def _new_room(self, room: str) -> _Room:
@@ -399,14 +408,25 @@ class FleetHub:
         self._releasing.add(owned.name)
         self._outbound.put_nowait(("release", owned.name))
 
-    async def _drop_dead_members(self, owned: _Room) -> None:
+    async def _drop_dead_members(self, rooms: list[_Room]) -> None:
         """Disconnect the members whose instance has stopped renewing its heartbeat."""
-        instances = {conn.split("/", 1)[0] for conn in owned.members}
-        alive = {i for i in instances if i == self.id or await self.redis.exists(keys.instance(i))}
-        for conn in sorted(owned.members):
+        members = [(owned, conn) for owned in rooms for conn in sorted(owned.members)]
+        others = sorted({conn.split("/", 1)[0] for _, conn in members} - {self.id})
+        alive = {self.id}
+        if others:
+            found = await self.redis.exists(*[keys.instance(i) for i in others])
+            if found != len(others):  # someone is gone: find out who
+                async with self.redis.pipeline(transaction=False) as pipe:
+                    for instance in others:
+                        pipe.exists(keys.instance(instance))
+                    answers = await pipe.execute()
+                alive |= {i for i, answer in zip(others, answers, strict=True) if answer}
+            else:
+                alive |= set(others)
+        for owned, conn in members:
             instance, local = conn.split("/", 1)
             gone = instance not in alive or (instance == self.id and local not in self._locals)
-            if gone and owned.name in self._owned:
+            if gone and self._owned.get(owned.name) is owned and conn in owned.members:
                 log.info("member %s of room %r is gone with its instance", conn, owned.name)
                 self._remove_member(owned, conn)
 
@@ -488,23 +508,33 @@ class FleetHub:
             await asyncio.sleep(keys.TICK_S)
 
     async def _tick(self) -> None:
+        # A constant number of round trips, however many rooms: on a loaded instance a renewal
+        # per room could take longer than the lease itself.
         await self.redis.set(keys.instance(self.id), self.id, px=keys.INSTANCE_TTL_MS)
-        for room, owned in list(self._owned.items()):
-            held = await self._renew(
-                keys=[keys.room_owner(room)], args=[self.id, keys.ROOM_LEASE_MS]
+        rooms = list(self._owned)
+        if rooms:
+            held = await self._renew_many(
+                keys=[keys.room_owner(room) for room in rooms], args=[self.id, keys.ROOM_LEASE_MS]
             )
-            if not held:
-                log.warning("lost the lease of room %r; another instance runs it now", room)
-                if self._owned.get(room) is owned:
+            async with self.redis.pipeline(transaction=False) as pipe:
+                for room in rooms:
+                    pipe.pexpire(keys.room_members(room), keys.MEMBERS_TTL_MS)
+                await pipe.execute()
+            for room, kept in zip(rooms, held, strict=True):
+                if not kept and room in self._owned:
+                    log.warning("lost the lease of room %r; another instance runs it now", room)
                     del self._owned[room]
-                continue
-            await self.redis.pexpire(keys.room_members(room), keys.MEMBERS_TTL_MS)
-            await self._drop_dead_members(owned)
+            await self._drop_dead_members(list(self._owned.values()))
         # Rooms our sockets are in whose owner is gone: claim them (only one instance wins).
-        rooms = {local.room for local in self._locals.values() if local.room is not None}
-        for room in rooms - set(self._owned):
-            if await self.redis.get(keys.room_owner(room)) is None:
-                await self._claim(room)
+        joined = {local.room for local in self._locals.values() if local.room is not None}
+        for room in set(self._owners) - joined:
+            del self._owners[room]
+        orphans = sorted(joined - set(self._owned))
+        if orphans:
+            owners = await self.redis.mget([keys.room_owner(room) for room in orphans])
+            for room, owner in zip(orphans, owners, strict=True):
+                if owner is None:
+                    await self._claim(room)
 
 
 def _as_login(text: str, max_bytes: int) -> Login | None:

@@ -62,6 +62,20 @@ end
 return 0
 """
 
+# Lua: RENEW_LUA for many leases in one call (KEYS = leases); returns 1 or 0 per lease.
+RENEW_MANY_LUA = """
+local held = {}
+for i, key in ipairs(KEYS) do
+  if redis.call('get', key) == ARGV[1] then
+    redis.call('pexpire', key, ARGV[2])
+    held[i] = 1
+  else
+    held[i] = 0
+  end
+end
+return held
+"""
+
 # Lua: delete a lease only if we still hold it (KEYS[1], ARGV[1] = holder).
 RELEASE_LUA = """
 if redis.call('get', KEYS[1]) == ARGV[1] then

@@ -81,7 +81,11 @@ def serve_instance(redis_url: str, logdir: Path) -> Iterator[tuple[str, subproce
     finally:
         if process.poll() is None:
             process.terminate()
-            process.wait(timeout=10)
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(timeout=10)
 
 
 def _wait_healthy(url: str, process: subprocess.Popen[bytes], logfile: Path) -> None:
@@ -182,11 +186,19 @@ async def _room(index: int, rooms: int, urls: list[str], tally: Tally) -> None:
                 await asyncio.wait_for(peer.reader, 5)
 
 
+async def _session(index: int, rooms: int, urls: list[str], tally: Tally) -> None:
+    """One room; a connection the server closed is counted as an error, not a crash."""
+    try:
+        await _room(index, rooms, urls, tally)
+    except ConnectionClosed as exc:
+        tally.errors.append(f"room {index}: connection closed: {exc}")
+
+
 async def bench_signaling(urls: list[str], rooms: int) -> dict[str, Any]:
     """Signaling latency and losses across two instances."""
     tally = Tally()
     started = time.monotonic()
-    await asyncio.gather(*(_room(i, rooms, urls, tally) for i in range(rooms)))
+    await asyncio.gather(*(_session(i, rooms, urls, tally) for i in range(rooms)))
     ordered = sorted(tally.latencies_ms)
     return {
         "rooms": rooms,
