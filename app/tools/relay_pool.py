@@ -129,6 +129,12 @@ class RelayPool:
             try:
                 while not stop.is_set():
                     try:
+                        if not browser.is_connected():
+                            # Chromium died: its pages are marked dead and reopen in the new one.
+                            log.warning("relay pool browser died; starting a new one")
+                            browser = await playwright.chromium.launch(
+                                executable_path=chromium_path(), args=chromium_args(), headless=True
+                            )
                         await self.tick(browser)
                     except (aioredis.RedisError, PlaywrightError) as exc:
                         log.error("relay pool tick failed: %s", exc)
