@@ -9,6 +9,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Protocol
 
 import httpx
 import pytest
@@ -39,8 +40,13 @@ def start_instance(
 
 REPO = Path(__file__).resolve().parents[2]
 
-# Starts one ``autopilot serve`` process; returns its base URL and the process.
-ServeProcess = Callable[[], tuple[str, "subprocess.Popen[bytes]"]]
+
+class ServeProcess(Protocol):
+    """Starts one ``autopilot serve`` process (``env``: more settings); its base URL and process."""
+
+    def __call__(
+        self, env: dict[str, str] | None = None
+    ) -> tuple[str, subprocess.Popen[bytes]]: ...
 
 
 def free_port() -> int:
@@ -69,11 +75,14 @@ def serve_process(redis_url: str, tmp_path: Path) -> Iterator[ServeProcess]:
     """Start ``autopilot serve`` instances as their own processes, so that they can be killed."""
     processes: list[subprocess.Popen[bytes]] = []
 
-    def start() -> tuple[str, subprocess.Popen[bytes]]:
+    def start(env: dict[str, str] | None = None) -> tuple[str, subprocess.Popen[bytes]]:
         port = free_port()
+        extra = env or {}
         env = {**os.environ, "AUTOPILOT_REDIS_URL": redis_url}
         env.pop("AUTOPILOT_TOKEN", None)
+        env.pop("AUTOPILOT_SECRET", None)
         env["AUTOPILOT_ENVIRONMENT"] = "development"
+        env.update(extra)
         log = tmp_path / f"serve-{port}.log"
         with log.open("wb") as out:
             process = subprocess.Popen(

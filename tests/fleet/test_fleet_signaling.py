@@ -23,7 +23,7 @@ from tests.server.test_signaling_ws import (
     Connect,
     Peer,
     joined,
-    test_a_100_kib_message_gets_an_error_and_the_connection_still_works,
+    test_a_100_kib_frame_is_refused_before_it_is_buffered_and_others_carry_on,
     test_an_abusive_peer_is_disconnected,
     test_bad_input_gets_an_error_and_everyone_keeps_being_served,
     test_client_commands_reach_the_relay,
@@ -35,7 +35,7 @@ from tests.server.test_signaling_ws import (
 
 # The single-instance tests, collected again in this module with the two-instance ``new_peer``.
 __all__ = [
-    "test_a_100_kib_message_gets_an_error_and_the_connection_still_works",
+    "test_a_100_kib_frame_is_refused_before_it_is_buffered_and_others_carry_on",
     "test_an_abusive_peer_is_disconnected",
     "test_bad_input_gets_an_error_and_everyone_keeps_being_served",
     "test_client_commands_reach_the_relay",
