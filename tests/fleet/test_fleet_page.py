@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 
@@ -11,6 +12,8 @@ import pytest
 from playwright.async_api import Page, async_playwright
 from websockets.asyncio.client import connect
 
+from app.protocol import tokens
+from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.tools.browser import chromium_args, chromium_path
 from tests.server.test_signaling_ws import Peer, joined
@@ -83,3 +86,37 @@ async def test_without_redis_the_fleet_is_this_process_s_rooms(server: RunningSe
     assert [(row["room"], row["vehicles"], row["piloting"]) for row in table] == [
         ("solo", ["robot"], None)
     ]
+
+
+async def test_with_a_secret_the_page_sends_the_client_token_of_its_fragment(
+    redis_url: str, start_server: Callable[[Settings], RunningServer]
+) -> None:
+    secret = "fleet-page-secret-0123456789abcdef"
+    server = start_server(Settings(environment="development", secret=secret, redis_url=redis_url))
+
+    def token(room: str, role: tokens.Role) -> str:
+        return tokens.sign(secret, room, role, now=time.time())
+
+    async with AsyncExitStack() as stack:
+        ws = await stack.enter_async_context(connect(server.ws_url))
+        vehicle = Peer(ws)
+        await vehicle.send(
+            {"type": "login", "name": "robot", "role": "vehicle", "room": "lab"}
+            | {"token": token("lab", "vehicle")}
+        )
+        assert (await vehicle.recv())["success"] is True
+        pw = await stack.enter_async_context(async_playwright())
+        browser = await pw.chromium.launch(
+            executable_path=chromium_path(), args=chromium_args(), headless=True
+        )
+        stack.push_async_callback(browser.close)
+        page = await browser.new_page()
+        # Without a token the page loads but gets no rows, and says why.
+        await page.goto(f"{server.url}/fleet")
+        state = page.get_by_test_id("fleet-state")
+        await state.filter(has_text="a client token is needed").wait_for(timeout=20_000)
+        assert await rows(page) == []
+        # With a client token of another room, the fragment's token is sent and rows come.
+        other = await browser.new_page()
+        await other.goto(f"{server.url}/fleet#token={token('elsewhere', 'client')}")
+        await until_rows(other, [["lab", "robot", "–", "–", "–"]], "rows with the token")
