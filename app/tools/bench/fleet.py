@@ -10,7 +10,12 @@
 - **failover.pool_takeover_s**: a room with a scripted vehicle and client; pool A (its own
   process) serves it; A is SIGKILLed; time until pool B's relay page has joined the room.
   This is the relay's return, not piloting resumed (that needs media; the e2e test checks it).
-- **relay_density** is not measured by this version (it needs the agent's real video per room).
+- **relay_density**: one instance, one relay pool (its own process, one Chromium), rooms added
+  one at a time, each with the vehicle agent (its own process, synthetic 640x480 video with a
+  moving face at ``DENSITY_FPS``) and a client page that presses Start Piloting. After each
+  room is piloting and has settled, every room's goals/s (as the pool publishes it for
+  ``/fleet``) is sampled; the first room count where a room falls below ``MIN_GOALS_PER_S``
+  ends it. ``rooms_sustained`` is the last count where every room kept the rate.
 
 Writes ``fleet.json``, ``fleet.md`` and ``fleet-latency.png`` under ``--out``.
 """
@@ -50,6 +55,14 @@ QUICK = {"rooms": 200, "failover_rooms": 10}
 CANDIDATES = 10
 PACING_S = 0.02  # between two candidates of one peer, as a browser trickles them
 RAMP_S = 5.0  # rooms start spread over this long
+# Relay density: the goal rate every room must keep, the agents' frame rate, how long a new
+# room may take to start piloting, settle, and be sampled, and the most rooms tried.
+MIN_GOALS_PER_S = 15.0
+DENSITY_FPS = 30
+DENSITY_START_S = 120.0
+DENSITY_SETTLE_S = 5.0
+DENSITY_SAMPLE_S = 10.0
+DENSITY_MAX_ROOMS = {"full": 16, "quick": 6}
 
 
 def _free_port() -> int:
@@ -299,6 +312,121 @@ async def bench_pool_takeover(redis_url: str, logdir: Path) -> float:
                         pool.wait(timeout=30)
 
 
+async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> dict[str, Any]:
+    """Rooms one pool keeps at ``MIN_GOALS_PER_S`` each, and each room's figures per step."""
+    import redis.asyncio as aioredis
+    from playwright.async_api import async_playwright
+
+    from app.server.fleet import keys
+    from app.tools.browser import chromium_args, chromium_path
+
+    steps: list[dict[str, Any]] = []
+    children: list[subprocess.Popen[bytes]] = []
+
+    def spawn(name: str, argv: list[str]) -> None:
+        with (logdir / f"{name}.log").open("wb") as out:
+            children.append(
+                subprocess.Popen(
+                    [sys.executable, *argv],
+                    cwd=APP_DIR.parent,
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                )
+            )
+
+    with serve_instance(redis_url, logdir) as (url, _):
+        redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
+
+        async def status(room: str) -> dict[str, Any]:
+            raw = await redis.get(keys.relay_status(room))
+            return json.loads(raw) if raw else {}
+
+        try:
+            spawn("pool", ["-m", "app.cli", "relay", "--pool", "--server", url])
+            async with async_playwright() as pw:
+                browser = await pw.chromium.launch(
+                    executable_path=chromium_path(), args=chromium_args(), headless=True
+                )
+                for count in range(1, max_rooms + 1):
+                    room = f"density-{count}"
+                    spawn(
+                        f"agent-{count}",
+                        [
+                            "-m",
+                            "vehicle_agent",
+                            "--server",
+                            url,
+                            "--room",
+                            room,
+                            "--fps",
+                            str(DENSITY_FPS),
+                        ],
+                    )
+                    client = await browser.new_page()
+                    await client.goto(f"{url}/client?room={room}&name=client&auto=1")
+                    start = client.locator("button[data-action=start]")
+                    await start.click(timeout=DENSITY_START_S * 1000)
+                    try:
+                        async with asyncio.timeout(DENSITY_START_S):
+                            while not (await status(room)).get("goals_per_s"):
+                                await asyncio.sleep(0.5)
+                    except TimeoutError:
+                        steps.append({"rooms": count, "started": False})
+                        break
+                    await asyncio.sleep(DENSITY_SETTLE_S)
+                    rates: dict[str, list[float]] = {
+                        f"density-{i}": [] for i in range(1, count + 1)
+                    }
+                    ms: dict[str, list[float]] = {name: [] for name in rates}
+                    for _ in range(int(DENSITY_SAMPLE_S)):
+                        for name in rates:
+                            seen = await status(name)
+                            rates[name].append(float(seen.get("goals_per_s") or 0.0))
+                            if seen.get("ms_per_snapshot") is not None:
+                                ms[name].append(float(seen["ms_per_snapshot"]))
+                        await asyncio.sleep(1.0)
+                    per_room: dict[str, dict[str, Any]] = {
+                        name: {
+                            "goals_per_s": round(statistics.median(values), 1),
+                            "ms_per_snapshot": round(statistics.median(ms[name]), 1)
+                            if ms[name]
+                            else None,
+                        }
+                        for name, values in rates.items()
+                    }
+                    step: dict[str, Any] = {"rooms": count, "started": True, "per_room": per_room}
+                    steps.append(step)
+                    log.info("relay density: %d rooms: %s", count, per_room)
+                    if min(r["goals_per_s"] for r in per_room.values()) < MIN_GOALS_PER_S:
+                        break
+                await browser.close()
+        finally:
+            for child in reversed(children):
+                if child.poll() is None:
+                    child.terminate()
+                    try:
+                        child.wait(timeout=30)
+                    except subprocess.TimeoutExpired:
+                        child.kill()
+            await redis.aclose()
+    sustained = 0
+    for step in steps:
+        kept = step["started"] and all(
+            r["goals_per_s"] >= MIN_GOALS_PER_S for r in step["per_room"].values()
+        )
+        if not kept:
+            break
+        sustained = step["rooms"]
+    return {
+        "rooms_sustained": sustained,
+        "min_goals_per_s": MIN_GOALS_PER_S,
+        "fps": DENSITY_FPS,
+        "max_rooms_tried": max_rooms,
+        "cpus": os.cpu_count(),
+        "steps": steps,
+    }
+
+
 async def _relay_joined(peer: ScriptedPeer, timeout: float) -> None:
     async with asyncio.timeout(timeout):
         while True:
@@ -320,7 +448,6 @@ async def run_fleet(args: argparse.Namespace) -> dict[str, Any]:
     plan = QUICK if args.quick else FULL
     notes: dict[str, str] = {}
     obj: dict[str, Any] = {"signaling": None, "relay_density": None, "failover": {}}
-    notes["relay_density"] = "not measured by this version of the bench"
     with tempfile.TemporaryDirectory() as tmp, redis_server(Path(tmp)) as redis_url:
         logdir = Path(tmp)
         with (
@@ -343,6 +470,12 @@ async def run_fleet(args: argparse.Namespace) -> dict[str, Any]:
             except (OSError, TimeoutError, RuntimeError) as exc:
                 obj["failover"][key] = None
                 notes[key] = str(exc) or type(exc).__name__
+        try:
+            obj["relay_density"] = await bench_relay_density(
+                redis_url, logdir, DENSITY_MAX_ROOMS["quick" if args.quick else "full"]
+            )
+        except (OSError, TimeoutError, RuntimeError) as exc:
+            notes["relay_density"] = str(exc) or type(exc).__name__
     obj["notes"] = notes
     return obj
 
@@ -368,6 +501,23 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         f"Pool killed → another pool's relay in the room: {failover.get('pool_takeover_s')} s.",
         "",
     ]
+    density = obj.get("relay_density")
+    if density:
+        lines += [
+            f"Relay density, one pool on {density['cpus']} CPUs shared with everything else: "
+            f"{density['rooms_sustained']} rooms kept ≥ {density['min_goals_per_s']:g} goals/s "
+            f"each ({density['fps']} fps video).",
+            "",
+            "| rooms | per room: goals/s (ms per snapshot) |",
+            "| --- | --- |",
+        ]
+        for step in density["steps"]:
+            cells = ", ".join(
+                f"{r['goals_per_s']} ({r['ms_per_snapshot']})"
+                for r in step.get("per_room", {}).values()
+            )
+            lines.append(f"| {step['rooms']} | {cells or 'did not start piloting'} |")
+        lines.append("")
     lines += [f"- {key}: {why}" for key, why in obj["notes"].items()]
     (out / "fleet.md").write_text("\n".join(lines) + "\n")
     if latencies:
