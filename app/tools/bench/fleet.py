@@ -342,7 +342,10 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
             return json.loads(raw) if raw else {}
 
         try:
-            spawn("pool", ["-m", "app.cli", "relay", "--pool", "--server", url])
+            spawn(
+                "pool",
+                ["-m", "app.cli", "relay", "--pool", "--server", url, "--redis-url", redis_url],
+            )
             async with async_playwright() as pw:
                 browser = await pw.chromium.launch(
                     executable_path=chromium_path(), args=chromium_args(), headless=True
@@ -364,11 +367,15 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                     )
                     client = await browser.new_page()
                     await client.goto(f"{url}/client?room={room}&name=client&auto=1")
+                    if children[0].poll() is not None:
+                        raise RuntimeError(f"the relay pool exited; see {logdir}")
                     start = client.locator("button[data-action=start]")
                     await start.click(timeout=DENSITY_START_S * 1000)
                     try:
                         async with asyncio.timeout(DENSITY_START_S):
                             while not (await status(room)).get("goals_per_s"):
+                                if children[0].poll() is not None:
+                                    raise RuntimeError(f"the relay pool exited; see {logdir}")
                                 await asyncio.sleep(0.5)
                     except TimeoutError:
                         steps.append({"rooms": count, "started": False})
