@@ -555,7 +555,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     log.info("fleet report in %s", args.out / "fleet.md")
-    missing = [key for key in ("signaling",) if obj[key] is None] + [
+    missing = [key for key in ("signaling", "relay_density") if obj[key] is None] + [
         key for key, value in obj["failover"].items() if value is None
     ]
     return 1 if missing else 0
