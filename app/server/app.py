@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
 from app.resources import STATIC_DIR
 from app.server.config import Settings
+from app.server.fleet.page import router as fleet_router
 from app.server.headers import SecurityHeaders
 from app.server.origins import OriginGuard
 from app.server.pages import router as pages_router
@@ -20,6 +22,21 @@ from app.server.signaling import router as signaling_router
 from app.server.vision import router as vision_router
 from app.vision.spec import load_spec
 
+if TYPE_CHECKING:
+    from app.server.fleet.bus import FleetHub
+
+
+def fleet_hub(settings: Settings) -> FleetHub:
+    """The fleet hub for ``settings.redis_url``; imported only then (it needs the fleet extra)."""
+    try:
+        from app.server.fleet.bus import FleetHub
+    except ModuleNotFoundError as exc:
+        raise RuntimeError(
+            f"AUTOPILOT_REDIS_URL is set but {exc.name} is missing: "
+            "pip install 'webrtc-autopilot[fleet]'"
+        ) from exc
+    return FleetHub.from_settings(settings)
+
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the app: signaling at /ws, role pages, turtle simulator and /rosbridge."""
@@ -28,9 +45,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.simulator.start()
+        if fleet is not None:
+            await fleet.start()
         try:
             yield
         finally:
+            if fleet is not None:
+                await fleet.stop()
             await app.state.simulator.stop()
 
     docs = settings.docs_enabled
@@ -49,9 +70,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Validated here so that a bad operations spec stops the server before it serves anything.
     app.state.operations = load_spec(settings.operations_spec)
     app.include_router(vision_router)
-    app.state.signaling = Switchboard.from_settings(settings)
+    # With Redis, this instance is one of a fleet (app/server/fleet/bus.py); else one process.
+    fleet = fleet_hub(settings) if settings.redis_url else None
+    app.state.signaling = Switchboard.from_settings(settings, fleet)
+    if fleet is not None:
+        fleet.deliver = app.state.signaling.dispatch
     app.include_router(signaling_router)
     app.include_router(pages_router)
+    app.include_router(fleet_router)
     app.state.simulator = Simulator.from_settings(settings)
     app.state.turtlesim = app.state.simulator.sim
     app.include_router(rosbridge_router)

@@ -55,6 +55,9 @@ class Settings(TurnSettings, BaseSettings):
     login_timeout_s: float = Field(default=10.0, gt=0)
     operations_spec: Path = OPERATIONS_SPEC
     ros: RosFlavour = DEFAULT_FLAVOUR
+    # When set (redis://host:port/db), instances sharing it form one signaling service
+    # (app.server.fleet); unset, the hub runs embedded in this one process.
+    redis_url: str | None = None
 
     @property
     def docs_enabled(self) -> bool:

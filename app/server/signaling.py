@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from fastapi import APIRouter, WebSocket
 
@@ -24,30 +26,48 @@ log = logging.getLogger(__name__)
 router = APIRouter()
 
 
+class HubPort(Protocol):
+    """What the route needs of a hub: :class:`Hub`, or the fleet's Redis-backed one, which
+    returns what it can decide at once and hands later actions to :meth:`Switchboard.dispatch`."""
+
+    def connect(self) -> ConnId: ...
+    def logged_in(self, conn: ConnId) -> bool: ...
+    def receive(self, conn: ConnId, text: str) -> list[Action]: ...
+    def receive_binary(self, conn: ConnId) -> list[Action]: ...
+    def disconnect(self, conn: ConnId) -> list[Action]: ...
+
+
+def login_ice(settings: Settings) -> Callable[[str], tuple[list[IceServer], IceTransportPolicy]]:
+    """The ICE configuration each successful login gets: TURN credentials minted for it."""
+
+    def ice(name: str) -> tuple[list[IceServer], IceTransportPolicy]:
+        servers = ice_servers_for(settings, settings.ice_servers, name, time.time())
+        return servers, settings.ice_transport_policy
+
+    return ice
+
+
 @dataclass
 class Switchboard:
     """The hub plus the outbox of every open connection; lives on ``app.state.signaling``."""
 
-    hub: Hub
+    hub: HubPort
     policy: SocketPolicy
     max_connections: int = 256
     login_timeout_s: float = 10.0
     _outboxes: dict[ConnId, Outbox] = field(default_factory=dict, init=False)
 
     @classmethod
-    def from_settings(cls, settings: Settings) -> Switchboard:
-        """A switchboard around a fresh hub configured by ``settings``."""
-
-        def ice(name: str) -> tuple[list[IceServer], IceTransportPolicy]:
-            servers = ice_servers_for(settings, settings.ice_servers, name, time.time())
-            return servers, settings.ice_transport_policy
-
-        return cls(
-            Hub(
+    def from_settings(cls, settings: Settings, hub: HubPort | None = None) -> Switchboard:
+        """A switchboard configured by ``settings`` around ``hub`` (default: a fresh ``Hub``)."""
+        if hub is None:
+            hub = Hub(
                 secret=settings.secret,
                 max_message_bytes=settings.max_message_bytes,
-                ice=ice,
-            ),
+                ice=login_ice(settings),
+            )
+        return cls(
+            hub,
             SocketPolicy(
                 settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes
             ),

@@ -1,1 +1,2 @@
-"""Tools that drive Chromium or child processes: relay service, demo, parity, bench, field lab."""
+"""Tools that drive Chromium or child processes: relay service and pool, demo, parity, bench,
+field lab."""

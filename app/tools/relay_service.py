@@ -167,10 +167,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--ca-file", type=Path, metavar="PEM", help="trust this CA for an https:// server"
     )
+    parser.add_argument(
+        "--pool",
+        action="store_true",
+        help="serve every room with a vehicle and no relay (needs Redis; --room is ignored)",
+    )
+    parser.add_argument("--max-rooms", type=int, help="with --pool: serve at most N rooms")
+    parser.add_argument("--redis-url", help="with --pool: Redis URL (default: AUTOPILOT_REDIS_URL)")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the headless relay until SIGINT/SIGTERM."""
+    """Run the headless relay (or, with ``--pool``, a relay pool) until SIGINT/SIGTERM."""
+    if args.pool:
+        from app.tools import relay_pool  # only a pool needs Redis
+
+        return relay_pool.run(args)
     try:
         check_server(args.server, args.ca_file)
         chromium_path()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-# What the agent, tools and bench extras install; none of it may load to serve pages.
-EXTRAS_ONLY = ("aiortc", "av", "roslibpy", "playwright", "matplotlib", "cv2")
+# What the agent, tools, bench and fleet extras install; none of it may load to serve pages.
+EXTRAS_ONLY = ("aiortc", "av", "roslibpy", "playwright", "matplotlib", "cv2", "redis")
 
 PROBE = """
 import sys
@@ -15,7 +15,7 @@ from app.server.app import create_app
 from app.server.config import Settings
 with TestClient(create_app(Settings(environment="development"))) as client:
     for path in ("/healthz", "/client?room=r", "/operations.json",
-                 "/cascades/haarcascade_frontalface_default.xml"):
+                 "/cascades/haarcascade_frontalface_default.xml", "/fleet", "/fleet/rooms"):
         assert client.get(path).status_code == 200, path
 print(" ".join(sorted({name.split(".")[0] for name in sys.modules})))
 """

@@ -29,6 +29,9 @@ const status = {
   poses: 0,
   routeM: 0, // metres the turtle drove while this page watched (the drawn route)
   videoTracks: 0, // how many times a (new) relayed video track arrived
+  // The person asked to pilot (Start) and has not asked to stop: a relay that replaces a lost
+  // one (a relay pool taking the room over) is asked to start again on its first state.
+  wantPiloting: false,
 };
 window.autopilotStatus = status;
 
@@ -60,6 +63,14 @@ function onOps(msg) {
 function onState(msg) {
   const previous = status.relay;
   status.relay = { piloting: msg.piloting, op: msg.op, vehicle: msg.vehicle };
+  if (previous === null && status.wantPiloting && !status.relay.piloting) {
+    log.info('a new relay took over: asking it to resume piloting');
+    try {
+      askRelay('start');
+    } catch (err) {
+      log.error(err.message);
+    }
+  }
   if (previous?.op !== status.relay.op && status.relay.op) log.info(`operation is now ${status.relay.op}`);
   if (previous !== null && previous.piloting !== status.relay.piloting) {
     log.info(status.relay.piloting ? 'piloting started' : 'piloting stopped');
@@ -182,6 +193,7 @@ button('set-op').addEventListener('click', () => {
 });
 for (const type of ['start', 'stop']) {
   button(type).addEventListener('click', () => {
+    status.wantPiloting = type === 'start';
     try {
       askRelay(type);
     } catch (err) {

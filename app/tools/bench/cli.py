@@ -59,6 +59,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="run the stack in the field lab under each network condition (root)",
     )
     parser.add_argument(
+        "--fleet",
+        action="store_true",
+        help="measure the fleet instead: signaling across 2 instances on Redis, failover",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -68,6 +73,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark; 0 when every figure was measured, 1 when some could not be."""
+    if args.fleet:
+        from app.tools.bench import fleet  # only the fleet bench needs Redis
+
+        return fleet.run(args)
     if args.soak is not None and args.soak <= 0:
         log.error("--soak must be a positive number of minutes, not %s", args.soak)
         return 2

@@ -1,0 +1,104 @@
+"""Fixtures of the fleet tests: a real Redis per test and app instances sharing it."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Protocol
+
+import httpx
+import pytest
+
+from app.server.config import Settings
+from app.server.serve import RunningServer
+from app.tools.redis_server import redis_server
+
+
+@pytest.fixture
+def redis_url(tmp_path: Path) -> Iterator[str]:
+    """A fresh Debian ``redis-server`` on a free port, stopped after the test."""
+    with redis_server(tmp_path) as url:
+        yield url
+
+
+@pytest.fixture
+def start_instance(
+    redis_url: str, start_server: Callable[[Settings], RunningServer]
+) -> Callable[[], RunningServer]:
+    """Start one more instance of the service on the test's Redis (in this process)."""
+
+    def start() -> RunningServer:
+        return start_server(Settings(environment="development", token=None, redis_url=redis_url))
+
+    return start
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+class ServeProcess(Protocol):
+    """Starts one ``autopilot serve`` process (``env``: more settings); its base URL and process."""
+
+    def __call__(
+        self, env: dict[str, str] | None = None
+    ) -> tuple[str, subprocess.Popen[bytes]]: ...
+
+
+def free_port() -> int:
+    """A TCP port free on loopback right now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def wait_healthy(url: str, process: subprocess.Popen[bytes], log: Path) -> None:
+    """Until ``url/healthz`` answers; fails with the process's log if it exits or hangs."""
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and process.poll() is None:
+        try:
+            if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
+                return
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.1)
+    raise RuntimeError(f"{url} did not become healthy:\n{log.read_text()}")
+
+
+@pytest.fixture
+def serve_process(redis_url: str, tmp_path: Path) -> Iterator[ServeProcess]:
+    """Start ``autopilot serve`` instances as their own processes, so that they can be killed."""
+    processes: list[subprocess.Popen[bytes]] = []
+
+    def start(env: dict[str, str] | None = None) -> tuple[str, subprocess.Popen[bytes]]:
+        port = free_port()
+        extra = env or {}
+        env = {**os.environ, "AUTOPILOT_REDIS_URL": redis_url}
+        env.pop("AUTOPILOT_TOKEN", None)
+        env.pop("AUTOPILOT_SECRET", None)
+        env["AUTOPILOT_ENVIRONMENT"] = "development"
+        env.update(extra)
+        log = tmp_path / f"serve-{port}.log"
+        with log.open("wb") as out:
+            process = subprocess.Popen(
+                [sys.executable, "-m", "app.cli", "serve", "--port", str(port)],
+                cwd=REPO,
+                env=env,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+            )
+        processes.append(process)
+        url = f"http://127.0.0.1:{port}"
+        wait_healthy(url, process, log)
+        return url, process
+
+    yield start
+    for process in processes:
+        if process.poll() is None:
+            process.terminate()
+            process.wait(timeout=10)
