@@ -10,6 +10,7 @@ import contextlib
 import logging
 import random
 import signal
+import socket
 from collections.abc import Callable
 
 
@@ -50,3 +51,11 @@ def configure_logging(verbose: bool = False) -> None:
         level=logging.DEBUG if verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` right now (for a child process that cannot take port 0)."""
+    with socket.socket() as sock:
+        sock.bind((host, 0))
+        port: int = sock.getsockname()[1]
+        return port

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import shutil
-import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -16,14 +15,9 @@ from pathlib import Path
 
 import redis
 
+from app.supervise import free_port
+
 ATTEMPTS = 5
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 @contextlib.contextmanager
@@ -33,7 +27,7 @@ def redis_server(workdir: Path) -> Iterator[str]:
     if binary is None:
         raise RuntimeError("redis-server not found: run scripts/setup (it installs redis-server)")
     for _ in range(ATTEMPTS):
-        port = _free_port()
+        port = free_port()
         process = subprocess.Popen(
             [
                 binary,

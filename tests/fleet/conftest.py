@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -16,6 +15,7 @@ import pytest
 
 from app.server.config import Settings
 from app.server.serve import RunningServer
+from app.supervise import free_port
 from app.tools.redis_server import redis_server
 
 
@@ -47,14 +47,6 @@ class ServeProcess(Protocol):
     def __call__(
         self, env: dict[str, str] | None = None
     ) -> tuple[str, subprocess.Popen[bytes]]: ...
-
-
-def free_port() -> int:
-    """A TCP port free on loopback right now."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 def wait_healthy(url: str, process: subprocess.Popen[bytes], log: Path) -> None:

@@ -30,7 +30,6 @@ import json
 import logging
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -46,6 +45,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from app.resources import APP_DIR
+from app.supervise import free_port
 from app.tools.redis_server import redis_server
 
 log = logging.getLogger(__name__)
@@ -65,17 +65,10 @@ DENSITY_SAMPLE_S = 10.0
 DENSITY_MAX_ROOMS = {"full": 16, "quick": 6}
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 @contextlib.contextmanager
 def serve_instance(redis_url: str, logdir: Path) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
     """One ``autopilot serve`` process on ``redis_url``; yields its URL and process."""
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "AUTOPILOT_REDIS_URL": redis_url, "AUTOPILOT_ENVIRONMENT": "development"}
     env.pop("AUTOPILOT_TOKEN", None)
     logfile = logdir / f"serve-{port}.log"
