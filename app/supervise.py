@@ -11,7 +11,7 @@ import logging
 import random
 import signal
 import socket
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 
 
 class Backoff:
@@ -43,6 +43,13 @@ def on_stop_signals(callback: Callable[[], object]) -> None:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, callback)
+
+
+async def run_until_stopped(run: Callable[[asyncio.Event], Awaitable[object]]) -> None:
+    """Await ``run(stop)``; SIGINT or SIGTERM sets ``stop`` so it can end cleanly."""
+    stop = asyncio.Event()
+    on_stop_signals(stop.set)
+    await run(stop)
 
 
 def configure_logging(verbose: bool = False) -> None:

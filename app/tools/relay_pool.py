@@ -37,7 +37,7 @@ from playwright.async_api import Error as PlaywrightError
 from app.protocol import tokens
 from app.server.fleet import keys
 from app.server.tls import spki_sha256
-from app.supervise import on_stop_signals
+from app.supervise import run_until_stopped
 from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
 from app.tools.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
 from app.tools.token_command import SECRET_ENV
@@ -274,12 +274,6 @@ def run(args: argparse.Namespace) -> int:
         token=args.token,
         ca_file=args.ca_file,
     )
-    asyncio.run(_main(pool))
+    asyncio.run(run_until_stopped(pool.run))
     log.info("relay pool stopped")
     return 0
-
-
-async def _main(pool: RelayPool) -> None:
-    stop = asyncio.Event()
-    on_stop_signals(stop.set)
-    await pool.run(stop)

@@ -23,7 +23,7 @@ from playwright.async_api import Error as PlaywrightError
 from app.protocol.constants import PROFILES
 from app.protocol.urls import ServerUrlError, page_url, server_base
 from app.server.tls import spki_sha256
-from app.supervise import Backoff, on_stop_signals, sleep_unless
+from app.supervise import Backoff, run_until_stopped, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
 
 log = logging.getLogger(__name__)
@@ -194,12 +194,6 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         log.error("cannot use --ca-file %s: %s", args.ca_file, exc)
         return 1
-    asyncio.run(_main(service))
+    asyncio.run(run_until_stopped(service.run))
     log.info("relay stopped")
     return 0
-
-
-async def _main(service: RelayService) -> None:
-    stop = asyncio.Event()
-    on_stop_signals(stop.set)
-    await service.run(stop)
