@@ -75,7 +75,10 @@ class Scene:
             60,
             "Start Piloting to be enabled on the client",
         )
-        await button.click()
+        # After a relay restart the button can still show the old relay's state: it turns
+        # disabled when the client hears the old relay left, and enabled again once the new one
+        # has loaded OpenCV.js, which took over 30 s (Playwright's default) on a loaded machine.
+        await button.click(timeout=90_000)
 
     async def stop_piloting(self) -> None:
         await self.client.get_by_role("button", name="Stop Piloting").click()
