@@ -133,7 +133,8 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
                now = t;
                const twist = kind === 'goal' ? c.goal(arg) : kind === 'pose' ? c.pose(arg)
                  : kind === 'tick' ? c.tick() : c.stop();
-               return twist === null ? null : [twist.linear, twist.angular, twist.seq];
+               const until = c.untilTimeout();
+               return [twist === null ? null : [twist.linear, twist.angular, twist.seq], until];
              });
            }""",
         [profile, events],
@@ -141,6 +142,7 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
     now = 0.0
     controller = control.Controller(control.PROFILES[profile], clock=lambda: now)
     expected: list[list[float | int | None] | None] = []
+    untils: list[float | None] = []
     for kind, t, arg in events:
         now = t
         if kind == "goal":
@@ -163,6 +165,7 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
         else:
             twist = controller.stop()
         expected.append(None if twist is None else [twist.linear_x, twist.angular_z, twist.seq])
+        untils.append(controller.until_timeout())
     published = [e for e in expected if e is not None]
     assert any(e[1] != 0 for e in published), "the script never drove the turtle"
     assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"
@@ -170,7 +173,9 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
         assert any(e[0] != 0 for e in published), "follow never drove forward or back"
         assert any(e[2] is None and e[1] != 0 for e in published), "follow never searched"
     assert len(js) == len(expected)
-    for got, want in zip(js, expected, strict=True):
+    # Both sides agree on when the goal timeout falls due (the ticker wakes up for it).
+    assert [until for _, until in js] == pytest.approx(untils, abs=1e-12)
+    for (got, _), want in zip(js, expected, strict=True):
         if want is None:
             assert got is None
         else:

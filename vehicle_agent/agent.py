@@ -425,7 +425,9 @@ class Agent:
 
     async def _tick(self) -> None:
         while True:
-            await asyncio.sleep(TICK_PERIOD_S)
+            until_timeout = self.controller.until_timeout()
+            delay = TICK_PERIOD_S if until_timeout is None else min(TICK_PERIOD_S, until_timeout)
+            await asyncio.sleep(delay)
             self._publish(self.controller.tick())
 
     def _publish(self, twist: Twist | None) -> None:

@@ -241,8 +241,18 @@ class Controller:
     def _lost(self, now: float) -> bool:
         return now - self._goal_at > self.profile.search_after_s
 
+    def until_timeout(self) -> float | None:
+        """Seconds until the goal timeout stops the turtle (0 when due), None with no goal.
+
+        A caller that ticks on a coarse period wakes up at this moment too, so the stop goes
+        out on time rather than up to a period late.
+        """
+        if self._goal is None:
+            return None
+        return max(0.0, self._goal_at + self.profile.goal_timeout_s - self._clock())
+
     def _check_timeout(self) -> Twist | None:
-        if self._goal is not None and self._clock() - self._goal_at > self.profile.goal_timeout_s:
+        if self._goal is not None and self._clock() - self._goal_at >= self.profile.goal_timeout_s:
             return self.stop()
         return None
 

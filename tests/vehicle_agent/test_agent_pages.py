@@ -157,7 +157,7 @@ async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) ->
             5,
             "a zero Twist after the relay died",
         )
-        # Within the goal timeout (0.75 s), with room for a loaded machine.
+        # Within the goal timeout (0.7 s), with room for a loaded machine.
         assert asyncio.get_running_loop().time() - killed < 1.5
         settled = s.heading_deg()
         await asyncio.sleep(1.0)

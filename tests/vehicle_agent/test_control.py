@@ -126,15 +126,21 @@ def test_default_profile_is_proportional_with_a_deadband() -> None:
 
 def test_goal_timeout_gives_one_zero_twist_then_nothing() -> None:
     clock = FakeClock()
+    timeout = PROFILES["default"].goal_timeout_s
+    # The field target: a vehicle that loses its goals stops within 0.75 s of the last one.
+    assert timeout <= 0.75
     control = Controller(PROFILES["default"], clock)
     control.goal(Goal(320, 40, 640, 480))
+    assert control.until_timeout() == pytest.approx(timeout)
     assert control.pose(CENTRE) is not None
-    clock.now += 0.7
-    assert control.tick() is None  # still inside 0.75 s
-    clock.now += 0.1
-    stop = control.tick()
+    clock.now += timeout - 0.01
+    assert control.tick() is None  # still inside the timeout
+    assert control.until_timeout() == pytest.approx(0.01)
+    clock.now += 0.01
+    stop = control.tick()  # due at the timeout itself, not a tick later
     assert stop is not None and stop.is_zero
     assert not control.active
+    assert control.until_timeout() is None
     clock.now += 1.0
     assert control.tick() is None
     assert control.pose(CENTRE) is None

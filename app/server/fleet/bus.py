@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import redis.asyncio as aioredis
-from redis.asyncio.client import PubSub
+from redis.asyncio.client import Pipeline, PubSub
 
 from app.protocol.signaling import IceServer, IceTransportPolicy, Login, ParseError, parse
 from app.server.config import Settings
@@ -56,6 +56,8 @@ OWNER_WAIT_S = 10.0
 MAX_HOPS = 3
 # Redis connections the sockets' pumps may use at once (the client's pool holds 100).
 PUMP_CONNECTIONS = 64
+# The most queued commands the owner sends to Redis in one pipeline.
+PUBLISH_BATCH = 500
 
 Deliver = Callable[[list[Action]], None]
 Ice = Callable[[str], tuple[list[IceServer], IceTransportPolicy]]
@@ -491,33 +493,43 @@ class FleetHub:
                 log.error("bad fleet message %.200r: %s", message["data"], exc)
 
     async def _publish(self) -> None:
-        """Send the owner's deliveries and member-list changes, in the order they were made."""
-        while True:
-            kind, payload = await self._outbound.get()
-            try:
-                await self._apply(kind, payload)
-            except aioredis.RedisError as exc:
-                log.error("fleet %s failed: %s", kind, exc)
+        """Send the owner's deliveries and member-list changes, in the order they were made.
 
-    async def _apply(self, kind: str, payload: Any) -> None:
+        Whatever has queued up meanwhile goes in one pipeline: one round trip for a burst, where
+        one command at a time made a busy owner's deliveries wait in line behind each other.
+        """
+        while True:
+            batch = [await self._outbound.get()]
+            while not self._outbound.empty() and len(batch) < PUBLISH_BATCH:
+                batch.append(self._outbound.get_nowait())
+            try:
+                async with self.redis.pipeline(transaction=False) as pipe:
+                    for kind, payload in batch:
+                        await self._queue_command(pipe, kind, payload)
+                    await pipe.execute()
+            except aioredis.RedisError as exc:
+                log.error("fleet publish of %d commands failed: %s", len(batch), exc)
+
+    async def _queue_command(self, pipe: Pipeline, kind: str, payload: Any) -> None:
         if kind == "deliver":
             instance, items = payload
             message = json.dumps({"op": "deliver", "items": items})
-            await self.redis.publish(keys.inbox(instance), message)
+            pipe.publish(keys.inbox(instance), message)
         elif kind == "member":
             room, conn, entry = payload
-            await self.redis.hset(keys.room_members(room), conn, entry)
-            await self.redis.pexpire(keys.room_members(room), keys.MEMBERS_TTL_MS)
+            pipe.hset(keys.room_members(room), conn, entry)
+            pipe.pexpire(keys.room_members(room), keys.MEMBERS_TTL_MS)
         elif kind == "unmember":
             room, conn = payload
-            await self.redis.hdel(keys.room_members(room), conn)
+            pipe.hdel(keys.room_members(room), conn)
         elif kind == "release":
             room = payload
             if room in self._releasing:  # not taken up again meanwhile
                 self._releasing.discard(room)
-                await self.redis.delete(keys.room_members(room))
-                await self.redis.srem(keys.ROOMS, room)
-                await self._release(keys=[keys.room_owner(room)], args=[self.id])
+                pipe.delete(keys.room_members(room))
+                pipe.srem(keys.ROOMS, room)
+                # Queued, not sent: the pipeline sends it with the rest.
+                await self._release(keys=[keys.room_owner(room)], args=[self.id], client=pipe)
 
     async def _watch(self) -> None:
         """Every tick: heartbeat, lease renewal, dead members out, orphaned rooms taken over."""

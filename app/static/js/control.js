@@ -176,8 +176,17 @@ export class Controller {
     return now - this.#goalAt > this.profile.searchAfterS;
   }
 
+  /**
+   * Seconds until the goal timeout stops the turtle (0 when due), null with no goal. A caller
+   * that ticks on a coarse period wakes up at this moment too, so the stop goes out on time.
+   */
+  untilTimeout() {
+    if (this.#goal === null) return null;
+    return Math.max(0, this.#goalAt + this.profile.goalTimeoutS - this.clock());
+  }
+
   #checkTimeout() {
-    if (this.#goal !== null && this.clock() - this.#goalAt > this.profile.goalTimeoutS) return this.stop();
+    if (this.#goal !== null && this.clock() - this.#goalAt >= this.profile.goalTimeoutS) return this.stop();
     return null;
   }
 

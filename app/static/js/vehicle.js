@@ -186,7 +186,12 @@ turtle.onPose = (pose) => {
   if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now() })) session.lastPoseSent = now;
 };
 
-setInterval(() => drive(() => controller.tick()), TICK_MS);
+function tick() {
+  drive(() => controller.tick());
+  const untilTimeout = controller.untilTimeout();
+  setTimeout(tick, untilTimeout === null ? TICK_MS : Math.min(TICK_MS, untilTimeout * 1000));
+}
+tick();
 
 /** A goal, already validated against the protocol's Goal model by serveChannel. */
 function onGoal(msg) {
