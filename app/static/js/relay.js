@@ -196,6 +196,7 @@ async function sendVideoOn(pc) {
     // The client offers recvonly; answering sendonly lets the track change later with no
     // renegotiation, which this side could not start anyway.
     if (pc.signalingState === 'have-remote-offer') transceiver.direction = 'sendonly';
+    // Chromium's default degradation (balanced) on purpose: see vehicle.js.
     await transceiver.sender.replaceTrack(session.vehicleTrack);
   }
 }

@@ -210,6 +210,9 @@ function onGoal(msg) {
 }
 
 function setupPeer(peer, stream) {
+  // No contentHint and no degradationPreference: on a capped uplink Chromium's default
+  // (balanced) kept the most frames per second, which the control loop lives on; 'motion'
+  // (maintain-framerate) kept fewer and 'detail' fewest (`autopilot bench --field`, video rows).
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
   const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
   serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log, SCHEMAS.autopilot.vehicle);

@@ -40,6 +40,10 @@ SETTLE_S = 2.0
 OUTAGE_AT_S = 4.0
 RESUME_TIMEOUT_S = 30.0
 WIDTH, HEIGHT = 640, 480
+# The video rows' keys, in the report's column order.
+VIDEO_COLUMNS = (
+    "condition", "hint", "degradation_preference", "fps", "width", "kbit_per_s", "limited_by",
+)  # fmt: skip
 _VIDEO_FRAMES_JS = """() => {
   const video = document.querySelector('[data-testid=video]');
   if (!video || !video.getVideoPlaybackQuality) return null;
@@ -160,6 +164,7 @@ def run(out: Path, quick: bool) -> dict[str, Any]:
     # Imported here: Playwright and the lab are only needed when the field bench runs.
     from playwright.sync_api import sync_playwright
 
+    from app.tools.bench import video
     from app.tools.lab import Lab
     from app.tools.lab.stack import field_stack
 
@@ -207,9 +212,13 @@ def run(out: Path, quick: bool) -> dict[str, Any]:
                 else:
                     row.problems["client_video_fps"] = "the client page shows no video element"
                 rows.append(row)
+        # Chromium's own video sender under a cap, per content hint: why the pages send
+        # theirs with the hint they do (app/tools/bench/video.py).
+        video_rows = video.measure(lab, playwright, quick)
     obj = {
         "field": [asdict(row) for row in rows],
         "link_drop": drop,
+        "video": video_rows,
         "window_s": window_s,
         "quick": quick,
         # Everything shares this machine's cores: the figures move with its load.
@@ -254,6 +263,19 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         "(target <= 3 s).",
         "",
     ]
+    if obj.get("video"):
+        lines += [
+            "Chromium's video sender, robot uplink capped, per content hint (received at the "
+            "cloud; `app/tools/bench/video.py`):",
+            "",
+            "| condition | contentHint | degradationPreference | fps | width | kbit/s "
+            "| limited by |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        for v in obj["video"]:
+            cells = [_cell(v[key]) for key in VIDEO_COLUMNS]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
     for row in obj["field"]:
         for key, reason in row["problems"].items():
             lines.append(f"- {row['condition']} {key}: {reason}")

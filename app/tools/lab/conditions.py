@@ -42,6 +42,7 @@ CONDITIONS: dict[str, Condition] = {
             jitter_ms=20,
         ),
         Condition("cap_1mbit", "robot uplink capped at 1 Mbit/s", uplink_kbit=1000),
+        Condition("cap_300kbit", "robot uplink capped at 300 kbit/s", uplink_kbit=300),
         Condition("link_drop", "the robot link goes dark for 3 s when asked", outage_s=3.0),
     )
 }

@@ -59,7 +59,17 @@ def test_a_run_without_a_link_says_why(tmp_path: Path) -> None:
     row = figures("clean", [], (0.0, 1.0))
     assert "connect_ms" in row.problems and "glass_to_command_ms_p50" in row.problems
     obj = {"field": [row.__dict__], "link_drop": {"stop_after_s": None, "resume_after_s": None}}
-    write(tmp_path, {**obj, "window_s": 1.0, "quick": True})
+    video = {
+        "condition": "cap_300kbit",
+        "hint": "motion",
+        "degradation_preference": "maintain-framerate",
+        "fps": 9.5,
+        "width": 320,
+        "kbit_per_s": 220,
+        "limited_by": "bandwidth",
+    }
+    write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video]})
     report = (tmp_path / "field.md").read_text()
     assert "clean connect_ms: the link never came up" in report
+    assert "| cap_300kbit | motion | maintain-framerate | 9.5 | 320 | 220 | bandwidth |" in report
     assert (tmp_path / "field-latency.png").stat().st_size > 0
