@@ -45,7 +45,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from app.resources import APP_DIR
-from app.supervise import free_port
+from app.supervise import free_port, stop_process
 from app.tools.redis_server import redis_server
 
 log = logging.getLogger(__name__)
@@ -85,13 +85,7 @@ def serve_instance(redis_url: str, logdir: Path) -> Iterator[tuple[str, subproce
         _wait_healthy(url, process, logfile)
         yield url, process
     finally:
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=10)
+        stop_process(process, grace_s=10)
 
 
 def _wait_healthy(url: str, process: subprocess.Popen[bytes], logfile: Path) -> None:
@@ -402,12 +396,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                 await browser.close()
         finally:
             for child in reversed(children):
-                if child.poll() is None:
-                    child.terminate()
-                    try:
-                        child.wait(timeout=30)
-                    except subprocess.TimeoutExpired:
-                        child.kill()
+                stop_process(child, grace_s=30)
             await redis.aclose()
     sustained = 0
     for step in steps:
