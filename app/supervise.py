@@ -11,7 +11,9 @@ import logging
 import random
 import signal
 import socket
+import subprocess
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 
 class Backoff:
@@ -66,3 +68,15 @@ def free_port(host: str = "127.0.0.1") -> int:
         sock.bind((host, 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+def stop_process(process: subprocess.Popen[Any], grace_s: float) -> None:
+    """SIGTERM ``process`` if it still runs; SIGKILL it if it has not exited ``grace_s`` later."""
+    if process.poll() is not None:
+        return
+    process.terminate()
+    try:
+        process.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()

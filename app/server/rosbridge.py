@@ -23,7 +23,7 @@ from app.protocol.jsonedge import oversize
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
-from app.server.websocket import Outbox, SocketPolicy, refuse_if_full, serve
+from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
 
@@ -48,22 +48,15 @@ class Simulator:
         self.hub = RosbridgeHub(self.sim, ros)
         self.tick_s = TurtleSim.TICK_S
         self.policy = policy
-        self.max_sessions = max_sessions
-        self._outboxes: dict[RosbridgeSession, Outbox] = {}
+        self.outboxes: Outboxes[RosbridgeSession] = Outboxes(policy, max_sessions)
         self._task: asyncio.Task[None] | None = None
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Simulator:
         """A fresh simulator with the socket policy and session cap of ``settings``."""
-        policy = SocketPolicy(
-            settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes
+        return cls(
+            SocketPolicy.from_settings(settings), settings.max_rosbridge_sessions, settings.ros
         )
-        return cls(policy, settings.max_rosbridge_sessions, settings.ros)
-
-    @property
-    def full(self) -> bool:
-        """True when no more rosbridge clients are accepted."""
-        return len(self._outboxes) >= self.max_sessions
 
     def start(self) -> None:
         """Start stepping the simulator every ``tick_s`` of wall time."""
@@ -81,14 +74,12 @@ class Simulator:
     def open(self) -> tuple[RosbridgeSession, Outbox]:
         """A new rosbridge client: its session and outbox."""
         session = self.hub.open_session()
-        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
-        self._outboxes[session] = outbox
-        return session, outbox
+        return session, self.outboxes.open(session)
 
     def forget(self, session: RosbridgeSession) -> None:
         """The client is gone: its subscriptions go with it."""
         session.close()
-        self._outboxes.pop(session, None)
+        self.outboxes.forget(session)
 
     def state(self) -> dict[str, Any]:
         """The turtles' poses and pens and the pen strokes, as JSON-ready data."""
@@ -111,7 +102,7 @@ class Simulator:
         """One step: the simulator, then the publications it causes."""
         self.sim.step()
         self.hub.tick(time.monotonic())
-        for session, outbox in self._outboxes.items():
+        for session, outbox in self.outboxes.items():
             # Publications are superseded by the next tick's: a slow reader misses some
             # rather than being closed (replies to its own requests do close it).
             dropped = sum(not outbox.offer(p) for p in session.take_publications())
@@ -154,7 +145,7 @@ async def rosbridge(websocket: WebSocket) -> None:
         await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
         return
     await websocket.accept()
-    if await refuse_if_full(websocket, simulator.full, simulator.max_sessions, "rosbridge clients"):
+    if await refuse_if_full(websocket, simulator.outboxes, "rosbridge clients"):
         return
     session, outbox = simulator.open()
 

@@ -18,7 +18,7 @@ from fastapi import APIRouter, WebSocket
 from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
 from app.server.turn import ice_servers_for
-from app.server.websocket import Outbox, SocketPolicy, refuse_if_full, serve
+from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
 from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,10 @@ class Switchboard:
     policy: SocketPolicy
     max_connections: int = 256
     login_timeout_s: float = 10.0
-    _outboxes: dict[ConnId, Outbox] = field(default_factory=dict, init=False)
+    outboxes: Outboxes[ConnId] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.outboxes = Outboxes(self.policy, self.max_connections)
 
     @classmethod
     def from_settings(cls, settings: Settings, hub: HubPort | None = None) -> Switchboard:
@@ -68,34 +71,25 @@ class Switchboard:
             )
         return cls(
             hub,
-            SocketPolicy(
-                settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes
-            ),
+            SocketPolicy.from_settings(settings),
             max_connections=settings.max_connections,
             login_timeout_s=settings.login_timeout_s,
         )
 
-    @property
-    def full(self) -> bool:
-        """True when no more connections are accepted."""
-        return len(self._outboxes) >= self.max_connections
-
     def open(self) -> tuple[ConnId, Outbox]:
         """Register a connection with the hub and give it an outbox."""
         conn = self.hub.connect()
-        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
-        self._outboxes[conn] = outbox
-        return conn, outbox
+        return conn, self.outboxes.open(conn)
 
     def forget(self, conn: ConnId) -> None:
         """The connection is gone: tell the hub and deliver what that causes."""
-        self._outboxes.pop(conn, None)
+        self.outboxes.forget(conn)
         self.dispatch(self.hub.disconnect(conn))
 
     def dispatch(self, actions: list[Action]) -> None:
         """Queue each action on its connection's outbox."""
         for action in actions:
-            outbox = self._outboxes.get(action.conn)
+            outbox = self.outboxes.get(action.conn)
             if outbox is None:
                 continue  # closed while this batch was being produced
             match action:
@@ -110,7 +104,7 @@ async def signaling(websocket: WebSocket) -> None:
     """One signaling connection: frames in to the hub, the hub's messages out."""
     board: Switchboard = websocket.app.state.signaling
     await websocket.accept()
-    if await refuse_if_full(websocket, board.full, board.max_connections, "connections"):
+    if await refuse_if_full(websocket, board.outboxes, "connections"):
         return
     conn, outbox = board.open()
 

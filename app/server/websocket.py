@@ -10,7 +10,8 @@ moves frames between a socket and a core, the same way for both:
 * **Outbox.** Each connection has an :class:`Outbox` bounded in messages and bytes, drained by
   its own writer task, so a slow peer never holds up the others. A peer that leaves more than
   that unread is closed with 1013; droppable messages (rosbridge publications, superseded every
-  tick) are dropped instead while the outbox is full.
+  tick) are dropped instead while the outbox is full. Each route keeps its connections' outboxes
+  in an :class:`Outboxes`, which also caps how many connections it accepts (1013 beyond that).
 * **JSON.** Replies are written with :func:`app.protocol.jsonedge.dumps`: never NaN or Infinity.
   Incoming text is parsed by the cores with :func:`app.protocol.jsonedge.loads`.
 * **Deadline.** A connection may be given a deadline (the login on ``/ws``); if the core does not
@@ -22,15 +23,16 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, ItemsView
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, Generic, TypeVar
 
 from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol import jsonedge
 from app.protocol.constants import CLOSE_POLICY_VIOLATION, CLOSE_TRY_AGAIN_LATER
+from app.server.config import Settings
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +48,11 @@ class SocketPolicy:
     max_message_bytes: int
     outbox_messages: int
     outbox_bytes: int
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> SocketPolicy:
+        """The limits of ``settings``."""
+        return cls(settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes)
 
 
 @dataclass(frozen=True)
@@ -133,14 +140,52 @@ class Outbox:
             return None
 
 
-async def refuse_if_full(websocket: WebSocket, full: bool, limit: int, what: str) -> bool:
-    """Close an accepted socket with 1013 when ``full``: ``limit`` ``what`` are open already.
+K = TypeVar("K", bound=Hashable)
+
+
+class Outboxes(Generic[K]):
+    """The outbox of each open connection of one route, keyed by the core's handle for it.
+
+    At most ``limit`` connections at once, each outbox bounded by ``policy``.
+    """
+
+    def __init__(self, policy: SocketPolicy, limit: int) -> None:
+        self.policy = policy
+        self.limit = limit
+        self._by_key: dict[K, Outbox] = {}
+
+    @property
+    def full(self) -> bool:
+        """True when no more connections are accepted."""
+        return len(self._by_key) >= self.limit
+
+    def open(self, key: K) -> Outbox:
+        """A new connection: its outbox."""
+        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
+        self._by_key[key] = outbox
+        return outbox
+
+    def forget(self, key: K) -> None:
+        """The connection is gone: so is its outbox."""
+        self._by_key.pop(key, None)
+
+    def get(self, key: K) -> Outbox | None:
+        """The connection's outbox; None once it is forgotten."""
+        return self._by_key.get(key)
+
+    def items(self) -> ItemsView[K, Outbox]:
+        """Each open connection with its outbox."""
+        return self._by_key.items()
+
+
+async def refuse_if_full(websocket: WebSocket, outboxes: Outboxes[Any], what: str) -> bool:
+    """Close an accepted socket with 1013 when ``outboxes`` is full: its limit of ``what``.
 
     True when the socket was refused; the route then returns without serving it.
     """
-    if not full:
+    if not outboxes.full:
         return False
-    reason = f"server full: {limit} {what}"
+    reason = f"server full: {outboxes.limit} {what}"
     log.warning("refusing a connection: %s", reason)
     await websocket.close(CLOSE_TRY_AGAIN_LATER, reason)
     return True

@@ -24,6 +24,8 @@ import json
 import logging
 import os
 import socket
+import subprocess
+import sys
 import time
 import uuid
 from dataclasses import dataclass
@@ -35,6 +37,7 @@ from playwright.async_api import Browser, Page, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
 from app.protocol import tokens
+from app.resources import APP_DIR
 from app.server.fleet import keys
 from app.server.tls import spki_sha256
 from app.supervise import run_until_stopped
@@ -244,6 +247,30 @@ class RelayPool:
             # Unload handlers run: the relay stops the vehicle and leaves the room first.
             await page.close(run_before_unload=True)
             await page.context.close()
+
+
+def start_pool_process(server_url: str, redis_url: str, log: Path) -> subprocess.Popen[bytes]:
+    """Start ``autopilot relay --pool`` as its own process, output to ``log``.
+
+    The fleet bench and the fleet test kill such a pool to watch another one take its rooms.
+    """
+    with log.open("wb") as out:
+        return subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "app.cli",
+                "relay",
+                "--pool",
+                "--server",
+                server_url,
+                "--redis-url",
+                redis_url,
+            ],
+            cwd=APP_DIR.parent,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
 
 
 def run(args: argparse.Namespace) -> int:

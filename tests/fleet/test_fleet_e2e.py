@@ -11,10 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import os
 import signal
-import subprocess
-import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
@@ -26,8 +23,7 @@ from playwright.async_api import async_playwright
 from app.server.fleet import keys
 from app.server.serve import RunningServer
 from app.tools.browser import chromium_args, chromium_path
-from app.tools.relay_pool import RelayPool, room_members
-from tests.fleet.conftest import REPO
+from app.tools.relay_pool import RelayPool, room_members, start_pool_process
 from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_agent_pages import H, W, page_until
 from vehicle_agent.agent import Agent, AgentConfig
@@ -64,24 +60,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
         return None if holder is None else str(holder)
 
     # The first pool is its own process, on the first instance, so that it can be SIGKILLed.
-    with (tmp_path / "pool-a.log").open("wb") as out:
-        pool_a = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "app.cli",
-                "relay",
-                "--pool",
-                "--server",
-                first.url,
-                "--redis-url",
-                redis_url,
-            ],
-            cwd=REPO,
-            env=os.environ.copy(),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
+    pool_a = start_pool_process(first.url, redis_url, tmp_path / "pool-a.log")
     pool_b = RelayPool(second.url, redis_url, pool_id="pool-b")
     stop_b = asyncio.Event()
     pool_b_task: asyncio.Task[None] | None = None

@@ -9,7 +9,7 @@ from contextlib import AsyncExitStack
 
 import httpx
 import pytest
-from playwright.async_api import Page, async_playwright
+from playwright.async_api import Browser, Page, async_playwright
 from websockets.asyncio.client import connect
 
 from app.protocol import tokens
@@ -19,6 +19,16 @@ from app.tools.browser import chromium_args, chromium_path
 from tests.server.test_signaling_ws import Peer, joined
 
 pytestmark = [pytest.mark.browser]
+
+
+async def launch(stack: AsyncExitStack) -> Browser:
+    """Headless Chromium, closed (with Playwright) when ``stack`` closes."""
+    pw = await stack.enter_async_context(async_playwright())
+    browser = await pw.chromium.launch(
+        executable_path=chromium_path(), args=chromium_args(), headless=True
+    )
+    stack.push_async_callback(browser.close)
+    return browser
 
 
 async def rows(page: Page) -> list[list[str]]:
@@ -49,11 +59,7 @@ async def test_the_fleet_page_lists_rooms_of_every_instance_live(
         async def peer_on(server: RunningServer) -> Peer:
             return Peer(await stack.enter_async_context(connect(server.ws_url)))
 
-        pw = await stack.enter_async_context(async_playwright())
-        browser = await pw.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args(), headless=True
-        )
-        stack.push_async_callback(browser.close)
+        browser = await launch(stack)
         page = await browser.new_page()
         await page.goto(f"{second.url}/fleet")
         await until_rows(page, [], "no rooms at first")
@@ -105,11 +111,7 @@ async def test_with_a_secret_the_page_sends_the_client_token_of_its_fragment(
             | {"token": token("lab", "vehicle")}
         )
         assert (await vehicle.recv())["success"] is True
-        pw = await stack.enter_async_context(async_playwright())
-        browser = await pw.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args(), headless=True
-        )
-        stack.push_async_callback(browser.close)
+        browser = await launch(stack)
         page = await browser.new_page()
         # Without a token the page loads but gets no rows, and says why.
         await page.goto(f"{server.url}/fleet")

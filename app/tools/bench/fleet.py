@@ -45,7 +45,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from app.resources import APP_DIR
-from app.supervise import free_port
+from app.supervise import free_port, stop_process
 from app.tools.redis_server import redis_server
 
 log = logging.getLogger(__name__)
@@ -85,13 +85,7 @@ def serve_instance(redis_url: str, logdir: Path) -> Iterator[tuple[str, subproce
         _wait_healthy(url, process, logfile)
         yield url, process
     finally:
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=10)
+        stop_process(process, grace_s=10)
 
 
 def _wait_healthy(url: str, process: subprocess.Popen[bytes], logfile: Path) -> None:
@@ -261,6 +255,8 @@ async def bench_instance_failover(redis_url: str, logdir: Path, rooms: int) -> f
 
 async def bench_pool_takeover(redis_url: str, logdir: Path) -> float:
     """Seconds from SIGKILL of the serving pool until another pool's relay joined the room."""
+    from app.tools.relay_pool import start_pool_process
+
     with serve_instance(redis_url, logdir) as (url, _):
         async with contextlib.AsyncExitStack() as stack:
             tally = Tally()
@@ -270,25 +266,7 @@ async def bench_pool_takeover(redis_url: str, logdir: Path) -> float:
             await vehicle.login("vehicle", "takeover")
             pools = []
             for name in ("a", "b"):
-                with (logdir / f"pool-{name}.log").open("wb") as out:
-                    pools.append(
-                        subprocess.Popen(
-                            [
-                                sys.executable,
-                                "-m",
-                                "app.cli",
-                                "relay",
-                                "--pool",
-                                "--server",
-                                url,
-                                "--redis-url",
-                                redis_url,
-                            ],
-                            cwd=APP_DIR.parent,
-                            stdout=out,
-                            stderr=subprocess.STDOUT,
-                        )
-                    )
+                pools.append(start_pool_process(url, redis_url, logdir / f"pool-{name}.log"))
                 if name == "a":
                     await _relay_joined(vehicle, 90)
             try:
@@ -312,6 +290,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
 
     from app.server.fleet import keys
     from app.tools.browser import chromium_args, chromium_path
+    from app.tools.relay_pool import start_pool_process
 
     steps: list[dict[str, Any]] = []
     children: list[subprocess.Popen[bytes]] = []
@@ -335,10 +314,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
             return json.loads(raw) if raw else {}
 
         try:
-            spawn(
-                "pool",
-                ["-m", "app.cli", "relay", "--pool", "--server", url, "--redis-url", redis_url],
-            )
+            children.append(start_pool_process(url, redis_url, logdir / "pool.log"))
             async with async_playwright() as pw:
                 browser = await pw.chromium.launch(
                     executable_path=chromium_path(), args=chromium_args(), headless=True
@@ -402,12 +378,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                 await browser.close()
         finally:
             for child in reversed(children):
-                if child.poll() is None:
-                    child.terminate()
-                    try:
-                        child.wait(timeout=30)
-                    except subprocess.TimeoutExpired:
-                        child.kill()
+                stop_process(child, grace_s=30)
             await redis.aclose()
     sustained = 0
     for step in steps:

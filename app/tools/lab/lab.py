@@ -43,6 +43,7 @@ from aioice import stun
 
 import app
 from app.server.turn import IceTransportPolicy
+from app.supervise import stop_process
 from app.tools.lab import coturn, netns
 from app.tools.lab.conditions import Condition, condition
 
@@ -403,13 +404,7 @@ class Lab:
 
 
 def _stop(process: subprocess.Popen[Any]) -> None:
-    if process.poll() is None:
-        process.terminate()
-        try:
-            process.wait(timeout=3)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+    stop_process(process, grace_s=3)
     for pipe in (process.stdin, process.stdout, process.stderr):
         if pipe is not None:
             pipe.close()
