@@ -36,7 +36,18 @@ CAPS = {"quick": ("cap_300kbit",), "full": ("cap_300kbit", "cap_1mbit")}
 SETTLE_S = {"quick": 6.0, "full": 10.0}
 WINDOW_S = {"quick": 6.0, "full": 15.0}
 
-_SENDER_JS = """async (hint) => {
+# The end of both peers' set-up: no trickle, the description is returned with every candidate.
+_GATHERED_JS = """  await new Promise((resolve) => {
+    if (pc.iceGatheringState === 'complete') resolve();
+    pc.addEventListener('icegatheringstatechange', () => {
+      if (pc.iceGatheringState === 'complete') resolve();
+    });
+  });
+  return pc.localDescription.toJSON();
+}"""
+
+_SENDER_JS = (
+    """async (hint) => {
   const canvas = document.createElement('canvas');
   canvas.width = 640;
   canvas.height = 480;
@@ -58,28 +69,19 @@ _SENDER_JS = """async (hint) => {
   window.pc = pc;
   window.sender = pc.addTrack(track, stream);
   await pc.setLocalDescription(await pc.createOffer());
-  await new Promise((resolve) => {
-    if (pc.iceGatheringState === 'complete') resolve();
-    pc.addEventListener('icegatheringstatechange', () => {
-      if (pc.iceGatheringState === 'complete') resolve();
-    });
-  });
-  return pc.localDescription.toJSON();
-}"""
+"""
+    + _GATHERED_JS
+)
 
-_RECEIVER_JS = """async (offer) => {
+_RECEIVER_JS = (
+    """async (offer) => {
   const pc = new RTCPeerConnection();
   window.pc = pc;
   await pc.setRemoteDescription(offer);
   await pc.setLocalDescription(await pc.createAnswer());
-  await new Promise((resolve) => {
-    if (pc.iceGatheringState === 'complete') resolve();
-    pc.addEventListener('icegatheringstatechange', () => {
-      if (pc.iceGatheringState === 'complete') resolve();
-    });
-  });
-  return pc.localDescription.toJSON();
-}"""
+"""
+    + _GATHERED_JS
+)
 
 _INBOUND_JS = """async () => {
   const stats = await window.pc.getStats();
