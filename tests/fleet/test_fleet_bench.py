@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.tools.bench.fleet import CANDIDATES, bench_signaling, serve_instance
+from app.tools.bench.fleet import CANDIDATES, bench_signaling, serve_instance, write
 
 
 async def test_the_scripted_rooms_get_every_message_across_two_instances(
@@ -25,3 +25,33 @@ async def test_the_scripted_rooms_get_every_message_across_two_instances(
     assert (result["errors"], result["lost"]) == (0, 0), result["_error_samples"]
     assert result["messages"] == 3 * per_room
     assert len(result["_latencies"]) == result["messages"]
+
+
+def test_the_report_shows_both_arrival_rates(tmp_path: Path) -> None:
+    def signaling(rate: float, p99: float) -> dict[str, object]:
+        latencies = [1.0, 2.0, p99]
+        return {
+            "rooms": 3,
+            "peers": 9,
+            "arrival_rooms_per_s": rate,
+            "messages": 3,
+            "latency_ms_p50": 2.0,
+            "latency_ms_p99": p99,
+            "errors": 0,
+            "lost": 0,
+            "_latencies": latencies,
+        }
+
+    obj = {
+        "signaling": signaling(10.0, 4.5),
+        "signaling_burst": signaling(40.0, 38.0),
+        "relay_density": None,
+        "failover": {"instance_peers_told_s": 2.9, "pool_takeover_s": 6.1},
+        "notes": {},
+    }
+    write(tmp_path, obj)
+    report = (tmp_path / "fleet.md").read_text()
+    assert "(steady arrival)" in report and "arriving at 10 rooms/s" in report
+    assert "(burst)" in report and "arriving at 40 rooms/s" in report and "p99 38.0 ms" in report
+    assert "_latencies" not in (tmp_path / "fleet.json").read_text()
+    assert (tmp_path / "fleet-latency.png").stat().st_size > 0
