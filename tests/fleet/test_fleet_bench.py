@@ -45,7 +45,31 @@ def test_the_report_shows_both_arrival_rates(tmp_path: Path) -> None:
     obj = {
         "signaling": signaling(10.0, 4.5),
         "signaling_burst": signaling(40.0, 38.0),
-        "relay_density": None,
+        "relay_density": {
+            "rooms_sustained": 1,
+            "min_goals_per_s": 15.0,
+            "fps": 30,
+            "cpus": 2,
+            "steps": [
+                {
+                    "rooms": 1,
+                    "started": True,
+                    "per_room": {"density-1": {"goals_per_s": 29.5, "ms_per_snapshot": 10.1}},
+                    "cores": {"relay": 0.4, "agents": 0.3, "server": 0.1, "rest": 0.5},
+                    "relay_cores_per_room": 0.4,
+                },
+                {
+                    "rooms": 2,
+                    "started": True,
+                    "per_room": {
+                        "density-1": {"goals_per_s": 12.0, "ms_per_snapshot": 30.0},
+                        "density-2": {"goals_per_s": 11.0, "ms_per_snapshot": 31.0},
+                    },
+                    "cores": {"relay": 0.6, "agents": 0.6, "server": 0.1, "rest": 0.7},
+                    "relay_cores_per_room": 0.3,
+                },
+            ],
+        },
         "failover": {"instance_peers_told_s": 2.9, "pool_takeover_s": 6.1},
         "notes": {},
     }
@@ -53,5 +77,9 @@ def test_the_report_shows_both_arrival_rates(tmp_path: Path) -> None:
     report = (tmp_path / "fleet.md").read_text()
     assert "(steady arrival)" in report and "arriving at 10 rooms/s" in report
     assert "(burst)" in report and "arriving at 40 rooms/s" in report and "p99 38.0 ms" in report
+    assert "| 1 | 29.5 (10.1) | 0.4, 0.3, 0.1, 0.5 | 0.4 |" in report
+    # The relay's share per room is taken only where every room kept its goal rate.
+    assert "costs the relay pool (its Chromium included) 0.4 cores" in report
+    assert "would hold about 5 rooms on 2 cores" in report
     assert "_latencies" not in (tmp_path / "fleet.json").read_text()
     assert (tmp_path / "fleet-latency.png").stat().st_size > 0

@@ -48,6 +48,7 @@ from websockets.exceptions import ConnectionClosed
 
 from app.resources import APP_DIR
 from app.supervise import free_port, stop_process
+from app.tools.bench.cpu import cores_used, tree_cpu_s
 from app.tools.redis_server import redis_server
 
 log = logging.getLogger(__name__)
@@ -316,8 +317,20 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                 )
             )
 
-    with serve_instance(redis_url, logdir) as (url, _):
+    with serve_instance(redis_url, logdir) as (url, server):
         redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
+
+        def cpu_s() -> dict[str, float]:
+            # Later groups get what earlier ones did not: the bench's own tree holds the
+            # client pages' Chromium, Redis and the bench itself.
+            return tree_cpu_s(
+                {
+                    "relay": [children[0].pid],
+                    "agents": [child.pid for child in children[1:]],
+                    "server": [server.pid],
+                    "clients_redis_bench": [os.getpid()],
+                }
+            )
 
         async def status(room: str) -> dict[str, Any]:
             raw = await redis.get(keys.relay_status(room))
@@ -364,6 +377,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                         f"density-{i}": [] for i in range(1, count + 1)
                     }
                     ms: dict[str, list[float]] = {name: [] for name in rates}
+                    cpu_before, sample_start = cpu_s(), time.monotonic()
                     for _ in range(int(DENSITY_SAMPLE_S)):
                         for name in rates:
                             seen = await status(name)
@@ -380,7 +394,14 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
                         }
                         for name, values in rates.items()
                     }
-                    step: dict[str, Any] = {"rooms": count, "started": True, "per_room": per_room}
+                    cores = cores_used(cpu_before, cpu_s(), time.monotonic() - sample_start)
+                    step: dict[str, Any] = {
+                        "rooms": count,
+                        "started": True,
+                        "per_room": per_room,
+                        "cores": cores,
+                        "relay_cores_per_room": round(cores["relay"] / count, 2),
+                    }
                     steps.append(step)
                     log.info("relay density: %d rooms: %s", count, per_room)
                     if min(r["goals_per_s"] for r in per_room.values()) < MIN_GOALS_PER_S:
@@ -398,14 +419,34 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
         if not kept:
             break
         sustained = step["rooms"]
-    return {
+    density: dict[str, Any] = {
         "rooms_sustained": sustained,
+        # Each room's figures at the largest count where every room kept the rate.
+        "per_room": [
+            {"room": name, **figures}
+            for step in steps
+            if step["rooms"] == sustained
+            for name, figures in step["per_room"].items()
+        ],
         "min_goals_per_s": MIN_GOALS_PER_S,
         "fps": DENSITY_FPS,
         "max_rooms_tried": max_rooms,
         "cpus": os.cpu_count(),
         "steps": steps,
     }
+    density["relay_cores_per_room"] = relay_cores_per_room(density)
+    return density
+
+
+def relay_cores_per_room(density: dict[str, Any]) -> float | None:
+    """The relay's cores per room, median over the steps where every room kept its rate."""
+    kept = [
+        step["relay_cores_per_room"]
+        for step in density["steps"]
+        if step.get("relay_cores_per_room")
+        and all(r["goals_per_s"] >= density["min_goals_per_s"] for r in step["per_room"].values())
+    ]
+    return statistics.median(kept) if kept else None
 
 
 async def _relay_joined(peer: ScriptedPeer, timeout: float) -> None:
@@ -497,16 +538,29 @@ def write(out: Path, obj: dict[str, Any]) -> None:
             f"{density['rooms_sustained']} rooms kept ≥ {density['min_goals_per_s']:g} goals/s "
             f"each ({density['fps']} fps video).",
             "",
-            "| rooms | per room: goals/s (ms per snapshot) |",
-            "| --- | --- |",
+            "| rooms | per room: goals/s (ms per snapshot) | cores busy: relay, agents, "
+            "server, client pages + Redis + bench | relay cores per room |",
+            "| --- | --- | --- | --- |",
         ]
         for step in density["steps"]:
             cells = ", ".join(
                 f"{r['goals_per_s']} ({r['ms_per_snapshot']})"
                 for r in step.get("per_room", {}).values()
             )
-            lines.append(f"| {step['rooms']} | {cells or 'did not start piloting'} |")
+            cores = ", ".join(f"{v:g}" for v in step.get("cores", {}).values())
+            lines.append(
+                f"| {step['rooms']} | {cells or 'did not start piloting'} | {cores or '–'} "
+                f"| {step.get('relay_cores_per_room', '–')} |"
+            )
         lines.append("")
+        if per_room := relay_cores_per_room(density):
+            lines += [
+                f"One room costs the relay pool (its Chromium included) {per_room:g} cores at "
+                f"{density['fps']} fps, where every room kept its goal rate: a relay host with "
+                f"nothing else on it would hold about {density['cpus'] / per_room:.0f} rooms on "
+                f"{density['cpus']} cores (an estimate from the share, not a measurement).",
+                "",
+            ]
     lines += [f"- {key}: {why}" for key, why in obj["notes"].items()]
     (out / "fleet.md").write_text("\n".join(lines) + "\n")
     if latencies:
