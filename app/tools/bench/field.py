@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -159,8 +160,9 @@ def _round(value: float | None, digits: int = 1) -> float | None:
     return None if value is None else round(value, digits)
 
 
-def run(out: Path, quick: bool) -> dict[str, Any]:
-    """Measure every condition; write ``field.json``, ``field.md`` and plots into ``out``."""
+def run(out: Path, quick: bool, conditions: Sequence[str] = ORDER) -> dict[str, Any]:
+    """Measure ``conditions`` (in the bench's order) and the video sender; write ``field.json``,
+    ``field.md`` and plots into ``out``."""
     # Imported here: Playwright and the lab are only needed when the field bench runs.
     from playwright.sync_api import sync_playwright
 
@@ -173,7 +175,7 @@ def run(out: Path, quick: bool) -> dict[str, Any]:
     rows: list[FieldRow] = []
     drop: dict[str, float | None] = {"stop_after_s": None, "resume_after_s": None}
     with Lab() as lab, sync_playwright() as playwright:
-        for name in ORDER:
+        for name in (name for name in ORDER if name in conditions):
             lab.apply(name)
             log.info("field bench: %s", name)
             with field_stack(lab, playwright, out / "field" / name) as stack:
