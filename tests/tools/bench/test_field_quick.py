@@ -21,6 +21,7 @@ from app.tools.bench.video import VARIANTS
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.browser,
+    pytest.mark.timeout(480),  # over the suite's 300 s: the run itself may take 420
     pytest.mark.skipif(os.geteuid() != 0, reason="the field lab builds network namespaces"),
 ]
 
