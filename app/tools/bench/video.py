@@ -1,19 +1,20 @@
-"""What Chromium's video sender gives up on a capped link, per content hint: the measurement
-behind the hint the pages put on the video they send (``contentHint = 'motion'``).
+"""What Chromium's video sender gives up on a capped link, per content hint and degradation
+preference: the measurement behind the pages leaving Chromium's default on the video they send.
 
 A headless Chromium at the robot site sends a busy 640x480 canvas at 30 fps (coloured blocks
 sliding over the whole frame, so the encoder wants far more than the cap) straight to a
 headless Chromium in the cloud: the SDP is handed over by Playwright, ICE uses host
 candidates through the robot's NAT. The robot's uplink is capped (the lab's ``cap_*``
 conditions). After the bandwidth estimate has settled, the receiver's ``inbound-rtp`` stats
-give the frames decoded per second and the frame width, for each hint:
+give the frames decoded per second and the frame width, for each variant:
 
-- ``""``: the browser's default for a canvas track (``balanced``);
-- ``"motion"``: keep the frame rate, lower the resolution first (``maintain-framerate``);
-- ``"detail"``: keep the resolution, drop frames (``maintain-resolution``).
+- no hint: the browser's default for a canvas track (``balanced``);
+- ``contentHint = "motion"``: keep the frame rate, lower the resolution first;
+- ``contentHint = "detail"``: keep the resolution, drop frames;
+- ``degradationPreference = "maintain-framerate"`` set with ``RTCRtpSender.setParameters``.
 
 The control loop needs frames (a goal per frame), not pixels: the relay analyses a 256 px-wide
-copy of each frame anyway.
+copy of each frame anyway. On this machine the default kept the most (README, "Performance").
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from __future__ import annotations
 import logging
 import time
 from typing import TYPE_CHECKING, Any
+
+from app.tools.browser import chromium_args, chromium_path
 
 if TYPE_CHECKING:
     from playwright.sync_api import Page, Playwright
@@ -119,9 +122,7 @@ _OUTBOUND_JS = """async () => {
 
 
 def measure(lab: Lab, playwright: Playwright, quick: bool) -> list[dict[str, Any]]:
-    """One row per (cap, hint): received frames/s, frame width, kbit/s and what limited it."""
-    from app.tools.browser import chromium_args, chromium_path
-
+    """One row per (cap, variant): received frames/s, frame width, kbit/s and what limited it."""
     plan = "quick" if quick else "full"
     rows = []
     for cap in CAPS[plan]:
