@@ -1,8 +1,8 @@
 """CPU time of process trees, from ``/proc``: where a benchmark's cores went.
 
-Linux only; elsewhere every figure is None. A process that ends inside a window takes its CPU
-time with it (it is only counted while alive), so windows should be spans where the measured
-processes all run.
+Linux only; without ``/proc`` every group reads 0 s. A process that ends inside a window takes
+its CPU time with it (it is only counted while alive), so windows should be spans where the
+measured processes all run.
 """
 
 from __future__ import annotations
