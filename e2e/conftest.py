@@ -18,7 +18,7 @@ from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expec
 
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from e2e.helpers import FACES, FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]
@@ -53,16 +53,10 @@ def playwright() -> Iterator[Playwright]:
         yield pw
 
 
-def _launch(playwright: Playwright, fake_video: Path | None = None) -> Browser:
-    return playwright.chromium.launch(
-        executable_path=chromium_path(), args=chromium_args(fake_video), headless=True
-    )
-
-
 @pytest.fixture(scope="session")
 def browser(playwright: Playwright) -> Iterator[Browser]:
     """Chromium for the relay and client pages (default fake camera, unused)."""
-    launched = _launch(playwright)
+    launched = playwright.chromium.launch(**launch_options())
     yield launched
     launched.close()
 
@@ -70,7 +64,7 @@ def browser(playwright: Playwright) -> Iterator[Browser]:
 @pytest.fixture(scope="session")
 def vehicle_browser(playwright: Playwright, face_left_video: Path) -> Iterator[Browser]:
     """Chromium whose camera shows the face on the left."""
-    launched = _launch(playwright, face_left_video)
+    launched = playwright.chromium.launch(**launch_options(face_left_video))
     yield launched
     launched.close()
 

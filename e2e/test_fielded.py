@@ -25,7 +25,7 @@ from app.protocol import tokens
 from app.server import tls
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from e2e.conftest import artifacts_dir
 from e2e.helpers import status, wait_until
 
@@ -56,10 +56,7 @@ def _token(role: tokens.Role, room: str = ROOM) -> str:
 
 def _launch(playwright: Playwright, tls_files: tls.TlsFiles, fake_video: Path | None) -> Browser:
     assert tls_files.ca_file is not None
-    pin = f"--ignore-certificate-errors-spki-list={tls.spki_sha256(tls_files.ca_file)}"
-    return playwright.chromium.launch(
-        executable_path=chromium_path(), args=[*chromium_args(fake_video), pin], headless=True
-    )
+    return playwright.chromium.launch(**launch_options(fake_video, trust_ca=tls_files.ca_file))
 
 
 def _turtle(server: RunningServer, tls_files: tls.TlsFiles) -> dict[str, Any]:

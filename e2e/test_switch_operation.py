@@ -11,7 +11,7 @@ import pytest
 from playwright.sync_api import Browser, Playwright, expect
 
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from e2e.conftest import OpenRole, artifacts_dir
 from e2e.helpers import (
     FACES,
@@ -42,9 +42,7 @@ def face_left_flame_right(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def scene_browser(playwright: Playwright, face_left_flame_right: Path) -> Iterator[Browser]:
-    launched = playwright.chromium.launch(
-        executable_path=chromium_path(), args=chromium_args(face_left_flame_right)
-    )
+    launched = playwright.chromium.launch(**launch_options(face_left_flame_right))
     yield launched
     launched.close()
 

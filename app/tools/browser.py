@@ -8,7 +8,11 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TypedDict
+
+from app.server.tls import spki_sha256
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
@@ -55,9 +59,34 @@ def chromium_path() -> str:
     )
 
 
-def chromium_args(fake_video: Path | None = None) -> list[str]:
-    """Command-line flags; ``fake_video`` (.y4m or .mjpeg) becomes the fake camera."""
+class LaunchOptions(TypedDict):
+    """Keyword arguments of Playwright's ``chromium.launch``."""
+
+    executable_path: str
+    args: list[str]
+    headless: bool
+
+
+def launch_options(
+    fake_video: Path | None = None,
+    *,
+    trust_ca: Path | None = None,
+    extra_args: Sequence[str] = (),
+    executable: str | None = None,
+) -> LaunchOptions:
+    """How to launch our headless Chromium: ``playwright.chromium.launch(**launch_options())``.
+
+    ``fake_video`` (.y4m or .mjpeg) becomes the fake camera; ``trust_ca`` admits the
+    certificates that CA signed; ``executable`` replaces :func:`chromium_path` (the lab wraps
+    Chromium to run it in a site).
+    """
     args = list(BASE_FLAGS)
     if fake_video is not None:
         args.append(f"--use-file-for-fake-video-capture={fake_video.resolve()}")
-    return args
+    if trust_ca is not None:
+        # Chromium cannot be handed a CA file; pinning the CA's key admits exactly the
+        # certificates it signed (the server presents the CA with its certificate).
+        args.append(f"--ignore-certificate-errors-spki-list={spki_sha256(trust_ca)}")
+    return LaunchOptions(
+        executable_path=executable or chromium_path(), args=[*args, *extra_args], headless=True
+    )

@@ -33,7 +33,7 @@ from playwright.sync_api import Page, sync_playwright
 from app.protocol.constants import PROFILES, Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from app.vision.reference import Detection, detect
 from app.vision.spec import CascadeOperation, Spec, load_spec
 
@@ -238,7 +238,7 @@ def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
     server = start_in_thread(settings)
     try:
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium_path(), args=chromium_args())
+            browser = pw.chromium.launch(**launch_options())
             try:
                 page = browser.new_page()
                 page.on("console", lambda m: log.debug("page console: %s", m.text))

@@ -39,9 +39,8 @@ from playwright.async_api import Error as PlaywrightError
 from app.protocol import tokens
 from app.resources import APP_DIR
 from app.server.fleet import keys
-from app.server.tls import spki_sha256
 from app.supervise import run_until_stopped
-from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
+from app.tools.browser import BrowserNotFound, chromium_path, launch_options
 from app.tools.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
 from app.tools.token_command import SECRET_ENV
 
@@ -130,12 +129,7 @@ class RelayPool:
         self.server, self.max_rooms, self.profile, self.name = server, max_rooms, profile, name
         # The relay token of each page: minted per room with the secret, else this one token.
         self.secret, self.token = secret, token
-        self.browser_args = chromium_args()
-        if ca_file is not None:
-            # As in RelayService: Chromium trusts the CA's key, not a CA file.
-            self.browser_args.append(
-                f"--ignore-certificate-errors-spki-list={spki_sha256(ca_file)}"
-            )
+        self.launch_options = launch_options(trust_ca=ca_file)
         self.id = pool_id or f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
         self.redis: aioredis.Redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
         self.leases = RoomLeases(self.redis, self.id)
@@ -144,9 +138,7 @@ class RelayPool:
     async def run(self, stop: asyncio.Event) -> None:
         """Serve rooms until ``stop`` is set; then close every page and release every room."""
         async with async_playwright() as playwright:
-            browser = await playwright.chromium.launch(
-                executable_path=chromium_path(), args=self.browser_args, headless=True
-            )
+            browser = await playwright.chromium.launch(**self.launch_options)
             log.info("relay pool %s serving rooms of %s", self.id, self.server)
             try:
                 while not stop.is_set():
@@ -154,11 +146,7 @@ class RelayPool:
                         if not browser.is_connected():
                             # Chromium died: its pages are marked dead and reopen in the new one.
                             log.warning("relay pool browser died; starting a new one")
-                            browser = await playwright.chromium.launch(
-                                executable_path=chromium_path(),
-                                args=self.browser_args,
-                                headless=True,
-                            )
+                            browser = await playwright.chromium.launch(**self.launch_options)
                         await self.tick(browser)
                     except (aioredis.RedisError, PlaywrightError) as exc:
                         log.error("relay pool tick failed: %s", exc)

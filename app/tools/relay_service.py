@@ -22,9 +22,8 @@ from playwright.async_api import Error as PlaywrightError
 
 from app.protocol.constants import PROFILES
 from app.protocol.urls import ServerUrlError, page_url, server_base
-from app.server.tls import spki_sha256
 from app.supervise import Backoff, run_until_stopped, sleep_unless
-from app.tools.browser import BrowserNotFound, chromium_args, chromium_path
+from app.tools.browser import BrowserNotFound, chromium_path, launch_options
 
 log = logging.getLogger(__name__)
 
@@ -74,13 +73,7 @@ class RelayService:
         ca_file: Path | None = None,
     ) -> None:
         self.url = relay_url(server, room, name, profile, token)
-        # Chromium cannot be handed a CA file; pinning the CA's key admits exactly the
-        # certificates it signed (the server presents the CA with its certificate).
-        self.browser_args = chromium_args()
-        if ca_file is not None:
-            self.browser_args.append(
-                f"--ignore-certificate-errors-spki-list={spki_sha256(ca_file)}"
-            )
+        self.launch_options = launch_options(trust_ca=ca_file)
         self.page: Page | None = None
         self.starts = 0  # pages started, the first included
         self.started = asyncio.Event()  # set each time a page has loaded
@@ -102,9 +95,7 @@ class RelayService:
                 await sleep_unless(stop, delay)
 
     async def _run_browser(self, playwright: Playwright, stop: asyncio.Event) -> str:
-        browser = await playwright.chromium.launch(
-            executable_path=chromium_path(), args=self.browser_args, headless=True
-        )
+        browser = await playwright.chromium.launch(**self.launch_options)
         try:
             return await self._run_page(browser, stop)
         finally:

@@ -22,7 +22,7 @@ from playwright.async_api import async_playwright
 
 from app.server.fleet import keys
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from app.tools.relay_pool import RelayPool, room_members, start_pool_process
 from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_agent_pages import H, W, page_until
@@ -66,9 +66,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
     pool_b_task: asyncio.Task[None] | None = None
     try:
         async with async_playwright() as pw:
-            browser = await pw.chromium.launch(
-                executable_path=chromium_path(), args=chromium_args(), headless=True
-            )
+            browser = await pw.chromium.launch(**launch_options())
             client = await browser.new_page()
             await client.goto(f"{second.url}/client?room=default&name=client&auto=1")
 

@@ -15,7 +15,7 @@ from websockets.asyncio.client import connect
 from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from tests.server.test_signaling_ws import Peer, joined
 
 pytestmark = [pytest.mark.browser]
@@ -24,9 +24,7 @@ pytestmark = [pytest.mark.browser]
 async def launch(stack: AsyncExitStack) -> Browser:
     """Headless Chromium, closed (with Playwright) when ``stack`` closes."""
     pw = await stack.enter_async_context(async_playwright())
-    browser = await pw.chromium.launch(
-        executable_path=chromium_path(), args=chromium_args(), headless=True
-    )
+    browser = await pw.chromium.launch(**launch_options())
     stack.push_async_callback(browser.close)
     return browser
 

@@ -18,7 +18,7 @@ from playwright.sync_api import Page, sync_playwright
 from app.protocol import channels
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from tests.protocol.samples import SAMPLES
 
 pytestmark = [pytest.mark.browser]
@@ -52,7 +52,7 @@ def page() -> Iterator[Page]:
     server: RunningServer = start_in_thread(Settings(environment="development", token=None))
     try:
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium_path(), args=chromium_args())
+            browser = pw.chromium.launch(**launch_options())
             opened = browser.new_page()
             opened.goto(server.url + "/")
             yield opened

@@ -17,7 +17,7 @@ from playwright.async_api import Browser, async_playwright
 from app.protocol.ros import RosFlavour, page_config
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
 
@@ -27,9 +27,7 @@ POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtles
 @pytest.fixture
 async def browser() -> AsyncIterator[Browser]:
     async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args()
-        )
+        browser = await playwright.chromium.launch(**launch_options())
         try:
             yield browser
         finally:

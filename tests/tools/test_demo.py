@@ -26,9 +26,8 @@ from queue import Empty, Queue
 import pytest
 from playwright.sync_api import sync_playwright
 
-from app.server import tls
 from app.tools import relay_service
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
 from vehicle_agent import cli as agent_cli
@@ -119,22 +118,19 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
     base = url.split("/client")[0]
     token = url.split("#token=", 1)[1]
     context = None
-    browser_args = chromium_args()
+    ca_file: Path | None = None
     if url.startswith("https://"):
         # The first URL printed is the machine's first non-loopback address (in-netns: 10.203.0.1),
         # and its certificate is the demo's own CA's.
         assert not base.startswith("https://127."), url
         ca_file = state_dir / "ca.pem"
         context = ssl.create_default_context(cafile=str(ca_file))
-        browser_args.append(f"--ignore-certificate-errors-spki-list={tls.spki_sha256(ca_file)}")
     with urllib.request.urlopen(url, timeout=10, context=context) as response:
         assert response.status == 200
         assert "Start Piloting" in response.read().decode()
 
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(
-            executable_path=chromium_path(), args=browser_args, headless=True
-        )
+        browser = pw.chromium.launch(**launch_options(trust_ca=ca_file))
         try:
             page = browser.new_page()
             page.goto(url)

@@ -11,7 +11,7 @@ from playwright.async_api import Page, async_playwright
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from app.turtlesim.sim import TurtleSim
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
@@ -64,9 +64,7 @@ async (url) => {
 @pytest.fixture
 async def page(server: RunningServer) -> AsyncIterator[Page]:
     async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args()
-        )
+        browser = await playwright.chromium.launch(**launch_options())
         try:
             page = await browser.new_page()
             # Any page of the app gives roslib.js the server's origin; no CDN is involved.

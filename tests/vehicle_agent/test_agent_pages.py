@@ -20,7 +20,7 @@ from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
 from app.server.serve import RunningServer
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import launch_options
 from app.tools.relay_service import RelayService
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
@@ -99,9 +99,7 @@ async def scene(server: RunningServer, profile: str = "default") -> AsyncIterato
     stop_relay = asyncio.Event()
     relay_task = asyncio.create_task(relay.run(stop_relay))
     async with async_playwright() as pw:
-        browser = await pw.chromium.launch(
-            executable_path=chromium_path(), args=chromium_args(), headless=True
-        )
+        browser = await pw.chromium.launch(**launch_options())
         client = await browser.new_page()
         try:
             await client.goto(f"{server.url}/client?room=default&name=client&auto=1")

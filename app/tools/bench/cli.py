@@ -162,7 +162,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     from playwright.async_api import async_playwright
 
     from app.server.serve import start_in_thread
-    from app.tools.browser import chromium_args, chromium_path
+    from app.tools.browser import launch_options
 
     plan = QUICK if args.quick else FULL
     default_s = args.soak * 60.0 if args.soak else plan["default_s"]
@@ -171,9 +171,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
-            browser = await playwright.chromium.launch(
-                executable_path=chromium_path(), args=chromium_args() + MEMORY_FLAGS
-            )
+            browser = await playwright.chromium.launch(**launch_options(extra_args=MEMORY_FLAGS))
             try:
                 durations = {
                     "default": default_s,

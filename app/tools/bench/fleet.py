@@ -301,7 +301,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
     from playwright.async_api import async_playwright
 
     from app.server.fleet import keys
-    from app.tools.browser import chromium_args, chromium_path
+    from app.tools.browser import launch_options
     from app.tools.relay_pool import start_pool_process
 
     steps: list[dict[str, Any]] = []
@@ -340,9 +340,7 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
         try:
             children.append(start_pool_process(url, redis_url, logdir / "pool.log"))
             async with async_playwright() as pw:
-                browser = await pw.chromium.launch(
-                    executable_path=chromium_path(), args=chromium_args(), headless=True
-                )
+                browser = await pw.chromium.launch(**launch_options())
                 for count in range(1, max_rooms + 1):
                     room = f"density-{count}"
                     spawn(

@@ -23,7 +23,7 @@ import logging
 import time
 from typing import TYPE_CHECKING, Any
 
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import chromium_path, launch_options
 
 if TYPE_CHECKING:
     from playwright.sync_api import Page, Playwright
@@ -130,9 +130,7 @@ def measure(lab: Lab, playwright: Playwright, quick: bool) -> list[dict[str, Any
         for hint, preference in VARIANTS:
             browsers = [
                 playwright.chromium.launch(
-                    executable_path=str(lab.chromium(site, chromium_path())),
-                    args=chromium_args(),
-                    headless=True,
+                    **launch_options(executable=str(lab.chromium(site, chromium_path())))
                 )
                 for site in ("robot", "cloud")
             ]

@@ -20,7 +20,7 @@ from typing import IO, Any
 from playwright.sync_api import Browser, Page, Playwright
 from playwright.sync_api import Error as PlaywrightError
 
-from app.tools.browser import chromium_args, chromium_path
+from app.tools.browser import chromium_path, launch_options
 from app.tools.lab.lab import CLOUD, Lab
 
 PORT = 8000
@@ -104,9 +104,7 @@ def field_stack(
             agent = lab.python("robot", agent_args, stdout=logs["agent"], stderr=subprocess.STDOUT)
             started.append(agent)
             browser = playwright.chromium.launch(
-                executable_path=str(lab.chromium("operator", chromium_path())),
-                args=chromium_args(),
-                headless=True,
+                **launch_options(executable=str(lab.chromium("operator", chromium_path())))
             )
             client = browser.new_page()
             console: list[str] = []
