@@ -65,21 +65,23 @@ class Profile:
     search_angular: float = 0.0
 
 
+_DEFAULT = Profile(
+    name="default",
+    law="rotate",
+    period_s=0.05,
+    on_pose=True,
+    min_interval_s=0.02,
+    gain=6.0,
+    max_angular=4.0,
+    deadband=0.01,
+    # A lost link must stop the turtle within 0.75 s of the last goal; the stop is timed to
+    # the millisecond, and 50 ms to spare cover an event loop that wakes up late.
+    goal_timeout_s=0.7,
+    relay_profile="default",
+)
+
 PROFILES: dict[str, Profile] = {
-    "default": Profile(
-        name="default",
-        law="rotate",
-        period_s=0.05,
-        on_pose=True,
-        min_interval_s=0.02,
-        gain=6.0,
-        max_angular=4.0,
-        deadband=0.01,
-        # A lost link must stop the turtle within 0.75 s of the last goal; the stop is timed to
-        # the millisecond, and 50 ms to spare cover an event loop that wakes up late.
-        goal_timeout_s=0.7,
-        relay_profile="default",
-    ),
+    "default": _DEFAULT,
     # The thesis publishes the latest goal every 1100 ms; turtlesim runs a command for 1 s, so
     # angular.z = e turns the turtle by e.
     "thesis": Profile(
@@ -94,19 +96,15 @@ PROFILES: dict[str, Profile] = {
         goal_timeout_s=2.5,
         relay_profile="thesis",
     ),
-    # Drive towards the target's terrain point and hold a standoff from it.
-    "follow": Profile(
+    # Drive towards the target's terrain point and hold a standoff from it, paced and turning
+    # as the default does.
+    "follow": replace(
+        _DEFAULT,
         name="follow",
         law="follow",
-        period_s=0.05,
-        on_pose=True,
-        min_interval_s=0.02,
-        gain=6.0,
         max_angular=5.0,
-        deadband=0.01,
         # Searching stops after this long without any goal: the relay may be gone.
         goal_timeout_s=10.0,
-        relay_profile="default",
         linear_gain=3.0,
         max_linear=4.0,
         standoff_m=1.0,
