@@ -19,7 +19,7 @@ from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expec
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from app.tools.browser import launch_options
-from e2e.helpers import FACES, FPS, face_frame, write_y4m
+from e2e.helpers import FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
@@ -34,7 +34,7 @@ def face_left_video(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The fake camera: obama.jpg's face on the LEFT third of the frame, two seconds looped."""
     path = tmp_path_factory.getbasetemp() / "face-left.y4m"
     if not path.exists():
-        write_y4m(path, face_frame(FACES / "obama.jpg", "left"), frames=2 * FPS)
+        write_y4m(path, face_frame("obama.jpg", "left"), frames=2 * FPS)
     return path
 
 

@@ -2,47 +2,32 @@
 
 from __future__ import annotations
 
+import ssl
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import cv2
-import cv2.data
 import httpx
 import numpy as np
 import numpy.typing as npt
 from playwright.sync_api import Page
 
+from app.protocol.angles import wrap_angle
 from app.server.serve import RunningServer
 from tests.helpers import waiting
-
-FACES = Path(__file__).resolve().parents[1] / "tests" / "data" / "faces"
+from tests.vision.frames import face_crop
 
 WIDTH, HEIGHT, FPS = 640, 480, 15
 
 Image = npt.NDArray[np.uint8]
 
 
-def face_crop(image: Image) -> Image:
-    """The largest frontal face of ``image`` with a margin, so the pasted face is big enough."""
-    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    cascade = cv2.CascadeClassifier(
-        str(Path(cv2.data.haarcascades) / "haarcascade_frontalface_default.xml")
-    )
-    faces = cascade.detectMultiScale(gray, scaleFactor=1.1, minNeighbors=5)
-    assert len(faces) > 0, "the source image has no detectable face"
-    x, y, w, h = max(faces, key=lambda f: int(f[2]) * int(f[3]))
-    m = w // 3
-    top, left = max(0, y - m), max(0, x - m)
-    return image[top : y + h + m, left : x + w + m]
-
-
-def face_frame(face_image: Path, side: str) -> Image:
-    """A plain grey 640×480 frame with the face centred in the ``side`` third."""
+def face_frame(face_image: str, side: str) -> Image:
+    """A plain grey 640×480 frame with the face of ``face_image`` (in tests/data/faces) centred
+    in the ``side`` third."""
     frame = np.full((HEIGHT, WIDTH, 3), 110, np.uint8)
-    source = cv2.imread(str(face_image))
-    assert source is not None, f"cannot read {face_image}"
-    face = face_crop(np.asarray(source, np.uint8))
+    face = face_crop(face_image)
     size = 200
     face = np.asarray(cv2.resize(face, (size, size * face.shape[0] // face.shape[1])), np.uint8)
     fh, fw = face.shape[:2]
@@ -62,11 +47,29 @@ def write_y4m(path: Path, frame_bgr: Image, frames: int) -> None:
             out.write(yuv.tobytes())
 
 
-def turtle_state(server: RunningServer, name: str = "turtle1") -> dict[str, Any]:
-    """The simulated turtle's pose from ``GET /turtlesim/state``."""
-    state = httpx.get(f"{server.url}/turtlesim/state", timeout=10).json()
-    turtle: dict[str, Any] = next(t for t in state["turtles"] if t["name"] == name)
+def turtle_state(
+    server: RunningServer,
+    name: str = "turtle1",
+    *,
+    token: str | None = None,
+    ca_file: Path | None = None,
+) -> dict[str, Any]:
+    """The simulated turtle's pose from ``GET /turtlesim/state``; over HTTPS, ``ca_file`` is the
+    CA to verify the server with, and ``token`` the bearer token a guarded server asks for."""
+    response = httpx.get(
+        f"{server.url}/turtlesim/state",
+        headers={} if token is None else {"Authorization": f"Bearer {token}"},
+        verify=True if ca_file is None else ssl.create_default_context(cafile=str(ca_file)),
+        timeout=10,
+    )
+    response.raise_for_status()
+    turtle: dict[str, Any] = next(t for t in response.json()["turtles"] if t["name"] == name)
     return turtle
+
+
+def heading_error(theta: float, goal: float) -> float:
+    """Absolute angle between two headings, in [0, π]."""
+    return abs(wrap_angle(theta - goal))
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float, what: str) -> None:

@@ -9,7 +9,6 @@ Needs the private network namespace (it binds 10.203.0.1):
 from __future__ import annotations
 
 import math
-import ssl
 import threading
 import time
 from collections.abc import Iterator
@@ -17,7 +16,6 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect
 
@@ -27,7 +25,7 @@ from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from app.tools.browser import launch_options
 from e2e.conftest import artifacts_dir
-from e2e.helpers import status, wait_until
+from e2e.helpers import heading_error, status, turtle_state, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
@@ -62,19 +60,8 @@ def _launch(playwright: Playwright, tls_files: tls.TlsFiles, fake_video: Path | 
 def _turtle(server: RunningServer, tls_files: tls.TlsFiles) -> dict[str, Any]:
     """turtle1 from ``/turtlesim/state``, over verified HTTPS with a client token."""
     assert tls_files.ca_file is not None
-    response = httpx.get(
-        f"{server.url}/turtlesim/state",
-        headers={"Authorization": f"Bearer {_token('client', room='anywhere')}"},
-        verify=ssl.create_default_context(cafile=str(tls_files.ca_file)),
-        timeout=10,
-    )
-    response.raise_for_status()
-    turtle: dict[str, Any] = next(t for t in response.json()["turtles"] if t["name"] == "turtle1")
-    return turtle
-
-
-def _heading_error(theta: float, goal: float) -> float:
-    return abs(math.atan2(math.sin(theta - goal), math.cos(theta - goal)))
+    token = _token("client", room="anywhere")
+    return turtle_state(server, token=token, ca_file=tls_files.ca_file)
 
 
 class _Pages:
@@ -148,7 +135,7 @@ def test_the_whole_flow_over_https_with_tokens_from_another_address(
         )
         # The vehicle authenticated to /rosbridge with its token: its spawn step turned turtle1.
         wait_until(
-            lambda: _heading_error(_turtle(https_server, tls_files)["theta"], math.pi / 2) < 0.01,
+            lambda: heading_error(_turtle(https_server, tls_files)["theta"], math.pi / 2) < 0.01,
             60,
             "the vehicle page's spawn step (a rosbridge service call) to turn the turtle to π/2",
         )
@@ -161,7 +148,7 @@ def test_the_whole_flow_over_https_with_tokens_from_another_address(
         expect(vehicle.get_by_test_id("goals-received")).not_to_have_text("0", timeout=60_000)
         # The face is on the left of the camera: the turtle turns from π/2 toward π.
         wait_until(
-            lambda: _heading_error(_turtle(https_server, tls_files)["theta"], math.pi) < 0.3,
+            lambda: heading_error(_turtle(https_server, tls_files)["theta"], math.pi) < 0.3,
             60,
             "the turtle to turn toward the face on the left (θ ≈ π)",
         )

@@ -14,11 +14,11 @@ from app.server.serve import RunningServer
 from app.tools.browser import launch_options
 from e2e.conftest import OpenRole, artifacts_dir
 from e2e.helpers import (
-    FACES,
     FPS,
     HEIGHT,
     WIDTH,
     face_frame,
+    heading_error,
     status,
     turtle_state,
     wait_until,
@@ -31,7 +31,7 @@ pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 @pytest.fixture(scope="module")
 def face_left_flame_right(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The fake camera: a face in the left third, a flame-coloured blob in the right third."""
-    frame = face_frame(FACES / "obama.jpg", "left")
+    frame = face_frame("obama.jpg", "left")
     centre = (WIDTH * 5 // 6, HEIGHT // 2)
     cv2.ellipse(frame, centre, (50, 70), 0, 0, 360, (0, 90, 255), -1)  # orange (BGR)
     cv2.ellipse(frame, (centre[0], centre[1] + 15), (25, 35), 0, 0, 360, (40, 210, 255), -1)
@@ -45,11 +45,6 @@ def scene_browser(playwright: Playwright, face_left_flame_right: Path) -> Iterat
     launched = playwright.chromium.launch(**launch_options(face_left_flame_right))
     yield launched
     launched.close()
-
-
-def heading_error(theta: float, goal: float) -> float:
-    """Absolute angle between two headings, in [0, π]."""
-    return abs(math.atan2(math.sin(theta - goal), math.cos(theta - goal)))
 
 
 def test_switching_face_to_fire_turns_the_turtle_to_the_flame(

@@ -10,14 +10,9 @@ from playwright.sync_api import Browser, expect
 
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, artifacts_dir
-from e2e.helpers import status, turtle_state, wait_until
+from e2e.helpers import heading_error, status, turtle_state, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
-
-
-def heading_error(theta: float, goal: float) -> float:
-    """Absolute angle between two headings, in [0, π]."""
-    return abs(math.atan2(math.sin(theta - goal), math.cos(theta - goal)))
 
 
 @pytest.mark.parametrize("profile", ["default", "thesis"])

@@ -14,22 +14,13 @@ from websockets.asyncio.client import connect
 
 from app.server.serve import RunningServer
 from app.tools.relay_pool import RelayPool, room_members
-from tests.helpers.processes import cmdline, descendants
+from tests.helpers.processes import browser_processes
 from tests.helpers.waiting import eventually
 from tests.server.test_signaling_ws import Peer, joined
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 RELAY = {"name": "relay", "role": "relay"}
-
-
-def browser_processes() -> set[int]:
-    """Chromium's main processes started from this test process (not its helpers)."""
-    return {
-        pid
-        for pid in descendants(os.getpid())
-        if "chromium" in cmdline(pid) and "--type=" not in cmdline(pid)
-    }
 
 
 async def test_the_pool_serves_a_vehicle_s_room_and_survives_its_browser_dying(

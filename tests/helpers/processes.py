@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -45,6 +46,15 @@ def cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
     except OSError:
         return ""
+
+
+def browser_processes() -> set[int]:
+    """Chromium's main processes started from this test process (not its helpers)."""
+    return {
+        pid
+        for pid in descendants(os.getpid())
+        if "chromium" in cmdline(pid) and "--type=" not in cmdline(pid)
+    }
 
 
 def wait_all_gone(pids: set[int], timeout: float = 15.0) -> list[int]:

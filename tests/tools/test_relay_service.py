@@ -16,7 +16,7 @@ from websockets.asyncio.client import connect
 
 from app.server.serve import RunningServer
 from app.tools.relay_service import RelayService
-from tests.helpers.processes import cmdline, descendants, wait_all_gone
+from tests.helpers.processes import browser_processes, cmdline, descendants, wait_all_gone
 from tests.helpers.waiting import eventually
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -43,15 +43,6 @@ async def wait_for_relay_in(server: RunningServer, room: str, what: str) -> None
                 await asyncio.sleep(0.2)
     except TimeoutError:
         raise AssertionError(f"timed out after 30 s waiting for {what}") from None
-
-
-def browser_processes() -> set[int]:
-    """Chromium's main processes started from this test process (not its helpers)."""
-    return {
-        pid
-        for pid in descendants(os.getpid())
-        if "chromium" in cmdline(pid) and "--type=" not in cmdline(pid)
-    }
 
 
 async def test_relay_page_comes_back_after_its_browser_is_killed(server: RunningServer) -> None:

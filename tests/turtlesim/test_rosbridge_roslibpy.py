@@ -26,6 +26,7 @@ from app.server.config import Settings
 from app.server.rosbridge import Simulator
 from app.server.serve import RunningServer, start_in_thread
 from app.turtlesim.sim import TurtleSim
+from tests.helpers.sockets import rosbridge_url
 from tests.helpers.waiting import wait_until
 
 pytestmark = pytest.mark.timeout(120)
@@ -42,9 +43,9 @@ def server() -> Iterator[RunningServer]:
     running.stop()
 
 
-@pytest.fixture(scope="module")
-def rosbridge_url(server: RunningServer) -> str:
-    return server.url.replace("http", "ws", 1) + "/rosbridge"
+@pytest.fixture(name="rosbridge_url", scope="module")
+def rosbridge_url_fixture(server: RunningServer) -> str:
+    return rosbridge_url(server)
 
 
 @pytest.fixture(scope="module")
