@@ -20,19 +20,11 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SPEC = load_spec(OPERATIONS_SPEC)
 
-# Helpers evaluated in the page: raw RGBA from Python, and a VideoFrame drawn on a canvas.
+# Helpers evaluated in the harness page (which has toBase64 and fromBase64): raw RGBA from
+# Python, and a VideoFrame drawn on a canvas.
 PAGE_HELPERS = """() => {
-window.rawFrame = (width, height, b64) => {
-  const bytes = Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0));
-  return { width, height, data: bytes };
-};
-window.toBase64 = (bytes) => {
-  let text = '';
-  for (let i = 0; i < bytes.length; i += 0x8000) {
-    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
-  }
-  return btoa(text);
-};
+window.rawFrame = (width, height, b64) => (
+  { width, height, data: new Uint8ClampedArray(fromBase64(b64).buffer) });
 window.flameVideoFrame = (width, height, box) => {
   const canvas = new OffscreenCanvas(width, height);
   const ctx = canvas.getContext('2d');

@@ -33,22 +33,15 @@ FLAME_BGR = (0, 120, 255)
 
 # An I420 VideoFrame from base64 planes (Y, then U, then V): full-range BT.601 as OpenCV's
 # BGR2YUV_I420 writes them, with sRGB primaries and transfer so that converting it to sRGB is
-# the YUV matrix alone; and the analyzer run on several such frames at once.
+# the YUV matrix alone; and the analyzer run on several such frames at once (the harness page
+# has toBase64 and fromBase64).
 PAGE_HELPERS = """() => {
 window.i420Frame = (width, height, b64) => {
-  const data = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
-  return new VideoFrame(data, {
+  return new VideoFrame(fromBase64(b64), {
     format: 'I420', codedWidth: width, codedHeight: height, timestamp: 0,
     colorSpace: { primaries: 'bt709', transfer: 'iec61966-2-1', matrix: 'smpte170m',
                   fullRange: true },
   });
-};
-const toBase64 = (bytes) => {
-  let text = '';
-  for (let i = 0; i < bytes.length; i += 0x8000) {
-    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
-  }
-  return btoa(text);
 };
 window.analyzeAll = async (frames, op, options) => {
   const results = await Promise.all(

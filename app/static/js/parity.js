@@ -1,5 +1,6 @@
 // The parity harness page, driven by `autopilot parity` through window.runImage (and by the
-// windowed-path tests and the bench through window.runPixels and window.analyzer).
+// windowed-path tests and the bench through window.runPixels and window.analyzer; the
+// analyzer tests also use its window.toBase64 and window.fromBase64).
 import { createAnalyzer } from './vision.js';
 import { largest } from './window.js';
 
@@ -70,6 +71,8 @@ createAnalyzer().then(
     window.analyzer = analyzer;
     window.runImage = runImage;
     window.runPixels = runPixels;
+    window.toBase64 = toBase64;
+    window.fromBase64 = fromBase64;
     state.textContent = `ready: ${analyzer.ops.map((op) => op.id).join(', ')}`;
     document.body.dataset.ready = 'true';
   },
