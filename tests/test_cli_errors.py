@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -43,6 +44,11 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
         (["--size", "big"], ["size", "big"]),
         (["--size", "641x480"], ["size", "641x480"]),
         (["--profile", "fastest"], ["fastest"]),
+        # float() takes these, but a NaN goal timeout would never expire.
+        (["--goal-timeout", "nan"], ["--goal-timeout", "finite"]),
+        (["--goal-timeout", "0"], ["--goal-timeout", "positive"]),
+        (["--fps", "inf"], ["--fps", "finite"]),
+        (["--standoff", "-1"], ["--standoff", ">= 0"]),
     ],
 )
 def test_vehicle_bad_input(args: list[str], needles: list[str]) -> None:
@@ -89,3 +95,33 @@ def test_relay_malformed_server_url() -> None:
 def test_demo_port_in_use(server: RunningServer) -> None:
     port = server.url.rsplit(":", 1)[1]
     assert_one_line_error(autopilot("demo", "--port", port), "cannot listen", port)
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (["serve", "--port", "70000"], ["--port", "65535"]),
+        (["serve", "--port", "0"], ["--port", ">= 1"]),
+        (["demo", "--port", "http"], ["--port", "whole number"]),
+        (["token", "--room", "lab", "--role", "client", "--ttl", "inf"], ["--ttl", "finite"]),
+        (["relay", "--pool", "--max-rooms", "0"], ["--max-rooms", ">= 1"]),
+        (["bench", "--soak", "nan"], ["--soak", "finite"]),
+        (["bench", "--fps", "-30"], ["--fps", "positive"]),
+    ],
+)
+def test_numbers_out_of_range_are_refused_by_the_parser(
+    args: list[str], needles: list[str]
+) -> None:
+    assert_one_line_error(autopilot(*args), *needles)
+
+
+def test_a_port_out_of_range_in_the_environment_is_one_line() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={**os.environ, "AUTOPILOT_PORT": "70000"},
+    )
+    assert_one_line_error(result, "cannot start", "port")

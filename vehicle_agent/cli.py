@@ -13,6 +13,7 @@ from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
+from app.arguments import non_negative_number, positive_number
 from app.protocol.constants import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
@@ -40,26 +41,6 @@ def _size(text: str) -> tuple[int, int]:
     return width, height
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, not {text!r}")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
-    if not value >= 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, not {text!r}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot vehicle``."""
     parser.add_argument(
@@ -83,7 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="WxH",
         help="frame size (synthetic: 640x480; files, devices: their own)",
     )
-    parser.add_argument("--fps", type=_positive, help="frame rate (default 30, or the file's)")
+    parser.add_argument(
+        "--fps", type=positive_number, help="frame rate (default 30, or the file's)"
+    )
     parser.add_argument(
         "--rosbridge",
         metavar="URL",
@@ -104,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--standoff",
-        type=_non_negative,
+        type=non_negative_number,
         metavar="M",
         help=f"follow: distance kept from the target (default {PROFILES['follow'].standoff_m:g} m)",
     )
@@ -116,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--goal-timeout",
-        type=_positive,
+        type=positive_number,
         metavar="S",
         help="stop the turtle when no goal came for this long (default: the profile's)",
     )

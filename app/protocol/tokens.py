@@ -13,6 +13,7 @@ import binascii
 import hashlib
 import hmac
 import json
+import math
 from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Literal, get_args
@@ -62,8 +63,9 @@ def sign(secret: str, room: str, role: Role, *, now: float, ttl_s: float = DEFAU
     check_secret(secret)
     if role not in ROLES:
         raise ValueError(f"role must be one of {', '.join(ROLES)}, not {role!r}")
-    if ttl_s <= 0:
-        raise ValueError(f"ttl must be positive, not {ttl_s}")
+    # NaN and infinity would fail in int() below, or mint a token that never expires.
+    if not math.isfinite(ttl_s) or ttl_s <= 0:
+        raise ValueError(f"ttl must be a positive finite number of seconds, not {ttl_s}")
     payload = json.dumps(
         {"room": room, "role": role, "exp": int(now + ttl_s)}, separators=(",", ":")
     ).encode()

@@ -30,7 +30,7 @@ class Settings(TurnSettings, BaseSettings):
 
     environment: Literal["development", "production"] = "development"
     host: str = "127.0.0.1"
-    port: int = 8000
+    port: int = Field(default=8000, ge=1, le=65535)
     # No public STUN by default: nothing leaves the machine unless an operator asks for it.
     # Extra ICE servers handed out as they are (TURN belongs in turn_urls: minted per login).
     ice_servers: list[IceServer] = Field(default_factory=list)
@@ -52,7 +52,7 @@ class Settings(TurnSettings, BaseSettings):
     max_connections: int = Field(default=256, ge=1)
     max_rosbridge_sessions: int = Field(default=64, ge=1)
     # A /ws connection that has not logged in this long after opening is closed (1008).
-    login_timeout_s: float = Field(default=10.0, gt=0)
+    login_timeout_s: float = Field(default=10.0, gt=0, allow_inf_nan=False)
     operations_spec: Path = OPERATIONS_SPEC
     ros: RosFlavour = DEFAULT_FLAVOUR
     # When set (redis://host:port/db), instances sharing it form one signaling service

@@ -13,6 +13,7 @@ from typing import Any
 import uvicorn
 from pydantic import ValidationError
 
+from app.arguments import port
 from app.protocol.constants import ROLES
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
@@ -28,7 +29,7 @@ log = logging.getLogger(__name__)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot serve``."""
     parser.add_argument("--host", help="address to bind (default: AUTOPILOT_HOST or 127.0.0.1)")
-    parser.add_argument("--port", type=int, help="port to bind (default: AUTOPILOT_PORT or 8000)")
+    parser.add_argument("--port", type=port, help="port to bind (default: AUTOPILOT_PORT or 8000)")
     parser.add_argument(
         "--ros",
         choices=ROS_FLAVOURS,

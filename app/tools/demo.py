@@ -23,6 +23,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from app.arguments import port
 from app.protocol import tokens
 from app.protocol.control import DEFAULT_PROFILE, PROFILES
 from app.protocol.urls import page_url, reachable_host
@@ -49,7 +50,7 @@ ANY_ADDRESS = ("0.0.0.0", "::")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot demo``."""
     parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8000, help="port to bind (default 8000)")
+    parser.add_argument("--port", type=port, default=8000, help="port to bind (default 8000)")
     parser.add_argument("--room", default="default", help="room (default: default)")
     parser.add_argument(
         "--profile",

@@ -267,9 +267,6 @@ def run(args: argparse.Namespace) -> int:
     if not redis_url:
         log.error("--pool needs Redis: pass --redis-url or set AUTOPILOT_REDIS_URL")
         return 1
-    if args.max_rooms is not None and args.max_rooms < 1:
-        log.error("--max-rooms must be at least 1, not %d", args.max_rooms)
-        return 1
     secret = os.environ.get(SECRET_ENV) or None
     try:
         if secret is not None:

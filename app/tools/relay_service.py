@@ -20,6 +20,7 @@ from pathlib import Path
 from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
+from app.arguments import positive_integer
 from app.protocol.constants import PROFILES
 from app.protocol.urls import ServerUrlError, page_url, server_base
 from app.supervise import Backoff, run_until_stopped, sleep_unless
@@ -163,7 +164,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="serve every room with a vehicle and no relay (needs Redis; --room is ignored)",
     )
-    parser.add_argument("--max-rooms", type=int, help="with --pool: serve at most N rooms")
+    parser.add_argument(
+        "--max-rooms", type=positive_integer, help="with --pool: serve at most N rooms"
+    )
     parser.add_argument("--redis-url", help="with --pool: Redis URL (default: AUTOPILOT_REDIS_URL)")
 
 

@@ -15,6 +15,7 @@ import sys
 import time
 from datetime import UTC, datetime
 
+from app.arguments import positive_number
 from app.protocol import tokens
 from app.protocol.constants import Role
 from app.protocol.urls import ServerUrlError, page_url, server_base
@@ -31,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--role", required=True, choices=tokens.ROLES, help="the role it grants")
     parser.add_argument(
         "--ttl",
-        type=float,
+        type=positive_number,
         default=tokens.DEFAULT_TTL_S,
         metavar="SECONDS",
         help=f"how long it stays valid (default {tokens.DEFAULT_TTL_S} s)",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 
 import pytest
 
@@ -76,10 +77,11 @@ def test_a_signed_payload_that_is_not_ours_is_malformed() -> None:
     assert refused.value.reason == "malformed"
 
 
-def test_signing_needs_a_real_secret_a_known_role_and_a_positive_ttl() -> None:
+def test_signing_needs_a_real_secret_a_known_role_and_a_positive_finite_ttl() -> None:
     with pytest.raises(ValueError, match="at least"):
         tokens.sign("short", "lab", "client", now=NOW)
     with pytest.raises(ValueError, match="role"):
         tokens.sign(SECRET, "lab", "admin", now=NOW)  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="ttl"):
-        tokens.sign(SECRET, "lab", "client", now=NOW, ttl_s=0)
+    for ttl_s in (0, -1, math.nan, math.inf):
+        with pytest.raises(ValueError, match="ttl"):
+            tokens.sign(SECRET, "lab", "client", now=NOW, ttl_s=ttl_s)

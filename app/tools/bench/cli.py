@@ -20,6 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from app.arguments import positive_number
 from app.protocol.control import PROFILES
 from app.resources import APP_DIR
 from app.tools.bench import report
@@ -49,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true", help="short run (under 3 minutes)")
     parser.add_argument(
         "--soak",
-        type=float,
+        type=positive_number,
         metavar="MINUTES",
         help="run the default profile this long to measure memory growth",
     )
@@ -77,7 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
-        "--fps", type=float, default=30.0, help="frame rate of the synthetic video (30)"
+        "--fps", type=positive_number, default=30.0, help="frame rate of the synthetic video (30)"
     )
 
 
@@ -90,9 +91,6 @@ def run(args: argparse.Namespace) -> int:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
         return fleet.run(args)
-    if args.soak is not None and args.soak <= 0:
-        log.error("--soak must be a positive number of minutes, not %s", args.soak)
-        return 2
     if args.field:
         return _field(args)
     if _can_enter_netns():

@@ -21,6 +21,8 @@ import sys
 from collections import deque
 from collections.abc import Callable
 
+from app.arguments import non_negative_number
+
 log = logging.getLogger(__name__)
 
 Address = tuple[str, int]
@@ -175,8 +177,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m app.tools.lab.delay")
     parser.add_argument("--listen", type=_address, required=True)
     parser.add_argument("--upstream", type=_address, required=True)
-    parser.add_argument("--delay-ms", type=float, required=True, help="one-way delay")
-    parser.add_argument("--jitter-ms", type=float, default=0.0, help="one-way jitter (+-)")
+    parser.add_argument("--delay-ms", type=non_negative_number, required=True, help="one-way delay")
+    parser.add_argument(
+        "--jitter-ms", type=non_negative_number, default=0.0, help="one-way jitter (+-)"
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
     asyncio.run(_serve(args))

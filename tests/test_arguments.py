@@ -1,0 +1,50 @@
+"""The argparse number types every command shares (app/arguments.py)."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+import pytest
+
+from app.arguments import non_negative_number, port, positive_integer, positive_number
+
+
+@pytest.mark.parametrize(
+    ("parse", "text", "value"),
+    [
+        (positive_number, "0.5", 0.5),
+        (positive_number, "1e3", 1000.0),
+        (non_negative_number, "0", 0.0),
+        (non_negative_number, "2.5", 2.5),
+        (positive_integer, "3", 3),
+        (port, "1", 1),
+        (port, "65535", 65535),
+    ],
+)
+def test_accepts(parse: Callable[[str], float], text: str, value: float) -> None:
+    assert parse(text) == value
+
+
+@pytest.mark.parametrize(
+    ("parse", "text", "words"),
+    [
+        (positive_number, "fast", "expected a number"),
+        (positive_number, "nan", "finite"),
+        (positive_number, "inf", "finite"),
+        (positive_number, "-inf", "finite"),
+        (positive_number, "0", "positive"),
+        (positive_number, "-1", "positive"),
+        (non_negative_number, "NaN", "finite"),
+        (non_negative_number, "-0.1", ">= 0"),
+        (positive_integer, "1.5", "whole number"),
+        (positive_integer, "0", ">= 1"),
+        (port, "0", ">= 1"),
+        (port, "65536", "65535"),
+        (port, "http", "whole number"),
+    ],
+)
+def test_refuses_with_the_reason(parse: Callable[[str], float], text: str, words: str) -> None:
+    with pytest.raises(argparse.ArgumentTypeError, match=words) as refused:
+        parse(text)
+    assert repr(text) in str(refused.value)
