@@ -26,23 +26,23 @@ def test_accepts(parse: Callable[[str], float], text: str, value: float) -> None
     assert parse(text) == value
 
 
+# What each type refuses, and a word of the reason it gives.
+REFUSED: dict[Callable[[str], float], dict[str, str]] = {
+    positive_number: {
+        "fast": "expected a number",
+        "nan": "finite",
+        "-inf": "finite",
+        "0": "positive",
+    },
+    non_negative_number: {"NaN": "finite", "inf": "finite", "-0.1": ">= 0"},
+    positive_integer: {"1.5": "whole number", "0": ">= 1"},
+    port: {"0": ">= 1", "65536": "65535", "http": "whole number"},
+}
+
+
 @pytest.mark.parametrize(
     ("parse", "text", "words"),
-    [
-        (positive_number, "fast", "expected a number"),
-        (positive_number, "nan", "finite"),
-        (positive_number, "inf", "finite"),
-        (positive_number, "-inf", "finite"),
-        (positive_number, "0", "positive"),
-        (positive_number, "-1", "positive"),
-        (non_negative_number, "NaN", "finite"),
-        (non_negative_number, "-0.1", ">= 0"),
-        (positive_integer, "1.5", "whole number"),
-        (positive_integer, "0", ">= 1"),
-        (port, "0", ">= 1"),
-        (port, "65536", "65535"),
-        (port, "http", "whole number"),
-    ],
+    [(parse, text, words) for parse, cases in REFUSED.items() for text, words in cases.items()],
 )
 def test_refuses_with_the_reason(parse: Callable[[str], float], text: str, words: str) -> None:
     with pytest.raises(argparse.ArgumentTypeError, match=words) as refused:
