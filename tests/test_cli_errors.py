@@ -12,13 +12,17 @@ import pytest
 from app.server.serve import RunningServer
 
 
-def autopilot(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+def autopilot(
+    *args: str, timeout: float = 60, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``autopilot`` with ``args``; ``env`` adds to this process's environment."""
     return subprocess.run(
         [sys.executable, "-m", "app.cli", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
         check=False,
+        env=None if env is None else {**os.environ, **env},
     )
 
 
@@ -116,12 +120,5 @@ def test_numbers_out_of_range_are_refused_by_the_parser(
 
 
 def test_a_port_out_of_range_in_the_environment_is_one_line() -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "app.cli", "serve"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        env={**os.environ, "AUTOPILOT_PORT": "70000"},
-    )
+    result = autopilot("serve", env={"AUTOPILOT_PORT": "70000"})
     assert_one_line_error(result, "cannot start", "port")
