@@ -2,14 +2,17 @@
 
 ``float()`` accepts ``nan`` and ``inf``, and ``int()`` any size: a goal timeout of ``nan`` would
 never expire and a port of 70000 fails deep inside the server. These types turn such a value
-into argparse's one-line usage error instead. Imports nothing of the project's own, so the agent
-and the tools can all use it.
+into argparse's one-line usage error instead. The ``--profile`` options are declared here too, so
+that every command lists the same profiles with the same default. Imports only the protocol core,
+so the agent and the tools can all use it.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+
+from app.protocol import constants, control
 
 
 def _number(text: str) -> float:
@@ -55,3 +58,24 @@ def port(text: str) -> int:
     if value > 65535:
         raise argparse.ArgumentTypeError(f"expected a port from 1 to 65535, not {text!r}")
     return value
+
+
+def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
+    """``--profile``: one of the vehicle profiles (:data:`app.protocol.control.PROFILES`)."""
+    parser.add_argument(
+        "--profile",
+        choices=sorted(control.PROFILES),
+        default=control.DEFAULT_PROFILE,
+        help="vehicle profile: default (turn in place), thesis (1100 ms pacing), follow (drive to"
+        " the target and keep a standoff)",
+    )
+
+
+def add_relay_profile(parser: argparse.ArgumentParser, purpose: str) -> None:
+    """``--profile``: one of the relay profiles (:data:`app.protocol.constants.PROFILES`)."""
+    parser.add_argument(
+        "--profile",
+        choices=constants.PROFILES,
+        default=constants.DEFAULT_PROFILE,
+        help=f"{purpose} (default: {constants.DEFAULT_PROFILE})",
+    )

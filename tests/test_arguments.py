@@ -1,13 +1,22 @@
-"""The argparse number types every command shares (app/arguments.py)."""
+"""The argparse types and options every command shares (app/arguments.py)."""
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from functools import partial
 
 import pytest
 
-from app.arguments import non_negative_number, port, positive_integer, positive_number
+from app.arguments import (
+    add_relay_profile,
+    add_vehicle_profile,
+    non_negative_number,
+    port,
+    positive_integer,
+    positive_number,
+)
+from app.protocol import constants, control
 
 
 @pytest.mark.parametrize(
@@ -48,3 +57,23 @@ def test_refuses_with_the_reason(parse: Callable[[str], float], text: str, words
     with pytest.raises(argparse.ArgumentTypeError, match=words) as refused:
         parse(text)
     assert repr(text) in str(refused.value)
+
+
+@pytest.mark.parametrize(
+    ("add", "profiles", "foreign"),
+    [
+        (add_vehicle_profile, list(control.PROFILES), "fastest"),
+        # follow is a vehicle profile: the relay paces it as default and has no such profile.
+        (partial(add_relay_profile, purpose="relay profile"), list(constants.PROFILES), "follow"),
+    ],
+)
+def test_profile_options_offer_the_protocol_profiles(
+    add: Callable[[argparse.ArgumentParser], None], profiles: list[str], foreign: str
+) -> None:
+    parser = argparse.ArgumentParser(exit_on_error=False)
+    add(parser)
+    assert parser.parse_args([]).profile == constants.DEFAULT_PROFILE
+    for name in profiles:
+        assert parser.parse_args(["--profile", name]).profile == name
+    with pytest.raises(argparse.ArgumentError, match=foreign):
+        parser.parse_args(["--profile", foreign])

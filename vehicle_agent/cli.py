@@ -13,7 +13,7 @@ from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
-from app.arguments import non_negative_number, positive_number
+from app.arguments import add_vehicle_profile, non_negative_number, positive_number
 from app.protocol.constants import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
@@ -22,7 +22,7 @@ from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
-from vehicle_agent.video import VideoSourceError, open_source
+from vehicle_agent.video import DEFAULT_FPS, DEFAULT_SIZE, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
 
@@ -62,10 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--size",
         type=_size,
         metavar="WxH",
-        help="frame size (synthetic: 640x480; files, devices: their own)",
+        help="frame size (synthetic: {}x{}; files, devices: their own)".format(*DEFAULT_SIZE),
     )
     parser.add_argument(
-        "--fps", type=positive_number, help="frame rate (default 30, or the file's)"
+        "--fps", type=positive_number, help=f"frame rate (default {DEFAULT_FPS:g}, or the file's)"
     )
     parser.add_argument(
         "--rosbridge",
@@ -79,12 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="ROS flavour of the robot's type names when its rosapi cannot tell: 1, 2 (up to "
         "Iron) or jazzy; auto (default) learns them from rosapi topic_type",
     )
-    parser.add_argument(
-        "--profile",
-        choices=sorted(PROFILES),
-        default="default",
-        help="control profile: default (turn in place), thesis (1100 ms pacing), follow (drive)",
-    )
+    add_vehicle_profile(parser)
     parser.add_argument(
         "--standoff",
         type=non_negative_number,

@@ -42,6 +42,8 @@ TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 # The relay analyses one snapshot per decoded frame, so the frame rate bounds goals per second
 # and the wait for the next frame is part of every goal's latency.
 DEFAULT_FPS = 30.0
+# The synthetic scene's frame size (width, height): the agent's default, and the bench's.
+DEFAULT_SIZE = (640, 480)
 
 Image = npt.NDArray[np.uint8]
 
@@ -344,8 +346,8 @@ class SyntheticVideo(PacedVideoTrack):
 
     def __init__(
         self,
-        width: int = 640,
-        height: int = 480,
+        width: int = DEFAULT_SIZE[0],
+        height: int = DEFAULT_SIZE[1],
         fps: float = DEFAULT_FPS,
         path: FacePath | None = None,
         photo: Path = DEFAULT_FACE,
@@ -495,7 +497,7 @@ def open_source(
 ) -> MediaStreamTrack:
     """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path."""
     if source == "synthetic":
-        width, height = size or (640, 480)
+        width, height = size or DEFAULT_SIZE
         return SyntheticVideo(width, height, fps or DEFAULT_FPS, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)

@@ -7,6 +7,7 @@ typing the numbers again.
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import Final, Literal
 
 # The room a peer joins when it names none.
@@ -36,10 +37,14 @@ AUTOPILOT_CHANNEL: Final = "autopilot"
 AUTOPILOT_STATE_CHANNEL: Final = "autopilot-state"
 CONTROL_CHANNEL: Final = "control"
 
-# WebSocket close codes (RFC 6455 §7.4.1) the server's sockets close with.
-CLOSE_NORMAL: Final = 1000
-CLOSE_POLICY_VIOLATION: Final = 1008
-CLOSE_TRY_AGAIN_LATER: Final = 1013
+
+class CloseCode(IntEnum):
+    """WebSocket close codes (RFC 6455 §7.4.1) the server's sockets close with."""
+
+    NORMAL = 1000
+    POLICY_VIOLATION = 1008
+    TRY_AGAIN_LATER = 1013
+
 
 # The turtlesim world: a square of this many metres, origin bottom-left, y up. The terrain
 # centre (where turtle1 spawns, and where a goal in the middle of the frame lands) is half of it,

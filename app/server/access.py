@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from app.protocol import tokens
-from app.protocol.constants import CLOSE_POLICY_VIOLATION, Role
+from app.protocol.constants import CloseCode, Role
 from app.protocol.tokens import Claims, TokenError
 
 # Ops that only read the simulator; everything else (publish, advertise, services) changes it.
@@ -144,5 +144,7 @@ def _status(text: str, message: dict[str, Any] | None) -> dict[str, Any]:
 
 def _refuse(text: str, message: dict[str, Any] | None) -> Decision:
     return Decision(
-        forward=False, reply=_status(text, message), close=(CLOSE_POLICY_VIOLATION, "token refused")
+        forward=False,
+        reply=_status(text, message),
+        close=(CloseCode.POLICY_VIOLATION, "token refused"),
     )

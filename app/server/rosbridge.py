@@ -18,7 +18,7 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 
-from app.protocol.constants import CLOSE_POLICY_VIOLATION
+from app.protocol.constants import CloseCode
 from app.protocol.jsonedge import oversize
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import RosbridgeGate, bearer_token, state_refusal
@@ -142,7 +142,7 @@ async def rosbridge(websocket: WebSocket) -> None:
     refusal = gate.handshake(bearer_token(websocket.headers), time.time())
     if refusal is not None:
         log.info("rosbridge handshake refused: %s", refusal)
-        await websocket.close(CLOSE_POLICY_VIOLATION)  # before accept(): HTTP 403
+        await websocket.close(CloseCode.POLICY_VIOLATION)  # before accept(): HTTP 403
         return
     await websocket.accept()
     if await refuse_if_full(websocket, simulator.outboxes, "rosbridge clients"):

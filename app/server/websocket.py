@@ -31,7 +31,7 @@ from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol import jsonedge
-from app.protocol.constants import CLOSE_POLICY_VIOLATION, CLOSE_TRY_AGAIN_LATER
+from app.protocol.constants import CloseCode
 from app.server.config import Settings
 
 log = logging.getLogger(__name__)
@@ -93,7 +93,7 @@ class Outbox:
             log.warning("closing a slow reader: %d messages (%d bytes) unread", unread, self._bytes)
             self._frames.clear()
             self._bytes = 0
-            self.close(CLOSE_TRY_AGAIN_LATER, f"too slow: {unread} messages left unread")
+            self.close(CloseCode.TRY_AGAIN_LATER, f"too slow: {unread} messages left unread")
             return
         self._push(frame)
 
@@ -187,7 +187,7 @@ async def refuse_if_full(websocket: WebSocket, outboxes: Outboxes[Any], what: st
         return False
     reason = f"server full: {outboxes.limit} {what}"
     log.warning("refusing a connection: %s", reason)
-    await websocket.close(CLOSE_TRY_AGAIN_LATER, reason)
+    await websocket.close(CloseCode.TRY_AGAIN_LATER, reason)
     return True
 
 
@@ -214,7 +214,7 @@ async def serve(
         def check() -> None:
             if not met():
                 log.info("closing %s: %s", name, reason)
-                outbox.close(CLOSE_POLICY_VIOLATION, reason)
+                outbox.close(CloseCode.POLICY_VIOLATION, reason)
 
         timer = loop.call_later(seconds, check)
     reader = asyncio.create_task(

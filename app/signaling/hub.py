@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Final, assert_never
 
 from app.protocol import tokens
-from app.protocol.constants import CLOSE_NORMAL, CLOSE_POLICY_VIOLATION, Role
+from app.protocol.constants import CloseCode, Role
 from app.protocol.jsonedge import oversize
 from app.protocol.signaling import (
     Answer,
@@ -285,7 +285,7 @@ class Hub:
     def _leave(self, connection: _Connection, peer: _Peer) -> list[Action]:
         connection.closing = True
         connection.peer = None
-        return [*self._remove(peer), Close(connection.id, CLOSE_NORMAL, "left")]
+        return [*self._remove(peer), Close(connection.id, CloseCode.NORMAL, "left")]
 
     # -- helpers --------------------------------------------------------------------------------
 
@@ -334,7 +334,7 @@ class Hub:
             actions.append(
                 Close(
                     connection.id,
-                    CLOSE_POLICY_VIOLATION,
+                    CloseCode.POLICY_VIOLATION,
                     f"abusive: {connection.errors_in_a_row} bad messages in a row",
                 )
             )

@@ -23,9 +23,9 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from app.arguments import port
+from app.arguments import add_vehicle_profile, port
 from app.protocol import tokens
-from app.protocol.control import DEFAULT_PROFILE, PROFILES
+from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings
@@ -52,13 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     parser.add_argument("--port", type=port, default=8000, help="port to bind (default 8000)")
     parser.add_argument("--room", default="default", help="room (default: default)")
-    parser.add_argument(
-        "--profile",
-        choices=sorted(PROFILES),
-        default=DEFAULT_PROFILE,
-        help="vehicle profile: default (turn in place), thesis (1100 ms), follow (drive to the"
-        " target and keep a standoff; see docs/demo.md)",
-    )
+    add_vehicle_profile(parser)
     tls.add_arguments(parser)
 
 

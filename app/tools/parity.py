@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 from playwright.sync_api import Page, sync_playwright
 
-from app.protocol.constants import PROFILES, Profile
+from app.arguments import add_relay_profile
+from app.protocol.constants import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.tools.browser import launch_options
@@ -275,12 +276,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot parity``."""
     parser.add_argument("paths", nargs="*", type=Path, metavar="PATH", help="images or folders")
     parser.add_argument("--op", default="all", help="operation id, or 'all' (default)")
-    parser.add_argument(
-        "--profile",
-        choices=PROFILES,
-        default="default",
-        help="relay profile whose parameters to check (default: default)",
-    )
+    add_relay_profile(parser, "relay profile whose parameters to check")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 

@@ -20,8 +20,7 @@ from pathlib import Path
 from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
-from app.arguments import positive_integer
-from app.protocol.constants import PROFILES
+from app.arguments import add_relay_profile, positive_integer
 from app.protocol.urls import ServerUrlError, page_url, server_base
 from app.supervise import Backoff, run_until_stopped, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path, launch_options
@@ -150,7 +149,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--server", required=True, help="server base URL, e.g. http://host:8000")
     parser.add_argument("--room", default="default", help="room to join (default: default)")
     parser.add_argument("--name", default="relay", help="peer name (default: relay)")
-    parser.add_argument("--profile", choices=PROFILES, default="default", help="relay profile")
+    add_relay_profile(parser, "relay profile")
     parser.add_argument(
         "--token",
         default=os.environ.get(TOKEN_ENV),

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from app.protocol import tokens
-from app.protocol.constants import CLOSE_POLICY_VIOLATION
+from app.protocol.constants import CloseCode
 from app.server.access import (
     Decision,
     RosbridgeGate,
@@ -41,7 +41,7 @@ def test_without_a_secret_everything_passes_and_auth_is_swallowed() -> None:
 def test_anything_but_a_token_first_is_refused_and_closed(first: str) -> None:
     decision = RosbridgeGate(SECRET).check(first, NOW)
     assert not decision.forward
-    assert decision.close is not None and decision.close[0] == CLOSE_POLICY_VIOLATION
+    assert decision.close is not None and decision.close[0] == CloseCode.POLICY_VIOLATION
     assert decision.reply is not None and "authenticate first" in decision.reply["msg"]
 
 

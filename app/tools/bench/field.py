@@ -29,6 +29,7 @@ from app.tools.bench.stats import (
     heading_track,
 )
 from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.video import DEFAULT_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,6 @@ SETTLE_S = 2.0
 # link_drop: the outage starts this far into the window.
 OUTAGE_AT_S = 4.0
 RESUME_TIMEOUT_S = 30.0
-WIDTH, HEIGHT = 640, 480
 # The video rows' keys, in the report's column order.
 VIDEO_COLUMNS = (
     "condition", "hint", "degradation_preference", "fps", "width", "kbit_per_s", "limited_by",
@@ -96,7 +96,7 @@ def figures(condition: str, events: list[dict[str, Any]], window: tuple[float, f
     else:
         row.problems["glass_to_command_ms_p50"] = "no tagged goal turned into a Twist"
     truth = [
-        TruthSample(e["t"], e["face_x"], e["face_y"], WIDTH, HEIGHT)
+        TruthSample(e["t"], e["face_x"], e["face_y"], *DEFAULT_SIZE)
         for e in events
         if e["ev"] == "frame_sent"
     ]

@@ -60,14 +60,14 @@ class Comparison:
     frames: int = 0
 
 
-def synthetic_frames(count: int, width: int = 640, height: int = 480) -> list[Rgba]:
+def synthetic_frames(count: int) -> list[Rgba]:
     """``count`` frames of the agent's synthetic scene spread over one cycle of the face's path."""
     from vehicle_agent.video import SweepPath, SyntheticVideo
 
     fps = 15.0
     path = SweepPath()
     cycle_frames = int(path.cycle_s * fps)
-    video = SyntheticVideo(width, height, fps, path=path)
+    video = SyntheticVideo(fps=fps, path=path)
     frames = []
     for i in range(count):
         rgb = video.render(i * cycle_frames // count)

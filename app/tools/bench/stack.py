@@ -36,6 +36,7 @@ from app.tools.bench.stats import (
     standoff_errors,
 )
 from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.video import DEFAULT_FPS, DEFAULT_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -80,9 +81,8 @@ class StackOptions:
 
     profile: str
     duration_s: float
-    width: int = 640
-    height: int = 480
-    fps: float = 30.0
+    size: tuple[int, int] = DEFAULT_SIZE
+    fps: float = DEFAULT_FPS
     memory_every_s: float = 10.0
 
 
@@ -217,7 +217,7 @@ async def _start_agent(
     command = [
         sys.executable, "-m", "vehicle_agent",
         "--server", server_url, "--room", room, "--name", "vehicle",
-        "--video", "synthetic", "--size", f"{options.width}x{options.height}",
+        "--video", "synthetic", "--size", "{}x{}".format(*options.size),
         "--fps", f"{options.fps:g}", "--profile", options.profile, "--events", str(events),
     ]  # fmt: skip
     log.debug("starting the agent: %s", " ".join(command))
@@ -279,7 +279,7 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
     if not path.exists():
         run.problems["glass_to_command_ms_p50"] = "the agent wrote no event log"
         return
-    run.frame_size = (options.width, options.height)
+    run.frame_size = options.size
     poses: list[PoseSample] = []
     truth: list[TruthSample] = []
     first_command: float | None = None
@@ -296,9 +296,7 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
                     bool(event.get("jump", False)),
                 )
             )
-            truth.append(
-                TruthSample(t, event["face_x"], event["face_y"], options.width, options.height)
-            )
+            truth.append(TruthSample(t, event["face_x"], event["face_y"], *options.size))
         elif kind == "goal":
             run.goals.append((t, event.get("frame")))
             if event.get("frame") is not None:
