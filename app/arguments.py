@@ -66,8 +66,9 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
         "--profile",
         choices=sorted(control.PROFILES),
         default=control.DEFAULT_PROFILE,
-        help="vehicle profile: default (turn in place), thesis (1100 ms pacing), follow (drive to"
-        " the target and keep a standoff)",
+        help="vehicle profile: default (turn in place), thesis"
+        f" ({control.PROFILES['thesis'].period_s * 1000:.0f} ms pacing), follow (drive to the"
+        " target and keep a standoff)",
     )
 
 
