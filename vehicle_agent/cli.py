@@ -14,7 +14,7 @@ from urllib.parse import urlsplit
 from aiortc import RTCIceServer
 
 from app.arguments import add_vehicle_profile, non_negative_number, positive_number
-from app.protocol.constants import DEFAULT_ROOM
+from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
@@ -22,7 +22,7 @@ from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
-from vehicle_agent.video import DEFAULT_FPS, DEFAULT_SIZE, VideoSourceError, open_source
+from vehicle_agent.video import VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
 
@@ -62,10 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--size",
         type=_size,
         metavar="WxH",
-        help="frame size (synthetic: {}x{}; files, devices: their own)".format(*DEFAULT_SIZE),
+        help="frame size (synthetic: {}x{}; files, devices: their own)".format(*VIDEO_SIZE),
     )
     parser.add_argument(
-        "--fps", type=positive_number, help=f"frame rate (default {DEFAULT_FPS:g}, or the file's)"
+        "--fps", type=positive_number, help=f"frame rate (default {VIDEO_FPS:g}, or the file's)"
     )
     parser.add_argument(
         "--rosbridge",

@@ -31,7 +31,13 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
-from app.protocol.constants import TAG_BITS, TAG_BLOCKS_PER_WIDTH, TAG_MARKER_BLOCKS
+from app.protocol.constants import (
+    TAG_BITS,
+    TAG_BLOCKS_PER_WIDTH,
+    TAG_MARKER_BLOCKS,
+    VIDEO_FPS,
+    VIDEO_SIZE,
+)
 
 log = logging.getLogger(__name__)
 
@@ -39,11 +45,6 @@ ASSETS = Path(__file__).resolve().parent / "assets"
 DEFAULT_FACE = ASSETS / "obama.jpg"
 CLOCK_RATE = 90_000
 TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
-# The relay analyses one snapshot per decoded frame, so the frame rate bounds goals per second
-# and the wait for the next frame is part of every goal's latency.
-DEFAULT_FPS = 30.0
-# The synthetic scene's frame size (width, height): the agent's default, and the bench's.
-DEFAULT_SIZE = (640, 480)
 
 Image = npt.NDArray[np.uint8]
 
@@ -346,9 +347,9 @@ class SyntheticVideo(PacedVideoTrack):
 
     def __init__(
         self,
-        width: int = DEFAULT_SIZE[0],
-        height: int = DEFAULT_SIZE[1],
-        fps: float = DEFAULT_FPS,
+        width: int = VIDEO_SIZE[0],
+        height: int = VIDEO_SIZE[1],
+        fps: float = VIDEO_FPS,
         path: FacePath | None = None,
         photo: Path = DEFAULT_FACE,
         on_frame: Callable[[FrameInfo], None] | None = None,
@@ -497,8 +498,8 @@ def open_source(
 ) -> MediaStreamTrack:
     """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path."""
     if source == "synthetic":
-        width, height = size or DEFAULT_SIZE
-        return SyntheticVideo(width, height, fps or DEFAULT_FPS, on_frame=on_frame)
+        width, height = size or VIDEO_SIZE
+        return SyntheticVideo(width, height, fps or VIDEO_FPS, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)
     path = Path(source)

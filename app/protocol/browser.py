@@ -46,6 +46,8 @@ def browser_protocol() -> dict[str, Any]:
         },
         "goalFreshness": {"maxAgeS": GOAL_MAX_AGE_S, "windowS": GOAL_AGE_WINDOW_S},
         "world": {"size": c.WORLD_SIZE, "terrainCentre": c.TERRAIN_CENTRE},
+        # The frame size the vehicle page asks its camera for.
+        "video": {"width": c.VIDEO_SIZE[0], "height": c.VIDEO_SIZE[1]},
         "frameTag": {
             "blocksPerWidth": c.TAG_BLOCKS_PER_WIDTH,
             "markerBlocks": c.TAG_MARKER_BLOCKS,

@@ -52,6 +52,13 @@ class CloseCode(IntEnum):
 WORLD_SIZE: Final = 11.088889
 TERRAIN_CENTRE: Final = 5.544445
 
+# The vehicle's video: the size a browser vehicle asks its camera for and the Python agent's
+# synthetic scene, and the agent's frame rate. The relay analyses one snapshot per decoded frame,
+# so the frame rate bounds goals per second and the wait for the next frame is part of every
+# goal's latency.
+VIDEO_SIZE: Final = (640, 480)
+VIDEO_FPS: Final = 30.0
+
 # Frame tag (docs/contracts.md, "Frame tag"): a row of square blocks along the top edge, each
 # floor(width / TAG_BLOCKS_PER_WIDTH) px; TAG_MARKER_BLOCKS marker blocks (white, black), then
 # TAG_BITS bits of the frame number, most significant first.

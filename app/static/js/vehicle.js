@@ -254,7 +254,7 @@ function showState() {
 async function startCamera() {
   try {
     const stream = await navigator.mediaDevices.getUserMedia({
-      video: { width: { ideal: 640 }, height: { ideal: 480 } },
+      video: { width: { ideal: PROTOCOL.video.width }, height: { ideal: PROTOCOL.video.height } },
       audio: false,
     });
     byTestId('camera').srcObject = stream;

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from app.arguments import positive_number
+from app.protocol.constants import VIDEO_FPS
 from app.protocol.control import PROFILES
 from app.resources import APP_DIR
 from app.tools.bench import report
@@ -78,7 +79,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
-        "--fps", type=positive_number, default=30.0, help="frame rate of the synthetic video (30)"
+        "--fps",
+        type=positive_number,
+        default=VIDEO_FPS,
+        help=f"frame rate of the synthetic video ({VIDEO_FPS:g})",
     )
 
 
@@ -274,6 +278,6 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
-    if args.fps != 30.0:
+    if args.fps != VIDEO_FPS:
         parts.append(f"--fps {args.fps:g}")
     return " ".join(parts)

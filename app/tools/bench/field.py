@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from app.protocol.constants import VIDEO_SIZE
 from app.tools.bench.stats import (
     PoseSample,
     TruthSample,
@@ -29,7 +30,6 @@ from app.tools.bench.stats import (
     heading_track,
 )
 from vehicle_agent.control import pixel_to_terrain
-from vehicle_agent.video import DEFAULT_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ def figures(condition: str, events: list[dict[str, Any]], window: tuple[float, f
     else:
         row.problems["glass_to_command_ms_p50"] = "no tagged goal turned into a Twist"
     truth = [
-        TruthSample(e["t"], e["face_x"], e["face_y"], *DEFAULT_SIZE)
+        TruthSample(e["t"], e["face_x"], e["face_y"], *VIDEO_SIZE)
         for e in events
         if e["ev"] == "frame_sent"
     ]

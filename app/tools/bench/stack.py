@@ -25,6 +25,7 @@ from playwright.async_api import Browser, ConsoleMessage, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
+from app.protocol.constants import VIDEO_FPS, VIDEO_SIZE
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
 from app.tools.bench.results import MemorySample, ProfileRun
@@ -36,7 +37,6 @@ from app.tools.bench.stats import (
     standoff_errors,
 )
 from vehicle_agent.control import pixel_to_terrain
-from vehicle_agent.video import DEFAULT_FPS, DEFAULT_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -81,8 +81,8 @@ class StackOptions:
 
     profile: str
     duration_s: float
-    size: tuple[int, int] = DEFAULT_SIZE
-    fps: float = DEFAULT_FPS
+    size: tuple[int, int] = VIDEO_SIZE
+    fps: float = VIDEO_FPS
     memory_every_s: float = 10.0
 
 
