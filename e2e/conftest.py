@@ -47,13 +47,16 @@ def server() -> Iterator[RunningServer]:
     running.stop()
 
 
-@pytest.fixture(scope="session")
+# Playwright's sync API marks the thread's event loop as running for as long as it is open, and
+# the asyncio tests cannot run beside it: module scope closes it before any other module's tests,
+# so the suite passes in any order and under any split between xdist workers.
+@pytest.fixture(scope="module")
 def playwright() -> Iterator[Playwright]:
     with sync_playwright() as pw:
         yield pw
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser(playwright: Playwright) -> Iterator[Browser]:
     """Chromium for the relay and client pages (default fake camera, unused)."""
     launched = playwright.chromium.launch(**launch_options())
@@ -61,7 +64,7 @@ def browser(playwright: Playwright) -> Iterator[Browser]:
     launched.close()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def vehicle_browser(playwright: Playwright, face_left_video: Path) -> Iterator[Browser]:
     """Chromium whose camera shows the face on the left."""
     launched = playwright.chromium.launch(**launch_options(face_left_video))

@@ -18,7 +18,7 @@ import pytest
 
 from app.tools.bench.results import FIGURE_KEYS
 
-pytestmark = [pytest.mark.slow, pytest.mark.browser]
+pytestmark = [pytest.mark.bench, pytest.mark.slow, pytest.mark.browser]
 
 PLOTS = (
     "processing_delay.png",

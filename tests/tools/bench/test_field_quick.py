@@ -19,6 +19,7 @@ from app.tools.bench.field import VIDEO_COLUMNS, FieldRow
 from app.tools.bench.video import VARIANTS
 
 pytestmark = [
+    pytest.mark.bench,
     pytest.mark.slow,
     pytest.mark.browser,
     pytest.mark.timeout(480),  # over the suite's 300 s: the run itself may take 420
