@@ -22,7 +22,7 @@ from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
-from vehicle_agent.video import VideoSourceError, open_source
+from vehicle_agent.video import SweepPath, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +66,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--fps", type=positive_number, help=f"frame rate (default {VIDEO_FPS:g}, or the file's)"
+    )
+    parser.add_argument(
+        "--sweep-s",
+        type=positive_number,
+        metavar="S",
+        help=f"synthetic: seconds per cycle of the face's glides and leaps "
+        f"(default {SweepPath().cycle_s:g})",
     )
     parser.add_argument(
         "--rosbridge",
@@ -161,6 +168,7 @@ async def _main(args: argparse.Namespace) -> int:
             face_y=info.face_y,
             jump=info.jump,
         ),
+        sweep_s=args.sweep_s,
     )
     turtle: Turtle = SimTurtle()
     if args.rosbridge:

@@ -123,6 +123,12 @@ class SweepPath:
     hold_s: float = 4.0
     glide_s: float = 2.0
 
+    @classmethod
+    def with_cycle(cls, cycle_s: float) -> SweepPath:
+        """The same sweep, played faster or slower: each hold twice as long as each glide, as in
+        the default 20 s cycle (a short bench run still sees the face glide and leap)."""
+        return cls(hold_s=cycle_s / 5, glide_s=cycle_s / 10)
+
     @property
     def cycle_s(self) -> float:
         """Length of one cycle: four holds and two glides."""
@@ -495,11 +501,14 @@ def open_source(
     size: tuple[int, int] | None = None,
     fps: float | None = None,
     on_frame: Callable[[FrameInfo], None] | None = None,
+    sweep_s: float | None = None,
 ) -> MediaStreamTrack:
-    """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path."""
+    """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path;
+    ``sweep_s``: the synthetic face's cycle (default :class:`SweepPath`'s)."""
     if source == "synthetic":
         width, height = size or VIDEO_SIZE
-        return SyntheticVideo(width, height, fps or VIDEO_FPS, on_frame=on_frame)
+        path = None if sweep_s is None else SweepPath.with_cycle(sweep_s)
+        return SyntheticVideo(width, height, fps or VIDEO_FPS, path=path, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)
     path = Path(source)

@@ -91,6 +91,20 @@ def test_sweep_path_leaps_across_the_frame_at_its_jump_times() -> None:
     assert not path.jumped(-1.0, 0.0)
 
 
+def test_a_shorter_sweep_keeps_the_shape_and_any_window_of_one_cycle_holds_both_leaps() -> None:
+    # `--sweep-s` (and `bench --seconds`): the same glides and leaps, played faster.
+    default, fast = SweepPath(), SweepPath.with_cycle(8.0)
+    assert SweepPath.with_cycle(default.cycle_s) == default
+    assert fast.cycle_s == pytest.approx(8.0)
+    for t in (0.5, 2.0, 4.0, 6.0, 7.0, 7.9):
+        assert fast(t) == pytest.approx(default(t * default.cycle_s / 8.0))
+    leaps = [k * fast.cycle_s + at for k in range(4) for at in fast.jump_times()]
+    for start in (0.1, 3.3, 5.0, 9.7):
+        end = start + fast.cycle_s
+        assert fast.jumped(start, end)
+        assert len([t for t in leaps if start < t <= end]) == 2
+
+
 def test_synthetic_frames_flag_exactly_the_jumps() -> None:
     fps = 30.0
     infos: list[FrameInfo] = []

@@ -55,6 +55,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="MINUTES",
         help="run the default profile this long to measure memory growth",
     )
+    parser.add_argument(
+        "--seconds",
+        type=positive_number,
+        metavar="S",
+        help="measure each profile (--field: each condition and video variant) for S seconds "
+        "instead of --quick's or the full lengths; the synthetic face's sweep is shortened to "
+        "S when longer, so even a short run sees it glide and leap",
+    )
     parser.add_argument("--json", action="store_true", help="print the results object on stdout")
     parser.add_argument(
         "--field",
@@ -120,7 +128,7 @@ def _field(args: argparse.Namespace) -> int:
         log.error("the field bench builds network namespaces: run it as root")
         return 2
     conditions = args.condition or FIELD_CONDITIONS
-    obj = field.run(args.out, args.quick, conditions)
+    obj = field.run(args.out, args.quick, conditions, args.seconds)
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     unmeasured = [(r["condition"], k) for r in obj["field"] for k in r["problems"]]
@@ -150,6 +158,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--quick")
     if args.soak is not None:
         argv += ["--soak", str(args.soak)]
+    if args.seconds is not None:
+        argv += ["--seconds", str(args.seconds)]
     if args.json:
         argv.append("--json")
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -166,8 +176,11 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     from app.server.serve import start_in_thread
     from app.tools.browser import launch_options
 
-    plan = QUICK if args.quick else FULL
+    plan = dict(QUICK if args.quick else FULL)
+    if args.seconds is not None:
+        plan.update(default_s=args.seconds, thesis_s=args.seconds, follow_s=args.seconds)
     default_s = args.soak * 60.0 if args.soak else plan["default_s"]
+    sweep_s = _sweep_s(args.seconds)
     started = datetime.datetime.now(datetime.UTC)
     load_before = os.getloadavg()[0]
     server = start_in_thread()
@@ -180,7 +193,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                     "thesis": plan["thesis_s"],
                     "follow": plan["follow_s"],
                 }
-                runs = await _run_profiles(browser, server.url, durations, args.fps)
+                runs = await _run_profiles(browser, server.url, durations, args.fps, sweep_s)
                 # After the stack is down, so that neither side shares its core with the video.
                 await _compare_detection(browser, server.url, runs, int(plan["frames"]))
                 browser_version = browser.version
@@ -202,7 +215,8 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
         "follow_s": plan["follow_s"],
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s,"
-        f" follow profile {plan['follow_s']:.0f} s",
+        f" follow profile {plan['follow_s']:.0f} s"
+        + ("" if sweep_s is None else f"; the face's sweep shortened to {sweep_s:g} s"),
     }
     obj = results(runs["default"], runs["thesis"], run_info, runs["follow"])
     report.write(args.out, obj, runs["default"], runs["thesis"])
@@ -210,7 +224,11 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
 
 
 async def _run_profiles(
-    browser: Browser, server_url: str, durations: dict[str, float], fps: float
+    browser: Browser,
+    server_url: str,
+    durations: dict[str, float],
+    fps: float,
+    sweep_s: float | None = None,
 ) -> dict[str, ProfileRun]:
     """One stack run per profile; a profile whose stack fails keeps the reason, not numbers."""
     from app.tools.bench.stack import StackError, StackOptions, run_profile
@@ -220,13 +238,21 @@ async def _run_profiles(
         for profile, seconds in durations.items():
             # A soak samples memory every 30 s; short runs every 10 s.
             every = 30.0 if seconds >= 300 else 10.0
-            options = StackOptions(profile, seconds, fps=fps, memory_every_s=every)
+            options = StackOptions(profile, seconds, fps=fps, memory_every_s=every, sweep_s=sweep_s)
             try:
                 runs[profile] = await run_profile(browser, server_url, options, Path(tmp))
             except StackError as exc:
                 log.error("%s profile: %s", profile, exc)
                 runs[profile] = ProfileRun(profile, problems=_all(str(exc)))
     return runs
+
+
+def _sweep_s(seconds: float | None) -> float | None:
+    """The synthetic face's cycle for a ``--seconds`` window: the window itself when shorter
+    than the default cycle, so that it always holds both leaps (recall after a jump)."""
+    from vehicle_agent.video import SweepPath
+
+    return seconds if seconds is not None and seconds < SweepPath().cycle_s else None
 
 
 async def _compare_detection(
@@ -278,6 +304,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
+    if args.seconds is not None:
+        parts.append(f"--seconds {args.seconds:g}")
     if args.fps != VIDEO_FPS:
         parts.append(f"--fps {args.fps:g}")
     return " ".join(parts)

@@ -160,9 +160,11 @@ def _round(value: float | None, digits: int = 1) -> float | None:
     return None if value is None else round(value, digits)
 
 
-def run(out: Path, quick: bool, conditions: Sequence[str] = ORDER) -> dict[str, Any]:
-    """Measure ``conditions`` (in the bench's order) and the video sender; write ``field.json``,
-    ``field.md`` and plots into ``out``."""
+def run(
+    out: Path, quick: bool, conditions: Sequence[str] = ORDER, seconds: float | None = None
+) -> dict[str, Any]:
+    """Measure ``conditions`` (in the bench's order) and the video sender, each for ``seconds``
+    if given (``--seconds``); write ``field.json``, ``field.md`` and plots into ``out``."""
     # Imported here: Playwright and the lab are only needed when the field bench runs.
     from playwright.sync_api import sync_playwright
 
@@ -170,7 +172,7 @@ def run(out: Path, quick: bool, conditions: Sequence[str] = ORDER) -> dict[str, 
     from app.tools.lab import Lab
     from app.tools.lab.stack import field_stack
 
-    window_s = QUICK_WINDOW_S if quick else FULL_WINDOW_S
+    window_s = seconds if seconds is not None else QUICK_WINDOW_S if quick else FULL_WINDOW_S
     load_before = os.getloadavg()[0]
     rows: list[FieldRow] = []
     drop: dict[str, float | None] = {"stop_after_s": None, "resume_after_s": None}
@@ -216,7 +218,7 @@ def run(out: Path, quick: bool, conditions: Sequence[str] = ORDER) -> dict[str, 
                 rows.append(row)
         # Chromium's own video sender under a cap, per content hint: why the pages send
         # theirs with the hint they do (app/tools/bench/video.py).
-        video_rows = video.measure(lab, playwright, quick)
+        video_rows = video.measure(lab, playwright, quick, seconds)
     obj = {
         "field": [asdict(row) for row in rows],
         "link_drop": drop,

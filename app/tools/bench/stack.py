@@ -84,6 +84,7 @@ class StackOptions:
     size: tuple[int, int] = VIDEO_SIZE
     fps: float = VIDEO_FPS
     memory_every_s: float = 10.0
+    sweep_s: float | None = None  # the synthetic face's cycle; None: the agent's default
 
 
 class StackError(RuntimeError):
@@ -220,6 +221,8 @@ async def _start_agent(
         "--video", "synthetic", "--size", "{}x{}".format(*options.size),
         "--fps", f"{options.fps:g}", "--profile", options.profile, "--events", str(events),
     ]  # fmt: skip
+    if options.sweep_s is not None:
+        command += ["--sweep-s", f"{options.sweep_s:g}"]
     log.debug("starting the agent: %s", " ".join(command))
     with log_path.open("wb") as out:
         return await asyncio.create_subprocess_exec(

@@ -121,9 +121,15 @@ _OUTBOUND_JS = """async () => {
 }"""
 
 
-def measure(lab: Lab, playwright: Playwright, quick: bool) -> list[dict[str, Any]]:
-    """One row per (cap, variant): received frames/s, frame width, kbit/s and what limited it."""
+def measure(
+    lab: Lab, playwright: Playwright, quick: bool, seconds: float | None = None
+) -> list[dict[str, Any]]:
+    """One row per (cap, variant): received frames/s, frame width, kbit/s and what limited it;
+    ``seconds`` (``--seconds``) replaces the plan's window, and caps its settling time."""
     plan = "quick" if quick else "full"
+    settle_s, window_s = SETTLE_S[plan], WINDOW_S[plan]
+    if seconds is not None:
+        settle_s, window_s = min(settle_s, seconds), seconds
     rows = []
     for cap in CAPS[plan]:
         lab.apply(cap)
@@ -136,7 +142,7 @@ def measure(lab: Lab, playwright: Playwright, quick: bool) -> list[dict[str, Any
             ]
             try:
                 sender, receiver = (browser.new_page() for browser in browsers)
-                row = _run(sender, receiver, hint, preference, plan)
+                row = _run(sender, receiver, hint, preference, settle_s, window_s)
                 rows.append({"condition": cap, "hint": hint or "(none)", **row})
             finally:
                 for browser in browsers:
@@ -146,17 +152,22 @@ def measure(lab: Lab, playwright: Playwright, quick: bool) -> list[dict[str, Any
 
 
 def _run(
-    sender: Page, receiver: Page, hint: str, preference: str | None, plan: str
+    sender: Page,
+    receiver: Page,
+    hint: str,
+    preference: str | None,
+    settle_s: float,
+    window_s: float,
 ) -> dict[str, Any]:
     offer = sender.evaluate(_SENDER_JS, hint)
     answer = receiver.evaluate(_RECEIVER_JS, offer)
     sender.evaluate("(answer) => window.pc.setRemoteDescription(answer)", answer)
     # What the sender runs with: the preference asked for, if the browser took it.
     applied = sender.evaluate(_PREFERENCE_JS, preference)
-    time.sleep(SETTLE_S[plan])
+    time.sleep(settle_s)
     before = receiver.evaluate(_INBOUND_JS)
     started = time.monotonic()
-    time.sleep(WINDOW_S[plan])
+    time.sleep(window_s)
     after = receiver.evaluate(_INBOUND_JS)
     elapsed = time.monotonic() - started
     return {
