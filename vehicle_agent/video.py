@@ -507,8 +507,8 @@ def open_source(
     ``sweep_s``: the synthetic face's cycle (default :class:`SweepPath`'s)."""
     if source == "synthetic":
         width, height = size or VIDEO_SIZE
-        path = None if sweep_s is None else SweepPath.with_cycle(sweep_s)
-        return SyntheticVideo(width, height, fps or VIDEO_FPS, path=path, on_frame=on_frame)
+        sweep = None if sweep_s is None else SweepPath.with_cycle(sweep_s)
+        return SyntheticVideo(width, height, fps or VIDEO_FPS, path=sweep, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)
     path = Path(source)
