@@ -6,7 +6,7 @@
 // the target lock (lock.js): while a target is locked, the goal is that target's, not the
 // largest box's.
 
-import { TargetLock } from './lock.js';
+import { pick, TargetLock } from './lock.js';
 import { RelayStats } from './relay-stats.js';
 
 /**
@@ -49,14 +49,19 @@ export class SnapshotLoop extends EventTarget {
     this.lastGoal = null;
     this.lastDetections = null;
     this.lock = new TargetLock(lockRule);
+    // Between full scans the tracker searches a window around the target, so the last
+    // snapshot's boxes may lack the one a person clicks: the last full scan's has it.
+    this.lastFullScanBoxes = [];
   }
 
   /**
-   * A click at frame pixel (x, y): lock on the target whose box on the last snapshot contains
-   * it, or release the lock when it hit none. True when locked.
+   * A click at frame pixel (x, y): lock on the target whose box on the last snapshot (or else
+   * the last full scan) contains it, or release the lock when it hit none. True when locked.
    */
   lockAt(x, y) {
-    const locked = this.lock.lock(x, y, this.lastDetections?.boxes ?? [], this.clock() / 1000);
+    const latest = this.lastDetections?.boxes ?? [];
+    const boxes = pick(x, y, latest) !== null ? latest : this.lastFullScanBoxes;
+    const locked = this.lock.lock(x, y, boxes, this.clock() / 1000);
     this.#lockChanged(locked ? null : 'the click was on no detection box');
     return locked;
   }
@@ -123,6 +128,7 @@ export class SnapshotLoop extends EventTarget {
     const lock = this.lock.query(started / 1000);
     const result = await this.analyzer.analyze(source, this.op, { profile: this.profile, track: this.track, lock });
     if (!this.running) return null;
+    if (result.scan === 'full') this.lastFullScanBoxes = result.boxes;
     const changed = this.lock.update(lock, result.locked, started / 1000);
     if (changed === 'none') {
       this.#emit('lock', this.lockMessage(`not seen for more than ${this.lock.rule.releaseAfterS} s`));
