@@ -11,6 +11,7 @@ import cv2
 import pytest
 from playwright.sync_api import Browser, Page, Playwright, expect
 
+from app.tools.bench.lock import click_position
 from app.tools.browser import launch_options
 from app.vision.lock import contains
 from app.vision.window import Box
@@ -48,14 +49,12 @@ def goal_near(vehicle: Page, centre: tuple[float, float]) -> bool:
 
 
 def click_frame_point(client: Page, x: float, y: float) -> None:
-    """Click the client's video where frame pixel (x, y) is shown (letterboxed, contain)."""
+    """Click the client's video where frame pixel (x, y) is shown."""
     video = client.get_by_test_id("video")
     box = video.bounding_box()
     assert box is not None
-    scale = min(box["width"] / WIDTH, box["height"] / HEIGHT)
-    left = (box["width"] - WIDTH * scale) / 2
-    top = (box["height"] - HEIGHT * scale) / 2
-    video.click(position={"x": left + x * scale, "y": top + y * scale})
+    px, py = click_position(box["width"], box["height"], x, y)
+    video.click(position={"x": px, "y": py})
 
 
 def test_click_the_smaller_face_then_unlock(

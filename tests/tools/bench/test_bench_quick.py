@@ -55,7 +55,7 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
         [sys.executable, "-m", "app.cli", "bench", "--quick", "--json", "--out", str(out)],
         capture_output=True,
         text=True,
-        timeout=360,
+        timeout=420,
         check=False,
     )
     assert done.returncode == 0, done.stderr[-4000:]
@@ -72,6 +72,9 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
     assert isinstance(p50, float) and isinstance(p95, float)
     # Within the world's diagonal (11.09 m * sqrt 2): the turtle never leaves the terrain.
     assert 0 <= p50 <= p95 < 15.7
+    # The target lock in the two-face scene: a share of goals, over at least 20 s of them.
+    assert 0 <= printed["lock_held_pct"] <= 100
+    assert printed["details"]["lock"]["seconds"] >= 20 and printed["details"]["lock"]["goals"] > 0
 
     assert json.loads((out / "results.json").read_text()) == printed
     report = (out / "report.md").read_text()
