@@ -54,7 +54,9 @@ Image = npt.NDArray[np.uint8]
 TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
 
 
-# The --video value of the target-lock scene (TwoFaceVideo).
+# The --video values of the generated scenes: the moving face (SyntheticVideo) and the
+# target-lock scene (TwoFaceVideo).
+SYNTHETIC = "synthetic"
 TWO_FACES = "two-faces"
 
 
@@ -559,9 +561,9 @@ def open_source(
 ) -> MediaStreamTrack:
     """The track for a ``--video`` value: ``synthetic``, ``two-faces``, ``/dev/videoN`` or a
     file path."""
-    if source in ("synthetic", TWO_FACES):
+    if source in (SYNTHETIC, TWO_FACES):
         width, height = size or VIDEO_SIZE
-        scene = SyntheticVideo if source == "synthetic" else TwoFaceVideo
+        scene = SyntheticVideo if source == SYNTHETIC else TwoFaceVideo
         return scene(width, height, fps or VIDEO_FPS, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)
