@@ -18,6 +18,7 @@ from app.protocol.browser import browser_protocol
 from app.server.serve import RunningServer
 from app.vision import lock
 from app.vision.window import Box
+from e2e.helpers import module_page
 from tests.vision import lock_sequences
 
 pytestmark = [pytest.mark.browser]
@@ -51,11 +52,8 @@ RUN_JS = """([events, rule]) => {
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    opened = browser.new_page()
-    opened.goto(server.url + "/")
-    opened.evaluate("async () => { window.lock = await import('/static/js/lock.js'); }")
-    yield opened
-    opened.close()
+    with module_page(server, browser, "lock") as opened:
+        yield opened
 
 
 def test_the_rule_reaches_the_page_from_app_protocol() -> None:
