@@ -45,6 +45,7 @@ export class LockPanel {
     this.send = send;
     this.log = log;
     this.state = null; // the relay's last lockState message
+    stage.classList.add('lockable');
     stage.addEventListener('click', (event) => {
       const shown = frame();
       if (shown === null) return;

@@ -129,7 +129,7 @@ export class SnapshotLoop extends EventTarget {
     const result = await this.analyzer.analyze(source, this.op, { profile: this.profile, track: this.track, lock });
     if (!this.running) return null;
     if (result.scan === 'full') this.lastFullScanBoxes = result.boxes;
-    const changed = this.lock.update(lock, result.locked, started / 1000);
+    const changed = this.lock.update(lock, result.locked ?? null, started / 1000);
     if (changed === 'none') {
       this.#emit('lock', this.lockMessage(`not seen for more than ${this.lock.rule.releaseAfterS} s`));
     } else if (changed !== null) {

@@ -69,8 +69,9 @@ export function fmt(value, digits = 1) {
 }
 
 /**
- * Draw detection boxes and the target on the canvas laid over a video. Boxes are in the detection frame's pixels
- * (`w` × `h`); the canvas covers the <video>, whose picture is letterboxed (object-fit: contain).
+ * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on the canvas laid
+ * over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas covers the <video>, whose
+ * picture is letterboxed (object-fit: contain).
  */
 export function drawDetections(canvas, detections) {
   const rect = canvas.getBoundingClientRect();
