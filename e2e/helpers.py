@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import ssl
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,7 @@ import cv2
 import httpx
 import numpy as np
 import numpy.typing as npt
-from playwright.sync_api import Page
+from playwright.sync_api import Browser, Page
 
 from app.protocol.angles import wrap_angle
 from app.server.serve import RunningServer
@@ -102,3 +103,16 @@ def status(page: Page) -> dict[str, Any]:
     """The page's read-only ``window.autopilotStatus``."""
     result: dict[str, Any] = page.evaluate("() => structuredClone(window.autopilotStatus)")
     return result
+
+
+@contextmanager
+def module_page(server: RunningServer, browser: Browser, module: str) -> Iterator[Page]:
+    """A page of the server with ``/static/js/<module>.js`` imported as ``window.<module>``,
+    to run a page module's pure functions against their Python twins."""
+    opened = browser.new_page()
+    opened.goto(server.url + "/")
+    opened.evaluate(f"async () => {{ window.{module} = await import('/static/js/{module}.js'); }}")
+    try:
+        yield opened
+    finally:
+        opened.close()

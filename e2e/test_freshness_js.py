@@ -10,6 +10,7 @@ import pytest
 from playwright.sync_api import Browser, Page
 
 from app.server.serve import RunningServer
+from e2e.helpers import module_page
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 
 pytestmark = [pytest.mark.browser]
@@ -17,11 +18,8 @@ pytestmark = [pytest.mark.browser]
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    opened = browser.new_page()
-    opened.goto(server.url + "/")
-    opened.evaluate("async () => { window.freshness = await import('/static/js/freshness.js'); }")
-    yield opened
-    opened.close()
+    with module_page(server, browser, "freshness") as opened:
+        yield opened
 
 
 def _arrivals(rng: random.Random) -> list[tuple[int, float, float]]:

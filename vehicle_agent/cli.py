@@ -56,7 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--video",
         default="synthetic",
         metavar="SOURCE",
-        help="'synthetic' (a moving face with frame tags), a video file (looped) or /dev/videoN",
+        help="'synthetic' (a moving face with frame tags), 'two-faces' (two faces drifting, to"
+        " try the target lock), a video file (looped) or /dev/videoN",
     )
     parser.add_argument(
         "--size",

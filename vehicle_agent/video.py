@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 
 ASSETS = Path(__file__).resolve().parent / "assets"
 DEFAULT_FACE = ASSETS / "obama.jpg"
+SMALL_FACE = ASSETS / "biden.jpg"
 CLOCK_RATE = 90_000
 TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 
@@ -51,6 +52,12 @@ Image = npt.NDArray[np.uint8]
 # Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
 # blocks first, then the bits.
 TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
+
+
+# The --video values of the generated scenes: the moving face (SyntheticVideo) and the
+# target-lock scene (TwoFaceVideo).
+SYNTHETIC = "synthetic"
+TWO_FACES = "two-faces"
 
 
 class VideoSourceError(RuntimeError):
@@ -179,6 +186,27 @@ class FixedPath:
 
     def jumped(self, t0: float, t1: float) -> bool:
         """Never: a test that moves the face knows when it did."""
+        return False
+
+
+@dataclass
+class DriftPath:
+    """A face that drifts slowly around (``x``, ``y``): ``dx``, ``dy`` either way, one round in
+    ``period_s``, starting ``phase`` radians in."""
+
+    x: float
+    y: float
+    dx: float
+    dy: float
+    period_s: float
+    phase: float = 0.0
+
+    def __call__(self, t: float) -> tuple[float, float]:
+        a = 2 * math.pi * t / self.period_s + self.phase
+        return self.x + self.dx * math.sin(a), self.y + self.dy * math.sin(2 * a)
+
+    def jumped(self, t0: float, t1: float) -> bool:
+        """Never: it only drifts."""
         return False
 
 
@@ -394,18 +422,20 @@ class SyntheticVideo(PacedVideoTrack):
         flame = self.flame_centre()
         if flame is not None:
             draw_flame(img, flame[0], flame[1], frame)
-        cx, cy = self.face_centre(frame)
-        sprite = self._sprite
-        x0 = round(cx - sprite.cx)
-        y0 = round(cy - sprite.cy)
+        self._paste(img, self._sprite, self.face_centre(frame))
+        draw_frame_tag(img, frame)
+        return img
+
+    def _paste(self, img: Image, sprite: _FaceSprite, centre: tuple[float, float]) -> None:
+        """Draw ``sprite`` with its face centred on ``centre``, clipped to the frame (a path
+        may take the face partly out of view)."""
+        x0 = round(centre[0] - sprite.cx)
+        y0 = round(centre[1] - sprite.cy)
         sh, sw = sprite.image.shape[:2]
-        # Clip the sprite to the frame (a path may take the face partly out of view).
         ix0, iy0 = max(0, x0), max(0, y0)
         ix1, iy1 = min(self.width, x0 + sw), min(self.height, y0 + sh)
         if ix1 > ix0 and iy1 > iy0:
             img[iy0:iy1, ix0:ix1] = sprite.image[iy0 - y0 : iy1 - y0, ix0 - x0 : ix1 - x0]
-        draw_frame_tag(img, frame)
-        return img
 
     async def make_frame(self, index: int) -> av.VideoFrame:
         """Render frame ``index`` and report it to ``on_frame``."""
@@ -414,6 +444,39 @@ class SyntheticVideo(PacedVideoTrack):
             cx, cy = self.face_centre(index)
             self.on_frame(FrameInfo(index, time.monotonic(), cx, cy, self.jumped(index)))
         return frame
+
+
+class TwoFaceVideo(SyntheticVideo):
+    """The target-lock scene (DESIGN §10): two faces drifting slowly, a large one on the left
+    (the default choice) and one ``small_share`` its size on the right; no flame. The large
+    face is :meth:`face_centre`, the small one :meth:`small_centre`."""
+
+    def __init__(
+        self,
+        width: int = VIDEO_SIZE[0],
+        height: int = VIDEO_SIZE[1],
+        fps: float = VIDEO_FPS,
+        on_frame: Callable[[FrameInfo], None] | None = None,
+        small_share: float = 0.65,
+    ) -> None:
+        super().__init__(
+            width, height, fps, DriftPath(0.3, 0.45, 0.06, 0.04, 9.0), on_frame=on_frame, flame=None
+        )
+        self.small_path = DriftPath(0.72, 0.5, 0.05, 0.05, 7.0, phase=1.0)
+        self.small_px = max(24, round(height // 4 * small_share))
+        self._small = _FaceSprite(SMALL_FACE, face_px=self.small_px)
+
+    def small_centre(self, frame: int) -> tuple[float, float]:
+        """True centre (pixels) of the small face's box in frame number ``frame``."""
+        fx, fy = self.small_path(frame / self.fps)
+        return fx * self.width, fy * self.height
+
+    def render(self, frame: int) -> Image:
+        """Frame number ``frame``: the scene with both faces, and the tag on top."""
+        img = super().render(frame)
+        self._paste(img, self._small, self.small_centre(frame))
+        draw_frame_tag(img, frame)
+        return img
 
 
 class FileVideo(PacedVideoTrack):
@@ -503,12 +566,15 @@ def open_source(
     on_frame: Callable[[FrameInfo], None] | None = None,
     sweep_s: float | None = None,
 ) -> MediaStreamTrack:
-    """The track for a ``--video`` value: ``synthetic``, ``/dev/videoN`` or a file path;
-    ``sweep_s``: the synthetic face's cycle (default :class:`SweepPath`'s)."""
-    if source == "synthetic":
+    """The track for a ``--video`` value: ``synthetic``, ``two-faces``, ``/dev/videoN`` or a
+    file path; ``sweep_s``: the synthetic face's cycle (default :class:`SweepPath`'s)."""
+    if source == SYNTHETIC:
         width, height = size or VIDEO_SIZE
         sweep = None if sweep_s is None else SweepPath.with_cycle(sweep_s)
         return SyntheticVideo(width, height, fps or VIDEO_FPS, path=sweep, on_frame=on_frame)
+    if source == TWO_FACES:
+        width, height = size or VIDEO_SIZE
+        return TwoFaceVideo(width, height, fps or VIDEO_FPS, on_frame=on_frame)
     if source.startswith("/dev/video"):
         return open_device(source, size, fps)
     path = Path(source)

@@ -53,6 +53,13 @@ def browser_protocol() -> dict[str, Any]:
             "markerBlocks": c.TAG_MARKER_BLOCKS,
             "bits": c.TAG_BITS,
         },
+        # The target lock's rule (app/vision/lock.py, app/static/js/lock.js).
+        "lock": {
+            "searchAfterS": c.LOCK_SEARCH_AFTER_S,
+            "releaseAfterS": c.LOCK_RELEASE_AFTER_S,
+            "maxScale": c.LOCK_MAX_SCALE,
+            "reach": c.LOCK_REACH,
+        },
         # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
         "schemas": channel_schemas(),
     }

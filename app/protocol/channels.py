@@ -148,6 +148,39 @@ class Detections(_Message):
     h: Size
     ms: NonNegative  # this snapshot's processing delay: taken -> goal sent
     goalsPerS: NonNegative  # noqa: N815 -- the wire name
+    # The locked target's box, when a lock holds and this snapshot found it.
+    locked: Box | None = None
+
+
+# Of the relay's target lock (app/vision/lock.py): none: the largest box is the target; locked:
+# seen on the last snapshot; lost: not seen, looked for near where it was; searching: lost long
+# enough to be looked for in the whole frame.
+LockState = Literal["none", "locked", "lost", "searching"]
+
+
+class Lock(_Message):
+    """client→relay: lock on the target whose box contains pixel (x, y) of the analysed frame;
+    a point on no box releases the lock."""
+
+    type: Literal["lock"] = "lock"
+    x: Finite
+    y: Finite
+
+
+class Unlock(_Message):
+    """client→relay: release the lock (back to the largest box)."""
+
+    type: Literal["unlock"] = "unlock"
+
+
+class LockStatus(_Message):
+    """relay→client: the lock changed state; ``box`` is the locked target's, ``reason`` says
+    why it was released."""
+
+    type: Literal["lockState"] = "lockState"
+    state: LockState
+    box: Box | None = None
+    reason: str | None = None
 
 
 class Error(_Message):
@@ -158,7 +191,21 @@ class Error(_Message):
     ref: str | None = None
 
 
-ChannelMessage = Goal | Pose | Stop | Start | GetOps | SetOp | Ops | State | Detections | Error
+ChannelMessage = (
+    Goal
+    | Pose
+    | Stop
+    | Start
+    | GetOps
+    | SetOp
+    | Ops
+    | State
+    | Detections
+    | Lock
+    | Unlock
+    | LockStatus
+    | Error
+)
 
 
 def _or(models: tuple[type[_Message], ...]) -> Any:
@@ -174,8 +221,8 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
     AUTOPILOT_CHANNEL: {"vehicle": (Goal, Stop, Error), "relay": (Pose, Error)},
     AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Error), "relay": (Pose, Error)},
     CONTROL_CHANNEL: {
-        "relay": (GetOps, SetOp, Start, Stop, Error),
-        "client": (Ops, State, Detections, Pose, Error),
+        "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, Error),
+        "client": (Ops, State, Detections, Pose, LockStatus, Error),
     },
 }
 

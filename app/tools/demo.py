@@ -33,6 +33,7 @@ from app.server.serve import RunningServer, start_in_thread
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path
 from app.tools.relay_service import TOKEN_ENV
+from vehicle_agent.video import SYNTHETIC, TWO_FACES
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +46,8 @@ HEALTHY_RUN_S = 60.0
 # signed with a secret made for this run, so they end with it anyway.
 DEMO_TOKEN_TTL_S = 30 * 24 * 3600
 ANY_ADDRESS = ("0.0.0.0", "::")
+# The agent's --video values the demo offers.
+DEMO_VIDEOS = (SYNTHETIC, TWO_FACES)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,6 +56,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=port, default=8000, help="port to bind (default 8000)")
     parser.add_argument("--room", default="default", help="room (default: default)")
     add_vehicle_profile(parser)
+    parser.add_argument(
+        "--video",
+        choices=DEMO_VIDEOS,
+        default=DEMO_VIDEOS[0],
+        help="the agent's synthetic video: a face sweeping across (synthetic, the default) or"
+        " two faces drifting, to try the target lock (two-faces)",
+    )
     tls.add_arguments(parser)
 
 
@@ -73,6 +83,7 @@ def children_for(
     profile: str,
     secret: str | None = None,
     ca_file: Path | None = None,
+    video: str = DEMO_VIDEOS[0],
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``."""
@@ -114,7 +125,7 @@ def children_for(
                 "--profile",
                 profile,
                 "--video",
-                "synthetic",
+                video,
                 "--rosbridge",
                 rosbridge,
             ],
@@ -228,7 +239,7 @@ async def _main(
     stop = asyncio.Event()
     on_stop_signals(stop.set)
     ca_file = files.ca_file if files is not None else None
-    children = children_for(base, args.room, args.profile, settings.secret, ca_file)
+    children = children_for(base, args.room, args.profile, settings.secret, ca_file, args.video)
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
     token = None
     if settings.secret is not None:

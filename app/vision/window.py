@@ -57,13 +57,10 @@ def largest(boxes: Sequence[Box]) -> Box | None:
 
 
 class Found(Protocol):
-    """What a detection returns: boxes in full-frame pixels and the target, if any."""
+    """What a detection returns: boxes in full-frame pixels."""
 
     @property
     def boxes(self) -> list[Box]: ...
-
-    @property
-    def target(self) -> tuple[float, float] | None: ...
 
 
 D = TypeVar("D", bound=Found)
@@ -86,9 +83,9 @@ class Tracker:
             return None
         return self.last
 
-    def record(self, found: Found, scan: Scan) -> None:
-        """Remember the target of a snapshot's search."""
-        self.last = largest(found.boxes) if found.target is not None else None
+    def record(self, box: Box | None, scan: Scan) -> None:
+        """Remember the target box a snapshot's search chose (None: nothing chosen)."""
+        self.last = box
         self.windowed = self.windowed + 1 if scan == "window" else 0
 
     def reset(self) -> None:
@@ -97,18 +94,25 @@ class Tracker:
         self.windowed = 0
 
 
-def step(tracker: Tracker, detect: Callable[[Box | None], D]) -> tuple[D, Scan]:
+Choose = Callable[[Sequence[Box]], Box | None]
+
+
+def step(
+    tracker: Tracker, detect: Callable[[Box | None], D], choose: Choose = largest
+) -> tuple[D, Scan]:
     """One snapshot: search the window if there is one, the whole frame when it finds nothing.
 
     ``detect(around)`` runs the operation around a full-frame box, or on the whole frame when
-    ``around`` is None.
+    ``around`` is None. ``choose`` picks the target among the boxes found: the largest, or the
+    locked target's box (``app/vision/lock.py``); a window where it picks none is a miss.
     """
     around = tracker.window()
     if around is not None:
         found = detect(around)
-        if found.target is not None:
-            tracker.record(found, "window")
+        box = choose(found.boxes)
+        if box is not None:
+            tracker.record(box, "window")
             return found, "window"
     found = detect(None)
-    tracker.record(found, "full")
+    tracker.record(choose(found.boxes), "full")
     return found, "full"

@@ -26,7 +26,8 @@ CHANNEL_SENDS = [
     ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose"}),
     ("relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop"}),
     ("snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
-    ("snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections"}),
+    ("snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),
+    ("lock-view.js", CONTROL_CHANNEL, "relay", {"lock", "unlock"}),
     # serveChannel's error replies go back on whichever channel the bad message came from.
     ("peer.js", AUTOPILOT_CHANNEL, "vehicle", {"error"}),
 ]

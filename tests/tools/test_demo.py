@@ -182,3 +182,11 @@ def test_demo_profile_drives_the_vehicle_and_paces_the_relay(
         add_arguments(parser)
         args = parser.parse_args(child.argv[child.argv.index(child.name) + 1 :])
         assert args.profile in (profile, relay_profile)
+
+
+def test_demo_two_faces_video_reaches_the_agent() -> None:
+    _, vehicle = children_for("http://127.0.0.1:8000", "r", "default", video="two-faces")
+    parser = argparse.ArgumentParser()
+    agent_cli.add_arguments(parser)
+    args = parser.parse_args(vehicle.argv[vehicle.argv.index("vehicle") + 1 :])
+    assert args.video == "two-faces"

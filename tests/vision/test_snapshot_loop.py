@@ -32,6 +32,7 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
   const { SnapshotLoop } = await import('/static/js/snapshot-loop.js');
+  const { PROTOCOL } = await import('/static/js/protocol.js');
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;
@@ -39,7 +40,7 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
   const emitted = { goal: [], detections: [] };
   const loop = new SnapshotLoop({
     analyzer: window.analyzer, profile, op: window.analyzer.defaultOp,
-    sendGoal: (goal) => { sent.push(goal); return true; },
+    sendGoal: (goal) => { sent.push(goal); return true; }, lockRule: PROTOCOL.lock,
     clock: () => now, wallClock: () => 1.7e12 + now,
   });
   for (const type of Object.keys(emitted)) {

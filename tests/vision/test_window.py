@@ -86,5 +86,5 @@ def test_full_scan_cadence_and_refind_after_a_jump() -> None:
 def test_thesis_profile_scans_every_frame() -> None:
     assert FACE.thesis["fullScanEvery"] == 1
     tracker = window.Tracker(1)
-    tracker.record(reference.Detection(boxes=[(0, 0, 10, 10)], target=(5.0, 5.0)), "full")
+    tracker.record((0, 0, 10, 10), "full")
     assert tracker.window() is None

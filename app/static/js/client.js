@@ -1,6 +1,7 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
 import { ControlLaw } from './control.js';
+import { LockPanel } from './lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
@@ -17,6 +18,15 @@ const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
 const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
+// A click on the video locks the relay on the target there; Unlock releases it.
+const lockPanel = new LockPanel({
+  stage: video.parentElement,
+  unlockButton: button('unlock'),
+  showState: (text) => show('lock-state', text),
+  send: (msg) => sendJson(session.control, msg),
+  frame: () => status.lastDetections,
+  log,
+});
 
 /** The page's one session object, read-only for tests. */
 const status = {
@@ -32,6 +42,7 @@ const status = {
   // The person asked to pilot (Start) and has not asked to stop: a relay that replaces a lost
   // one (a relay pool taking the room over) is asked to start again on its first state.
   wantPiloting: false,
+  lock: null, // the relay's last lockState: {state, box, reason}
 };
 window.autopilotStatus = status;
 
@@ -103,6 +114,12 @@ function onPose(msg) {
   show('route', `route ${fmt(status.routeM, 1)} m driven`);
 }
 
+function onLockState(msg) {
+  status.lock = { state: msg.state, box: msg.box ?? null, reason: msg.reason ?? null };
+  lockPanel.onState(msg);
+  if (msg.reason) log.info(`target lock ${msg.state}: ${msg.reason}`);
+}
+
 function median(values) {
   const sorted = [...values].sort((a, b) => a - b);
   const mid = Math.floor(sorted.length / 2);
@@ -127,7 +144,7 @@ function setupPeer(peer) {
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
-  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose };
+  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
     session.control = dc;

@@ -12,7 +12,8 @@ function readProtocol() {
 /**
  * {roles, defaultRoom, profiles: {relay, vehicle}, defaultProfile, relayProfiles: {name: {snapshotPeriodMs}},
  *  channels: {autopilot, control}, world: {size, terrainCentre},
- *  frameTag: {blocksPerWidth, markerBlocks, bits}, schemas: {label: {role: JSON Schema}}}
+ *  frameTag: {blocksPerWidth, markerBlocks, bits}, lock: {searchAfterS, releaseAfterS, maxScale, reach},
+ *  schemas: {label: {role: JSON Schema}}}
  */
 export const PROTOCOL = readProtocol();
 export const CHANNELS = PROTOCOL.channels;

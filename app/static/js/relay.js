@@ -31,6 +31,7 @@ const status = {
   vehicle: null, // name of the connected vehicle
   clients: [], // names of connected clients
   vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
+  lock: 'none', // the target lock's state (lock.js)
   get snapshots() {
     return session.loop?.stats.snapshots ?? 0;
   },
@@ -249,6 +250,8 @@ function onDataChannel(entry, channel) {
         setOp: (msg) => setOp(msg, name),
         start: () => setPiloting(true, name),
         stop: () => setPiloting(false, name),
+        lock: (msg) => lockAt(msg, name),
+        unlock: () => unlock(`released by ${name}`),
       },
       log,
       SCHEMAS.control.relay,
@@ -257,6 +260,7 @@ function onDataChannel(entry, channel) {
       entry.channel = channel;
       log.info(`control channel to client ${name} open`);
       sendJson(channel, stateMessage());
+      if (session.loop !== null) sendJson(channel, session.loop.lockMessage());
       updatePeers();
     });
   } else {
@@ -306,7 +310,10 @@ function setOp(msg, from) {
   if (!session.analyzer.ops.some((op) => op.id === msg.op)) {
     throw new BadMessage(`unknown operation "${msg.op}"; the current one stays "${status.op}"`);
   }
-  if (msg.op !== status.op) log.info(`operation ${status.op} → ${msg.op} (asked by ${from})`);
+  if (msg.op !== status.op) {
+    log.info(`operation ${status.op} → ${msg.op} (asked by ${from})`);
+    unlock(`the operation changed to ${msg.op}`);
+  }
   status.op = msg.op;
   session.loop.op = msg.op;
   broadcastState();
@@ -328,6 +335,26 @@ function setPiloting(on, from) {
   broadcastState();
 }
 
+// ---------------------------------------------------------------- target lock
+
+/** A client clicked frame pixel (x, y): lock on the box there, or release (lock.js). */
+function lockAt(msg, from) {
+  if (session.loop === null) throw new BadMessage('operations are still loading; try again');
+  if (session.loop.lockAt(msg.x, msg.y)) log.info(`locked on the target at (${fmt(msg.x, 0)}, ${fmt(msg.y, 0)}) for ${from}`);
+}
+
+function unlock(reason) {
+  session.loop?.unlock(reason);
+}
+
+function onLockChanged(message) {
+  const where = message.box ? ` at [${message.box.map((v) => fmt(v, 0)).join(', ')}]` : '';
+  log.info(`target lock: ${message.state}${where}${message.reason ? ` (${message.reason})` : ''}`);
+  status.lock = message.state;
+  show('lock', message.state === 'none' ? 'none (largest)' : message.state);
+  broadcast(message);
+}
+
 /** Forward the vehicle's pose (validated by serveChannel) to every client. */
 function onPose(msg) {
   broadcast({ type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() });
@@ -342,6 +369,7 @@ function createLoop(analyzer) {
     op: analyzer.defaultOp,
     // Between full scans, search only around the last target (the spec's fullScanEvery).
     track: true,
+    lockRule: PROTOCOL.lock,
     // The lossy state channel when it is open (latest wins), else the reliable one.
     sendGoal: (goal) => {
       const vehicle = vehicleEntry();
@@ -356,6 +384,7 @@ function createLoop(analyzer) {
     show('ms-per-snapshot', fmt(detections.ms));
     show('goals-per-s', fmt(detections.goalsPerS));
   });
+  loop.addEventListener('lock', (event) => onLockChanged(event.detail));
   loop.addEventListener('failure', (event) => log.error(`snapshot failed: ${event.detail}`));
   return loop;
 }

@@ -69,8 +69,9 @@ export function fmt(value, digits = 1) {
 }
 
 /**
- * Draw detection boxes and the target on the canvas laid over a video. Boxes are in the detection frame's pixels
- * (`w` × `h`); the canvas covers the <video>, whose picture is letterboxed (object-fit: contain).
+ * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on the canvas laid
+ * over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas covers the <video>, whose
+ * picture is letterboxed (object-fit: contain).
  */
 export function drawDetections(canvas, detections) {
   const rect = canvas.getBoundingClientRect();
@@ -89,6 +90,17 @@ export function drawDetections(canvas, detections) {
   ctx.fillStyle = '#39ff88';
   for (const [x, y, w, h] of detections.boxes || []) {
     ctx.strokeRect(ox + x * scale, oy + y * scale, w * scale, h * scale);
+  }
+  if (detections.locked) {
+    // The locked target (lock.js): thicker, in its own colour, labelled.
+    const [x, y, w, h] = detections.locked;
+    ctx.lineWidth = 5 * dpr;
+    ctx.strokeStyle = '#ffd23f';
+    ctx.fillStyle = '#ffd23f';
+    ctx.strokeRect(ox + x * scale, oy + y * scale, w * scale, h * scale);
+    ctx.fillText('locked', ox + x * scale, oy + y * scale - 4 * dpr);
+    ctx.lineWidth = 3 * dpr;
+    ctx.fillStyle = '#39ff88';
   }
   if (detections.target) {
     const tx = ox + detections.target.x * scale;

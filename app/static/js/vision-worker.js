@@ -3,14 +3,15 @@
 //
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp} | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, lock}
 //                   {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
 'use strict';
 
 importScripts('/static/opencv.js');
 
-// From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits}, defaultProfile}.
+// From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits}, defaultProfile,
+// lock: the target lock's rule}.
 const PROTOCOL = JSON.parse(new URLSearchParams(self.location.search).get('protocol'));
 
 /** Everything the worker holds, in one place. */
@@ -22,6 +23,7 @@ const session = {
   // tracker: its window.js Tracker for the snapshots analysed with `track`}
   instances: new Map(),
   window: null, // the imported window.js (detect, then track)
+  lock: null, // the imported lock.js (target lock)
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
   ctx: null,
@@ -68,6 +70,7 @@ async function init() {
     session.files.push(name);
   }
   session.window = await import('./window.js');
+  session.lock = await import('./lock.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
       session.modules.set(op.module, await import(`./operations/${op.module}`));
@@ -185,15 +188,15 @@ function describe(error) {
 
 /**
  * Run the operation on the frame: with `track`, its tracker picks a window around the last
- * target or a full scan (window.js step); with `around` (a full-frame box, parity checks), the
- * window around it alone is searched; otherwise the whole frame.
+ * target (chosen by `choose`) or a full scan (window.js step); with `around` (a full-frame box,
+ * parity checks), the window around it alone is searched; otherwise the whole frame.
  */
-function detectIn(instance, frame, track, around) {
+function detectIn(instance, frame, track, around, choose) {
   if (around != null) {
     if (!instance.windowed) throw new Error('this operation has no windowed search');
     return { found: instance.op.detect(frame, around), scan: 'window' };
   }
-  if (track) return session.window.step(instance.tracker, (box) => instance.op.detect(frame, box));
+  if (track) return session.window.step(instance.tracker, (box) => instance.op.detect(frame, box), choose);
   return { found: instance.op.detect(frame), scan: 'full' };
 }
 
@@ -204,6 +207,7 @@ async function analyze({
   returnPixels = false,
   track = false,
   around = null,
+  lock = null,
 }) {
   const started = performance.now();
   let instance;
@@ -215,8 +219,13 @@ async function analyze({
   }
   const frame = await readPixels(source);
   const detectStarted = performance.now();
-  const { found, scan } = detectIn(instance, frame, track, around);
-  const { boxes, target, region = null } = found;
+  // Locked (lock.js): the target is the centre of the box that continues the locked track.
+  const choose = session.lock.chooser(lock, PROTOCOL.lock);
+  const { found, scan } = detectIn(instance, frame, track, around, choose);
+  const { boxes, region = null } = found;
+  const locked = lock === null ? null : choose(boxes);
+  let { target } = found;
+  if (lock !== null) target = locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
   const done = performance.now();
   const { cols: width, rows: height } = frame;
   const result = {
@@ -230,6 +239,7 @@ async function analyze({
     frame: decodeFrameTag(width, height, frame.data),
     scan,
     region,
+    locked,
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;

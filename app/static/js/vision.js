@@ -6,7 +6,11 @@ import { PROTOCOL } from './protocol.js';
 
 // The worker has no page config: what it needs of the protocol rides in its URL.
 const WORKER_URL = `/static/js/vision-worker.js?${new URLSearchParams({
-  protocol: JSON.stringify({ frameTag: PROTOCOL.frameTag, defaultProfile: PROTOCOL.defaultProfile }),
+  protocol: JSON.stringify({
+    frameTag: PROTOCOL.frameTag,
+    defaultProfile: PROTOCOL.defaultProfile,
+    lock: PROTOCOL.lock,
+  }),
 })}`;
 
 /**
@@ -64,13 +68,20 @@ export async function createAnalyzer() {
      * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
      * Options: profile (one of PROTOCOL.profiles.relay); returnPixels adds `rgba` (the pixels
      * analysed); track: detect, then track (window.js) across the calls that set it, per operation
-     * and profile; around: a full-frame box [x, y, w, h] whose window alone is searched (parity).
-     * Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' | 'window',
-     * region: the window searched in detection-image pixels or null[, rgba]}.
+     * and profile; around: a full-frame box [x, y, w, h] whose window alone is searched (parity);
+     * lock: {box, anywhere} from a lock.js TargetLock query, to follow that target instead of
+     * the largest. Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' |
+     * 'window', region: the window searched in detection-image pixels or null, locked: the
+     * locked target's box or null[, rgba]}.
      */
-    analyze(source, opId, { profile = PROTOCOL.defaultProfile, returnPixels = false, track = false, around = null } = {}) {
+    analyze(
+      source,
+      opId,
+      { profile = PROTOCOL.defaultProfile, returnPixels = false, track = false, around = null, lock = null } = {},
+    ) {
       const transfer = source.data ? [] : [source];
-      return call({ type: 'analyze', source, opId, profile, returnPixels, track, around }, transfer);
+      const asked = lock === null ? null : { box: lock.box, anywhere: lock.anywhere };
+      return call({ type: 'analyze', source, opId, profile, returnPixels, track, around, lock: asked }, transfer);
     },
 
     /** Forget every tracked target: the next tracked snapshot scans the whole frame. */

@@ -44,9 +44,9 @@ export class Tracker {
     return this.last;
   }
 
-  /** Remember the target of a snapshot's search ('full' or 'window'). */
-  record({ boxes, target }, scan) {
-    this.last = target === null ? null : largest(boxes);
+  /** Remember the target box a snapshot's search chose (null: none) and how ('full' or 'window'). */
+  record(box, scan) {
+    this.last = box;
     this.windowed = scan === 'window' ? this.windowed + 1 : 0;
   }
 
@@ -60,18 +60,20 @@ export class Tracker {
 /**
  * One snapshot: search the window if there is one, the whole frame when it finds nothing.
  * `detect(around)` runs the operation around a full-frame box, or on the whole frame for null.
- * Returns {found, scan}.
+ * `choose(boxes)` picks the target box: the largest, or the locked target's (lock.js); a window
+ * where it picks none is a miss. Returns {found, scan}.
  */
-export function step(tracker, detect) {
+export function step(tracker, detect, choose = largest) {
   const around = tracker.window();
   if (around !== null) {
     const found = detect(around);
-    if (found.target !== null) {
-      tracker.record(found, 'window');
+    const box = choose(found.boxes);
+    if (box !== null) {
+      tracker.record(box, 'window');
       return { found, scan: 'window' };
     }
   }
   const found = detect(null);
-  tracker.record(found, 'full');
+  tracker.record(choose(found.boxes), 'full');
   return { found, scan: 'full' };
 }

@@ -41,9 +41,9 @@ REEXEC_ENV = "AUTOPILOT_BENCH_REEXEC"
 # performance.memory with real numbers, and window.gc() so heap samples follow a collection.
 MEMORY_FLAGS = ["--enable-precise-memory-info", "--js-flags=--expose-gc"]
 
-QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "frames": 13}
+QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, "frames": 13}
 # The follow run spans three cycles of the synthetic face's path (20 s each).
-FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "frames": 43}
+FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "lock_s": 60.0, "frames": 43}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -114,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     missing = [key for key in FIGURE_KEYS if obj[key] is None or obj["thesis"][key] is None]
     missing += [f"follow {key}" for key in POSITION_KEYS if obj["follow"][key] is None]
+    missing += list(obj["unmeasured"]["lock"])
     if missing:
         log.error("not measured: %s (reasons in %s)", ", ".join(missing), args.out / "report.md")
         return 1
@@ -174,11 +175,12 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     from playwright.async_api import async_playwright
 
     from app.server.serve import start_in_thread
+    from app.tools.bench import lock
     from app.tools.browser import launch_options
 
     plan = dict(QUICK if args.quick else FULL)
     if args.seconds is not None:
-        plan.update(default_s=args.seconds, thesis_s=args.seconds, follow_s=args.seconds)
+        plan.update(dict.fromkeys(("default_s", "thesis_s", "follow_s", "lock_s"), args.seconds))
     default_s = args.soak * 60.0 if args.soak else plan["default_s"]
     sweep_s = _sweep_s(args.seconds)
     started = datetime.datetime.now(datetime.UTC)
@@ -194,6 +196,10 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                     "follow": plan["follow_s"],
                 }
                 runs = await _run_profiles(browser, server.url, durations, args.fps, sweep_s)
+                with tempfile.TemporaryDirectory(prefix="autopilot-bench-lock-") as tmp:
+                    lock_run = await lock.run(
+                        browser, server.url, plan["lock_s"], args.fps, Path(tmp)
+                    )
                 # After the stack is down, so that neither side shares its core with the video.
                 await _compare_detection(browser, server.url, runs, int(plan["frames"]))
                 browser_version = browser.version
@@ -213,12 +219,14 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
         "default_s": default_s,
         "thesis_s": plan["thesis_s"],
         "follow_s": plan["follow_s"],
+        "lock_s": plan["lock_s"],
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "note": f"default profile {default_s:.0f} s, thesis profile {plan['thesis_s']:.0f} s,"
-        f" follow profile {plan['follow_s']:.0f} s"
+        f" follow profile {plan['follow_s']:.0f} s, target lock {plan['lock_s']:.0f} s"
         + ("" if sweep_s is None else f"; the face's sweep shortened to {sweep_s:g} s"),
     }
     obj = results(runs["default"], runs["thesis"], run_info, runs["follow"])
+    lock.merge(obj, *lock_run)
     report.write(args.out, obj, runs["default"], runs["thesis"])
     return obj
 

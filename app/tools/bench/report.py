@@ -49,6 +49,7 @@ LABELS = {
     "recall_after_jump_pct": "goals within 3 frames of a jump (%)",
     "position_error_m_p50": "follow position error p50 (m)",
     "position_error_m_p95": "follow position error p95 (m)",
+    "lock_held_pct": "goals on the locked (smaller) face (%)",
 }
 
 
@@ -348,6 +349,26 @@ def _follow_section(results: dict[str, Any]) -> list[str]:
     ]
 
 
+def _lock_section(results: dict[str, Any]) -> list[str]:
+    """The target lock in the two-face scene, when it ran."""
+    target = results["targets"].get("lock_held_pct")
+    if target is None:
+        return []
+    value, counts = results["lock_held_pct"], results["details"]["lock"]
+    verdict = "not measured" if value is None else ("met" if value >= target["limit"] else "missed")
+    return [
+        "",
+        "## Target lock",
+        "",
+        "Two faces drift slowly (the agent's `two-faces` video); once goals flow the client page"
+        " clicks the smaller one. Share of the goals the vehicle received that lie on the smaller"
+        f" face over {_fmt(counts['seconds'])} s: {counts['on_smaller']} of {counts['goals']}"
+        f" ({counts['on_larger']} on the larger one, {counts['elsewhere']} elsewhere).",
+        "",
+        f"- {_fmt(value)} %; **{target['text']}**: {verdict}.",
+    ]
+
+
 def markdown(results: dict[str, Any]) -> str:
     """The report as Markdown: figures against the thesis and the targets, then the plots."""
     run = results["run"]
@@ -426,6 +447,7 @@ def markdown(results: dict[str, Any]) -> str:
         )
 
     lines += _follow_section(results)
+    lines += _lock_section(results)
 
     missing = {p: m for p, m in results["unmeasured"].items() if m}
     if missing:

@@ -15,7 +15,7 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import Awaitable
+from collections.abc import Awaitable, Callable
 from contextlib import AsyncExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,6 +85,9 @@ class StackOptions:
     fps: float = VIDEO_FPS
     memory_every_s: float = 10.0
     sweep_s: float | None = None  # the synthetic face's cycle; None: the agent's default
+    # The agent's --video, and a name for the run (room and file names) when not the profile's.
+    video: str = "synthetic"
+    name: str | None = None
 
 
 class StackError(RuntimeError):
@@ -92,19 +95,27 @@ class StackError(RuntimeError):
 
 
 async def run_profile(
-    browser: Browser, server_url: str, options: StackOptions, workdir: Path
+    browser: Browser,
+    server_url: str,
+    options: StackOptions,
+    workdir: Path,
+    prepare: Callable[[Page, Page], Awaitable[None]] | None = None,
 ) -> ProfileRun:
-    """Bring the stack up under ``options.profile``, pilot for ``duration_s``, take it down."""
+    """Bring the stack up under ``options.profile``, pilot for ``duration_s``, take it down.
+
+    ``prepare(relay, client)``, when given, runs once goals flow, before the measurement.
+    """
     run = ProfileRun(options.profile)
-    room = f"bench-{options.profile}"
-    events_path = workdir / f"events-{options.profile}.jsonl"
-    agent_log = workdir / f"agent-{options.profile}.log"
+    name = options.name or options.profile
+    room = f"bench-{name}"
+    events_path = workdir / f"events-{name}.jsonl"
+    agent_log = workdir / f"agent-{name}.log"
     async with AsyncExitStack() as stack:
         relay = await _open_page(stack, browser, "relay")
         await relay.goto(
             page_url(server_url, "relay", room, name="relay", auto=1, profile=options.profile)
         )
-        await _wait(
+        await wait_for(
             relay,
             "() => window.autopilotStatus?.analyzerReady === true",
             ANALYZER_TIMEOUT_S,
@@ -126,16 +137,16 @@ async def run_profile(
         await _unless_agent_exits(
             agent,
             agent_log,
-            _wait(
+            wait_for(
                 relay,
                 "() => window.autopilotStatus.goalsSent > 0",
                 FIRST_GOAL_TIMEOUT_S,
                 "piloting started but the relay sent no goal",
             ),
         )
-        log.info(
-            "%s profile: goals flowing, measuring for %.0f s", options.profile, options.duration_s
-        )
+        if prepare is not None:
+            await prepare(relay, client)
+        log.info("%s run: goals flowing, measuring for %.0f s", name, options.duration_s)
         run.window = await _measure(relay, options, run)
         await client.get_by_role("button", name="Stop Piloting").click()
     _read_events(run, events_path, options)
@@ -203,7 +214,8 @@ async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page
     return page
 
 
-async def _wait(page: Page, condition: str, timeout_s: float, failure: str) -> None:
+async def wait_for(page: Page, condition: str, timeout_s: float, failure: str) -> None:
+    """Wait until the JS function ``condition`` holds on ``page``, else StackError(failure)."""
     # ``condition`` is a JS function: under the pages' CSP (no 'unsafe-eval') Playwright cannot
     # evaluate a bare expression.
     try:
@@ -218,7 +230,7 @@ async def _start_agent(
     command = [
         sys.executable, "-m", "vehicle_agent",
         "--server", server_url, "--room", room, "--name", "vehicle",
-        "--video", "synthetic", "--size", "{}x{}".format(*options.size),
+        "--video", options.video, "--size", "{}x{}".format(*options.size),
         "--fps", f"{options.fps:g}", "--profile", options.profile, "--events", str(events),
     ]  # fmt: skip
     if options.sweep_s is not None:

@@ -20,9 +20,9 @@ from app.tools.bench.results import FIGURE_KEYS
 
 pytestmark = [pytest.mark.bench, pytest.mark.slow, pytest.mark.browser]
 
-# Each profile measured for 8 s instead of --quick's 25-30 s: every figure still comes from a
-# real run (the face's sweep shortened to fit, so the window holds its glides and both leaps),
-# at a third of the suite's time.
+# Each profile and the target lock measured for 8 s instead of --quick's 22-30 s: every figure
+# still comes from a real run (the face's sweep shortened to fit, so the window holds its glides
+# and both leaps), in a third of the time.
 SHORT = ("--seconds", "8")
 
 PLOTS = (
@@ -77,6 +77,9 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
     assert isinstance(p50, float) and isinstance(p95, float)
     # Within the world's diagonal (11.09 m * sqrt 2): the turtle never leaves the terrain.
     assert 0 <= p50 <= p95 < 15.7
+    # The target lock in the two-face scene: a share of goals, over the whole window of them.
+    assert 0 <= printed["lock_held_pct"] <= 100
+    assert printed["details"]["lock"]["seconds"] >= 8 and printed["details"]["lock"]["goals"] > 0
 
     assert printed["run"]["default_s"] == 8 and "sweep shortened to 8 s" in printed["run"]["note"]
     assert json.loads((out / "results.json").read_text()) == printed

@@ -32,8 +32,11 @@ def test_a_busy_tree_uses_a_core_and_an_idle_one_none() -> None:
     finally:
         busy.wait(10)
         idle.wait(10)
-    assert cores["busy"] > 0.5, cores
-    assert cores["idle"] < 0.1, cores
+    # A spinning process gets a core to itself on a quiet machine, but only its share of one
+    # when the suite's other workers run beside it: well above nothing, and far above the idle
+    # tree (which sleeps through the window whatever the load).
+    assert cores["busy"] > 0.1, cores
+    assert cores["idle"] < 0.1 and cores["busy"] > 5 * cores["idle"], cores
     # The children were counted in their own groups, not again in the parent's.
     assert cores["rest"] < 0.5, cores
 

@@ -1,0 +1,159 @@
+"""Target lock: follow the object a person clicked, not the largest one (DESIGN §10).
+
+The relay owns the lock. A click (a point in frame pixels) locks the box that contains it; on
+each later snapshot the box that continues its track is chosen among those found (the tracker's
+window first, ``window.step``): the one that overlaps it most, else the one whose centre is
+nearest within reach, of a similar size either way. Not seen for ``search_after_s``, it is
+searched for in the whole frame (any similar box, nearest first); not seen for
+``release_after_s``, the lock is released and the largest box is the target again.
+
+This module is the Python side of ``app/static/js/lock.js``; both take the same decisions from the
+same doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from app.protocol import constants as c
+from app.protocol.channels import LockState
+from app.vision.window import Box, Choose, largest
+
+
+@dataclass(frozen=True)
+class LockRule:
+    """The numbers of the rule (``app.protocol.constants``, pages get them as ``PROTOCOL.lock``)."""
+
+    search_after_s: float = c.LOCK_SEARCH_AFTER_S
+    release_after_s: float = c.LOCK_RELEASE_AFTER_S
+    max_scale: float = c.LOCK_MAX_SCALE
+    reach: float = c.LOCK_REACH
+
+
+def contains(box: Box, x: float, y: float) -> bool:
+    """Whether pixel (x, y) is inside ``box``, edges included."""
+    bx, by, bw, bh = box
+    return bx <= x <= bx + bw and by <= y <= by + bh
+
+
+def pick(x: float, y: float, boxes: Sequence[Box]) -> Box | None:
+    """The box clicked at (x, y): of the boxes containing it the smallest (the first of equal
+    areas), since a small box inside a large one can only be meant by a click on it."""
+    best: Box | None = None
+    for box in boxes:
+        if contains(box, x, y) and (best is None or box[2] * box[3] < best[2] * best[3]):
+            best = box
+    return best
+
+
+def overlap(a: Box, b: Box) -> float:
+    """Intersection over union of two boxes."""
+    w = min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0])
+    h = min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1])
+    if w <= 0 or h <= 0:
+        return 0.0
+    inter = w * h
+    return inter / (a[2] * a[3] + b[2] * b[3] - inter)
+
+
+def similar(box: Box, locked: Box, max_scale: float) -> bool:
+    """Neither side of ``box`` is more than ``max_scale`` times the locked box's, or less than
+    its ``1 / max_scale``."""
+    return all(box[i] <= max_scale * locked[i] and locked[i] <= max_scale * box[i] for i in (2, 3))
+
+
+def associate(locked: Box, boxes: Sequence[Box], anywhere: bool, rule: LockRule) -> Box | None:
+    """The box among ``boxes`` that continues the track of ``locked``, or None.
+
+    Of the boxes of a similar size: the one that overlaps it most; when none overlaps, the one
+    whose centre is nearest to its centre, within ``rule.reach`` times its longer side unless
+    ``anywhere`` (the whole-frame search). Ties go to the first box, as in lock.js.
+    """
+    candidates = [b for b in boxes if similar(b, locked, rule.max_scale)]
+    best: Box | None = None
+    best_overlap = 0.0
+    for box in candidates:
+        iou = overlap(box, locked)
+        if iou > best_overlap:
+            best, best_overlap = box, iou
+    if best is not None:
+        return best
+    lx, ly = locked[0] + locked[2] / 2, locked[1] + locked[3] / 2
+    reach = rule.reach * max(locked[2], locked[3])
+    limit = math.inf if anywhere else reach * reach
+    best_d2 = math.inf
+    for box in candidates:
+        dx, dy = box[0] + box[2] / 2 - lx, box[1] + box[3] / 2 - ly
+        d2 = dx * dx + dy * dy
+        if d2 <= limit and (best is None or d2 < best_d2):
+            best, best_d2 = box, d2
+    return best
+
+
+@dataclass(frozen=True)
+class Query:
+    """What one snapshot is asked to follow: the locked box, whether to accept it anywhere in
+    the frame, and the lock's ``epoch`` then (an answer to an older lock is not news)."""
+
+    box: Box
+    anywhere: bool
+    epoch: int
+
+
+def chooser(query: Query | None, rule: LockRule) -> Choose:
+    """The rule that picks the target among a snapshot's boxes (``window.step``): the locked
+    target's track, or the largest box when nothing is locked."""
+    if query is None:
+        return largest
+    return lambda boxes: associate(query.box, boxes, query.anywhere, rule)
+
+
+@dataclass
+class TargetLock:
+    """The relay's lock on one target; times in seconds on any monotonic clock."""
+
+    rule: LockRule = field(default_factory=LockRule)
+    box: Box | None = None  # the locked target's box when last seen
+    seen_at: float = 0.0
+    state: LockState = "none"
+    epoch: int = 0  # bumped by every lock and release
+
+    def lock(self, x: float, y: float, boxes: Sequence[Box], now: float) -> bool:
+        """A click at (x, y) on a snapshot that found ``boxes``: lock the box clicked, or
+        release when the click hit none. True when locked."""
+        box = pick(x, y, boxes)
+        if box is None:
+            self.release()
+            return False
+        self.box, self.seen_at, self.state = box, now, "locked"
+        self.epoch += 1
+        return True
+
+    def release(self) -> None:
+        """Back to the default choice (the largest box)."""
+        self.box, self.state = None, "none"
+        self.epoch += 1
+
+    def query(self, now: float) -> Query | None:
+        """What the next snapshot follows, or None for the default choice."""
+        if self.box is None:
+            return None
+        return Query(self.box, now - self.seen_at > self.rule.search_after_s, self.epoch)
+
+    def update(self, query: Query | None, chosen: Box | None, now: float) -> LockState | None:
+        """The outcome of the snapshot asked with ``query``: the box chosen, or None when the
+        target was not found. Returns the new state when it changed."""
+        if query is None or query.epoch != self.epoch:
+            return None
+        before = self.state
+        if chosen is not None:
+            self.box, self.seen_at, self.state = chosen, now, "locked"
+        elif now - self.seen_at > self.rule.release_after_s:
+            self.release()
+        elif now - self.seen_at > self.rule.search_after_s:
+            self.state = "searching"
+        else:
+            self.state = "lost"
+        return self.state if self.state != before else None

@@ -1,0 +1,114 @@
+"""The relay's target lock (lock.js) agrees with the Python rule (app/vision/lock.py).
+
+lock.js gets its numbers the way the relay page does, from ``PROTOCOL.lock``, and runs the same
+scripted snapshot sequences (tests/vision/lock_sequences.py) and the same grid of boxes.
+"""
+
+from __future__ import annotations
+
+import itertools
+import random
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, Page
+
+from app.protocol.browser import browser_protocol
+from app.server.serve import RunningServer
+from app.vision import lock
+from app.vision.window import Box
+from e2e.helpers import module_page
+from tests.vision import lock_sequences
+
+pytestmark = [pytest.mark.browser]
+
+PAGE_RULE = browser_protocol()["lock"]
+RULE = lock.LockRule(
+    search_after_s=PAGE_RULE["searchAfterS"],
+    release_after_s=PAGE_RULE["releaseAfterS"],
+    max_scale=PAGE_RULE["maxScale"],
+    reach=PAGE_RULE["reach"],
+)
+
+# The page's side of lock_sequences.run, event for event.
+RUN_JS = """([events, rule]) => {
+  const target = new lock.TargetLock(rule);
+  let last = [];
+  return events.map(([kind, t, arg]) => {
+    if (kind === 'snapshot') {
+      last = arg;
+      const query = target.query(t);
+      const chosen = lock.chooser(query, rule)(last);
+      const changed = target.update(query, chosen, t);
+      return [query && query.box, query && query.anywhere, chosen, target.state, changed];
+    }
+    if (kind === 'click') return [target.lock(arg[0], arg[1], last, t), target.state];
+    target.release();
+    return [target.state];
+  });
+}"""
+
+
+@pytest.fixture
+def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
+    with module_page(server, browser, "lock") as opened:
+        yield opened
+
+
+def test_the_rule_reaches_the_page_from_app_protocol() -> None:
+    assert lock.LockRule() == RULE
+
+
+def test_scripted_sequences_take_the_same_decisions(page: Page) -> None:
+    for seed in (1, 2, 3):
+        events, _ = lock_sequences.script(seed)
+        expected = lock_sequences.run(events, RULE)
+        got = page.evaluate(RUN_JS, [events, PAGE_RULE])
+        # Every kind of decision occurs, so agreeing means something.
+        snapshots = [
+            o for (kind, _, _), o in zip(events, expected, strict=True) if kind == "snapshot"
+        ]
+        assert {o[3] for o in snapshots} == {"none", "locked", "lost", "searching"}
+        assert len(got) == len(expected)
+        for i, (event, want, have) in enumerate(zip(events, expected, got, strict=True)):
+            assert have == want, (seed, i, event, want, have)
+
+
+def test_pick_overlap_and_association_on_a_grid(page: Page) -> None:
+    rng = random.Random(7)
+
+    def box() -> Box:
+        side = rng.choice([40, 60, 76, 80, 100, 130])
+        return (rng.randint(0, 560), rng.randint(0, 400), side, side + rng.randint(-4, 4))
+
+    locked_boxes = [box() for _ in range(12)]
+    sets = [[box() for _ in range(rng.randint(0, 5))] for _ in range(40)]
+    sets += [[b, b] for b in locked_boxes[:3]]  # ties: the first wins
+    points = [(rng.uniform(0, 640), rng.uniform(0, 480)) for _ in range(40)]
+    cases = list(itertools.product(locked_boxes, sets))
+    js: dict[str, Any] = page.evaluate(
+        """([cases, sets, points, rule]) => ({
+             associate: cases.map(([l, boxes]) => [false, true].map(
+               (anywhere) => lock.associate(l, boxes, anywhere, rule))),
+             overlap: cases.flatMap(([l, boxes]) => boxes.map((b) => lock.overlap(l, b))),
+             pick: points.flatMap(([x, y]) => sets.map((boxes) => lock.pick(x, y, boxes))),
+           })""",
+        [cases, sets, points, PAGE_RULE],
+    )
+
+    def listed(b: Box | None) -> list[int] | None:
+        return None if b is None else list(b)
+
+    want_associate = [
+        [listed(lock.associate(locked, boxes, anywhere, RULE)) for anywhere in (False, True)]
+        for locked, boxes in cases
+    ]
+    assert js["associate"] == want_associate
+    assert any(a != [None, None] for a in want_associate)
+    assert any(a[0] is None and a[1] is not None for a in want_associate)
+    want_overlap = [lock.overlap(locked, b) for locked, boxes in cases for b in boxes]
+    assert js["overlap"] == pytest.approx(want_overlap, abs=1e-15)
+    assert any(v > 0 for v in want_overlap)
+    want_pick = [listed(lock.pick(x, y, boxes)) for x, y in points for boxes in sets]
+    assert js["pick"] == want_pick and any(p is not None for p in want_pick)

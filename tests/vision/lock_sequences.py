@@ -1,0 +1,90 @@
+"""Scripted snapshot sequences for the target lock, run by lock.py here and by lock.js in a page.
+
+A script is a list of events ``[kind, t, arg]`` (JSON-ready, so the page gets the very same):
+``snapshot`` with the boxes found (each drawn from one of three tracks that wander, change size a
+little and are now and then missed), ``click`` at a point, ``unlock``. The small track vanishes
+twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock is released).
+"""
+
+from __future__ import annotations
+
+import random
+from typing import Any
+
+from app.vision import lock
+from app.vision.window import Box
+
+STEP_S = 0.05
+DURATION_S = 20.0
+# Track name -> (start x, start y, size): the large one is the default choice; the middle one is
+# too large to be taken for the small one even by the whole-frame search.
+TRACKS = {"large": (120, 150, 130), "small": (440, 200, 76), "middle": (300, 330, 125)}
+SMALL_GONE = ((4.0, 5.6), (8.0, 12.0))
+CLICKS_AT = (0.5, 12.5, 17.0)  # on the small track (never missed on these snapshots)
+Event = list[Any]
+
+
+def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
+    """The events, and for each snapshot which track each of its boxes came from."""
+    rng = random.Random(seed)
+    where = {name: [float(x), float(y)] for name, (x, y, _) in TRACKS.items()}
+    events: list[Event] = []
+    owners: list[dict[str, str]] = []
+    small_at: tuple[float, float] = (0.0, 0.0)
+    for k in range(round(DURATION_S / STEP_S)):
+        t = round(k * STEP_S, 3)
+        boxes: list[Box] = []
+        owner: dict[str, str] = {}
+        for name, (_, _, size) in TRACKS.items():
+            position = where[name]
+            position[0] += rng.uniform(-4, 4)
+            position[1] += rng.uniform(-3, 3)
+            gone = name == "small" and any(a <= t < b for a, b in SMALL_GONE)
+            missed = rng.random() < 0.1 and t not in CLICKS_AT
+            if gone or missed:
+                continue
+            side = size + rng.randint(-6, 6)
+            box = (round(position[0]), round(position[1]), side, side)
+            boxes.append(box)
+            owner[str(list(box))] = name
+            if name == "small":
+                small_at = (box[0] + side / 2, box[1] + side / 2)
+        boxes.sort()
+        events.append(["snapshot", t, [list(b) for b in boxes]])
+        owners.append(owner)
+        if t in CLICKS_AT:
+            events.append(["click", t + 0.01, list(small_at)])
+        if t == 15.0:
+            events.append(["click", t + 0.01, [5.0, 5.0]])  # on no box: releases
+        if t == 18.5:
+            events.append(["unlock", t + 0.01, None])
+    return events, owners
+
+
+def run(events: list[Event], rule: lock.LockRule) -> list[list[Any]]:
+    """What lock.py does with each event: for a snapshot [box asked, anywhere, box chosen,
+    state, state changed]; for a click [locked, state]; for unlock [state]."""
+    target = lock.TargetLock(rule)
+    last: list[Box] = []
+    out: list[list[Any]] = []
+    for kind, t, arg in events:
+        if kind == "snapshot":
+            last = [(b[0], b[1], b[2], b[3]) for b in arg]
+            query = target.query(t)
+            chosen = lock.chooser(query, rule)(last)
+            changed = target.update(query, chosen, t)
+            out.append(
+                [
+                    None if query is None else list(query.box),
+                    None if query is None else query.anywhere,
+                    None if chosen is None else list(chosen),
+                    target.state,
+                    changed,
+                ]
+            )
+        elif kind == "click":
+            out.append([target.lock(arg[0], arg[1], last, t), target.state])
+        else:
+            target.release()
+            out.append([target.state])
+    return out
