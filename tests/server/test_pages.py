@@ -164,15 +164,15 @@ def test_query_text_cannot_break_out_of_the_config_script(server: RunningServer)
     assert embedded_config(html)["room"] == evil
 
 
-def test_client_has_exactly_the_thesis_buttons_and_a_labelled_operation_list(
+def test_client_has_exactly_the_thesis_buttons_the_console_s_and_a_labelled_operation_list(
     server: RunningServer,
 ) -> None:
     html = httpx.get(f"{server.url}/client").text
     parser = Buttons()
     parser.feed(html)
-    assert sorted(parser.labels) == sorted(
-        ["Connect", "Join Room", "Leave Room", "Set Operation", "Start Piloting", "Stop Piloting"]
-    )
+    thesis = ["Connect", "Join Room", "Leave Room", "Set Operation", "Start Piloting"]
+    console = ["Unlock"]  # the operator's console (target lock)
+    assert sorted(parser.labels) == sorted([*thesis, "Stop Piloting", *console])
     assert re.search(r'<label for="operation">Select Operation</label>', html)
     assert re.search(r'<select id="operation"', html)
     assert "Current State:" in html
