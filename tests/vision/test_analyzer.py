@@ -86,7 +86,7 @@ def test_video_frame_source_matches_python_on_the_same_pixels(page: Page) -> Non
         """async () => {
              const r = await window.analyzer.analyze(
                flameVideoFrame(640, 480, [420, 300, 120, 90]), 'fire', { returnPixels: true });
-             return { ...r, rgba: toBase64(r.rgba) };
+             return { ...r, rgba: await toBase64(r.rgba) };
            }"""
     )
     assert (result["w"], result["h"]) == (640, 480)

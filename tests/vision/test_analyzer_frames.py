@@ -46,7 +46,8 @@ window.i420Frame = (width, height, b64) => {
 window.analyzeAll = async (frames, op, options) => {
   const results = await Promise.all(
     frames.map(([w, h, b64]) => window.analyzer.analyze(i420Frame(w, h, b64), op, options)));
-  return results.map((r) => (r.rgba ? { ...r, rgba: toBase64(r.rgba) } : r));
+  const encode = async (r) => (r.rgba ? { ...r, rgba: await toBase64(r.rgba) } : r);
+  return Promise.all(results.map(encode));
 };
 }"""
 

@@ -6,13 +6,17 @@ import { largest } from './window.js';
 
 const state = document.getElementById('state');
 
-/** Base64 of a byte array, in chunks small enough for String.fromCharCode. */
+/**
+ * Base64 of a byte array, by the browser's own encoder (a data: URL of a Blob): a 1920×1080 RGBA
+ * frame takes milliseconds, where btoa over String.fromCharCode chunks took a third of a second.
+ */
 function toBase64(bytes) {
-  let text = '';
-  for (let i = 0; i < bytes.length; i += 0x8000) {
-    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
-  }
-  return btoa(text);
+  return new Promise((resolve, reject) => {
+    const reader = new FileReader();
+    reader.onload = () => resolve(reader.result.slice(reader.result.indexOf(',') + 1));
+    reader.onerror = () => reject(reader.error);
+    reader.readAsDataURL(new Blob([bytes]));
+  });
 }
 
 /** The bytes of a base64 string (decoded here: the page's CSP allows no fetch of data: URLs). */
@@ -53,7 +57,7 @@ async function runImage(base64, opIds, profile, windowOps = []) {
       results[opId].window = { around, boxes: windowed.boxes, target: windowed.target };
     }
   }
-  return { width: pixels.width, height: pixels.height, rgba: toBase64(pixels.rgba), results };
+  return { width: pixels.width, height: pixels.height, rgba: await toBase64(pixels.rgba), results };
 }
 
 /**
