@@ -1,10 +1,13 @@
-"""Suite-wide ordering: the longest tests start first.
+"""Suite-wide scheduling for ``scripts/test``'s xdist workers (``--dist loadgroup``).
 
-``scripts/test`` runs the suite on several xdist workers with ``--dist loadgroup``, which hands
-out tests one at a time in collection order. Starting the few long runs first (the benches, then
-the browser flows) lets the many short tests fill the other workers around them, instead of one
-long run starting last and holding the whole suite up. Within each rank the collection order
-stays, so a module's tests stay together and share their module-scoped browser.
+Two rules, both about the two cores this suite shares:
+
+- **Longest first.** The workers take tests in collection order, so the few long runs (the
+  benches, then the browser flows) start first and the many short tests fill the other workers
+  around them, instead of a long run starting last and holding the whole suite up.
+- **A module-scoped fixture is set up once.** Tests that share one (a headless Chromium with
+  OpenCV.js loaded, a parity harness, a Redis server) form one xdist group, so they run on one
+  worker and pay for it once, not once per worker. The other tests of the module stay free.
 """
 
 from __future__ import annotations
@@ -21,6 +24,22 @@ def _rank(item: pytest.Item) -> int:
     )
 
 
+def _shares_a_module_fixture(item: pytest.Item) -> bool:
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return any(
+        definition.scope == "module"
+        for definitions in info.name2fixturedefs.values()
+        for definition in definitions
+    )
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist turns the group marks into node ids
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Longest-first order (stable: ``sorted`` keeps the collection order within a rank)."""
+    """Group the tests of a module-scoped fixture; order longest first (``sorted`` is stable,
+    so within a rank the collection order stays and a module's tests stay together)."""
+    for item in items:
+        if _shares_a_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
     items[:] = sorted(items, key=_rank)
