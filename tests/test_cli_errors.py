@@ -43,7 +43,7 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
         (["--server", "not-a-url"], ["server URL", "not-a-url"]),
         (["--video", "/no/such/clip.mp4"], ["no such video file", "/no/such/clip.mp4"]),
         (["--video", "/dev/video99"], ["no such video device", "/dev/video99"]),
-        (["--rosbridge", "ws://127.0.0.1:9"], ["rosbridge", "ws://127.0.0.1:9"]),
+        (["--rosbridge", "ws://127.0.0.1:9"], ["rosbridge", "ws://127.0.0.1:9", "refused"]),
         (["--rosbridge", "robot:9090"], ["rosbridge URL", "robot:9090"]),
         (["--size", "big"], ["size", "big"]),
         (["--size", "641x480"], ["size", "641x480"]),

@@ -20,6 +20,7 @@ from urllib.parse import urlsplit
 
 import roslibpy
 from autobahn.twisted.websocket import connectWS
+from twisted.internet import error as twisted_error
 from twisted.internet import reactor
 from twisted.internet import ssl as twisted_ssl
 
@@ -150,13 +151,11 @@ class RosbridgeTurtle:
             ros: roslibpy.Ros = _VerifiedRos(self.url, self.headers, _tls_options(self))
         else:
             ros = roslibpy.Ros(host=self.url, headers=self.headers, transport="twisted")
-        try:
-            await asyncio.to_thread(ros.run, CONNECT_TIMEOUT_S)
-        except TimeoutError as exc:
+        reason = await _connect(ros, loop)
+        if reason is not None:
             # Twisted would keep retrying in the background; we give up and say so.
             reactor.callFromThread(ros.factory.stopTrying)
-            reason = f"no answer within {CONNECT_TIMEOUT_S:g} s"
-            raise TurtleError(f"cannot connect to rosbridge at {self.url}: {reason}") from exc
+            raise TurtleError(f"cannot connect to rosbridge at {self.url}: {reason}")
         self._ros = ros
         ros.on("close", lambda *_: log.warning("rosbridge connection to %s lost", self.url))
         types = self.types = await self._detect(ros)
@@ -263,6 +262,40 @@ def _tls_options(turtle: RosbridgeTurtle) -> Any:
     except OSError as exc:
         raise TurtleError(f"cannot read --ca-file {turtle.ca_file}: {exc}") from exc
     return twisted_ssl.optionsForClientTLS(host, trustRoot=root)
+
+
+async def _connect(ros: roslibpy.Ros, loop: asyncio.AbstractEventLoop) -> str | None:
+    """Start ``ros``'s connection; None once it is ready, else why not: the first failed attempt
+    (a refused port says so at once instead of after the whole timeout; one that failed before
+    this hook was in place is caught on twisted's retry) or the timeout."""
+    outcome: asyncio.Future[str | None] = loop.create_future()
+
+    def settle(reason: str | None) -> None:
+        if not outcome.done():
+            outcome.set_result(reason)
+
+    factory = ros.factory
+    retry = factory.clientConnectionFailed
+
+    def failed(connector: Any, reason: Any) -> None:
+        # Twisted's Failure: its value is the error, e.g. ConnectionRefusedError.
+        loop.call_soon_threadsafe(settle, _failure_text(reason.value))
+        retry(connector, reason)
+
+    factory.clientConnectionFailed = failed
+    factory.on_ready(lambda _proto: loop.call_soon_threadsafe(settle, None))
+    # Ros() queued its connection on the reactor thread; this starts that thread (once).
+    factory.manager.run()
+    try:
+        return await asyncio.wait_for(outcome, CONNECT_TIMEOUT_S)
+    except TimeoutError:
+        return f"no answer within {CONNECT_TIMEOUT_S:g} s"
+
+
+def _failure_text(error: BaseException) -> str:
+    if isinstance(error, twisted_error.ConnectionRefusedError):
+        return "connection refused (is rosbridge running on that port?)"
+    return str(error) or type(error).__name__
 
 
 class _VerifiedRos(roslibpy.Ros):  # type: ignore[misc]
