@@ -52,7 +52,7 @@ async def test_the_pool_serves_a_vehicle_s_room_and_survives_its_browser_dying(
 
             await until(relay_in_room, "the pool's relay to join the room")
             # The page joins the room before the pool's open() returns and records it as served.
-            await eventually(lambda: list(pool.served) == ["lab"], 10, "the pool to record the room")
+            await eventually(lambda: list(pool.served) == ["lab"], 10, "the pool to record it")
             ours = browser_processes() - before
             assert len(ours) == 1
             os.kill(ours.pop(), signal.SIGKILL)
