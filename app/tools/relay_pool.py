@@ -134,12 +134,16 @@ class RelayPool:
         self.redis: aioredis.Redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
         self.leases = RoomLeases(self.redis, self.id)
         self.served: dict[str, _Served] = {}
+        # Rooms whose lease this pool holds, renewed by their own task: opening a page or asking
+        # one for its status can take longer than the lease under load, and must not lose it.
+        self.held: set[str] = set()
 
     async def run(self, stop: asyncio.Event) -> None:
         """Serve rooms until ``stop`` is set; then close every page and release every room."""
         async with async_playwright() as playwright:
             browser = await playwright.chromium.launch(**self.launch_options)
             log.info("relay pool %s serving rooms of %s", self.id, self.server)
+            keeper = asyncio.create_task(self._keep_leases())
             try:
                 while not stop.is_set():
                     try:
@@ -153,6 +157,9 @@ class RelayPool:
                     with contextlib.suppress(TimeoutError):
                         await asyncio.wait_for(stop.wait(), keys.TICK_S)
             finally:
+                keeper.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await keeper
                 for room in list(self.served):
                     await self._let_go(room)
                 await browser.close()
@@ -161,8 +168,7 @@ class RelayPool:
     async def tick(self, browser: Browser) -> None:
         """Renew, report and let go of served rooms; then claim rooms that need a relay."""
         for room in list(self.served):
-            if not await self.leases.renew(room):
-                log.warning("lost the relay lease of room %r", room)
+            if room not in self.held:
                 await self._let_go(room, release=False)
                 continue
             roles = {m["role"] for m in await room_members(self.redis, room)}
@@ -182,7 +188,22 @@ class RelayPool:
                 break
             if room not in self.served and await self.leases.claim(room):
                 log.info("claimed room %r", room)
+                self.held.add(room)
                 self.served[room] = await self._open(browser, room)
+
+    async def _keep_leases(self) -> None:
+        """Renew every held lease each tick, whatever the pages are doing meanwhile."""
+        while True:
+            for room in list(self.held):
+                try:
+                    renewed = await self.leases.renew(room)
+                except aioredis.RedisError as exc:
+                    log.error("could not renew the relay lease of room %r: %s", room, exc)
+                    continue  # kept until the lease is known lost: Redis may be back next tick
+                if not renewed and room in self.held:
+                    log.warning("lost the relay lease of room %r", room)
+                    self.held.discard(room)
+            await asyncio.sleep(keys.TICK_S)
 
     async def _open(self, browser: Browser, room: str) -> _Served:
         context = await browser.new_context()
@@ -224,8 +245,10 @@ class RelayPool:
 
     async def _let_go(self, room: str, release: bool = True) -> None:
         served = self.served.pop(room)
+        held = room in self.held
+        self.held.discard(room)
         await self._close(served.page)
-        if release:
+        if release and held:
             with contextlib.suppress(aioredis.RedisError):
                 await self.leases.release(room)
                 await self.redis.delete(keys.relay_status(room))

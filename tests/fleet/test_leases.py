@@ -11,7 +11,8 @@ import pytest
 import redis.asyncio as aioredis
 
 from app.server.fleet import keys
-from app.tools.relay_pool import RoomLeases
+from app.tools.relay_pool import RelayPool, RoomLeases
+from tests.helpers.waiting import eventually
 
 
 @pytest.fixture
@@ -66,3 +67,23 @@ async def test_racing_pools_never_both_get_a_room(redis_url: str, redis: aioredi
     assert {room: len(held) for room, held in holders.items()} == dict.fromkeys(rooms, 1)
     for room, [holder] in holders.items():
         assert await redis.get(keys.relay_lease(room)) == holder
+
+
+async def test_a_pool_keeps_its_leases_while_its_pages_are_busy(
+    redis_url: str, redis: aioredis.Redis
+) -> None:
+    # No tick runs here, as when opening a page takes longer than the lease: the pool's own
+    # lease keeper alone holds the room, and it notices when another pool has it.
+    pool = RelayPool("http://127.0.0.1:9", redis_url, pool_id="pool-a")
+    pool.leases = RoomLeases(pool.redis, pool.id, ttl_ms=2500)
+    assert await pool.leases.claim("lab")
+    pool.held.add("lab")
+    keeper = asyncio.create_task(pool._keep_leases())
+    try:
+        await asyncio.sleep(3.5)
+        assert await redis.get(keys.relay_lease("lab")) == "pool-a"
+        await redis.set(keys.relay_lease("lab"), "pool-b")
+        await eventually(lambda: "lab" not in pool.held, 3, "the pool to see its lease lost")
+    finally:
+        keeper.cancel()
+        await pool.redis.aclose()
