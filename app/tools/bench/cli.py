@@ -90,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fps",
         type=positive_number,
         default=VIDEO_FPS,
-        help=f"frame rate of the synthetic video ({VIDEO_FPS:g})",
+        help=f"frame rate of the synthetic video ({VIDEO_FPS:g}; --field: the vehicle camera's)",
     )
 
 
@@ -129,7 +129,7 @@ def _field(args: argparse.Namespace) -> int:
         log.error("the field bench builds network namespaces: run it as root")
         return 2
     conditions = args.condition or FIELD_CONDITIONS
-    obj = field.run(args.out, args.quick, conditions, args.seconds)
+    obj = field.run(args.out, args.quick, conditions, args.seconds, args.fps)
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     unmeasured = [(r["condition"], k) for r in obj["field"] for k in r["problems"]]

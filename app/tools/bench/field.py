@@ -161,10 +161,16 @@ def _round(value: float | None, digits: int = 1) -> float | None:
 
 
 def run(
-    out: Path, quick: bool, conditions: Sequence[str] = ORDER, seconds: float | None = None
+    out: Path,
+    quick: bool,
+    conditions: Sequence[str] = ORDER,
+    seconds: float | None = None,
+    fps: float | None = None,
 ) -> dict[str, Any]:
     """Measure ``conditions`` (in the bench's order) and the video sender, each for ``seconds``
-    if given (``--seconds``); write ``field.json``, ``field.md`` and plots into ``out``."""
+    if given (``--seconds``), the vehicle's camera at ``fps`` if given (``--fps``; the video
+    sender's canvas keeps its own 30 frames/s); write ``field.json``, ``field.md`` and plots
+    into ``out``."""
     # Imported here: Playwright and the lab are only needed when the field bench runs.
     from playwright.sync_api import sync_playwright
 
@@ -180,7 +186,7 @@ def run(
         for name in (name for name in ORDER if name in conditions):
             lab.apply(name)
             log.info("field bench: %s", name)
-            with field_stack(lab, playwright, out / "field" / name) as stack:
+            with field_stack(lab, playwright, out / "field" / name, fps) as stack:
                 stack.start_piloting()
                 deadline = time.monotonic() + FIRST_GOAL_TIMEOUT_S
                 while not stack.events("goal") and time.monotonic() < deadline:
@@ -224,6 +230,7 @@ def run(
         "link_drop": drop,
         "video": video_rows,
         "window_s": window_s,
+        "fps": fps,
         "quick": quick,
         # Everything shares this machine's cores: the figures move with its load.
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],

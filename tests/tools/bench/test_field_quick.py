@@ -27,15 +27,16 @@ pytestmark = [
 ]
 
 CONDITIONS = ("clean", "link_drop")
-# Each condition and video variant measured for 4 s instead of --quick's 15 s and 6 + 6 s: the
-# same code paths and figures, a third of the time.
+# Each condition and video variant measured for 4 s instead of --quick's 15 s and 6 + 6 s, at 10
+# frames/s instead of 30: the same code paths and figures, for a third of the time and cores.
 SECONDS = 4
+FPS = 10
 
 
 def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
     out = tmp_path / "report"
     argv = [sys.executable, "-m", "app.cli", "bench", "--field", "--quick", "--json"]
-    argv += ["--seconds", str(SECONDS)]
+    argv += ["--seconds", str(SECONDS), "--fps", str(FPS)]
     for name in CONDITIONS:
         argv += ["--condition", name]
     done = subprocess.run(
@@ -53,9 +54,9 @@ def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
         assert 0 < row["connect_ms"] < 120_000
         p50, p95 = row["glass_to_command_ms_p50"], row["glass_to_command_ms_p95"]
         assert 0 < p50 <= p95 < 60_000
-        assert 0 < row["goals_per_s"] <= 31  # at most a goal per frame of 30 frames/s
+        assert 0 < row["goals_per_s"] <= FPS + 1  # at most a goal per frame
         assert 0 <= row["heading_error_deg_median"] <= 180
-        assert 0 < row["client_video_fps"] <= 61
+        assert 0 < row["client_video_fps"] <= FPS + 1
         # Latest wins: never a goal older than one already applied (a rule, not a timing).
         assert row["stale_goals_applied"] == 0
     drop = obj["link_drop"]
@@ -63,14 +64,15 @@ def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
     assert 0 < drop["stop_after_s"] < 3
     assert 0 <= drop["resume_after_s"] < 30
 
-    assert obj["window_s"] == SECONDS
+    assert obj["window_s"] == SECONDS and obj["fps"] == FPS
 
     video = obj["video"]
     assert len(video) == len(VARIANTS)
     for row in video:
         assert set(VIDEO_COLUMNS) <= set(row)
         assert row["condition"] == "cap_300kbit"
-        assert math.isfinite(row["fps"]) and 0 <= row["fps"] <= 61
+        # The sender's canvas runs at its own 30 frames/s (what the cap is measured against).
+        assert math.isfinite(row["fps"]) and 0 <= row["fps"] <= 31
         assert row["width"] > 0 and row["kbit_per_s"] > 0
 
     report = (out / "field.md").read_text()
