@@ -27,6 +27,7 @@ from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.freshness import GoalGate
+from vehicle_agent.manual import ManualDrive
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.signaling import SignalingClient, SignalingError
 from vehicle_agent.turtle import Turtle, TurtleError
@@ -83,6 +84,9 @@ class Agent:
         self.turtle = turtle
         self.events = events or EventLog()
         self.controller = Controller(profile)
+        # The operator's wheel (manual override): while manual, goals are ignored (counted).
+        self.manual = ManualDrive(profile)
+        self.goals_ignored = 0
         # Latest-wins on the lossy goal channel; reset for every new link.
         self.goal_gate = GoalGate()
         self.pose: Pose | None = None
@@ -114,6 +118,8 @@ class Agent:
         self._channel_handlers: dict[type[channels.ChannelMessage], ChannelHandler] = {
             channels.Goal: self._on_goal,
             channels.Stop: self._on_stop,
+            channels.ModeChange: self._on_mode,
+            channels.Drive: self._on_drive,
             channels.Error: self._on_peer_error,
         }
 
@@ -297,6 +303,7 @@ class Agent:
         link.on_up = self._on_link_up
         self._link = link
         self.goal_gate.reset()
+        self.manual.reset_link()
         self.events.emit("link", state="offer", relay=link.relay)
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
@@ -332,7 +339,7 @@ class Agent:
 
     async def _drop_link(self, reason: str) -> None:
         link, self._link = self._link, None
-        self._publish(self.controller.stop())
+        self._halt()
         if link is None:
             return
         log.info("link to %s down: %s", link.relay, reason)
@@ -372,6 +379,10 @@ class Agent:
         return channels.Error(reason=reason, ref=ref)
 
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
+        if self.manual.manual:
+            self.goals_ignored += 1
+            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why="manual")
+            return
         verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
         if verdict != "fresh":
             self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
@@ -386,6 +397,32 @@ class Agent:
     def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)
         self._publish(self.controller.stop())
+
+    def _on_mode(self, relay: str, message: channels.ModeChange) -> None:
+        # Whichever way the mode changes, the turtle stops first: the autopilot's last command
+        # must not outlive its goals, nor the operator's outlive the wheel.
+        changed = self.manual.set_mode(message.mode, message.operator)
+        if changed is None:
+            return
+        self.controller.stop()
+        log.info(
+            "mode %s%s (%s)",
+            message.mode,
+            f" by {message.operator}" if message.operator else "",
+            message.reason or relay,
+        )
+        self.events.emit("mode", mode=message.mode, operator=message.operator)
+        self._publish(changed)
+
+    def _on_drive(self, relay: str, message: channels.Drive) -> None:
+        twist = self.manual.drive(message.seq, message.linear, message.angular)
+        self.events.emit("drive", seq=message.seq, applied=twist is not None)
+        self._publish(twist)
+
+    def _halt(self) -> None:
+        """Stop at once, autopilot or operator: the link that carried the commands is gone."""
+        stopped = self.controller.stop()
+        self._publish(self.manual.set_mode("auto", None) or stopped)
 
     def _on_peer_error(self, relay: str, message: channels.Error) -> None:
         log.warning("%r reported an error: %r", relay, message.reason)
@@ -425,10 +462,10 @@ class Agent:
 
     async def _tick(self) -> None:
         while True:
-            until_timeout = self.controller.until_timeout()
-            delay = TICK_PERIOD_S if until_timeout is None else min(TICK_PERIOD_S, until_timeout)
-            await asyncio.sleep(delay)
+            waits = (self.controller.until_timeout(), self.manual.until_deadman())
+            await asyncio.sleep(min([TICK_PERIOD_S, *(w for w in waits if w is not None)]))
             self._publish(self.controller.tick())
+            self._publish(self.manual.tick())
 
     def _publish(self, twist: Twist | None) -> None:
         if twist is None:

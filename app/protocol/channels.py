@@ -183,6 +183,47 @@ class LockStatus(_Message):
     reason: str | None = None
 
 
+# Manual override: "auto", the relay's goals steer; "manual", the operator's drive commands do.
+Mode = Literal["auto", "manual"]
+# A drive command's share of the vehicle profile's manual speed (DESIGN §10).
+Axis = Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+PeerName = Annotated[str, Field(min_length=1, max_length=64)]
+
+
+class TakeOver(_Message):
+    """client→relay: this client takes the wheel (refused while another operator holds it)."""
+
+    type: Literal["takeOver"] = "takeOver"
+
+
+class HandBack(_Message):
+    """client→relay: the operator gives the wheel back to the autopilot."""
+
+    type: Literal["handBack"] = "handBack"
+
+
+class Drive(_Message):
+    """client→relay, relay→vehicle: the operator's command; ``linear`` forward (+) / back (−)
+    and ``angular`` counter-clockwise (+) / clockwise (−), each a share of the profile's manual
+    speed. ``seq`` grows with every command of one sender (the relay renumbers what it
+    forwards); a command that is not the newest is dropped."""
+
+    type: Literal["drive"] = "drive"
+    seq: Annotated[int, Field(ge=1)]
+    linear: Axis
+    angular: Axis
+
+
+class ModeChange(_Message):
+    """relay→vehicle and relay→clients: who steers now; ``operator`` is the client holding the
+    wheel in manual mode, ``reason`` why the mode changed."""
+
+    type: Literal["mode"] = "mode"
+    mode: Mode
+    operator: PeerName | None = None
+    reason: str | None = None
+
+
 class Error(_Message):
     """Any peer→any peer: why a message was refused; ``ref`` is its type, if known."""
 
@@ -204,6 +245,10 @@ ChannelMessage = (
     | Lock
     | Unlock
     | LockStatus
+    | TakeOver
+    | HandBack
+    | Drive
+    | ModeChange
     | Error
 )
 
@@ -218,11 +263,15 @@ def _or(models: tuple[type[_Message], ...]) -> Any:
 # What each side accepts on each channel: RECEIVERS[label][receiving role].
 RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
     # Goals fall back to the reliable channel while the state channel is not open.
-    AUTOPILOT_CHANNEL: {"vehicle": (Goal, Stop, Error), "relay": (Pose, Error)},
-    AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Error), "relay": (Pose, Error)},
+    # Drive commands, like goals, are state: the lossy channel when it is open.
+    AUTOPILOT_CHANNEL: {
+        "vehicle": (Goal, Stop, ModeChange, Drive, Error),
+        "relay": (Pose, Error),
+    },
+    AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Drive, Error), "relay": (Pose, Error)},
     CONTROL_CHANNEL: {
-        "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, Error),
-        "client": (Ops, State, Detections, Pose, LockStatus, Error),
+        "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, TakeOver, HandBack, Drive, Error),
+        "client": (Ops, State, Detections, Pose, LockStatus, ModeChange, Error),
     },
 }
 

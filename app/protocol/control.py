@@ -23,6 +23,12 @@ SPAWN_THETA = math.pi / 2
 
 Law = Literal["rotate", "follow"]
 
+# The operator's console (manual override). A vehicle that was moving on a drive command and has
+# had none for DEADMAN_S stops; a held key or stick resends its command every DRIVE_REPEAT_S, so a
+# live operator never trips it, and a lost or stuck client stops the vehicle within 0.3 s.
+DEADMAN_S = 0.3
+DRIVE_REPEAT_S = 0.1
+
 
 @dataclass(frozen=True)
 class Profile:
@@ -63,6 +69,10 @@ class Profile:
     # No goal for this long: the target counts as lost and the vehicle turns in place to search.
     search_after_s: float = math.inf
     search_angular: float = 0.0
+    # --- manual override ---------------------------------------------------------------------
+    # An operator's full key or stick deflection (a drive command of 1) is this speed.
+    manual_linear: float = 1.5
+    manual_angular: float = 2.0
 
 
 _DEFAULT = Profile(
@@ -115,7 +125,9 @@ PROFILES: dict[str, Profile] = {
     ),
 }
 __all__ = [
+    "DEADMAN_S",
     "DEFAULT_PROFILE",
+    "DRIVE_REPEAT_S",
     "PROFILES",
     "TERRAIN_CENTRE",
     "WORLD_SIZE",
@@ -159,5 +171,7 @@ def page_constants(profiles: dict[str, Profile] | None = None) -> dict[str, Any]
         "terrainCentre": TERRAIN_CENTRE,
         "minTargetDistanceM": MIN_TARGET_DISTANCE_M,
         "spawnTheta": SPAWN_THETA,
+        "deadmanS": DEADMAN_S,
+        "driveRepeatS": DRIVE_REPEAT_S,
         "profiles": {name: profile_constants(p) for name, p in chosen.items()},
     }

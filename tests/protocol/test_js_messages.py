@@ -23,8 +23,9 @@ CHANNEL_SENDS = [
     ("vehicle.js", AUTOPILOT_CHANNEL, "relay", {"pose"}),
     # askRelay(type) sends start/stop on `control` when signaling is down.
     ("client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
-    ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose"}),
-    ("relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop"}),
+    ("client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive"}),
+    ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "mode"}),
+    ("relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop", "mode", "drive"}),
     ("snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
     ("snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),
     ("lock-view.js", CONTROL_CHANNEL, "relay", {"lock", "unlock"}),

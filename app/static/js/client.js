@@ -7,6 +7,7 @@ import { CHANNELS, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
 import { button, byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
+import { Wheel } from './wheel.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
 
@@ -43,6 +44,10 @@ const status = {
   // one (a relay pool taking the room over) is asked to start again on its first state.
   wantPiloting: false,
   lock: null, // the relay's last lockState: {state, box, reason}
+  mode: null, // the relay's last mode: {mode: 'auto'|'manual', operator, reason}
+  get drivesSent() {
+    return wheel.sent;
+  },
 };
 window.autopilotStatus = status;
 
@@ -50,7 +55,16 @@ window.autopilotStatus = status;
 const session = {
   control: null, // the open `control` data channel
   recentMs: [],
+  driveSeq: 0,
 };
+// Keys and gamepads drive while this client holds the wheel (manual override).
+const wheel = new Wheel({
+  repeatS: config.control.driveRepeatS,
+  send: (command) => {
+    session.driveSeq += 1;
+    sendJson(session.control, { type: 'drive', seq: session.driveSeq, ...command });
+  },
+});
 
 // ---------------------------------------------------------------- relay messages
 
@@ -120,6 +134,26 @@ function onLockState(msg) {
   if (msg.reason) log.info(`target lock ${msg.state}: ${msg.reason}`);
 }
 
+function onMode(msg) {
+  const previous = status.mode;
+  status.mode = { mode: msg.mode, operator: msg.operator ?? null, reason: msg.reason ?? null };
+  const mine = msg.mode === 'manual' && msg.operator === room.name;
+  wheel.setEnabled(mine);
+  show('mode', modeText());
+  if (previous !== null && (previous.mode !== msg.mode || previous.operator !== status.mode.operator)) {
+    log.info(`${msg.mode === 'manual' ? `${msg.operator} has the wheel` : 'the autopilot steers'}${msg.reason ? ` (${msg.reason})` : ''}`);
+  }
+  updateControls();
+}
+
+function modeText() {
+  const mode = status.mode;
+  if (mode === null) return 'unknown (no relay)';
+  if (mode.mode === 'auto') return 'autopilot steers';
+  if (mode.operator === room.name) return 'you drive: arrow keys (held) or gamepad; Space stops';
+  return `${mode.operator} is driving`;
+}
+
 function median(values) {
   const sorted = [...values].sort((a, b) => a - b);
   const mid = Math.floor(sorted.length / 2);
@@ -144,7 +178,7 @@ function setupPeer(peer) {
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
-  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState };
+  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState, mode: onMode };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
     session.control = dc;
@@ -158,6 +192,7 @@ function setupPeer(peer) {
     if (session.control !== dc) return;
     session.control = null;
     status.controlOpen = false;
+    forgetMode();
     showState();
     updateControls();
   });
@@ -172,6 +207,12 @@ function askRelay(type) {
 
 // ---------------------------------------------------------------- page
 
+function forgetMode() {
+  status.mode = null;
+  wheel.setEnabled(false);
+  show('mode', modeText());
+}
+
 function showDescription() {
   const op = status.ops.find((candidate) => candidate.id === select.value);
   show('op-description', op?.description ?? '');
@@ -184,6 +225,9 @@ function updateControls() {
   button('set-op').disabled = select.disabled;
   button('start').disabled = !reachable || piloting;
   button('stop').disabled = !reachable || !piloting;
+  const mode = status.mode;
+  button('take-over').disabled = !reachable || mode === null || mode.mode === 'manual';
+  button('hand-back').disabled = !reachable || mode?.mode !== 'manual' || mode.operator !== room.name;
 }
 
 function showState() {
@@ -219,6 +263,13 @@ for (const type of ['start', 'stop']) {
   });
 }
 
+// The relay answers with `mode` (to every client), or with an error naming who drives.
+for (const [action, msg] of [['take-over', { type: 'takeOver' }], ['hand-back', { type: 'handBack' }]]) {
+  button(action).addEventListener('click', () => {
+    if (!sendJson(session.control, msg)) log.error(`cannot ${button(action).textContent}: no relay connection`);
+  });
+}
+
 room.bindControls();
 room.addEventListener('phase', (event) => {
   showState();
@@ -229,6 +280,7 @@ room.addEventListener('roster', showState);
 const link = new RelayLink(room, { log, setup: setupPeer });
 link.addEventListener('lost', () => {
   status.relay = null;
+  forgetMode();
   clearDetections();
   showState();
   updateControls();

@@ -32,6 +32,8 @@ const status = {
   clients: [], // names of connected clients
   vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
   lock: 'none', // the target lock's state (lock.js)
+  operator: null, // the client holding the wheel (manual override), or null: the autopilot steers
+  drivesForwarded: 0,
   get snapshots() {
     return session.loop?.stats.snapshots ?? 0;
   },
@@ -78,6 +80,7 @@ const session = {
   timer: null, // a profile with a snapshot period: its interval
   frameCallback: null, // a snapshot per frame: the pending requestVideoFrameCallback
   frameReader: null, // default profile: the reader of the vehicle track's decoded frames
+  driveSeq: 0, // the seq of the last drive command forwarded to the vehicle
 };
 
 const ANALYZER_SLOW_MS = 30000;
@@ -148,6 +151,11 @@ function closePeer(name, reason) {
   session.peers.delete(name);
   entry.peer.close();
   log.info(`connection with ${name} closed: ${reason}`);
+  if (entry.role === 'client' && status.operator === name) {
+    // The failsafe: the operator's link is gone, so nobody drives and the autopilot stays off.
+    if (status.piloting) setPiloting(false, `operator ${name} leaving`);
+    setOperator(null, `operator ${name} left`);
+  }
   if (entry.role === 'vehicle') {
     session.vehicleTrack = null;
     video.srcObject = null;
@@ -239,6 +247,7 @@ function onDataChannel(entry, channel) {
       entry.channel = channel;
       status.vehicle = name;
       log.info(`autopilot channel to vehicle ${name} open`);
+      if (status.operator !== null) sendJson(channel, modeMessage('an operator holds the wheel'));
       broadcastState();
       updatePeers();
     });
@@ -252,6 +261,9 @@ function onDataChannel(entry, channel) {
         stop: () => setPiloting(false, name),
         lock: (msg) => lockAt(msg, name),
         unlock: () => unlock(`released by ${name}`),
+        takeOver: () => takeOver(name),
+        handBack: () => handBack(name),
+        drive: (msg) => forwardDrive(msg, name),
       },
       log,
       SCHEMAS.control.relay,
@@ -260,6 +272,7 @@ function onDataChannel(entry, channel) {
       entry.channel = channel;
       log.info(`control channel to client ${name} open`);
       sendJson(channel, stateMessage());
+      sendJson(channel, modeMessage(null));
       if (session.loop !== null) sendJson(channel, session.loop.lockMessage());
       updatePeers();
     });
@@ -333,6 +346,51 @@ function setPiloting(on, from) {
     sendJson(vehicleEntry()?.channel, { type: 'stop' });
   }
   broadcastState();
+}
+
+// ---------------------------------------------------------------- manual override
+
+function modeMessage(reason) {
+  const mode = status.operator === null ? 'auto' : 'manual';
+  return { type: 'mode', mode, operator: status.operator, ...(reason ? { reason } : {}) };
+}
+
+/** Give the wheel to `name` (null: back to the autopilot); tell the vehicle and every client. */
+function setOperator(name, reason) {
+  status.operator = name;
+  session.driveSeq = 0; // the vehicle numbers each operator's commands afresh
+  const message = modeMessage(reason);
+  log.info(`${name === null ? 'autopilot steers' : `${name} has the wheel`} (${reason})`);
+  show('mode', name === null ? 'autopilot' : `manual: ${name}`);
+  sendJson(vehicleEntry()?.channel, message);
+  broadcast(message);
+}
+
+function takeOver(from) {
+  if (status.operator === from) return;
+  if (status.operator !== null) {
+    throw new BadMessage(`${status.operator} is driving; take over once they hand back or leave`);
+  }
+  setOperator(from, `taken over by ${from}`);
+}
+
+function handBack(from) {
+  if (status.operator !== from) {
+    throw new BadMessage(status.operator === null ? 'nobody holds the wheel' : `${status.operator} holds the wheel, not ${from}`);
+  }
+  setOperator(null, `handed back by ${from}`);
+}
+
+/** The operator's drive command, renumbered for the vehicle (latest wins on the lossy channel). */
+function forwardDrive(msg, from) {
+  if (status.operator !== from) {
+    throw new BadMessage(status.operator === null ? 'take over before driving' : `${status.operator} is driving, not ${from}`);
+  }
+  const vehicle = vehicleEntry();
+  session.driveSeq += 1;
+  const drive = { type: 'drive', seq: session.driveSeq, linear: msg.linear, angular: msg.angular };
+  if (!sendJson(vehicle?.stateChannel ?? vehicle?.channel, drive)) throw new BadMessage('no vehicle connected');
+  status.drivesForwarded += 1;
 }
 
 // ---------------------------------------------------------------- target lock

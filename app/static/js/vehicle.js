@@ -3,6 +3,7 @@
 // the relay on the same channel; `stop` on the reliable `autopilot` channel.
 import { ControlLaw, Controller } from './control.js';
 import { GoalGate } from './freshness.js';
+import { ManualDrive } from './manual.js';
 import { RelayLink, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
@@ -20,6 +21,8 @@ const law = new ControlLaw(config.control);
 const profile = law.profiles[config.profile];
 const controller = new Controller(law, profile);
 const goalGate = new GoalGate(PROTOCOL.goalFreshness);
+// The operator's wheel (manual override): while manual, goals are ignored (counted).
+const manual = new ManualDrive(profile, config.control.deadmanS);
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
@@ -33,6 +36,10 @@ const status = {
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
   goalsDropped: { old: 0, stale: 0 }, // refused by the latest-wins rule
+  mode: 'auto', // 'manual' while an operator holds the wheel
+  operator: null,
+  goalsIgnored: 0, // goals that came while manual
+  drivesApplied: 0,
 };
 window.autopilotStatus = status;
 
@@ -167,7 +174,33 @@ function publish(twist, why) {
 }
 
 function halt(reason) {
-  publish(controller.stop(), reason);
+  const stopped = controller.stop();
+  publish(setMode('auto', null, reason) ?? stopped, reason);
+}
+
+/** The relay's mode; a change stops the turtle first (the Twist returned, to publish). */
+function setMode(mode, operator, reason) {
+  const twist = manual.setMode(mode, operator);
+  if (twist === null) return null;
+  status.mode = manual.mode;
+  status.operator = manual.operator;
+  show('mode', manual.manual ? `manual: ${manual.operator}` : 'autopilot');
+  log.info(`mode ${mode}${operator ? ` by ${operator}` : ''} (${reason})`);
+  return twist;
+}
+
+function onMode(msg) {
+  const twist = setMode(msg.mode, msg.operator ?? null, msg.reason ?? 'relay');
+  if (twist === null) return; // no change
+  controller.stop(); // the autopilot's goal must not steer again when the wheel comes back
+  publish(twist, `mode ${msg.mode}`);
+}
+
+function onDrive(msg) {
+  const twist = manual.drive(msg.seq, msg.linear, msg.angular);
+  if (twist === null) return;
+  status.drivesApplied += 1;
+  publish(twist, twist.linear === 0 && twist.angular === 0 ? 'operator stopped' : 'operator');
 }
 
 /** Run one controller step; a goal timeout inside it shows up as `active` turning false. */
@@ -188,13 +221,18 @@ turtle.onPose = (pose) => {
 
 function tick() {
   drive(() => controller.tick());
-  const untilTimeout = controller.untilTimeout();
-  setTimeout(tick, untilTimeout === null ? TICK_MS : Math.min(TICK_MS, untilTimeout * 1000));
+  publish(manual.tick(), 'dead-man: no drive command');
+  const waits = [controller.untilTimeout(), manual.untilDeadman()].filter((s) => s !== null);
+  setTimeout(tick, Math.min(TICK_MS, ...waits.map((s) => s * 1000)));
 }
 tick();
 
 /** A goal, already validated against the protocol's Goal model by serveChannel. */
 function onGoal(msg) {
+  if (manual.manual) {
+    status.goalsIgnored += 1;
+    return;
+  }
   // Validated against the goal schema by serveChannel before it gets here.
   const goal = { x: msg.x, y: msg.y, w: msg.w, h: msg.h, seq: msg.seq, frame: msg.frame ?? null, op: msg.op };
   const verdict = goalGate.admit(msg.seq, msg.t, performance.now() / 1000);
@@ -215,11 +253,14 @@ function setupPeer(peer, stream) {
   // (maintain-framerate) kept fewer and 'detail' fewest (`autopilot bench --field`, video rows).
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
   const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
-  serveChannel(dc, { goal: onGoal, stop: () => halt('relay says stop') }, log, SCHEMAS.autopilot.vehicle);
-  // A new link: the relay's seq starts again.
+  const handlers = { goal: onGoal, stop: () => publish(controller.stop(), 'relay says stop'), mode: onMode, drive: onDrive };
+  serveChannel(dc, handlers, log, SCHEMAS.autopilot.vehicle);
+  // A new link: the relay's seq starts again, and a new relay knows of no operator.
   goalGate.reset();
+  publish(setMode('auto', null, 'a new relay link'), 'a new relay link');
+  manual.resetLink();
   const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);
-  serveChannel(state, { goal: onGoal }, log, SCHEMAS[CHANNELS.autopilotState].vehicle);
+  serveChannel(state, { goal: onGoal, drive: onDrive }, log, SCHEMAS[CHANNELS.autopilotState].vehicle);
   state.addEventListener('open', () => {
     session.stateChannel = state;
   });
