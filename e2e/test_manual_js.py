@@ -1,0 +1,57 @@
+"""The browser vehicle's manual override (manual.js) answers as the Python one does
+(vehicle_agent/manual.py): the same scripted sequences, the same Twists, modes and dead-man
+times. manual.js gets its numbers as the vehicle page does, from ``config.control``."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, Page
+
+from app.protocol.control import page_constants
+from app.server.serve import RunningServer
+from e2e.helpers import module_page
+from tests.vehicle_agent.manual_sequences import SEQUENCES, run
+from vehicle_agent.control import PROFILES
+
+pytestmark = [pytest.mark.browser]
+
+CONSTANTS = page_constants()
+
+RUN_JS = """([events, profile, deadmanS]) => {
+  const now = [0];
+  const drive = new manual.ManualDrive(profile, deadmanS, () => now[0]);
+  return events.map(([kind, t, args]) => {
+    now[0] = t;
+    let twist;
+    if (kind === 'mode') twist = drive.setMode(args[0], args[1]);
+    else if (kind === 'drive') twist = drive.drive(...args);
+    else twist = drive.tick();
+    const answer = twist === null ? null : [twist.linear, twist.angular];
+    return [answer, drive.manual, drive.operator, drive.untilDeadman()];
+  });
+}"""
+
+
+def rounded(value: Any) -> Any:
+    """Floats to 9 places, through lists: both sides compute the same doubles up to rounding."""
+    if isinstance(value, list):
+        return [rounded(item) for item in value]
+    return round(value, 9) if isinstance(value, float) else value
+
+
+@pytest.fixture
+def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
+    with module_page(server, browser, "manual") as opened:
+        yield opened
+
+
+@pytest.mark.parametrize("profile", sorted(PROFILES))
+def test_scripted_sequences_take_the_same_decisions(page: Page, profile: str) -> None:
+    constants = CONSTANTS["profiles"][profile]
+    for name, events in SEQUENCES.items():
+        expected: Any = run(events, PROFILES[profile])
+        got = page.evaluate(RUN_JS, [events, constants, CONSTANTS["deadmanS"]])
+        assert rounded(got) == rounded(expected), name

@@ -1,0 +1,108 @@
+"""The manual override at the vehicle: the mode, drive commands and the dead-man, on an injected
+clock (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and ``drive``."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.protocol.control import DEADMAN_S
+from tests.helpers.agent import Vehicle
+from vehicle_agent.control import PROFILES
+from vehicle_agent.manual import ManualDrive
+
+from .manual_sequences import SEQUENCES, run
+
+DEFAULT = PROFILES["default"]
+FULL = [DEFAULT.manual_linear, 0.0]
+
+
+def twists(name: str) -> list[list[float] | None]:
+    return [answer[0] for answer in run(SEQUENCES[name], DEFAULT)]
+
+
+def test_drive_commands_move_the_turtle_only_in_manual_mode() -> None:
+    assert twists("drive in auto is ignored") == [None, None]
+    turn = [0.0, DEFAULT.manual_angular]
+    # Taking over stops first; each command is its Twist; a zero command stops at once and the
+    # dead-man has nothing left to stop.
+    assert twists("take over, drive, release") == [[0.0, 0.0], turn, turn, None, [0.0, 0.0], None]
+
+
+def test_the_dead_man_stops_the_turtle_once_after_the_last_command() -> None:
+    answers = run(SEQUENCES["dead-man after the last command"], DEFAULT)
+    assert [a[0] for a in answers] == [
+        [0.0, 0.0],
+        [0.5 * DEFAULT.manual_linear, -0.5 * DEFAULT.manual_angular],
+        None,
+        [0.0, 0.0],
+        None,
+    ]
+    assert answers[1][3] == pytest.approx(DEADMAN_S)
+    assert answers[2][3] == pytest.approx(0.01)
+    assert answers[3][3] is None
+
+
+def test_old_commands_are_dropped_and_shares_clamped_to_the_profile_speeds() -> None:
+    assert twists("old and repeated seq dropped, out-of-range clamped") == [
+        [0.0, 0.0],
+        [DEFAULT.manual_linear, -DEFAULT.manual_angular],
+        None,
+        None,
+    ]
+
+
+def test_a_mode_change_stops_and_a_new_operator_starts_afresh() -> None:
+    answers = run(SEQUENCES["hand back stops, a new operator starts at seq 1"], DEFAULT)
+    assert [a[0] for a in answers] == [
+        [0.0, 0.0],
+        FULL,
+        [0.0, 0.0],  # handed back: stop
+        None,  # auto again: the old operator's command is ignored
+        None,  # the same mode again changes nothing
+        [0.0, 0.0],
+        [-DEFAULT.manual_linear, 0.0],  # seq 1 of the new operator is taken
+    ]
+    assert [(a[1], a[2]) for a in answers][-2:] == [(True, "bob"), (True, "bob")]
+    assert (answers[2][1], answers[2][2]) == (False, None)
+
+
+def test_a_new_link_is_back_in_auto() -> None:
+    drive = ManualDrive(DEFAULT, clock=lambda: 0.0)
+    drive.set_mode("manual", "ann")
+    drive.reset_link()
+    assert not drive.manual and drive.operator is None
+    assert drive.drive(1, 1.0, 0.0) is None
+
+
+GOAL = '{"type": "goal", "seq": %d, "op": "face", "x": 10, "y": 100, "w": 320, "h": 240, "t": 0}'
+
+
+def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
+    vehicle = Vehicle("default")
+    agent = vehicle.agent
+    assert agent.handle_channel_message(GOAL % 1, "relay") is None
+    assert vehicle.twists()[-1]["angular"] != 0  # the autopilot steers
+    take = '{"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over by ann"}'
+    assert agent.handle_channel_message(take, "relay") is None
+    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    before = len(vehicle.twists())
+    assert agent.handle_channel_message(GOAL % 2, "relay") is None
+    assert len(vehicle.twists()) == before and agent.goals_ignored == 1
+    drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
+    assert agent.handle_channel_message(drive, "relay") is None
+    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    # Hostile drive commands are refused with a reason and never move the turtle.
+    for bad in (
+        '{"type": "drive", "seq": 2, "linear": 2, "angular": 0}',
+        '{"type": "drive", "seq": 0, "linear": 0, "angular": 0}',
+        '{"type": "drive", "seq": 2, "linear": NaN, "angular": 0}',
+        '{"type": "mode", "mode": "turbo"}',
+    ):
+        reply = agent.handle_channel_message(bad, "relay")
+        assert reply is not None and reply.type == "error" and reply.reason, bad
+    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    back = '{"type": "mode", "mode": "auto"}'
+    assert agent.handle_channel_message(back, "relay") is None
+    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    assert agent.handle_channel_message(GOAL % 3, "relay") is None
+    assert vehicle.twists()[-1]["angular"] != 0  # goals steer again
