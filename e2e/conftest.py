@@ -84,17 +84,23 @@ OpenRole = Callable[..., Page]
 
 @pytest.fixture
 def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
-    """``open_role(role, browser, **query)`` opens a role page in its own browser context.
+    """``open_role(role, browser, **query)`` opens a role page in its own browser context;
+    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say).
 
     At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
     """
     opened: list[OpenedPage] = []
 
-    def open_page(role: str, browser: Browser, **query: str) -> Page:
+    def open_page(
+        role: str, browser: Browser, init_script: str | None = None, **query: str
+    ) -> Page:
         context = browser.new_context(viewport={"width": 1280, "height": 960})
         context.set_default_timeout(60_000)
+        if init_script is not None:
+            context.add_init_script(init_script)
         page = context.new_page()
-        entry = OpenedPage(role, page)
+        # Two pages of one role keep their own artifacts: name them by their peer name.
+        entry = OpenedPage(f"{role}-{query['name']}" if "name" in query else role, page)
 
         def keep(message: ConsoleMessage) -> None:
             entry.console.append(f"{message.type}: {message.text}")

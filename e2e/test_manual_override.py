@@ -1,0 +1,124 @@
+"""The operator's console end to end (browser vehicle, relay page, two client pages): a client
+takes the wheel and turns the turtle with ArrowLeft against the autopilot's pull, a release stops
+it; a second client sees who drives and is refused the wheel; after Hand Back it drives with a
+(stubbed) gamepad; the vehicle's dead-man stops the turtle when that client goes silent, and its
+leaving gives the wheel back with piloting stopped."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, Page, expect
+
+from app.server.serve import RunningServer
+from e2e.conftest import OpenRole
+from e2e.helpers import heading_error, status, turtle_state, wait_until
+
+pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
+
+# A gamepad in the W3C standard mapping that the test holds: navigator.getGamepads() returns it.
+GAMEPAD_STUB = """
+window.stubPad = {
+  id: 'stub', index: 0, connected: true, mapping: 'standard', timestamp: 0,
+  axes: [0, 0, 0, 0],
+  buttons: Array.from({ length: 17 }, () => ({ pressed: false, touched: false, value: 0 })),
+};
+navigator.getGamepads = () => [window.stubPad];
+"""
+# Left shoulder held (the enable button) and the left stick pushed left, or all let go.
+PAD_LEFT = "() => { stubPad.buttons[4].pressed = true; stubPad.axes[0] = -1; }"
+PAD_RELEASED = "() => { stubPad.buttons[4].pressed = false; stubPad.axes[0] = 0; }"
+
+
+def theta(server: RunningServer) -> float:
+    return float(turtle_state(server)["theta"])
+
+
+def ccw_from(start: float, now: float) -> float:
+    """How far the turtle turned counter-clockwise from ``start``, in (−π, π]."""
+    return math.remainder(now - start, 2 * math.pi)
+
+
+def stopped(vehicle: Page) -> bool:
+    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
+    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
+
+
+def turns_left_then_stops(server: RunningServer, vehicle: Page, press: Any, release: Any) -> None:
+    start = theta(server)
+    press()
+    wait_until(lambda: ccw_from(start, theta(server)) > math.radians(60), 20, "a left turn")
+    release()
+    wait_until(lambda: stopped(vehicle), 10, "a zero Twist once let go")
+    held = theta(server)
+    time.sleep(1.0)
+    assert theta(server) == pytest.approx(held, abs=1e-9), "the turtle moved after the release"
+
+
+def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
+    server: RunningServer, open_role: OpenRole, browser: Browser, vehicle_browser: Browser
+) -> None:
+    query = {"room": "wheel", "auto": "1"}
+    vehicle = open_role("vehicle", vehicle_browser, name="vehicle", **query)
+    open_role("relay", browser, name="relay", **query)
+    ann = open_role("client", browser, name="ann", **query)
+    bob = open_role("client", browser, name="bob", init_script=GAMEPAD_STUB, **query)
+
+    start = ann.get_by_role("button", name="Start Piloting")
+    expect(start).to_be_enabled(timeout=120_000)
+    start.click()
+    wait_until(lambda: heading_error(theta(server), math.pi) < 0.3, 60, "the autopilot's turn")
+
+    ann.get_by_role("button", name="Take Over").click()
+    expect(ann.get_by_test_id("mode")).to_contain_text("you drive")
+    expect(vehicle.get_by_test_id("mode")).to_have_text("manual: ann")
+    # The face pulls the turtle to θ ≈ π; ArrowLeft turns it on, counter-clockwise, past that.
+    keyboard = ann.keyboard
+    turns_left_then_stops(
+        server, vehicle, lambda: keyboard.down("ArrowLeft"), lambda: keyboard.up("ArrowLeft")
+    )
+    # The relay still pilots: its goals reach the vehicle and are ignored, counted.
+    ignored = status(vehicle)["goalsIgnored"]
+    wait_until(lambda: status(vehicle)["goalsIgnored"] > ignored, 10, "goals ignored while manual")
+
+    # Bob sees who drives and cannot take over: the button is off, and the relay refuses.
+    expect(bob.get_by_test_id("mode")).to_have_text("ann is driving")
+    take_bob = bob.get_by_role("button", name="Take Over")
+    expect(take_bob).to_be_disabled()
+    take_bob.evaluate("(button) => { button.disabled = false; }")
+    take_bob.click()
+    expect(bob.get_by_test_id("log")).to_contain_text("ann is driving; take over once")
+    expect(vehicle.get_by_test_id("mode")).to_have_text("manual: ann")
+
+    ann.get_by_role("button", name="Hand Back").click()
+    expect(ann.get_by_test_id("mode")).to_have_text("autopilot steers")
+    wait_until(lambda: heading_error(theta(server), math.pi) < 0.3, 30, "the autopilot again")
+
+    take_bob.click()
+    expect(bob.get_by_test_id("mode")).to_contain_text("you drive")
+    expect(ann.get_by_test_id("mode")).to_have_text("bob is driving")
+    turns_left_then_stops(
+        server, vehicle, lambda: bob.evaluate(PAD_LEFT), lambda: bob.evaluate(PAD_RELEASED)
+    )
+
+    # Bob holds the stick, then his page goes silent (paused: no more commands, no release):
+    # the vehicle's dead-man stops the turtle, with bob still holding the wheel.
+    bob.evaluate(PAD_LEFT)
+    wait_until(lambda: not stopped(vehicle), 10, "bob's gamepad turning the turtle")
+    cdp = bob.context.new_cdp_session(bob)
+    cdp.send("Debugger.enable")
+    cdp.send("Debugger.pause")  # the page's script stops at its next step: the repeat timer's
+    wait_until(lambda: stopped(vehicle), 5, "the dead-man's zero Twist")
+    assert status(vehicle)["mode"] == "manual"
+    held = theta(server)
+    time.sleep(1.0)
+    assert theta(server) == pytest.approx(held, abs=1e-9)
+
+    # Bob's link drops for good: the wheel goes back, with piloting stopped.
+    bob.close()
+    expect(ann.get_by_test_id("mode")).to_have_text("autopilot steers", timeout=30_000)
+    expect(vehicle.get_by_test_id("mode")).to_have_text("autopilot")
+    expect(start).to_be_enabled()
