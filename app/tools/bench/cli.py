@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     missing = [key for key in FIGURE_KEYS if obj[key] is None or obj["thesis"][key] is None]
     missing += [f"follow {key}" for key in POSITION_KEYS if obj["follow"][key] is None]
-    missing += list(obj["unmeasured"]["lock"])
+    missing += list(obj["unmeasured"]["lock"]) + list(obj["unmeasured"]["override"])
     if missing:
         log.error("not measured: %s (reasons in %s)", ", ".join(missing), args.out / "report.md")
         return 1
@@ -175,7 +175,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     from playwright.async_api import async_playwright
 
     from app.server.serve import start_in_thread
-    from app.tools.bench import lock
+    from app.tools.bench import lock, override
     from app.tools.browser import launch_options
 
     plan = dict(QUICK if args.quick else FULL)
@@ -200,6 +200,9 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                     lock_run = await lock.run(
                         browser, server.url, plan["lock_s"], args.fps, Path(tmp)
                     )
+                with tempfile.TemporaryDirectory(prefix="autopilot-bench-override-") as tmp:
+                    override_run = await override.run(browser, server.url, args.fps, Path(tmp))
+                    override_found = override.figures(*override_run)
                 # After the stack is down, so that neither side shares its core with the video.
                 await _compare_detection(browser, server.url, runs, int(plan["frames"]))
                 browser_version = browser.version
@@ -227,6 +230,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     }
     obj = results(runs["default"], runs["thesis"], run_info, runs["follow"])
     lock.merge(obj, *lock_run)
+    override.merge(obj, override_found)
     report.write(args.out, obj, runs["default"], runs["thesis"])
     return obj
 

@@ -50,6 +50,9 @@ LABELS = {
     "position_error_m_p50": "follow position error p50 (m)",
     "position_error_m_p95": "follow position error p95 (m)",
     "lock_held_pct": "goals on the locked (smaller) face (%)",
+    "override_ms_p50": "key event -> its Twist p50 (ms)",
+    "override_ms_p95": "key event -> its Twist p95 (ms)",
+    "deadman_stop_s": "last drive command -> zero Twist (s)",
 }
 
 
@@ -369,6 +372,30 @@ def _lock_section(results: dict[str, Any]) -> list[str]:
     ]
 
 
+def _override_section(results: dict[str, Any]) -> list[str]:
+    """The operator's console: key → Twist, and the dead-man, when it ran."""
+    counts = results["details"].get("override")
+    if counts is None:
+        return []
+    lines = [
+        "",
+        "## Manual override",
+        "",
+        f"The client page takes the wheel and ArrowLeft is pressed {counts.get('presses', 0)}"
+        " times (the bench's key event → the agent's first manual Twist, one monotonic clock);"
+        " then, with the key held, the client page's script is paused: the vehicle's dead-man"
+        f" ({_fmt(counts.get('deadman_s'))} s) must stop the turtle by itself.",
+        "",
+    ]
+    for key in ("override_ms_p50", "deadman_stop_s"):
+        target, value = results["targets"][key], results[key]
+        met = value is not None and value <= target["limit"]
+        verdict = "not measured" if value is None else "met" if met else "missed"
+        lines.append(f"- {LABELS[key]}: {_fmt(value)}; **{target['text']}**: {verdict}.")
+    lines.append(f"- {LABELS['override_ms_p95']}: {_fmt(results['override_ms_p95'])}.")
+    return lines
+
+
 def markdown(results: dict[str, Any]) -> str:
     """The report as Markdown: figures against the thesis and the targets, then the plots."""
     run = results["run"]
@@ -448,6 +475,7 @@ def markdown(results: dict[str, Any]) -> str:
 
     lines += _follow_section(results)
     lines += _lock_section(results)
+    lines += _override_section(results)
 
     missing = {p: m for p, m in results["unmeasured"].items() if m}
     if missing:

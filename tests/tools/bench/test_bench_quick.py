@@ -87,12 +87,18 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
     # The target lock in the two-face scene: a share of goals, over the whole window of them.
     assert 0 <= printed["lock_held_pct"] <= 100
     assert printed["details"]["lock"]["seconds"] >= 8 and printed["details"]["lock"]["goals"] > 0
+    # The operator's console: every key press answered by a Twist, within the press it came in
+    # (0.3 s); the dead-man fires no sooner than its 0.3 s, and well before the 1 s of silence.
+    override = printed["details"]["override"]
+    assert override["presses"] == override["answered"] > 0
+    assert 0 < printed["override_ms_p50"] <= printed["override_ms_p95"] < 600
+    assert 0.3 <= printed["deadman_stop_s"] < 1.0
 
     run = printed["run"]
     assert run["default_s"] == 8 and run["fps"] == FPS and "sweep shortened to 8 s" in run["note"]
     assert json.loads((out / "results.json").read_text()) == printed
     report = (out / "report.md").read_text()
-    assert "683 ms" in report
+    assert "683 ms" in report and "## Manual override" in report
     for name in PLOTS:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
         assert f"({name})" in report
