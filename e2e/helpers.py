@@ -111,7 +111,8 @@ def module_page(server: RunningServer, browser: Browser, module: str) -> Iterato
     to run a page module's pure functions against their Python twins."""
     opened = browser.new_page()
     opened.goto(server.url + "/")
-    opened.evaluate(f"async () => {{ window.{module} = await import('/static/js/{module}.js'); }}")
+    url = f"/static/js/{module}.js"
+    opened.evaluate(f"async () => {{ window[{module!r}] = await import({url!r}); }}")
     try:
         yield opened
     finally:

@@ -1,8 +1,9 @@
-"""The operator's console end to end (browser vehicle, relay page, two client pages): a client
-takes the wheel and turns the turtle with ArrowLeft against the autopilot's pull, a release stops
-it; a second client sees who drives and is refused the wheel; after Hand Back it drives with a
-(stubbed) gamepad; the vehicle's dead-man stops the turtle when that client goes silent, and its
-leaving gives the wheel back with piloting stopped."""
+"""The operator's console end to end (browser vehicle, relay page, two client pages): the link
+health panel measures both links; a client takes the wheel and turns the turtle with ArrowLeft
+against the autopilot's pull, a release stops it; a second client sees who drives and is refused
+the wheel; after Hand Back it drives with a (stubbed) gamepad; the vehicle's dead-man stops the
+turtle when that client goes silent, and its leaving gives the wheel back with piloting stopped.
+"""
 
 from __future__ import annotations
 
@@ -47,6 +48,18 @@ def stopped(vehicle: Page) -> bool:
     return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
 
 
+def healthy(client: Page) -> bool:
+    """Both links measured with plausible figures, and a recent goal at the vehicle."""
+    health = client.evaluate("() => structuredClone(window.autopilotHealth)")
+    for link in (health["vehicleToRelay"], health["relayToClient"]):
+        if link is None or link["fps"] is None or link["fps"] <= 0 or link["rttMs"] is None:
+            return False
+        assert link["candidate"] == "host" and (link["width"], link["height"]) == (640, 480)
+        assert 0 <= link["lossPct"] <= 100 and 0 <= link["rttMs"] < 10_000
+    age = health["goalAgeMs"]
+    return age is not None and 0 <= age < 2000
+
+
 def turns_left_then_stops(server: RunningServer, vehicle: Page, press: Any, release: Any) -> None:
     start = theta(server)
     press()
@@ -71,6 +84,14 @@ def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     expect(start).to_be_enabled(timeout=120_000)
     start.click()
     wait_until(lambda: heading_error(theta(server), math.pi) < 0.3, 60, "the autopilot's turn")
+
+    # The link health panel: both links measured, on loopback host candidates with no loss
+    # warning, and the vehicle's last goal a moment ago while the autopilot steers.
+    wait_until(lambda: healthy(ann), 30, "both links measured")
+    health = ann.evaluate("() => structuredClone(window.autopilotHealth)")
+    assert health["warnings"] == [], health
+    video_cell = ann.get_by_test_id("health-vehicle").locator("td").nth(2)
+    assert video_cell.inner_text().endswith("640×480")
 
     ann.get_by_role("button", name="Take Over").click()
     expect(ann.get_by_test_id("mode")).to_contain_text("you drive")

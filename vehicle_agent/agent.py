@@ -99,6 +99,8 @@ class Agent:
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
         self._last_telemetry = 0.0
+        # When the last goal was applied on this link (its age rides the pose: link health).
+        self._last_goal_at: float | None = None
         self.logged_in = asyncio.Event()
         self._handlers: dict[str, Callable[[Any], Awaitable[None]]] = {
             "login": self._ignore,
@@ -303,6 +305,7 @@ class Agent:
         link.on_up = self._on_link_up
         self._link = link
         self.goal_gate.reset()
+        self._last_goal_at = None
         self.manual.reset_link()
         self.events.emit("link", state="offer", relay=link.relay)
         await link.start()
@@ -387,6 +390,7 @@ class Agent:
         if verdict != "fresh":
             self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
             return
+        self._last_goal_at = time.monotonic()
         self.events.emit(
             "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
         )
@@ -455,8 +459,12 @@ class Agent:
             sent = False
             if link is not None and all(map(math.isfinite, (pose.x, pose.y, pose.theta))):
                 # Pose is state: the lossy channel, where a late one is skipped, not waited for.
+                last_goal = self._last_goal_at
+                age = None if last_goal is None else (now - last_goal) * 1000
                 sent = link.send_state(
-                    channels.Pose(x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000)
+                    channels.Pose(
+                        x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
+                    )
                 )
             self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
 

@@ -60,6 +60,12 @@ def browser_protocol() -> dict[str, Any]:
             "maxScale": c.LOCK_MAX_SCALE,
             "reach": c.LOCK_REACH,
         },
+        # The link health panel's period and warning thresholds (link-health.js).
+        "health": {
+            "periodS": c.HEALTH_PERIOD_S,
+            "maxLossPct": c.HEALTH_MAX_LOSS_PCT,
+            "maxRttMs": c.HEALTH_MAX_RTT_MS,
+        },
         # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
         "schemas": channel_schemas(),
     }

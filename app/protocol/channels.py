@@ -75,6 +75,8 @@ class Pose(_Message):
     y: Finite
     theta: Finite
     t: Finite | None = None
+    # Milliseconds since the vehicle last applied a goal (None: none on this link yet).
+    goalAgeMs: NonNegative | None = None  # noqa: N815 -- the wire name
 
 
 class Stop(_Message):
@@ -224,6 +226,28 @@ class ModeChange(_Message):
     reason: str | None = None
 
 
+CandidateType = Literal["host", "srflx", "prflx", "relay"]
+
+
+class LinkFigures(_Message):
+    """One link's received video as its receiver's getStats() showed it over the last period;
+    None where the browser did not say."""
+
+    rttMs: NonNegative | None  # noqa: N815 -- the wire names
+    lossPct: Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)] | None  # noqa: N815
+    fps: NonNegative | None
+    width: Count | None
+    height: Count | None
+    candidate: CandidateType | None  # the selected pair's: relay if either end is, and so on
+
+
+class Health(_Message):
+    """relay→client, once a HEALTH_PERIOD_S: the vehicle→relay link as the relay measures it."""
+
+    type: Literal["health"] = "health"
+    link: LinkFigures
+
+
 class Error(_Message):
     """Any peer→any peer: why a message was refused; ``ref`` is its type, if known."""
 
@@ -249,6 +273,7 @@ ChannelMessage = (
     | HandBack
     | Drive
     | ModeChange
+    | Health
     | Error
 )
 
@@ -271,7 +296,7 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
     AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Drive, Error), "relay": (Pose, Error)},
     CONTROL_CHANNEL: {
         "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, TakeOver, HandBack, Drive, Error),
-        "client": (Ops, State, Detections, Pose, LockStatus, ModeChange, Error),
+        "client": (Ops, State, Detections, Pose, LockStatus, ModeChange, Health, Error),
     },
 }
 

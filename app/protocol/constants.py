@@ -75,3 +75,10 @@ LOCK_SEARCH_AFTER_S: Final = 1.0
 LOCK_RELEASE_AFTER_S: Final = 3.0
 LOCK_MAX_SCALE: Final = 1.4
 LOCK_REACH: Final = 1.0
+
+# Link health (the client's panel, DESIGN §10): each link's figures are read once a HEALTH_PERIOD_S
+# from the receiving side's getStats(), and a link is flagged when it loses more than
+# HEALTH_MAX_LOSS_PCT of its video packets or its round trip exceeds HEALTH_MAX_RTT_MS.
+HEALTH_PERIOD_S: Final = 1.0
+HEALTH_MAX_LOSS_PCT: Final = 5.0
+HEALTH_MAX_RTT_MS: Final = 300.0

@@ -24,7 +24,7 @@ CHANNEL_SENDS = [
     # askRelay(type) sends start/stop on `control` when signaling is down.
     ("client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
     ("client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive"}),
-    ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "mode"}),
+    ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "mode", "health"}),
     ("relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop", "mode", "drive"}),
     ("snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
     ("snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),

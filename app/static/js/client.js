@@ -1,9 +1,10 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
 import { ControlLaw } from './control.js';
+import { LinkMeter, warnings } from './link-health.js';
 import { LockPanel } from './lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from './peer.js';
-import { CHANNELS, SCHEMAS } from './protocol.js';
+import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
 import { button, byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
@@ -51,8 +52,21 @@ const status = {
 };
 window.autopilotStatus = status;
 
+/**
+ * Link health, read-only for tests: each link's latest figures ({rttMs, lossPct, fps, width,
+ * height, candidate}, null until measured), the vehicle's goal age and the warnings on show.
+ */
+const health = {
+  vehicleToRelay: null, // measured by the relay, sent in `health`
+  relayToClient: null, // measured here
+  goalAgeMs: null, // from the vehicle's pose: since it last applied a goal
+  warnings: [],
+};
+window.autopilotHealth = health;
+
 /** Everything else this page holds, in one place. */
 const session = {
+  meter: null, // the LinkMeter of the connection to the relay
   control: null, // the open `control` data channel
   recentMs: [],
   driveSeq: 0,
@@ -121,12 +135,52 @@ function onDetections(msg) {
 function onPose(msg) {
   const pose = { x: msg.x, y: msg.y, theta: msg.theta };
   status.pose = pose;
+  if (msg.goalAgeMs !== undefined) health.goalAgeMs = msg.goalAgeMs;
   status.poses += 1;
   turtleView.addPose(pose);
   status.routeM = turtleView.routeLength;
   show('pose', `x ${fmt(pose.x, 2)} m   y ${fmt(pose.y, 2)} m   θ ${fmt(pose.theta, 3)} rad`);
   show('route', `route ${fmt(status.routeM, 1)} m driven`);
 }
+
+function onHealth(msg) {
+  health.vehicleToRelay = msg.link;
+  showHealth();
+}
+
+function showHealth() {
+  const limits = PROTOCOL.health;
+  health.warnings = [
+    ...warnings('vehicle → relay', health.vehicleToRelay, limits),
+    ...warnings('relay → client', health.relayToClient, limits),
+  ];
+  for (const [id, figures] of [['health-vehicle', health.vehicleToRelay], ['health-client', health.relayToClient]]) {
+    const cells = byTestId(id).querySelectorAll('td');
+    const video = figures?.width ? `${fmt(figures.fps, 1)} fps, ${figures.width}×${figures.height}` : '–';
+    const values = [
+      figures?.rttMs == null ? '–' : `${fmt(figures.rttMs, 0)} ms`,
+      figures?.lossPct == null ? '–' : `${fmt(figures.lossPct, 1)} %`,
+      video,
+      figures?.candidate ?? '–',
+    ];
+    values.forEach((text, i) => {
+      cells[i].textContent = text;
+    });
+  }
+  show('goal-age', health.goalAgeMs === null ? 'no goal applied at the vehicle yet' : `last goal applied at the vehicle ${fmt(health.goalAgeMs, 0)} ms ago`);
+  show('health-warnings', health.warnings.join(' · '));
+}
+
+async function measureHealth() {
+  if (session.meter === null || session.control === null) return;
+  try {
+    health.relayToClient = await session.meter.read();
+  } catch (err) {
+    log.warn(`could not read this link's statistics: ${err.message}`);
+  }
+  showHealth();
+}
+setInterval(measureHealth, PROTOCOL.health.periodS * 1000);
 
 function onLockState(msg) {
   status.lock = { state: msg.state, box: msg.box ?? null, reason: msg.reason ?? null };
@@ -171,6 +225,7 @@ function setupPeer(peer) {
   // Receive-only video from the start: the relay can then send the vehicle's track whenever
   // it has one, with no renegotiation.
   peer.pc.addTransceiver('video', { direction: 'recvonly' });
+  session.meter = new LinkMeter(peer.pc);
   peer.addEventListener('track', (event) => {
     preferLowLatency(event.detail.receiver);
     status.videoTracks += 1;
@@ -178,7 +233,7 @@ function setupPeer(peer) {
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
-  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState, mode: onMode };
+  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState, mode: onMode, health: onHealth };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
     session.control = dc;
@@ -281,6 +336,9 @@ const link = new RelayLink(room, { log, setup: setupPeer });
 link.addEventListener('lost', () => {
   status.relay = null;
   forgetMode();
+  session.meter = null;
+  Object.assign(health, { vehicleToRelay: null, relayToClient: null, goalAgeMs: null });
+  showHealth();
   clearDetections();
   showState();
   updateControls();

@@ -3,6 +3,7 @@
 // show to the snapshot loop (snapshot-loop.js), whose goals go to the vehicle on the
 // `autopilot` channel and whose detections go to the clients on `control`. This module is the
 // page: connections, control messages, scheduling the frames and the DOM.
+import { LinkMeter } from './link-health.js';
 import { BadMessage, Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
@@ -131,7 +132,8 @@ function createPeer(name, role) {
     log,
     beforeAnswer: role === 'client' ? (pc) => sendVideoOn(pc) : undefined,
   });
-  const entry = { peer, role, channel: null, stateChannel: null };
+  // The vehicle's link is measured here, where its video is received (link health).
+  const entry = { peer, role, channel: null, stateChannel: null, meter: role === 'vehicle' ? new LinkMeter(peer.pc) : null };
   peer.addEventListener('track', (event) => {
     if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail);
   });
@@ -415,8 +417,21 @@ function onLockChanged(message) {
 
 /** Forward the vehicle's pose (validated by serveChannel) to every client. */
 function onPose(msg) {
-  broadcast({ type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() });
+  const pose = { type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() };
+  broadcast(msg.goalAgeMs === undefined ? pose : { ...pose, goalAgeMs: msg.goalAgeMs });
 }
+
+/** Once a period: the vehicle → relay link's figures, to every client (link health). */
+async function reportHealth() {
+  const vehicle = vehicleEntry();
+  if (vehicle?.meter == null || clientEntries().length === 0) return;
+  try {
+    broadcast({ type: 'health', link: await vehicle.meter.read() });
+  } catch (err) {
+    log.warn(`could not read the vehicle link's statistics: ${err.message}`);
+  }
+}
+setInterval(reportHealth, PROTOCOL.health.periodS * 1000);
 
 // ---------------------------------------------------------------- snapshot loop
 

@@ -155,6 +155,7 @@ const session = {
   stateChannel: null, // the open `autopilot-state` data channel (unordered, no retransmits)
   lastPoseSent: 0,
   rosWarned: false, // a lost Twist has been reported for this outage
+  lastGoalAt: null, // performance.now() of the last goal applied on this link (link health)
 };
 
 function publish(twist, why) {
@@ -216,7 +217,8 @@ turtle.onPose = (pose) => {
   drive(() => controller.pose(pose));
   const now = performance.now();
   if (now - session.lastPoseSent < POSE_FORWARD_MS) return;
-  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now() })) session.lastPoseSent = now;
+  const goalAgeMs = session.lastGoalAt === null ? null : now - session.lastGoalAt;
+  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs })) session.lastPoseSent = now;
 };
 
 function tick() {
@@ -243,6 +245,7 @@ function onGoal(msg) {
   if (!controller.active) log.info(`piloting: first goal (${goal.op})`);
   status.goalsReceived += 1;
   status.lastGoal = { ...goal, t: msg.t };
+  session.lastGoalAt = performance.now();
   show('goals-received', String(status.goalsReceived));
   drive(() => controller.goal(goal));
 }
@@ -257,6 +260,7 @@ function setupPeer(peer, stream) {
   serveChannel(dc, handlers, log, SCHEMAS.autopilot.vehicle);
   // A new link: the relay's seq starts again, and a new relay knows of no operator.
   goalGate.reset();
+  session.lastGoalAt = null;
   publish(setMode('auto', null, 'a new relay link'), 'a new relay link');
   manual.resetLink();
   const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);

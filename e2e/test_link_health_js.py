@@ -1,0 +1,103 @@
+"""link-health.js's figures from getStats() reports: loss over the period, frames per second,
+round trip, the pair's most relayed candidate type, and the warnings at the thresholds of
+app/protocol/constants.py (which reach the page as ``PROTOCOL.health``)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, Page
+
+from app.protocol import constants as c
+from app.protocol.browser import browser_protocol
+from app.server.serve import RunningServer
+from e2e.helpers import module_page
+
+pytestmark = [pytest.mark.browser]
+
+FIGURES_JS = """([previous, now]) => {
+  const report = (entries) => (entries === null ? null : new Map(entries.map((s) => [s.id, s])));
+  return window['link-health'].linkFigures(report(previous), report(now));
+}"""
+WARNINGS_JS = """([figures, limits]) => window['link-health'].warnings('link', figures, limits)"""
+
+
+def report(t_ms: float, received: int, lost: int, frames: int, local: str, remote: str) -> list:
+    return [
+        {"id": "T", "type": "transport", "selectedCandidatePairId": "P"},
+        {
+            "id": "P",
+            "type": "candidate-pair",
+            "localCandidateId": "L",
+            "remoteCandidateId": "R",
+            "currentRoundTripTime": 0.042,
+            "nominated": True,
+            "state": "succeeded",
+        },
+        {"id": "L", "type": "local-candidate", "candidateType": local},
+        {"id": "R", "type": "remote-candidate", "candidateType": remote},
+        {
+            "id": "V",
+            "type": "inbound-rtp",
+            "kind": "video",
+            "timestamp": t_ms,
+            "packetsReceived": received,
+            "packetsLost": lost,
+            "framesDecoded": frames,
+            "frameWidth": 640,
+            "frameHeight": 480,
+        },
+    ]
+
+
+@pytest.fixture
+def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
+    with module_page(server, browser, "link-health") as opened:
+        yield opened
+
+
+def figures(page: Page, previous: list | None, now: list) -> dict[str, Any]:
+    result: dict[str, Any] = page.evaluate(FIGURES_JS, [previous, now])
+    return result
+
+
+def test_figures_over_one_period(page: Page) -> None:
+    first = report(1000, 900, 10, 100, "host", "host")
+    # No rates from one report, but what it says at once.
+    assert figures(page, None, first) == {
+        "rttMs": 42,
+        "lossPct": None,
+        "fps": None,
+        "width": 640,
+        "height": 480,
+        "candidate": "host",
+    }
+    # Over the next second: 90 packets came, 10 more were lost (10 %), 30 frames decoded.
+    got = figures(page, first, report(2000, 990, 20, 130, "host", "host"))
+    assert got["lossPct"] == pytest.approx(10.0) and got["fps"] == pytest.approx(30.0)
+
+
+@pytest.mark.parametrize(
+    ("local", "remote", "pair"),
+    [("host", "host", "host"), ("host", "srflx", "srflx"), ("relay", "host", "relay")],
+)
+def test_the_pair_is_as_relayed_as_its_most_relayed_end(
+    page: Page, local: str, remote: str, pair: str
+) -> None:
+    assert figures(page, None, report(0, 0, 0, 0, local, remote))["candidate"] == pair
+
+
+def test_warnings_at_the_protocol_s_thresholds(page: Page) -> None:
+    limits = browser_protocol()["health"]
+    assert limits == {
+        "periodS": c.HEALTH_PERIOD_S,
+        "maxLossPct": c.HEALTH_MAX_LOSS_PCT,
+        "maxRttMs": c.HEALTH_MAX_RTT_MS,
+    }
+    calm = {"lossPct": c.HEALTH_MAX_LOSS_PCT, "rttMs": c.HEALTH_MAX_RTT_MS}
+    assert page.evaluate(WARNINGS_JS, [calm, limits]) == []
+    bad = {"lossPct": c.HEALTH_MAX_LOSS_PCT + 1, "rttMs": c.HEALTH_MAX_RTT_MS + 1}
+    found = page.evaluate(WARNINGS_JS, [bad, limits])
+    assert len(found) == 2 and "packet loss" in found[0] and "round trip" in found[1]
