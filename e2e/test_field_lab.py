@@ -95,3 +95,29 @@ def test_a_link_outage_stops_the_turtle_and_piloting_resumes_by_itself(
         stops[0]["t"] - last_before,
         first_after - back_at,
     )
+
+
+@pytest.mark.parametrize("field", ["loss_10"], indirect=True)
+def test_the_link_health_panel_shows_the_robot_link_s_loss(field: FieldStack) -> None:
+    # 10 % of the robot link's packets are dropped each way: the relay's reading of the
+    # vehicle's video shows it, and the client page warns (the threshold is 5 %).
+    field.start_piloting()
+    wait_until(lambda: bool(field.events("goal")), 90, "the first goal at the agent")
+
+    shown: list[str] = []
+    read = """() => ({
+      link: window.autopilotHealth.vehicleToRelay,
+      text: document.querySelector('[data-testid=health-warnings]').textContent,
+    })"""
+
+    def lossy() -> bool:
+        # The figure and the text on show in one reading: the next second's may differ.
+        panel = field.client.evaluate(read)
+        link = panel["link"]
+        if link is None or link["lossPct"] is None or link["lossPct"] <= 5:
+            return False
+        shown.append(panel["text"])
+        return True
+
+    wait_until(lossy, 30, "the vehicle link's loss over 5 % on the client's panel")
+    assert "vehicle → relay" in shown[-1] and "packet loss" in shown[-1], shown
