@@ -20,8 +20,15 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("app.tools.demo", "run the whole system on an embedded default"),
     "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
     "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
-    "token": ("app.tools.token_command", "mint a token for one role in one room"),
-    "lab": ("app.tools.lab.cli", "build the field lab: NATs, TURN and network conditions"),
+    "token": (
+        "app.tools.token_command",
+        "mint a token for one role in one room, signed with AUTOPILOT_SECRET (the server's)",
+    ),
+    "lab": (
+        "app.tools.lab.cli",
+        "build the field lab: NATs, TURN and network conditions (needs root: it makes network"
+        " namespaces)",
+    ),
 }
 
 

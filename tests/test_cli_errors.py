@@ -121,4 +121,4 @@ def test_numbers_out_of_range_are_refused_by_the_parser(
 
 def test_a_port_out_of_range_in_the_environment_is_one_line() -> None:
     result = autopilot("serve", env={"AUTOPILOT_PORT": "70000"})
-    assert_one_line_error(result, "cannot start", "port")
+    assert_one_line_error(result, "cannot start", "AUTOPILOT_PORT")

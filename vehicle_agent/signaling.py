@@ -16,7 +16,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from app.protocol.constants import Role
 from app.protocol.errors import describe
 from app.protocol.signaling import IceServer, IceTransportPolicy, Leave, Login, LoginReply
-from app.protocol.urls import ServerUrlError, ws_endpoint
+from app.protocol.urls import ServerUrlError, untrusted_hint, ws_endpoint
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,9 @@ class SignalingClient:
                 self.url, open_timeout=LOGIN_TIMEOUT_S, max_size=2**20, ssl=self.tls
             )
         except (OSError, InvalidURI, InvalidHandshake, TimeoutError) as exc:
-            raise SignalingError(f"cannot reach signaling server at {self.url}: {exc}") from exc
+            raise SignalingError(
+                f"cannot reach signaling server at {self.url}: {exc}{untrusted_hint(exc)}"
+            ) from exc
         try:
             login = Login(
                 type="login", name=self.name, role=self.role, room=self.room, token=self.token

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ssl
 from urllib.parse import urlencode, urlsplit, urlunsplit
 
 _WS_SCHEMES = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}
@@ -42,3 +43,17 @@ def page_url(server: str, role: str, room: str, **query: str | int) -> str:
 def reachable_host(host: str) -> str:
     """The address to put in a URL for a server bound to ``host`` (wildcards mean loopback)."""
     return "127.0.0.1" if host in ("0.0.0.0", "::", "") else host
+
+
+def untrusted_hint(exc: BaseException) -> str:
+    """What to do when ``exc`` (or its reason) is a certificate the client does not trust; ""
+    for any other error."""
+    reason = getattr(exc, "reason", None)
+    if isinstance(exc, ssl.SSLCertVerificationError) or isinstance(
+        reason, ssl.SSLCertVerificationError
+    ):
+        return (
+            "; the server's certificate is not trusted here: pass --ca-file with its CA"
+            " (autopilot serve --self-signed prints where its ca.pem is)"
+        )
+    return ""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
@@ -15,7 +15,15 @@ from app.resources import OPERATIONS_SPEC
 from app.server.origins import normalise
 from app.server.turn import TurnSettings
 
-__all__ = ["IceServer", "Settings"]
+__all__ = ["IceServer", "Settings", "describe_settings_error"]
+
+# What a person sets is an environment variable: say it in those words, not pydantic's.
+_TYPE_WORDS = {
+    "int_parsing": "must be an integer",
+    "int_from_float": "must be an integer",
+    "float_parsing": "must be a number",
+    "bool_parsing": "must be true or false",
+}
 
 
 class Settings(TurnSettings, BaseSettings):
@@ -77,3 +85,18 @@ class Settings(TurnSettings, BaseSettings):
             check_secret(self.secret)
         self.allowed_origins = [normalise(origin) for origin in self.allowed_origins]
         return self
+
+
+def describe_settings_error(exc: ValidationError) -> str:
+    """One line naming each bad setting by its environment variable, e.g. ``AUTOPILOT_PORT must
+    be an integer``."""
+    problems = []
+    for error in exc.errors(include_url=False, include_input=False):
+        loc, words = error["loc"], _TYPE_WORDS.get(error["type"])
+        message = error["msg"].removeprefix("Value error, ")
+        if not loc:  # a rule across settings: its message names them
+            problems.append(message)
+            continue
+        name = f"AUTOPILOT_{str(loc[0]).upper()}"
+        problems.append(f"{name} {words}" if words else f"{name}: {message}")
+    return "; ".join(problems)

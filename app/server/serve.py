@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import errno
 import logging
 import socket
 import threading
@@ -15,15 +16,17 @@ from pydantic import ValidationError
 
 from app.arguments import port
 from app.protocol.constants import ROLES
-from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
 from app.server.app import create_app
-from app.server.config import Settings
+from app.server.config import Settings, describe_settings_error
 from app.vision.spec import SpecError
 
 log = logging.getLogger(__name__)
+
+# Bound to these, the server listens on every address of the machine.
+ANY_ADDRESS = ("0.0.0.0", "::")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,13 +47,35 @@ def page_urls(base: str, room: str = "default") -> dict[str, str]:
     return {role: page_url(base, role, room) for role in ROLES}
 
 
+def reachable_hosts(host: str) -> list[str]:
+    """The hosts to put in URLs for a server bound to ``host``: every address of this machine
+    when bound to all of them (the loopback ones last), else the bound address."""
+    if host not in ANY_ADDRESS:
+        return [reachable_host(host)]
+    _, addresses = tls.machine_names()
+    ordered = sorted(addresses, key=lambda a: (a.is_loopback, a.version))
+    return [str(a) if a.version == 4 else f"[{a}]" for a in ordered]
+
+
+def port_in_use(host: str, port: int) -> bool:
+    """Whether another process listens on ``port`` at ``host`` already (checked by binding)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            return exc.errno == errno.EADDRINUSE
+    return False
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted; a bad setting or operations spec is one line and exit 1."""
     try:
         settings = Settings(**({"ros": args.ros} if getattr(args, "ros", None) else {}))
         app = create_app(settings)
     except ValidationError as exc:
-        log.error("cannot start: %s", describe(exc))
+        log.error("cannot start: %s", describe_settings_error(exc))
         return 1
     except SpecError as exc:
         log.error("cannot start: %s", exc)
@@ -62,10 +87,32 @@ def run(args: argparse.Namespace) -> int:
         return 1
     host = args.host or settings.host
     port = args.port or settings.port
+    # Before any URL is printed: a port already taken fails here in one line, not in uvicorn.
+    if port_in_use(host, port):
+        log.error(
+            "cannot start: port %d on %s is already in use (another autopilot serve?);"
+            " stop that process or choose another with --port",
+            port,
+            host,
+        )
+        return 1
     scheme = "http" if files is None else "https"
-    base = f"{scheme}://{reachable_host(host)}:{port}"
-    for role, url in page_urls(base).items():
+    bases = [f"{scheme}://{h}:{port}" for h in reachable_hosts(host)]
+    for role, url in page_urls(bases[0]).items():
         log.info("%s page: %s", role, url)
+    if len(bases) > 1:
+        log.info("the same pages at: %s", ", ".join(bases[1:]))
+    if settings.secret is not None:
+        log.info(
+            "pages need a token (AUTOPILOT_SECRET is set): mint one with"
+            " AUTOPILOT_SECRET=... autopilot token --room default --role client --server %s",
+            bases[0],
+        )
+    elif host in ANY_ADDRESS and files is None:
+        log.warning(
+            "listening on every address over plain HTTP with no AUTOPILOT_SECRET:"
+            " anyone on the network can drive the robot (set AUTOPILOT_SECRET, add --self-signed)"
+        )
     uvicorn.run(
         app,
         **uvicorn_options(settings, files),

@@ -107,8 +107,8 @@ def self_signed(
         ca_cert, ca_key = _make_ca(now)
         _write_key(ca_key_file, ca_key)
         files.ca_file.write_bytes(ca_cert.public_bytes(serialization.Encoding.PEM))
+        # How to trust it is said once, by whoever serves with it (from_arguments).
         log.info("created a local certificate authority at %s", files.ca_file)
-        log.info("%s", trust_instructions(files.ca_file))
     if _needs_issue(files.certfile, ca_cert, names, addresses, now):
         cert, key = _issue(ca_cert, ca_key, names, addresses, now)
         _write_key(files.keyfile, key)
@@ -133,7 +133,9 @@ def trust_instructions(ca_file: Path) -> str:
         f"To trust this server, import its CA certificate {ca_file} "
         f"(SHA-256 {fingerprint}) on each machine that opens a page:\n"
         f"  Chromium/Chrome on Linux: certutil -d sql:$HOME/.pki/nssdb -A -t C,, "
-        f"-n webrtc-autopilot -i {ca_file}\n"
+        f"-n webrtc-autopilot -i {ca_file}  (certutil: Debian's libnss3-tools)\n"
+        f"  headless Chromium (chromium --headless, Playwright's launch args): "
+        f"--ignore-certificate-errors-spki-list={spki_sha256(ca_file)}\n"
         f"  Firefox: Settings > Privacy & Security > Certificates > View Certificates > "
         f"Authorities > Import\n"
         f"  Debian/Ubuntu system-wide: sudo cp {ca_file} "

@@ -28,8 +28,8 @@ from app.protocol import tokens
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
-from app.server.config import Settings
-from app.server.serve import RunningServer, start_in_thread
+from app.server.config import Settings, describe_settings_error
+from app.server.serve import ANY_ADDRESS, RunningServer, reachable_hosts, start_in_thread
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path
 from app.tools.relay_service import TOKEN_ENV
@@ -45,14 +45,19 @@ HEALTHY_RUN_S = 60.0
 # The demo's tokens last as long as a demo may plausibly run; without AUTOPILOT_SECRET they are
 # signed with a secret made for this run, so they end with it anyway.
 DEMO_TOKEN_TTL_S = 30 * 24 * 3600
-ANY_ADDRESS = ("0.0.0.0", "::")
 # The agent's --video values the demo offers.
 DEMO_VIDEOS = (SYNTHETIC, TWO_FACES)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot demo``."""
-    parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind (default 127.0.0.1); 0.0.0.0 or :: (every address, for pages on"
+        " other machines) turns on HTTPS with a local CA, as browsers give the camera only to"
+        " HTTPS pages",
+    )
     parser.add_argument("--port", type=port, default=8000, help="port to bind (default 8000)")
     parser.add_argument("--room", default="default", help="room (default: default)")
     add_vehicle_profile(parser)
@@ -201,7 +206,8 @@ def run(args: argparse.Namespace) -> int:
             settings, host=args.host, port=args.port, log_level="info", tls_files=files
         )
     except (BrowserNotFound, ValueError) as exc:
-        log.error("%s", exc if not isinstance(exc, ValidationError) else _first_error(exc))
+        reason = describe_settings_error(exc) if isinstance(exc, ValidationError) else exc
+        log.error("cannot start: %s" if isinstance(exc, ValidationError) else "%s", reason)
         return 1
     except OSError as exc:
         log.error("cannot listen on %s:%s: %s", args.host, args.port, exc.strerror or exc)
@@ -214,18 +220,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _first_error(exc: ValidationError) -> str:
-    return "cannot start: " + "; ".join(e["msg"] for e in exc.errors())
-
-
 def client_urls(scheme: str, host: str, port: str, room: str, token: str | None) -> list[str]:
     """The client page URLs to print: every address of this machine when bound to all of them
     (the loopback ones last), else the bound address."""
-    hosts = [host]
-    if host in ANY_ADDRESS:
-        _, addresses = tls.machine_names()
-        ordered = sorted(addresses, key=lambda a: (a.is_loopback, a.version))
-        hosts = [str(a) if a.version == 4 else f"[{a}]" for a in ordered]
+    hosts = reachable_hosts(host) if host in ANY_ADDRESS else [host]
     fragment = f"#token={token}" if token else ""
     return [page_url(f"{scheme}://{h}:{port}", "client", room) + fragment for h in hosts]
 
@@ -250,7 +248,7 @@ async def _main(
     # The one line a newcomer needs, on stdout rather than in the log.
     sys.stdout.write(
         f"\nwebrtc-autopilot demo is running. Open the client page:\n\n{urls}\n\n"
-        f"then press Start Piloting. Ctrl-C stops everything.\n\n"
+        f"then press Connect, Join Room and Start Piloting. Ctrl-C stops everything.\n\n"
     )
     sys.stdout.flush()
     await asyncio.gather(*tasks)

@@ -21,7 +21,7 @@ from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, asyn
 from playwright.async_api import Error as PlaywrightError
 
 from app.arguments import add_relay_profile, positive_integer
-from app.protocol.urls import ServerUrlError, page_url, server_base
+from app.protocol.urls import ServerUrlError, page_url, server_base, untrusted_hint
 from app.supervise import Backoff, run_until_stopped, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path, launch_options
 
@@ -57,7 +57,9 @@ def check_server(server: str, ca_file: Path | None = None) -> None:
         with urllib.request.urlopen(f"{base}/healthz", timeout=10, context=context) as response:
             response.read()
     except (urllib.error.URLError, OSError) as exc:
-        raise RelayServiceError(f"cannot reach the server at {server}: {exc}") from exc
+        raise RelayServiceError(
+            f"cannot reach the server at {server}: {exc}{untrusted_hint(exc)}"
+        ) from exc
 
 
 class RelayService:

@@ -15,15 +15,19 @@ import sys
 import time
 from datetime import UTC, datetime
 
+from pydantic import ValidationError
+
 from app.arguments import positive_number
 from app.protocol import tokens
 from app.protocol.constants import Role
-from app.protocol.urls import ServerUrlError, page_url, server_base
+from app.protocol.urls import ServerUrlError, page_url, reachable_host, server_base
 
 log = logging.getLogger(__name__)
 
 SECRET_ENV = "AUTOPILOT_SECRET"
-DEFAULT_SERVER = "http://127.0.0.1:8000"
+MAKE_SECRET = (
+    "export AUTOPILOT_SECRET=$(python3 -c 'import secrets; print(secrets.token_urlsafe(32))')"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,7 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"how long it stays valid (default {tokens.DEFAULT_TTL_S} s)",
     )
     parser.add_argument(
-        "--server", default=DEFAULT_SERVER, help=f"server base URL (default {DEFAULT_SERVER})"
+        "--server",
+        help="server base URL, e.g. https://10.0.0.5:8000 (default: http:// on the host and port"
+        " the server's settings give, AUTOPILOT_HOST and AUTOPILOT_PORT)",
     )
 
 
@@ -51,8 +57,27 @@ def run(args: argparse.Namespace) -> int:
     """Print the token and URL as JSON on the last line; 1 with a reason on bad input."""
     secret = os.environ.get(SECRET_ENV, "")
     if not secret:
-        log.error("cannot mint a token: %s is not set (the server's signing secret)", SECRET_ENV)
+        log.error(
+            "cannot mint a token: %s is not set (the server's signing secret); make one with: %s",
+            SECRET_ENV,
+            MAKE_SECRET,
+        )
         return 1
+    if args.server is None:
+        # The server's settings, read as it reads them.
+        from app.server.config import Settings, describe_settings_error
+
+        try:
+            settings = Settings()
+        except ValidationError as exc:
+            log.error("cannot mint a token: %s", describe_settings_error(exc))
+            return 1
+        # Plain HTTP: TLS is a command-line choice of `autopilot serve`, not a setting.
+        args.server = f"http://{reachable_host(settings.host)}:{settings.port}"
+        log.info(
+            "no --server given: assuming %s (pass --server if it runs elsewhere or on HTTPS)",
+            args.server,
+        )
     try:
         server_base(args.server)
     except ServerUrlError as exc:

@@ -31,9 +31,10 @@ def _serve(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
         ({"AUTOPILOT_TOKEN": "old-shared-token"}, "AUTOPILOT_TOKEN is no longer used"),
         ({"AUTOPILOT_SECRET": "short"}, "at least 16 characters"),
         ({"AUTOPILOT_ALLOWED_ORIGINS": '["evil"]'}, "an origin looks like"),
-        ({"AUTOPILOT_MAX_MESSAGE_BYTES": "lots"}, "max_message_bytes"),
+        ({"AUTOPILOT_MAX_MESSAGE_BYTES": "lots"}, "AUTOPILOT_MAX_MESSAGE_BYTES must be an integer"),
+        ({"AUTOPILOT_PORT": "abc"}, "AUTOPILOT_PORT must be an integer"),
         ({"AUTOPILOT_OPERATIONS_SPEC": "/nonexistent/ops.json"}, "/nonexistent/ops.json"),
-        ({"AUTOPILOT_ROS": "3"}, "ros"),
+        ({"AUTOPILOT_ROS": "3"}, "AUTOPILOT_ROS: Input should be"),
     ],
 )
 def test_bad_configuration_is_one_line_and_exit_1(env: dict[str, str], words: str) -> None:

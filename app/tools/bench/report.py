@@ -382,7 +382,8 @@ def _override_section(results: dict[str, Any]) -> list[str]:
         "## Manual override",
         "",
         f"The client page takes the wheel and ArrowLeft is pressed {counts.get('presses', 0)}"
-        " times (the bench's key event → the agent's first manual Twist, one monotonic clock);"
+        " times, once a second (the bench's key event → the agent's first manual Twist, one"
+        " monotonic clock);"
         " then, with the key held, the client page's script is paused: the vehicle's dead-man"
         f" ({_fmt(counts.get('deadman_s'))} s) must stop the turtle by itself.",
         "",
