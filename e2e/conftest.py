@@ -125,6 +125,17 @@ def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator
         entry.page.context.close()
 
 
+def open_room(
+    open_role: OpenRole, room: str, vehicle_browser: Browser, browser: Browser, client: str
+) -> tuple[Page, Page, Page]:
+    """The vehicle, relay and client (named ``client``) pages of ``room``, each joining it by
+    itself (``auto=1``); the vehicle's camera is ``vehicle_browser``'s."""
+    query = {"room": room, "auto": "1"}
+    vehicle = open_role("vehicle", vehicle_browser, name="vehicle", **query)
+    relay = open_role("relay", browser, name="relay", **query)
+    return vehicle, relay, open_role("client", browser, name=client, **query)
+
+
 def artifacts_dir(request: pytest.FixtureRequest) -> Path:
     """``artifacts/<test name>/``, created on demand."""
     folder = ARTIFACTS / re.sub(r"[^\w.-]+", "_", request.node.name)

@@ -15,7 +15,7 @@ import pytest
 from playwright.sync_api import Browser, Page, expect
 
 from app.server.serve import RunningServer
-from e2e.conftest import OpenRole
+from e2e.conftest import OpenRole, open_room
 from e2e.helpers import heading_error, status, turtle_state, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
@@ -74,11 +74,8 @@ def turns_left_then_stops(server: RunningServer, vehicle: Page, press: Any, rele
 def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     server: RunningServer, open_role: OpenRole, browser: Browser, vehicle_browser: Browser
 ) -> None:
-    query = {"room": "wheel", "auto": "1"}
-    vehicle = open_role("vehicle", vehicle_browser, name="vehicle", **query)
-    open_role("relay", browser, name="relay", **query)
-    ann = open_role("client", browser, name="ann", **query)
-    bob = open_role("client", browser, name="bob", init_script=GAMEPAD_STUB, **query)
+    vehicle, _, ann = open_room(open_role, "wheel", vehicle_browser, browser, "ann")
+    bob = open_role("client", browser, init_script=GAMEPAD_STUB, room="wheel", name="bob", auto="1")
 
     start = ann.get_by_role("button", name="Start Piloting")
     expect(start).to_be_enabled(timeout=120_000)

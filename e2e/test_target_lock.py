@@ -15,7 +15,7 @@ from app.tools.bench.lock import click_position
 from app.tools.browser import launch_options
 from app.vision.lock import contains
 from app.vision.window import Box
-from e2e.conftest import OpenRole
+from e2e.conftest import OpenRole, open_room
 from e2e.helpers import FPS, HEIGHT, WIDTH, status, wait_until, write_y4m
 from vehicle_agent.video import TwoFaceVideo
 
@@ -60,10 +60,7 @@ def click_frame_point(client: Page, x: float, y: float) -> None:
 def test_click_the_smaller_face_then_unlock(
     open_role: OpenRole, browser: Browser, two_faces_browser: Browser, scene: TwoFaceVideo
 ) -> None:
-    query = {"room": "lock", "auto": "1"}
-    vehicle = open_role("vehicle", two_faces_browser, name="vehicle", **query)
-    open_role("relay", browser, name="relay", **query)
-    client = open_role("client", browser, name="client", **query)
+    vehicle, _, client = open_room(open_role, "lock", two_faces_browser, browser, "client")
     large, small = scene.face_centre(0), scene.small_centre(0)
 
     start = client.get_by_role("button", name="Start Piloting")

@@ -420,7 +420,8 @@ class Agent:
 
     def _on_drive(self, relay: str, message: channels.Drive) -> None:
         twist = self.manual.drive(message.seq, message.linear, message.angular)
-        self.events.emit("drive", seq=message.seq, applied=twist is not None)
+        moving = twist is not None and not twist.is_zero
+        self.events.emit("drive", seq=message.seq, applied=twist is not None, moving=moving)
         self._publish(twist)
 
     def _halt(self) -> None:

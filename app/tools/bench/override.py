@@ -122,7 +122,8 @@ def _deadman_stop_s(events: list[dict[str, Any]], after: float | None) -> float 
         if event["t"] < after + PERIOD_S:
             continue
         if event["ev"] == "drive" and event["applied"]:
-            last_drive = event["t"]
+            # A stop command (a release arriving late on a loaded machine) stops by itself.
+            last_drive = event["t"] if event["moving"] else None
         elif event["ev"] == "twist" and last_drive is not None:
             if event["seq"] is None and not event["linear"] and not event["angular"]:
                 return float(event["t"]) - last_drive
