@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -359,11 +360,14 @@ def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:
 
 
 def _token_refusal(secret: str, login: Login, now: float) -> str | None:
-    """Why ``login`` may not join: no token, or one not for its room and role; else None."""
+    """Why ``login`` may not join (no token, or one not for its room and role) and how to get
+    one that will; else None."""
+    # Whoever runs the server mints tokens: the reason names the command, for a page or a log.
+    remedy = f"get one with: autopilot token --room {shlex.quote(login.room)} --role {login.role}"
     if login.token is None:
-        return f"missing token: a {login.role} token for room {login.room!r} is required"
+        return f"missing token: a {login.role} token for room {login.room!r} is required; {remedy}"
     try:
         tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
     except tokens.TokenError as exc:
-        return str(exc)
+        return f"{exc}; {remedy.replace('get one', 'get a new one')}"
     return None

@@ -332,6 +332,7 @@ room.addEventListener('phase', (event) => {
   if (event.detail === 'joined' && room.relay !== undefined) room.send({ type: 'getOps' });
 });
 room.addEventListener('roster', showState);
+room.addEventListener('problem', showState);
 const link = new RelayLink(room, { log, setup: setupPeer });
 link.addEventListener('lost', () => {
   status.relay = null;

@@ -551,6 +551,7 @@ room.addEventListener('phase', (event) => {
   }
 });
 room.addEventListener('roster', showState);
+room.addEventListener('problem', showState);
 room.addEventListener('peerleft', (event) => {
   closePeer(event.detail, 'left the room');
   session.signalQueues.delete(event.detail);

@@ -10,6 +10,7 @@ const RETRY_MAX_MS = 5000;
 
 /**
  * Events: `phase` (disconnected → connected → joined), `roster` (detail: the other peers),
+ * `problem` (detail: why this page cannot join, also in `describe()`),
  * `peerleft` (detail: name), `signal` (detail: any other message from the server, e.g. offer).
  */
 export class RoomSession extends EventTarget {
@@ -27,6 +28,12 @@ export class RoomSession extends EventTarget {
     this.room = null;
     this.roster = [];
     this.auto = false;
+    // Why this page cannot join, in words for the state line (a refused login, a misplaced
+    // token); cleared by a successful join.
+    this.problem = null;
+    if (config.tokenInQuery) {
+      this.#setProblem('the token is in the query (?token=…): put it after # instead (…#token=…), where it never leaves the browser');
+    }
     this.signaling.addEventListener('message', (event) => this.#onMessage(event.detail));
     this.signaling.addEventListener('close', (event) => this.#onClose(event.detail));
     this.signaling.addEventListener('protocolerror', (event) => this.log.error(event.detail));
@@ -56,7 +63,14 @@ export class RoomSession extends EventTarget {
   }
 
   async join(name, room) {
-    const reply = await this.signaling.login({ name, role: this.role, room, token: this.config.token });
+    let reply;
+    try {
+      reply = await this.signaling.login({ name, role: this.role, room, token: this.config.token });
+    } catch (err) {
+      if (err instanceof LoginRefused) this.#setProblem(`login refused: ${err.message}`, { log: false });
+      throw err;
+    }
+    this.problem = null;
     this.name = name;
     this.room = reply.room || room;
     // ICE for this login (TURN credentials minted for it); every new connection uses it.
@@ -113,7 +127,7 @@ export class RoomSession extends EventTarget {
     const update = () => {
       connect.disabled = this.phase !== 'disconnected';
       join.disabled = this.phase !== 'connected';
-      leave.disabled = this.phase !== 'joined' && this.phase !== 'connected';
+      leave.disabled = this.phase !== 'joined';
     };
     this.addEventListener('phase', update);
     update();
@@ -125,7 +139,8 @@ export class RoomSession extends EventTarget {
       const others = this.roster.map((peer) => `${peer.role} ${peer.name}`).join(', ') || 'nobody else yet';
       return `joined room ${this.room} as ${this.name}${withRoster ? ` · with ${others}` : ''}`;
     }
-    return this.phase === 'connected' ? 'connected, not in a room' : this.phase;
+    const where = this.phase === 'connected' ? 'connected, not in a room' : this.phase;
+    return this.problem === null ? where : `${where} · ${this.problem}`;
   }
 
   #chosenName() {
@@ -152,6 +167,7 @@ export class RoomSession extends EventTarget {
         this.#setRoster(this.roster.filter((peer) => peer.name !== msg.from));
         break;
       case 'error':
+        if (msg.ref === 'login') break; // the refused login's own error, reported by join()
         this.log.error(`signaling server: ${msg.reason}${msg.ref ? ` (about ${msg.ref})` : ''}`);
         break;
       default:
@@ -184,6 +200,13 @@ export class RoomSession extends EventTarget {
       if (!now.has(name)) this.dispatchEvent(new CustomEvent('peerleft', { detail: name }));
     }
     this.dispatchEvent(new CustomEvent('roster', { detail: this.roster }));
+  }
+
+  /** Show `text` on the state line until a join succeeds (and log it, unless the caller does). */
+  #setProblem(text, { log = true } = {}) {
+    this.problem = text;
+    if (log) this.log.warn(text);
+    this.dispatchEvent(new CustomEvent('problem', { detail: text }));
   }
 
   #setPhase(phase) {

@@ -8,6 +8,9 @@
 export function readConfig() {
   const config = JSON.parse(document.getElementById('config').textContent);
   config.token = new URLSearchParams(location.hash.slice(1)).get('token');
+  // A token in the query has already gone to the server (and its access log): not used, but
+  // recognised, so that the page can say where it belongs.
+  config.tokenInQuery = config.token === null && new URLSearchParams(location.search).has('token');
   return config;
 }
 

@@ -297,6 +297,15 @@ function showState() {
 }
 
 async function startCamera() {
+  if (!window.isSecureContext) {
+    // Browsers hide navigator.mediaDevices from plain-HTTP pages of any host but this one.
+    const why =
+      'no camera: browsers give the camera only to pages served over HTTPS (or from localhost); ' +
+      'serve with --self-signed or --cert and open https://… (see docs/deploying.md)';
+    log.error(why);
+    show('camera-state', why);
+    return null;
+  }
   try {
     const stream = await navigator.mediaDevices.getUserMedia({
       video: { width: { ideal: PROTOCOL.video.width }, height: { ideal: PROTOCOL.video.height } },
@@ -305,9 +314,12 @@ async function startCamera() {
     byTestId('camera').srcObject = stream;
     const settings = stream.getVideoTracks()[0].getSettings();
     log.info(`camera on: ${settings.width}×${settings.height}`);
+    show('camera-state', `camera on: ${settings.width}×${settings.height}`);
     return stream;
   } catch (err) {
-    log.error(`camera unavailable (${err.name}: ${err.message}); connecting without video`);
+    const why = `camera unavailable (${err.name}: ${err.message}); connecting without video`;
+    log.error(why);
+    show('camera-state', why);
     return null;
   }
 }
@@ -315,6 +327,7 @@ async function startCamera() {
 room.bindControls();
 room.addEventListener('phase', showState);
 room.addEventListener('roster', showState);
+room.addEventListener('problem', showState);
 room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') halt('left the room');
 });
