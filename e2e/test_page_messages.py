@@ -75,7 +75,8 @@ def test_a_refused_token_shows_why_and_how_to_get_a_new_one_logged_once(
         _connect_and_join(page)
         state = page.get_by_test_id("state")
         expect(state).to_contain_text(f"login refused: token refused: {reason}")
-        expect(state).to_contain_text(f"get a new one with: autopilot token --room {ROOM} --role client")
+        remedy = f"get a new one with: autopilot token --room {ROOM} --role client"
+        expect(state).to_contain_text(remedy)
         page.wait_for_timeout(300)  # a second report would arrive with the first
         assert sum(f"token refused: {reason}" in line for line in console) == 1, console
         expect(page.locator("button[data-action=leave]")).to_be_disabled()
