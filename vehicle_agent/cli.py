@@ -14,12 +14,14 @@ from urllib.parse import urlsplit
 from aiortc import RTCIceServer
 
 from app.arguments import add_vehicle_profile, non_negative_number, positive_number
+from app.metrics import add_metrics_arguments
 from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
+from vehicle_agent.metrics import serve_agent_metrics
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
@@ -127,6 +129,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PEM",
         help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
     )
+    add_metrics_arguments(parser)
 
 
 def tls_context(ca_file: Path | None) -> ssl.SSLContext:
@@ -188,6 +191,7 @@ async def _main(args: argparse.Namespace) -> int:
         tls=tls_context(args.ca_file),
     )
     agent = Agent(config, video, turtle, events)
+    metrics = serve_agent_metrics(args, events)
     task = asyncio.create_task(agent.run())
     on_stop_signals(task.cancel)
     try:
@@ -195,5 +199,7 @@ async def _main(args: argparse.Namespace) -> int:
             await task
     finally:
         events.close()
+        if metrics is not None:
+            metrics.close()
     log.info("vehicle agent stopped")
     return 0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
@@ -13,6 +15,7 @@ from app.resources import STATIC_DIR
 from app.server.config import Settings
 from app.server.fleet.page import router as fleet_router
 from app.server.headers import SecurityHeaders
+from app.server.metrics import ServerMetrics
 from app.server.origins import OriginGuard
 from app.server.pages import router as pages_router
 from app.server.rosbridge import Simulator
@@ -39,17 +42,28 @@ def fleet_hub(settings: Settings) -> FleetHub:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the app: signaling at /ws, role pages, turtle simulator and /rosbridge."""
+    """Build the app: signaling at /ws, role pages, turtle simulator and /rosbridge.
+
+    Its metrics are on ``app.state.metrics`` (:class:`ServerMetrics`); ``autopilot serve
+    --metrics-port`` serves their registry.
+    """
     settings = settings or Settings()
+    metrics = ServerMetrics()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.simulator.start()
         if fleet is not None:
             await fleet.start()
+        sampler = asyncio.create_task(
+            metrics.run(app.state.signaling.hub, app.state.simulator), name="metrics-sampler"
+        )
         try:
             yield
         finally:
+            sampler.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sampler
             if fleet is not None:
                 await fleet.stop()
             await app.state.simulator.stop()
@@ -63,9 +77,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         openapi_url="/openapi.json" if docs else None,
     )
     app.state.settings = settings
+    app.state.metrics = metrics
     # The middleware added last runs first: the security headers go on every HTTP response,
     # the origin guard's refusals included; a foreign origin reaches no route.
-    app.add_middleware(OriginGuard, allowed=settings.allowed_origins)
+    app.add_middleware(
+        OriginGuard, allowed=settings.allowed_origins, on_refused=lambda: metrics.refused("origin")
+    )
     app.add_middleware(SecurityHeaders)
     # Validated here so that a bad operations spec stops the server before it serves anything.
     app.state.operations = load_spec(settings.operations_spec)
@@ -75,11 +92,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.signaling = Switchboard.from_settings(settings, fleet)
     if fleet is not None:
         fleet.deliver = app.state.signaling.dispatch
+    app.state.signaling.hub.metrics = metrics
+    app.state.signaling.outboxes.refused = metrics.refused
     app.include_router(signaling_router)
     app.include_router(pages_router)
     app.include_router(fleet_router)
     app.state.simulator = Simulator.from_settings(settings)
     app.state.turtlesim = app.state.simulator.sim
+    app.state.simulator.outboxes.refused = metrics.refused
     app.include_router(rosbridge_router)
 
     @app.get("/healthz")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from urllib.parse import urlsplit
 
 from starlette.datastructures import Headers
@@ -98,9 +98,16 @@ class OriginGuard:
     makes the server answer it with HTTP 403, so a foreign page never gets an open socket.
     """
 
-    def __init__(self, app: ASGIApp, allowed: Iterable[str] = ()) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        allowed: Iterable[str] = (),
+        on_refused: Callable[[], None] | None = None,
+    ) -> None:
         self.app = app
         self.allowed = [normalise(origin) for origin in allowed]
+        # Told of each refusal (the metrics count them).
+        self.on_refused = on_refused
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """Refuse a foreign origin; pass everything else on untouched."""
@@ -112,6 +119,8 @@ class OriginGuard:
             origin = headers.get("origin")
             if not judge(origin, headers.get("host"), self.allowed).admitted:
                 log.warning("refused %s %s from origin %r", scope["type"], scope["path"], origin)
+                if self.on_refused is not None:
+                    self.on_refused()
                 await self._refuse(scope, send)
                 return
         await self.app(scope, receive, send)

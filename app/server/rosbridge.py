@@ -23,6 +23,7 @@ from app.protocol.jsonedge import oversize
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
+from app.server.metrics import ServerMetrics
 from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
 from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
 from app.turtlesim.sim import TurtleSim
@@ -138,10 +139,12 @@ async def turtlesim_state(request: Request) -> dict[str, Any]:
 async def rosbridge(websocket: WebSocket) -> None:
     """One rosbridge v2 client (roslibpy, roslib.js): JSON text frames both ways."""
     simulator: Simulator = websocket.app.state.simulator
+    metrics: ServerMetrics = websocket.app.state.metrics
     gate = RosbridgeGate(websocket.app.state.settings.secret)
     refusal = gate.handshake(bearer_token(websocket.headers), time.time())
     if refusal is not None:
         log.info("rosbridge handshake refused: %s", refusal)
+        metrics.refused("auth")
         await websocket.close(CloseCode.POLICY_VIOLATION)  # before accept(): HTTP 403
         return
     await websocket.accept()
@@ -152,11 +155,13 @@ async def rosbridge(websocket: WebSocket) -> None:
     def on_text(text: str) -> None:
         closing: tuple[int, str] | None = None
         if (reason := oversize(text, simulator.policy.max_message_bytes)) is not None:
+            metrics.refused("invalid")
             replies = session.error(reason)
         else:
             decision = gate.check(text, time.time())
             replies = session.receive(text) if decision.forward else []
-            if decision.reply is not None:
+            if decision.reply is not None:  # the gate replies only to refuse: no token, or a
+                metrics.refused("auth")  # role that may not do this
                 replies.append(decision.reply)
             closing = decision.close
         for reply in replies:
@@ -165,6 +170,7 @@ async def rosbridge(websocket: WebSocket) -> None:
             outbox.close(*closing)  # after the refusal's reason
 
     def on_binary(_data: bytes) -> None:
+        metrics.refused("invalid")
         for reply in session.error("binary frames are not supported: send JSON text"):
             outbox.send(reply)
 

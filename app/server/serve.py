@@ -15,12 +15,14 @@ import uvicorn
 from pydantic import ValidationError
 
 from app.arguments import port
+from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol.constants import ROLES
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
 from app.server.app import create_app
 from app.server.config import Settings, describe_settings_error
+from app.server.metrics import ServerMetrics
 from app.vision.spec import SpecError
 
 log = logging.getLogger(__name__)
@@ -40,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"(default: AUTOPILOT_ROS or {DEFAULT_FLAVOUR})",
     )
     tls.add_arguments(parser)
+    add_metrics_arguments(parser)
 
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
@@ -96,6 +99,11 @@ def run(args: argparse.Namespace) -> int:
             host,
         )
         return 1
+    try:
+        metrics = serve_metrics(args, app.state.metrics.registry)
+    except OSError as exc:
+        log.error("cannot start: %s", exc)
+        return 1
     scheme = "http" if files is None else "https"
     bases = [f"{scheme}://{h}:{port}" for h in reachable_hosts(host)]
     for role, url in page_urls(bases[0]).items():
@@ -113,13 +121,17 @@ def run(args: argparse.Namespace) -> int:
             "listening on every address over plain HTTP with no AUTOPILOT_SECRET:"
             " anyone on the network can drive the robot (set AUTOPILOT_SECRET, add --self-signed)"
         )
-    uvicorn.run(
-        app,
-        **uvicorn_options(settings, files),
-        host=host,
-        port=port,
-        log_level="info",
-    )
+    try:
+        uvicorn.run(
+            app,
+            **uvicorn_options(settings, files),
+            host=host,
+            port=port,
+            log_level="info",
+        )
+    finally:
+        if metrics is not None:
+            metrics.close()
     return 0
 
 
@@ -155,6 +167,8 @@ class RunningServer:
     url: str
     server: uvicorn.Server
     thread: threading.Thread
+    # The app's metrics (their registry is what ``--metrics-port`` serves).
+    metrics: ServerMetrics
 
     @property
     def ws_url(self) -> str:
@@ -181,8 +195,9 @@ def start_in_thread(
     sock.bind((host, port))
     port = sock.getsockname()[1]
     settings = settings or Settings()
+    app = create_app(settings)
     config = uvicorn.Config(
-        create_app(settings),
+        app,
         **uvicorn_options(settings, tls_files),
         log_level=log_level,
         lifespan="on",
@@ -199,4 +214,6 @@ def start_in_thread(
     else:
         raise RuntimeError("server did not start within 5 s")
     scheme = "http" if tls_files is None else "https"
-    return RunningServer(url=f"{scheme}://{host}:{port}", server=server, thread=thread)
+    return RunningServer(
+        url=f"{scheme}://{host}:{port}", server=server, thread=thread, metrics=app.state.metrics
+    )

@@ -19,7 +19,7 @@ from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
 from app.server.turn import ice_servers_for
 from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
-from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
+from app.signaling.hub import Action, Census, Close, ConnId, Hub, HubMetrics, Outgoing
 
 log = logging.getLogger(__name__)
 
@@ -30,11 +30,14 @@ class HubPort(Protocol):
     """What the route needs of a hub: :class:`Hub`, or the fleet's Redis-backed one, which
     returns what it can decide at once and hands later actions to :meth:`Switchboard.dispatch`."""
 
+    metrics: HubMetrics | None
+
     def connect(self) -> ConnId: ...
     def logged_in(self, conn: ConnId) -> bool: ...
     def receive(self, conn: ConnId, text: str) -> list[Action]: ...
     def receive_binary(self, conn: ConnId) -> list[Action]: ...
     def disconnect(self, conn: ConnId) -> list[Action]: ...
+    def census(self) -> Census: ...
 
 
 def login_ice(settings: Settings) -> Callable[[str], tuple[list[IceServer], IceTransportPolicy]]:

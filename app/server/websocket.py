@@ -25,7 +25,7 @@ import logging
 from collections import deque
 from collections.abc import Callable, Hashable, ItemsView
 from dataclasses import dataclass
-from typing import Any, Final, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Generic, TypeVar
 
 from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
@@ -33,6 +33,9 @@ from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 from app.protocol import jsonedge
 from app.protocol.constants import CloseCode
 from app.server.config import Settings
+
+if TYPE_CHECKING:
+    from app.metrics import Refusal
 
 log = logging.getLogger(__name__)
 
@@ -64,11 +67,15 @@ class Shut:
 
 
 class Outbox:
-    """Frames waiting for one peer, bounded in count and bytes; overflowing closes the peer."""
+    """Frames waiting for one peer, bounded in count and bytes; overflowing closes the peer
+    (and calls ``on_slow_reader``, for the metrics)."""
 
-    def __init__(self, max_messages: int, max_bytes: int) -> None:
+    def __init__(
+        self, max_messages: int, max_bytes: int, on_slow_reader: Callable[[], None] | None = None
+    ) -> None:
         self.max_messages = max_messages
         self.max_bytes = max_bytes
+        self.on_slow_reader = on_slow_reader
         self._frames: deque[str] = deque()
         self._bytes = 0
         self._shut: Shut | None = None
@@ -91,6 +98,8 @@ class Outbox:
         if not self._fits(frame):
             unread = len(self._frames)
             log.warning("closing a slow reader: %d messages (%d bytes) unread", unread, self._bytes)
+            if self.on_slow_reader is not None:
+                self.on_slow_reader()
             self._frames.clear()
             self._bytes = 0
             self.close(CloseCode.TRY_AGAIN_LATER, f"too slow: {unread} messages left unread")
@@ -146,13 +155,18 @@ K = TypeVar("K", bound=Hashable)
 class Outboxes(Generic[K]):
     """The outbox of each open connection of one route, keyed by the core's handle for it.
 
-    At most ``limit`` connections at once, each outbox bounded by ``policy``.
+    At most ``limit`` connections at once, each outbox bounded by ``policy``. ``refused`` is
+    told of each connection refused at the limit (``caps``) and each slow reader closed.
     """
 
     def __init__(self, policy: SocketPolicy, limit: int) -> None:
         self.policy = policy
         self.limit = limit
+        self.refused: Callable[[Refusal], None] | None = None
         self._by_key: dict[K, Outbox] = {}
+
+    def __len__(self) -> int:
+        return len(self._by_key)
 
     @property
     def full(self) -> bool:
@@ -161,9 +175,13 @@ class Outboxes(Generic[K]):
 
     def open(self, key: K) -> Outbox:
         """A new connection: its outbox."""
-        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes)
+        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes, self._slow_reader)
         self._by_key[key] = outbox
         return outbox
+
+    def _slow_reader(self) -> None:
+        if self.refused is not None:
+            self.refused("slow_reader")
 
     def forget(self, key: K) -> None:
         """The connection is gone: so is its outbox."""
@@ -186,6 +204,8 @@ async def refuse_if_full(websocket: WebSocket, outboxes: Outboxes[Any], what: st
     if not outboxes.full:
         return False
     reason = f"server full: {outboxes.limit} {what}"
+    if outboxes.refused is not None:
+        outboxes.refused("caps")
     log.warning("refusing a connection: %s", reason)
     await websocket.close(CloseCode.TRY_AGAIN_LATER, reason)
     return True

@@ -14,12 +14,13 @@ import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Final, assert_never
+from typing import TYPE_CHECKING, Any, Final, Protocol, assert_never
 
 from app.protocol import tokens
 from app.protocol.constants import CloseCode, Role
 from app.protocol.jsonedge import oversize
 from app.protocol.signaling import (
+    INCOMING_TYPES,
     Answer,
     Candidate,
     Error,
@@ -38,6 +39,9 @@ from app.protocol.signaling import (
     Stop,
     parse,
 )
+
+if TYPE_CHECKING:
+    from app.metrics import Refusal
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +75,24 @@ class Close:
 
 
 Action = Outgoing | Close
+
+
+class HubMetrics(Protocol):
+    """What the hub reports as it works (:class:`app.server.metrics.ServerMetrics`)."""
+
+    def message(self, kind: str) -> None:
+        """A frame was read: its ``type`` when it is a known one, else ``"other"``."""
+
+    def refused(self, reason: Refusal) -> None:
+        """A frame or a login was refused, for ``reason``."""
+
+
+@dataclass(frozen=True)
+class Census:
+    """Who is here: rooms with anyone in them, and peers of each role."""
+
+    rooms: int
+    peers: dict[Role, int]
 
 
 @dataclass(frozen=True)
@@ -123,6 +145,8 @@ class Hub:
     _ids: itertools.count[int] = field(default_factory=itertools.count, init=False)
     # Unix seconds, for token expiry and the senders' rate limit; tests pass their own.
     clock: Callable[[], float] = time.time
+    # Told of every frame read and every refusal; None: nobody counts.
+    metrics: HubMetrics | None = None
 
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
@@ -139,6 +163,14 @@ class Hub:
         """Names of the rooms that have anyone in them."""
         return list(self._rooms)
 
+    def census(self) -> Census:
+        """How many rooms and peers of each role there are now."""
+        peers: dict[Role, int] = {}
+        for room in self._rooms.values():
+            for peer in room.values():
+                peers[peer.role] = peers.get(peer.role, 0) + 1
+        return Census(len(self._rooms), peers)
+
     def roster(self, room: str) -> list[PeerInfo]:
         """Who is in ``room`` now, in join order."""
         return [peer.info() for peer in self._rooms.get(room, {}).values()]
@@ -149,12 +181,15 @@ class Hub:
         if (turned_away := self._turn_away(connection)) is not None:
             return turned_away
         if (too_large := oversize(text, self.max_message_bytes)) is not None:
+            self._count("other")
             return self._refuse(connection, too_large, None)
         message = parse(text)
         if isinstance(message, ParseError):
+            self._count(message.ref if message.ref in INCOMING_TYPES else "other")
             if message.ref == "login" and connection.peer is None:
                 return self._refuse_login(connection, message.reason)
             return self._refuse(connection, message.reason, message.ref)
+        self._count(message.type)
         return self._dispatch(connection, message)
 
     def receive_binary(self, conn: ConnId) -> list[Action]:
@@ -162,6 +197,7 @@ class Hub:
         connection = self._connections[conn]
         if (turned_away := self._turn_away(connection)) is not None:
             return turned_away
+        self._count("other")
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
 
     def disconnect(self, conn: ConnId) -> list[Action]:
@@ -183,7 +219,10 @@ class Hub:
         if not connection.spend(self.clock()):
             # Refused before parsing: the flood costs its sender, not the peer it targets.
             return self._refuse(
-                connection, f"rate limit: more than {RATE_PER_S:g} messages per second", None
+                connection,
+                f"rate limit: more than {RATE_PER_S:g} messages per second",
+                None,
+                why="rate_limit",
             )
         return None
 
@@ -221,7 +260,7 @@ class Hub:
         if self.secret is not None:
             refusal = _token_refusal(self.secret, login, self.clock())
             if refusal is not None:
-                return self._refuse_login(connection, refusal)
+                return self._refuse_login(connection, refusal, why="auth")
         # Only a successful login creates a room: refused ones must not leave empty rooms behind.
         room = self._rooms.get(login.room, {})
         if login.name in room:
@@ -230,7 +269,7 @@ class Hub:
             )
         if len(room) >= MAX_ROOM_PEERS:
             return self._refuse_login(
-                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)"
+                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)", why="caps"
             )
         relay = _relay_of(room)
         if login.role == "relay" and relay is not None:
@@ -319,8 +358,20 @@ class Hub:
             )
         return actions
 
-    def _refuse(self, connection: _Connection, reason: str, ref: str | None) -> list[Action]:
-        """An ``error`` reply; closes the connection after too many refusals in a row."""
+    def _count(self, kind: str) -> None:
+        if self.metrics is not None:
+            self.metrics.message(kind)
+
+    def _refuse(
+        self, connection: _Connection, reason: str, ref: str | None, why: Refusal = "invalid"
+    ) -> list[Action]:
+        """An ``error`` reply; closes the connection after too many refusals in a row.
+
+        ``why`` is the refusal's kind for the metrics; anything not a token, a cap or the rate
+        limit is a message the protocol does not allow.
+        """
+        if self.metrics is not None:
+            self.metrics.refused(why)
         actions: list[Action] = [
             Outgoing(connection.id, Error(reason=reason, ref=ref).model_dump())
         ]
@@ -344,10 +395,12 @@ class Hub:
             log.debug("refused %r from %s: %r", ref, connection.id, reason)
         return actions
 
-    def _refuse_login(self, connection: _Connection, reason: str) -> list[Action]:
+    def _refuse_login(
+        self, connection: _Connection, reason: str, why: Refusal = "invalid"
+    ) -> list[Action]:
         """A failed login reply, followed by the ``error`` every refused message gets."""
         reply = LoginReply(success=False, reason=reason).model_dump(exclude_none=True)
-        return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login")]
+        return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login", why)]
 
 
 def _relay_of(room: dict[str, _Peer]) -> _Peer | None:

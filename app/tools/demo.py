@@ -24,6 +24,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from app.arguments import add_vehicle_profile, port
+from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol import tokens
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
@@ -69,6 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " two faces drifting, to try the target lock (two-faces)",
     )
     tls.add_arguments(parser)
+    # The server's metrics (the relay's and the agent's are each their own process's).
+    add_metrics_arguments(parser)
 
 
 @dataclass
@@ -213,8 +216,16 @@ def run(args: argparse.Namespace) -> int:
         log.error("cannot listen on %s:%s: %s", args.host, args.port, exc.strerror or exc)
         return 1
     try:
+        metrics = serve_metrics(args, server.metrics.registry)
+    except OSError as exc:
+        server.stop()
+        log.error("%s", exc)
+        return 1
+    try:
         asyncio.run(_main(server, args, settings, files))
     finally:
+        if metrics is not None:
+            metrics.close()
         server.stop()
     log.info("demo stopped")
     return 0

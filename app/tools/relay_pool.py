@@ -39,15 +39,13 @@ from playwright.async_api import Error as PlaywrightError
 from app.protocol import tokens
 from app.resources import APP_DIR
 from app.server.fleet import keys
-from app.supervise import run_until_stopped
 from app.tools.browser import BrowserNotFound, chromium_path, launch_options
+from app.tools.relay_metrics import RATE_WINDOW_S, run_with_metrics
 from app.tools.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
 from app.tools.token_command import SECRET_ENV
 
 log = logging.getLogger(__name__)
 
-# Goals per second are counted over this window of the page's recent goal times.
-RATE_WINDOW_S = 2.0
 STATUS_JS = """(windowMs) => {
   const s = window.autopilotStatus;
   if (!s) return null;
@@ -309,6 +307,8 @@ def run(args: argparse.Namespace) -> int:
         token=args.token,
         ca_file=args.ca_file,
     )
-    asyncio.run(run_until_stopped(pool.run))
+    status = run_with_metrics(
+        args, pool.run, lambda: {room: s.page for room, s in pool.served.items() if not s.dead}
+    )
     log.info("relay pool stopped")
-    return 0
+    return status

@@ -21,9 +21,11 @@ from playwright.async_api import Browser, ConsoleMessage, Page, Playwright, asyn
 from playwright.async_api import Error as PlaywrightError
 
 from app.arguments import add_relay_profile, positive_integer
+from app.metrics import add_metrics_arguments
 from app.protocol.urls import ServerUrlError, page_url, server_base, untrusted_hint
-from app.supervise import Backoff, run_until_stopped, sleep_unless
+from app.supervise import Backoff, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path, launch_options
+from app.tools.relay_metrics import run_with_metrics
 
 log = logging.getLogger(__name__)
 
@@ -169,6 +171,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-rooms", type=positive_integer, help="with --pool: serve at most N rooms"
     )
     parser.add_argument("--redis-url", help="with --pool: Redis URL (default: AUTOPILOT_REDIS_URL)")
+    add_metrics_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -189,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         log.error("cannot use --ca-file %s: %s", args.ca_file, exc)
         return 1
-    asyncio.run(run_until_stopped(service.run))
+    status = run_with_metrics(
+        args, service.run, lambda: {} if service.page is None else {"relay": service.page}
+    )
     log.info("relay stopped")
-    return 0
+    return status

@@ -41,11 +41,12 @@ from typing import Any
 import redis.asyncio as aioredis
 from redis.asyncio.client import Pipeline, PubSub
 
+from app.protocol.constants import Role
 from app.protocol.signaling import IceServer, IceTransportPolicy, Login, ParseError, parse
 from app.server.config import Settings
 from app.server.fleet import keys
 from app.server.signaling import login_ice
-from app.signaling.hub import Action, Close, ConnId, Hub, Outgoing
+from app.signaling.hub import Action, Census, Close, ConnId, Hub, HubMetrics, Outgoing
 
 log = logging.getLogger(__name__)
 
@@ -131,6 +132,8 @@ class FleetHub:
         # its 101st concurrent command: pumps take turns for a share of it instead.
         self._pump_slots = asyncio.Semaphore(PUMP_CONNECTIONS)
         self._lobby = Hub(secret=secret, ice=ice, max_message_bytes=max_message_bytes)
+        # What this instance's hubs (the lobby's and its rooms') count; set by the app.
+        self._metrics: HubMetrics | None = None
         self._locals: dict[ConnId, _Local] = {}
         self._owned: dict[str, _Room] = {}
         # Rooms emptied here whose lease is still being given back (see _release_room).
@@ -154,6 +157,26 @@ class FleetHub:
         return cls(
             settings.redis_url, settings.secret, login_ice(settings), settings.max_message_bytes
         )
+
+    @property
+    def metrics(self) -> HubMetrics | None:
+        """Told of the frames and refusals of the lobby and of every room this instance owns."""
+        return self._metrics
+
+    @metrics.setter
+    def metrics(self, metrics: HubMetrics | None) -> None:
+        self._metrics = self._lobby.metrics = metrics
+        for owned in self._owned.values():
+            owned.hub.metrics = metrics
+
+    def census(self) -> Census:
+        """The rooms this instance owns and their peers (each room has one owner in the fleet,
+        so the instances' censuses add up to the fleet's)."""
+        peers: dict[Role, int] = {}
+        for owned in self._owned.values():
+            for role, count in owned.hub.census().peers.items():
+                peers[role] = peers.get(role, 0) + count
+        return Census(len(self._owned), peers)
 
     # -- lifecycle ------------------------------------------------------------------------------
 
@@ -326,14 +349,15 @@ class FleetHub:
         # Replay the logins in join order; the survivors already know each other, so the
         # replies are dropped. Their tokens were checked when they logged in (and are neither
         # stored nor still valid, perhaps): the replay runs with no secret, then it is back.
-        owned.hub.secret = None
+        # Nor are they counted again as frames.
+        owned.hub.secret, owned.hub.metrics = None, None
         try:
             for conn, entry in members:
                 owned.hub.receive(owned.hub_id(conn), json.dumps(entry["login"]))
                 owned.members.add(conn)
                 owned.seq = max(owned.seq, int(entry["seq"]) + 1)
         finally:
-            owned.hub.secret = self.secret
+            owned.hub.secret, owned.hub.metrics = self.secret, self._metrics
         self._owned[room] = owned
         if members:
             log.info("took over room %r with %d members", room, len(members))
@@ -341,7 +365,12 @@ class FleetHub:
         return owned
 
     def _new_room(self, room: str) -> _Room:
-        hub = Hub(secret=self.secret, ice=self.ice, max_message_bytes=self.max_message_bytes)
+        hub = Hub(
+            secret=self.secret,
+            ice=self.ice,
+            max_message_bytes=self.max_message_bytes,
+            metrics=self._metrics,
+        )
         return _Room(room, hub)
 
     def _on_room_op(self, owned: _Room, op: dict[str, Any]) -> None:
