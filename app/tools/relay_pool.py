@@ -136,6 +136,10 @@ class RelayPool:
         # one for its status can take longer than the lease under load, and must not lose it.
         self.held: set[str] = set()
 
+    def pages(self) -> dict[str, Page]:
+        """The live page of each room served, for the metrics' poll."""
+        return {room: served.page for room, served in self.served.items() if not served.dead}
+
     async def run(self, stop: asyncio.Event) -> None:
         """Serve rooms until ``stop`` is set; then close every page and release every room."""
         async with async_playwright() as playwright:
@@ -307,8 +311,6 @@ def run(args: argparse.Namespace) -> int:
         token=args.token,
         ca_file=args.ca_file,
     )
-    status = run_with_metrics(
-        args, pool.run, lambda: {room: s.page for room, s in pool.served.items() if not s.dead}
-    )
+    status = run_with_metrics(args, pool.run, pool.pages)
     log.info("relay pool stopped")
     return status

@@ -82,6 +82,10 @@ class RelayService:
         self.starts = 0  # pages started, the first included
         self.started = asyncio.Event()  # set each time a page has loaded
 
+    def pages(self) -> dict[str, Page]:
+        """The running page, for the metrics' poll (none while it loads or restarts)."""
+        return {} if self.page is None else {"relay": self.page}
+
     async def run(self, stop: asyncio.Event) -> None:
         """Run until ``stop`` is set."""
         backoff = Backoff(RESTART_FIRST_S, RESTART_CAP_S, jitter=0)
@@ -192,8 +196,6 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         log.error("cannot use --ca-file %s: %s", args.ca_file, exc)
         return 1
-    status = run_with_metrics(
-        args, service.run, lambda: {} if service.page is None else {"relay": service.page}
-    )
+    status = run_with_metrics(args, service.run, service.pages)
     log.info("relay stopped")
     return status

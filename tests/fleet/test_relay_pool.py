@@ -13,6 +13,7 @@ import pytest
 from websockets.asyncio.client import connect
 
 from app.server.serve import RunningServer
+from app.tools.relay_metrics import RelayMetrics
 from app.tools.relay_pool import RelayPool, room_members
 from tests.helpers.processes import browser_processes
 from tests.helpers.waiting import eventually
@@ -53,6 +54,11 @@ async def test_the_pool_serves_a_vehicle_s_room_and_survives_its_browser_dying(
             await until(relay_in_room, "the pool's relay to join the room")
             # The page joins the room before the pool's open() returns and records it as served.
             await eventually(lambda: list(pool.served) == ["lab"], 10, "the pool to record it")
+            # The metrics' poll reads the page (loaded: it joined), not piloting.
+            metrics = RelayMetrics()
+            await metrics.poll_once(pool.pages())
+            assert metrics.registry.get_sample_value("autopilot_relay_pages") == 1
+            assert metrics.registry.get_sample_value("autopilot_relay_piloting") == 0
             ours = browser_processes() - before
             assert len(ours) == 1
             os.kill(ours.pop(), signal.SIGKILL)
@@ -62,6 +68,8 @@ async def test_the_pool_serves_a_vehicle_s_room_and_survives_its_browser_dying(
             assert message == {"type": "leave", "from": "relay"}
             await until(relay_in_room, "the relay to come back in a new browser")
             await eventually(lambda: list(pool.served) == ["lab"], 10, "the room still served")
+            await metrics.poll_once(pool.pages())  # the new page, in the new browser
+            assert metrics.registry.get_sample_value("autopilot_relay_pages") == 1
     finally:
         stop.set()
         await asyncio.wait_for(task, 30)
