@@ -15,7 +15,7 @@ import argparse
 import logging
 import threading
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Final
 from wsgiref.simple_server import WSGIServer
 
 from prometheus_client import CollectorRegistry, start_http_server
@@ -25,18 +25,6 @@ from app.arguments import port
 log = logging.getLogger(__name__)
 
 DEFAULT_HOST: Final = "127.0.0.1"
-
-# Why the server refused a connection or a message: the only values of the ``reason`` label of
-# ``autopilot_refusals_total`` (a fixed set, so the series stay bounded whatever peers send).
-Refusal = Literal["auth", "origin", "rate_limit", "caps", "slow_reader", "invalid"]
-REFUSALS: Final[tuple[Refusal, ...]] = (
-    "auth",
-    "origin",
-    "rate_limit",
-    "caps",
-    "slow_reader",
-    "invalid",
-)
 
 
 def add_metrics_arguments(parser: argparse.ArgumentParser) -> None:

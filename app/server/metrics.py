@@ -7,7 +7,7 @@ tick rate) are sampled once a second on the event loop, which owns the hub and t
 the metrics listener's thread never reads their state while the loop changes it.
 
 Every label takes values from a fixed set: roles, the protocol's message types (anything else is
-``other``), and :data:`app.metrics.REFUSALS`. No room name is ever a label.
+``other``), and :data:`app.signaling.hub.REFUSALS`. No room name is ever a label.
 """
 
 from __future__ import annotations
@@ -18,10 +18,9 @@ from typing import TYPE_CHECKING, Final, Protocol
 
 from prometheus_client import CollectorRegistry, Counter, Gauge
 
-from app.metrics import REFUSALS, Refusal
 from app.protocol.constants import ROLES
 from app.protocol.signaling import INCOMING_TYPES
-from app.signaling.hub import Census
+from app.signaling.hub import REFUSALS, Census, Refusal
 
 if TYPE_CHECKING:
     from app.server.rosbridge import Simulator

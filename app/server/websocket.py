@@ -25,7 +25,7 @@ import logging
 from collections import deque
 from collections.abc import Callable, Hashable, ItemsView
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final, Generic, TypeVar
+from typing import Any, Final, Generic, TypeVar
 
 from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
@@ -33,9 +33,7 @@ from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 from app.protocol import jsonedge
 from app.protocol.constants import CloseCode
 from app.server.config import Settings
-
-if TYPE_CHECKING:
-    from app.metrics import Refusal
+from app.signaling.hub import Refusal
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,7 @@ import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Final, Protocol, assert_never
+from typing import Any, Final, Literal, Protocol, assert_never
 
 from app.protocol import tokens
 from app.protocol.constants import CloseCode, Role
@@ -39,9 +39,6 @@ from app.protocol.signaling import (
     Stop,
     parse,
 )
-
-if TYPE_CHECKING:
-    from app.metrics import Refusal
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +72,20 @@ class Close:
 
 
 Action = Outgoing | Close
+
+
+# Why the server refused a connection, a login or a message: the only values of the ``reason``
+# label of ``autopilot_refusals_total`` (a fixed set, so the series stay bounded whatever peers
+# send). The hub decides auth, caps (a full room), rate_limit and invalid; the transport the rest.
+Refusal = Literal["auth", "origin", "rate_limit", "caps", "slow_reader", "invalid"]
+REFUSALS: Final[tuple[Refusal, ...]] = (
+    "auth",
+    "origin",
+    "rate_limit",
+    "caps",
+    "slow_reader",
+    "invalid",
+)
 
 
 class HubMetrics(Protocol):

@@ -19,13 +19,14 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from websockets.asyncio.client import ClientConnection, connect
 
-from app.metrics import REFUSALS, start_metrics_server
+from app.metrics import start_metrics_server
 from app.protocol import tokens
 from app.protocol.constants import Role
 from app.server.config import Settings
 from app.server.metrics import MESSAGE_TYPES, ServerMetrics
 from app.server.serve import RunningServer
 from app.server.websocket import Outboxes, SocketPolicy
+from app.signaling.hub import REFUSALS
 from app.supervise import free_port, stop_process
 from tests.helpers.sockets import login, recv, rosbridge_url
 from tests.helpers.waiting import eventually, wait_until
