@@ -6,6 +6,7 @@ Loopback only: Prometheus listens on 127.0.0.1 and scrapes nothing but the serve
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import shutil
@@ -58,10 +59,10 @@ def metrics_listener(server: RunningServer) -> Iterator[MetricsServer]:
     listener.close()
 
 
-@pytest.fixture
-def prometheus(tmp_path: Path, metrics_listener: MetricsServer) -> Iterator[str]:
-    """Prometheus scraping ``metrics_listener`` every second, with the alert rules loaded;
-    its base URL. Stopped (and its storage gone with tmp_path) after the test."""
+@contextlib.contextmanager
+def running_prometheus(tmp_path: Path, target_port: int) -> Iterator[str]:
+    """Debian's Prometheus on loopback scraping ``127.0.0.1:target_port`` every second, with the
+    alert rules loaded; its base URL. Stopped on exit (its storage is in ``tmp_path``)."""
     config = tmp_path / "prometheus.yml"
     config.write_text(
         json.dumps(  # JSON is YAML
@@ -71,7 +72,7 @@ def prometheus(tmp_path: Path, metrics_listener: MetricsServer) -> Iterator[str]
                 "scrape_configs": [
                     {
                         "job_name": "autopilot",
-                        "static_configs": [{"targets": [f"127.0.0.1:{metrics_listener.port}"]}],
+                        "static_configs": [{"targets": [f"127.0.0.1:{target_port}"]}],
                     }
                 ],
             }
@@ -83,7 +84,7 @@ def prometheus(tmp_path: Path, metrics_listener: MetricsServer) -> Iterator[str]
         [
             PROMETHEUS,
             f"--config.file={config}",
-            f"--storage.tsdb.path={tmp_path / 'data'}",
+            f"--storage.tsdb.path={tmp_path / 'prometheus-data'}",
             f"--web.listen-address=127.0.0.1:{port}",
         ],
         stdout=log,
@@ -94,6 +95,26 @@ def prometheus(tmp_path: Path, metrics_listener: MetricsServer) -> Iterator[str]
     finally:
         stop_process(process, 10)
         log.close()
+
+
+def wait_for_scrape(prometheus: str) -> None:
+    """Until Prometheus has scraped its one target and found it up."""
+
+    def up() -> bool:
+        try:
+            result = api(prometheus, "query", query="up")["result"]
+        except OSError:
+            return False  # not listening yet
+        return [r["value"][1] for r in result] == ["1"]
+
+    wait_until(up, 30, "Prometheus to scrape its target with up = 1", poll_s=0.25)
+
+
+@pytest.fixture
+def prometheus(tmp_path: Path, metrics_listener: MetricsServer) -> Iterator[str]:
+    """Prometheus scraping ``metrics_listener``."""
+    with running_prometheus(tmp_path, metrics_listener.port) as url:
+        yield url
 
 
 def api(base: str, path: str, **query: str) -> Any:
@@ -107,14 +128,7 @@ def api(base: str, path: str, **query: str) -> Any:
 
 @needs_prometheus
 def test_prometheus_scrapes_the_server(prometheus: str) -> None:
-    def up() -> bool:
-        try:
-            result = api(prometheus, "query", query="up")["result"]
-        except OSError:
-            return False  # not listening yet
-        return [r["value"][1] for r in result] == ["1"]
-
-    wait_until(up, 30, "Prometheus to scrape the server with up = 1", poll_s=0.25)
+    wait_for_scrape(prometheus)
     peers = api(prometheus, "query", query="autopilot_peers")["result"]
     assert {p["metric"]["role"] for p in peers} == {"vehicle", "relay", "client"}
     assert all(p["metric"]["job"] == "autopilot" for p in peers)

@@ -1,0 +1,77 @@
+"""``autopilot demo --metrics-port``: the demo's server serves ``/metrics``, which parses, counts
+the demo's own relay and vehicle, and Debian's Prometheus scrapes (``up`` = 1,
+``autopilot_peers`` present). Everything on loopback."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+import pytest
+from prometheus_client.parser import text_string_to_metric_families
+
+from app.supervise import free_port
+from tests.helpers.processes import descendants, wait_all_gone
+from tests.helpers.waiting import wait_until
+from tests.server.test_prometheus import PROMETHEUS, api, running_prometheus, wait_for_scrape
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+
+def peers(url: str) -> dict[str, float]:
+    """``autopilot_peers`` by role from ``/metrics`` at ``url``; empty while nothing listens."""
+    try:
+        with urllib.request.urlopen(url, timeout=5) as response:
+            text = response.read().decode()
+    except OSError:
+        return {}
+    return {
+        s.labels["role"]: s.value
+        for family in text_string_to_metric_families(text)
+        if family.name == "autopilot_peers"
+        for s in family.samples
+    }
+
+
+@pytest.mark.skipif(not Path(PROMETHEUS).exists(), reason="Debian's prometheus is not installed")
+def test_demo_metrics_count_its_children_and_prometheus_scrapes_them(tmp_path: Path) -> None:
+    port, metrics_port = free_port(), free_port()
+    url = f"http://127.0.0.1:{metrics_port}/metrics"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "demo", "--port", str(port)]
+        + ["--metrics-port", str(metrics_port), "--state-dir", str(tmp_path)],
+        env={k: v for k, v in os.environ.items() if not k.startswith("AUTOPILOT_")},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_until(
+            lambda: peers(url) == {"vehicle": 1, "relay": 1, "client": 0},
+            60,
+            "the demo's relay and vehicle in its server's metrics",
+            poll_s=0.25,
+        )
+        with running_prometheus(tmp_path, metrics_port) as prometheus:
+            wait_for_scrape(prometheus)
+            result = api(prometheus, "query", query="autopilot_peers")["result"]
+            assert {r["metric"]["role"]: r["value"][1] for r in result} == {
+                "vehicle": "1",
+                "relay": "1",
+                "client": "0",
+            }
+        children = descendants(process.pid)
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=60) == 0
+        assert wait_all_gone(children) == []
+    finally:
+        if process.poll() is None:
+            for pid in descendants(process.pid):
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            process.kill()
+            process.wait(timeout=30)
