@@ -17,6 +17,7 @@ from app.arguments import add_vehicle_profile, non_negative_number, positive_num
 from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
+from vehicle_agent import recorder
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -127,6 +128,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PEM",
         help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
     )
+    recorder.add_arguments(parser)
 
 
 def tls_context(ca_file: Path | None) -> ssl.SSLContext:
@@ -187,13 +189,22 @@ async def _main(args: argparse.Namespace) -> int:
         token=args.token,
         tls=tls_context(args.ca_file),
     )
+    record = recorder.settings_from(args, args.room)
+    flight = None if record is None else recorder.FlightRecorder(record)
     agent = Agent(config, video, turtle, events)
+    camera = None
+    if flight is not None:
+        events.listeners.append(flight.on_event)
+        camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
     task = asyncio.create_task(agent.run())
     on_stop_signals(task.cancel)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task
     finally:
+        if flight is not None and camera is not None:
+            camera.cancel()
+            await flight.close()
         events.close()
     log.info("vehicle agent stopped")
     return 0
