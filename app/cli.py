@@ -19,6 +19,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "vehicle": ("vehicle_agent.cli", "run the Python vehicle agent (aiortc)"),
     "demo": ("app.tools.demo", "run the whole system on an embedded default"),
     "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),
+    "replay": (
+        "app.tools.replay",
+        "replay a flight recording through the relay's vision and compare its goals",
+    ),
     "bench": ("app.tools.bench.cli", "measure the running system and write a report"),
     "token": (
         "app.tools.token_command",

@@ -125,6 +125,10 @@ class Agent:
             channels.Error: self._on_peer_error,
         }
 
+    def camera_tap(self) -> MediaStreamTrack:
+        """Another reader of the camera, beside the relay's (the flight recorder's)."""
+        return self._media.subscribe(self.video, buffered=False)
+
     @property
     def link(self) -> RelayLink | None:
         """The current connection to the relay, if any."""
@@ -392,7 +396,14 @@ class Agent:
             return
         self._last_goal_at = time.monotonic()
         self.events.emit(
-            "goal", seq=goal.seq, frame=goal.frame, x=goal.x, y=goal.y, w=goal.w, h=goal.h
+            "goal",
+            seq=goal.seq,
+            op=goal.op,
+            frame=goal.frame,
+            x=goal.x,
+            y=goal.y,
+            w=goal.w,
+            h=goal.h,
         )
         self._publish(
             self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))

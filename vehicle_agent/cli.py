@@ -18,6 +18,7 @@ from app.metrics import add_metrics_arguments
 from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
+from vehicle_agent import recorder
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -129,6 +130,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PEM",
         help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
     )
+    recorder.add_arguments(parser)
     add_metrics_arguments(parser)
 
 
@@ -190,7 +192,13 @@ async def _main(args: argparse.Namespace) -> int:
         token=args.token,
         tls=tls_context(args.ca_file),
     )
+    record = recorder.settings_from(args, args.room)
+    flight = None if record is None else recorder.FlightRecorder(record)
     agent = Agent(config, video, turtle, events)
+    camera = None
+    if flight is not None:
+        events.listeners.append(flight.on_event)
+        camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
     metrics = serve_agent_metrics(args, events)
     task = asyncio.create_task(agent.run())
     on_stop_signals(task.cancel)
@@ -198,6 +206,9 @@ async def _main(args: argparse.Namespace) -> int:
         with contextlib.suppress(asyncio.CancelledError):
             await task
     finally:
+        if flight is not None and camera is not None:
+            camera.cancel()
+            await flight.close()
         events.close()
         if metrics is not None:
             metrics.close()

@@ -6,9 +6,11 @@ processes of one machine):
 * ``{"ev": "frame_sent", "frame", "face_x", "face_y", "jump", "t"}`` -- synthetic frame handed
   to the encoder, with the true face centre in pixels; ``jump`` is true on the first frame after
   the face leapt across the frame (``SweepPath.jump_times``);
-* ``{"ev": "goal", "seq", "frame", "x", "y", "w", "h", "t"}`` -- goal received and applied;
+* ``{"ev": "goal", "seq", "op", "frame", "x", "y", "w", "h", "t"}`` -- goal received and applied;
 * ``{"ev": "goal_dropped", "seq", "frame", "why", "t"}`` -- goal refused by the latest-wins
-  rule (``why``: ``old`` seq or ``stale``);
+  rule (``why``: ``old`` seq or ``stale``) or ignored while the operator drives (``manual``);
+* ``{"ev": "mode", "mode", "operator", "t"}`` -- the operator took the wheel or handed it back;
+* ``{"ev": "drive", "seq", "applied", "moving", "t"}`` -- an operator's drive command;
 * ``{"ev": "twist", "seq", "frame", "linear", "angular", "t"}`` -- Twist published
   (``seq``/``frame`` of the goal that caused it, null for a stop);
 * ``{"ev": "pose", "x", "y", "theta", "t"}`` -- pose sent as telemetry;

@@ -85,17 +85,16 @@ def read_frame_tag(rgb: Image) -> int | None:
     b = tag_block_size(rgb.shape[1])
     if b < 2:
         return None
-    luma = rgb[0:b, : (TAG_FIRST_BIT_BLOCK + TAG_BITS) * b].astype(np.float32).mean(axis=2)
+    blocks = TAG_FIRST_BIT_BLOCK + TAG_BITS
     lo, hi = b // 4, b // 4 + max(1, b // 2)
-
-    def bit(i: int) -> bool:
-        return bool(luma[lo:hi, i * b + lo : i * b + hi].mean() >= 128)
-
-    if not bit(0) or bit(1):
+    # The inner square of every block at once (rows, block, columns, channel): the mean of each.
+    inner = rgb[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
+    bits = inner.mean(axis=(0, 2, 3)) >= 128
+    if not bits[0] or bits[1]:
         return None
     value = 0
-    for i in range(TAG_BITS):
-        value = (value << 1) | int(bit(TAG_FIRST_BIT_BLOCK + i))
+    for bit in bits[TAG_FIRST_BIT_BLOCK:]:
+        value = (value << 1) | int(bit)
     return value
 
 

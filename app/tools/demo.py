@@ -18,6 +18,7 @@ import secrets
 import signal
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +35,7 @@ from app.server.serve import ANY_ADDRESS, RunningServer, reachable_hosts, start_
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from app.tools.browser import BrowserNotFound, chromium_path
 from app.tools.relay_service import TOKEN_ENV
+from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
 
 log = logging.getLogger(__name__)
@@ -70,6 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " two faces drifting, to try the target lock (two-faces)",
     )
     tls.add_arguments(parser)
+    recorder.add_arguments(parser)
     # The server's metrics (the relay's and the agent's are each their own process's).
     add_metrics_arguments(parser)
 
@@ -92,9 +95,11 @@ def children_for(
     secret: str | None = None,
     ca_file: Path | None = None,
     video: str = DEMO_VIDEOS[0],
+    vehicle_args: Sequence[str] = (),
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
-    with a token for its role in ``room`` when there is a ``secret``."""
+    with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the
+    agent as they are (the flight recorder's options)."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
     common = ["--server", base_url, "--room", room]
@@ -136,6 +141,7 @@ def children_for(
                 video,
                 "--rosbridge",
                 rosbridge,
+                *vehicle_args,
             ],
             token_env("vehicle"),
         ),
@@ -248,7 +254,15 @@ async def _main(
     stop = asyncio.Event()
     on_stop_signals(stop.set)
     ca_file = files.ca_file if files is not None else None
-    children = children_for(base, args.room, args.profile, settings.secret, ca_file, args.video)
+    children = children_for(
+        base,
+        args.room,
+        args.profile,
+        settings.secret,
+        ca_file,
+        args.video,
+        recorder.arguments_of(args),
+    )
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
     token = None
     if settings.secret is not None:

@@ -1,5 +1,5 @@
 """``autopilot demo`` as a user runs it: it starts, prints the client URL, piloting works from
-the client page, and SIGTERM ends every process it started.
+the client page, SIGTERM ends every process it started, and its flight recording replays.
 
 Run inside the private network namespace: ``scripts/in-netns python -m pytest tests/test_demo.py``.
 """
@@ -22,6 +22,7 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from queue import Empty, Queue
+from typing import Any
 
 import pytest
 from playwright.sync_api import sync_playwright
@@ -31,6 +32,7 @@ from app.tools.browser import launch_options
 from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
 from vehicle_agent import cli as agent_cli
+from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
@@ -50,6 +52,8 @@ def turtle_theta(base: str, token: str, context: ssl.SSLContext | None = None) -
 # On loopback the demo serves plain HTTP; bound to every address it serves HTTPS with its own
 # local CA (kept in --state-dir), so that the URLs it prints work from another machine.
 SETUPS = {"loopback": [], "any-address": ["--host", "0.0.0.0"]}
+# How long the client keeps piloting once the turtle turned, for the recording.
+RECORDED_PILOTING_S = 3.0
 
 
 @pytest.fixture(params=list(SETUPS))
@@ -59,7 +63,8 @@ def demo(
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    extra = [*SETUPS[request.param], "--state-dir", str(tmp_path)]
+    # Every demo run is recorded (the flight recorder), and the test replays the recording.
+    extra = [*SETUPS[request.param], "--state-dir", str(tmp_path), "--record", str(tmp_path)]
     process = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "demo", "--port", str(port), *extra],
         cwd=REPO,
@@ -151,6 +156,7 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
             while abs(math.remainder(turtle_theta(base, token, context) - before, math.tau)) < 0.3:
                 assert time.monotonic() - clicked < 30, "the turtle did not turn after Start"
                 time.sleep(0.1)
+            time.sleep(RECORDED_PILOTING_S)
             (REPO / "artifacts").mkdir(exist_ok=True)
             page.screenshot(path=str(REPO / "artifacts" / f"demo-client-{base.split(':')[0]}.png"))
         finally:
@@ -162,6 +168,31 @@ def test_demo_runs_pilots_and_ends_every_child_on_sigterm(
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=60) == 0
     assert wait_all_gone(children) == []
+    check_recording(sorted(state_dir.glob("*.mcap")))
+
+
+def check_recording(files: list[Path]) -> None:
+    """The demo's flight recording holds the run, and replaying it through the relay's vision
+    gives the goals the relay sent."""
+    assert len(files) == 1, files
+
+    def replay(*options: str) -> dict[str, Any]:
+        argv = [sys.executable, "-m", "app.cli", "replay", *options, "--json", *map(str, files)]
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stdout + done.stderr
+        result: dict[str, Any] = json.loads(done.stdout.splitlines()[-1])
+        return result
+
+    channels = replay("--summary")["channels"]
+    counts = {topic: entry["messages"] for topic, entry in channels.items()}
+    # Images at the recording's 10 per second while the turtle turned and then for a while.
+    assert counts[IMAGE_TOPIC] >= 10 * RECORDED_PILOTING_S, counts
+    for kind in ("goal", "twist", "pose"):
+        assert counts[EVENT_TOPICS[kind]] > 0, counts
+    assert counts[EVENT_TOPICS["link"]] >= 2, counts  # offered, up (and down at the end)
+    replayed = replay()
+    assert replayed["goals_compared"] >= 10, replayed
+    assert replayed["agreement_pct"] == 100.0, replayed
 
 
 @pytest.mark.parametrize(

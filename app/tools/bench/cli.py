@@ -43,6 +43,8 @@ MEMORY_FLAGS = ["--enable-precise-memory-info", "--js-flags=--expose-gc"]
 
 QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, "frames": 13}
 # The follow run spans three cycles of the synthetic face's path (20 s each).
+# bench --recorder: seconds per run (with and without recording).
+RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
 FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "lock_s": 60.0, "frames": 43}
 
 
@@ -84,6 +86,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="measure the fleet instead: signaling across 2 instances on Redis, failover",
     )
     parser.add_argument(
+        "--recorder",
+        action="store_true",
+        help="measure the flight recorder's cost instead: the agent's CPU and latency without"
+        " and with --record",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -109,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
         log.warning("no private network namespace here: WebRTC runs on the host's interfaces")
+    if args.recorder:
+        return asyncio.run(_recorder(args))
     obj = asyncio.run(_bench(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
@@ -163,11 +173,39 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv += ["--seconds", str(args.seconds)]
     if args.json:
         argv.append("--json")
+    if args.recorder:
+        argv.append("--recorder")
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
     sys.stderr.flush()
     os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
+
+
+async def _recorder(args: argparse.Namespace) -> int:
+    """The flight recorder's cost: print the figures, write recorder.md; 1 if not measured."""
+    from playwright.async_api import async_playwright
+
+    from app.server.serve import start_in_thread
+    from app.tools.bench import recording
+    from app.tools.browser import launch_options
+
+    seconds = args.seconds or (RECORDER_QUICK_S if args.quick else RECORDER_FULL_S)
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                figures = await recording.run(browser, server.url, seconds, args.fps)
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    path = recording.write_report(args.out, figures)
+    log.info("recorder report: %s", path)
+    if args.json:
+        sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
+    return 1 if figures["problems"] or "agent_cpu_increase_pct" not in figures else 0
 
 
 async def _bench(args: argparse.Namespace) -> dict[str, Any]:

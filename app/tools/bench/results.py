@@ -119,6 +119,8 @@ class ProfileRun:
     problems: dict[str, str] = field(default_factory=dict)
     # Follow profile: (time, metres off the standoff from the true target point) per pose.
     position_error: list[tuple[float, float]] = field(default_factory=list)
+    # Cores the agent process used over the window (its CPU time / the window's length).
+    agent_cores: float | None = None
 
     def position_error_summary(self) -> Summary | None:
         """Distribution of the follow profile's position error after the settle time."""

@@ -28,6 +28,7 @@ from playwright.async_api import TimeoutError as PlaywrightTimeout
 from app.protocol.constants import VIDEO_FPS, VIDEO_SIZE
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
+from app.tools.bench.cpu import cores_used, tree_cpu_s
 from app.tools.bench.results import MemorySample, ProfileRun
 from app.tools.bench.stats import (
     FaceSample,
@@ -88,6 +89,8 @@ class StackOptions:
     # The agent's --video, and a name for the run (room and file names) when not the profile's.
     video: str = "synthetic"
     name: str | None = None
+    # More options for the agent (the flight recorder's, say).
+    agent_args: tuple[str, ...] = ()
 
 
 class StackError(RuntimeError):
@@ -147,7 +150,12 @@ async def run_profile(
         if prepare is not None:
             await prepare(relay, client)
         log.info("%s run: goals flowing, measuring for %.0f s", name, options.duration_s)
+        cpu_before = tree_cpu_s({"agent": [agent.pid]})
         run.window = await _measure(relay, options, run)
+        cpu = cores_used(
+            cpu_before, tree_cpu_s({"agent": [agent.pid]}), run.window[1] - run.window[0]
+        )
+        run.agent_cores = cpu["agent"]
         await client.get_by_role("button", name="Stop Piloting").click()
     _read_events(run, events_path, options)
     return run
@@ -235,6 +243,7 @@ async def _start_agent(
     ]  # fmt: skip
     if options.sweep_s is not None:
         command += ["--sweep-s", f"{options.sweep_s:g}"]
+    command += options.agent_args
     log.debug("starting the agent: %s", " ".join(command))
     with log_path.open("wb") as out:
         return await asyncio.create_subprocess_exec(

@@ -1,0 +1,224 @@
+"""``autopilot replay``: a flight recording as a regression test of the vision path.
+
+The recorded camera images (``--record``, vehicle_agent/recorder.py) go through the relay's own
+OpenCV.js analyzer in headless Chromium (the parity page's worker path: ``autopilot parity``),
+and the goal each one yields is compared with the goal the relay sent for the same frame, paired
+by frame tag. ``--summary`` only lists what a recording holds.
+
+Agreement rule: the replayed goal exists and lies within ``AGREE_FRACTION`` of the frame's width
+of the recorded one. Not pixel equality: the relay analysed the decoded VP8 video, the replay the
+recorded JPEG of the frame before encoding, and between full scans the relay searched a window
+around the last target; the same target's goal moves by a few pixels, another target's by far
+more. Goals the relay sent for frames that were not recorded (images are kept at ``--record-fps``,
+goals come at the video's rate) are not compared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import math
+import sys
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+
+from app.arguments import add_relay_profile
+from app.protocol.constants import Profile
+from app.tools.parity import open_harness
+from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
+
+# A replayed goal agrees when within this fraction of the frame's width of the recorded one.
+AGREE_FRACTION = 0.05
+DEFAULT_MIN_AGREEMENT = 99.0
+# Disagreements listed in the report (the count is always complete).
+LISTED = 10
+
+
+@dataclass
+class Recording:
+    """What replay needs from one or more MCAP files: images and goals by frame tag."""
+
+    images: dict[int, bytes] = field(default_factory=dict)
+    goals: dict[int, dict[str, Any]] = field(default_factory=dict)
+    untagged_images: int = 0
+
+
+@dataclass
+class Replay:
+    """The comparison: counts, agreement and the first disagreements."""
+
+    frames: int
+    goals_recorded: int
+    goals_compared: int = 0
+    goals_replayed: int = 0
+    agreed: int = 0
+    disagreements: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def agreement_pct(self) -> float:
+        """Share of compared goals that agree (100 when none could be compared)."""
+        return 100.0 * self.agreed / self.goals_compared if self.goals_compared else 100.0
+
+    def as_json(self) -> dict[str, Any]:
+        """The last line of ``--json``."""
+        return {**asdict(self), "agreement_pct": round(self.agreement_pct, 2)}
+
+
+def messages(paths: Sequence[Path]) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """Every message of the files in log-time order per file: (topic, log time ns, fields)."""
+    for path in paths:
+        with path.open("rb") as stream:
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=True):
+                yield channel.topic, message.log_time, json.loads(message.data)
+
+
+def load(paths: Sequence[Path]) -> Recording:
+    """The recorded images (JPEG bytes) and applied goals, each by frame tag."""
+    recording = Recording()
+    for topic, _, fields in messages(paths):
+        if topic == IMAGE_TOPIC:
+            if fields.get("frame") is None:
+                recording.untagged_images += 1
+            else:
+                recording.images[fields["frame"]] = base64.b64decode(fields["data"])
+        elif topic == EVENT_TOPICS["goal"] and fields.get("frame") is not None:
+            recording.goals[fields["frame"]] = fields
+    return recording
+
+
+def compare(recording: Recording, analyse: Any, op: str | None = None) -> Replay:
+    """Replay every recorded goal whose frame was recorded; ``analyse(jpeg, op)`` returns the
+    replayed target ``{x, y}`` or None; ``op`` overrides the recorded operation."""
+    replay = Replay(frames=len(recording.images), goals_recorded=len(recording.goals))
+    for frame, goal in sorted(recording.goals.items()):
+        jpeg = recording.images.get(frame)
+        if jpeg is None:
+            continue
+        replay.goals_compared += 1
+        target = analyse(jpeg, op or goal["op"])
+        distance = None
+        if target is not None:
+            replay.goals_replayed += 1
+            distance = math.hypot(target["x"] - goal["x"], target["y"] - goal["y"])
+            if distance <= AGREE_FRACTION * goal["w"]:
+                replay.agreed += 1
+                continue
+        if len(replay.disagreements) < LISTED:
+            replay.disagreements.append(
+                {
+                    "frame": frame,
+                    "op": op or goal["op"],
+                    "recorded": [goal["x"], goal["y"]],
+                    "replayed": None if target is None else [target["x"], target["y"]],
+                    "distance_px": None if distance is None else round(distance, 1),
+                }
+            )
+    return replay
+
+
+def summary(paths: Sequence[Path]) -> dict[str, Any]:
+    """Channels (topic, schema, messages), duration and size of the files, from their
+    summary sections."""
+    channels: dict[str, dict[str, Any]] = {}
+    start, end, size = None, None, 0
+    for path in paths:
+        size += path.stat().st_size
+        with path.open("rb") as stream:
+            found = make_reader(stream).get_summary()
+        if found is None or found.statistics is None:
+            raise McapError(f"{path} has no summary (a recording cut off before it was finished)")
+        stats = found.statistics
+        for channel_id, channel in found.channels.items():
+            entry = channels.setdefault(
+                channel.topic,
+                {"schema": found.schemas[channel.schema_id].name, "messages": 0},
+            )
+            entry["messages"] += stats.channel_message_counts.get(channel_id, 0)
+        if stats.message_count:
+            start = min(start or stats.message_start_time, stats.message_start_time)
+            end = max(end or stats.message_end_time, stats.message_end_time)
+    duration = 0.0 if start is None or end is None else (end - start) / 1e9
+    return {
+        "files": len(paths),
+        "bytes": size,
+        "duration_s": round(duration, 3),
+        "channels": channels,
+    }
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``autopilot replay``."""
+    parser.add_argument(
+        "files", nargs="+", type=Path, metavar="FILE", help="MCAP files of one recording"
+    )
+    parser.add_argument("--op", help="replay with this operation (default: each goal's own)")
+    add_relay_profile(parser, "relay profile the recording was made with")
+    parser.add_argument(
+        "--min-agreement",
+        type=float,
+        default=DEFAULT_MIN_AGREEMENT,
+        metavar="PCT",
+        help=f"exit 1 below this agreement (default {DEFAULT_MIN_AGREEMENT:g} %%)",
+    )
+    parser.add_argument(
+        "--summary", action="store_true", help="list the channels, counts, duration and size"
+    )
+    parser.add_argument("--json", action="store_true", help="end with one JSON line")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Replay (or summarise) the files; 1 below ``--min-agreement``, 2 on unreadable input."""
+    try:
+        if args.summary:
+            return _print_summary(summary(args.files), args.json)
+        recording = load(args.files)
+    except (OSError, McapError, ValueError, KeyError) as exc:
+        sys.stderr.write(f"autopilot replay: cannot read the recording: {exc}\n")
+        return 2
+    profile: Profile = args.profile
+    with open_harness() as harness:
+        known = [operation.id for operation in harness.spec.operations]
+        if args.op is not None and args.op not in known:
+            sys.stderr.write(f"autopilot replay: unknown operation {args.op!r}; known: {known}\n")
+            return 2
+
+        def analyse(jpeg: bytes, op: str) -> dict[str, Any] | None:
+            _, results = harness.run(jpeg, [op], profile)
+            target: dict[str, Any] | None = results[op]["target"]
+            return target
+
+        replay = compare(recording, analyse, args.op)
+    for item in replay.disagreements:
+        sys.stdout.write(
+            f"frame {item['frame']} {item['op']}: recorded {item['recorded']}, "
+            f"replayed {item['replayed']}\n"
+        )
+    sys.stdout.write(
+        f"{replay.frames} frames, {replay.goals_recorded} goals recorded, "
+        f"{replay.goals_compared} on recorded frames, {replay.goals_replayed} replayed: "
+        f"{replay.agreement_pct:.1f} % agree\n"
+    )
+    if recording.untagged_images:
+        sys.stdout.write(
+            f"{recording.untagged_images} images had no frame tag and could not be paired\n"
+        )
+    if args.json:
+        sys.stdout.write(json.dumps(replay.as_json()) + "\n")
+    return 0 if replay.agreement_pct >= args.min_agreement else 1
+
+
+def _print_summary(found: dict[str, Any], as_json: bool) -> int:
+    sys.stdout.write(
+        f"{found['files']} file(s), {found['bytes'] / 1e6:.1f} MB, {found['duration_s']:.1f} s\n"
+    )
+    for topic, entry in sorted(found["channels"].items()):
+        sys.stdout.write(f"  {topic:32} {entry['schema']:28} {entry['messages']:>8}\n")
+    if as_json:
+        sys.stdout.write(json.dumps(found) + "\n")
+    return 0

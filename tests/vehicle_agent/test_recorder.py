@@ -1,0 +1,148 @@
+"""The flight recorder's files, read back with the ``mcap`` reader: every channel with its
+Foxglove-readable schema, the counts that went in, log times that never go back, JPEG images
+that decode at the camera's size with their frame tags, and files that roll over and are pruned.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import base64
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from vehicle_agent import cli as agent_cli
+from vehicle_agent import recorder
+from vehicle_agent.events import EventLog
+from vehicle_agent.recorder import (
+    EVENT_TOPICS,
+    IMAGE_SCHEMA,
+    IMAGE_TOPIC,
+    FlightRecorder,
+    RecordSettings,
+)
+from vehicle_agent.video import SyntheticVideo, read_frame_tag
+
+FPS = 30.0
+RECORD_FPS = 10.0
+
+
+def _read(path: Path) -> tuple[dict[str, tuple[str, str, str]], list[tuple[str, int, Any]]]:
+    """Channels (topic → schema name, schema encoding, message encoding) and messages."""
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None
+        channels = {
+            channel.topic: (
+                summary.schemas[channel.schema_id].name,
+                summary.schemas[channel.schema_id].encoding,
+                channel.message_encoding,
+            )
+            for channel in summary.channels.values()
+        }
+        messages = [
+            (channel.topic, message.log_time, json.loads(message.data))
+            for _, channel, message in reader.iter_messages()
+        ]
+    return channels, messages
+
+
+async def _record(settings: RecordSettings, seconds: float) -> FlightRecorder:
+    """Record a synthetic camera and a few of each event for ``seconds``."""
+    recorder = FlightRecorder(settings)
+    events = EventLog()
+    events.listeners.append(recorder.on_event)
+    video = SyntheticVideo(fps=FPS)
+    camera = asyncio.create_task(recorder.record_video(video))
+    for seq in range(1, 6):
+        events.emit("goal", seq=seq, op="face", frame=seq, x=100.0, y=200.0, w=640, h=480)
+        events.emit("twist", seq=seq, frame=seq, linear=0.5, angular=-0.25)
+        events.emit("pose", x=5.5, y=5.5, theta=1.57, sent=True)
+        events.emit("frame_sent", frame=seq, face_x=1.0, face_y=2.0, jump=False)  # not recorded
+    events.emit("goal_dropped", seq=3, frame=3, why="old")
+    events.emit("mode", mode="manual", operator="ann")
+    events.emit("drive", seq=1, applied=True, moving=True)
+    events.emit("link", state="up", relay="relay", local_candidates=["host"], selected="host")
+    await asyncio.sleep(seconds)
+    camera.cancel()
+    video.stop()
+    await recorder.close()
+    return recorder
+
+
+def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
+    tmp_path: Path,
+) -> None:
+    recorder = asyncio.run(_record(RecordSettings(tmp_path, room="lab", fps=RECORD_FPS), 1.5))
+    files = sorted(tmp_path.glob("autopilot-lab-*.mcap"))
+    assert files == recorder.files and len(files) == 1
+    channels, messages = _read(files[0])
+
+    assert channels[IMAGE_TOPIC] == (IMAGE_SCHEMA, "jsonschema", "json")
+    assert set(channels) == {IMAGE_TOPIC, *EVENT_TOPICS.values()}
+    assert all(encodings == "jsonschema" for _, encodings, _ in channels.values())
+
+    counts: dict[str, int] = {}
+    for topic, _, _ in messages:
+        counts[topic] = counts.get(topic, 0) + 1
+    assert counts[EVENT_TOPICS["goal"]] == 5
+    assert counts[EVENT_TOPICS["twist"]] == 5
+    assert counts[EVENT_TOPICS["pose"]] == 5
+    for kind in ("goal_dropped", "mode", "drive", "link"):
+        assert counts[EVENT_TOPICS[kind]] == 1, kind
+    # 1.5 s of a 30 fps camera at 10 images a second (fewer if a loaded machine delays frames).
+    assert 5 <= counts[IMAGE_TOPIC] <= 16, counts
+    assert recorder.images == counts[IMAGE_TOPIC] and recorder.dropped == 0
+
+    times = [log_time for _, log_time, _ in messages]
+    assert times == sorted(times)
+
+    goal = next(fields for topic, _, fields in messages if topic == EVENT_TOPICS["goal"])
+    assert goal == {"seq": 1, "op": "face", "frame": 1, "x": 100.0, "y": 200.0, "w": 640, "h": 480}
+    images = [fields for topic, _, fields in messages if topic == IMAGE_TOPIC]
+    tags = []
+    for image in images:
+        assert image["format"] == "jpeg"
+        jpeg = np.frombuffer(base64.b64decode(image["data"]), np.uint8)
+        bgr = cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
+        assert bgr is not None and bgr.shape == (480, 640, 3)
+        # The tag survives the JPEG: the image is the frame its "frame" field names.
+        rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), np.uint8)
+        assert read_frame_tag(rgb) == image["frame"]
+        tags.append(image["frame"])
+    # Never two camera frames in a row, and no more than 10 images a second on average.
+    assert min(b - a for a, b in zip(tags, tags[1:], strict=False)) >= 2, tags
+    stamps = [t for topic, t, _ in messages if topic == IMAGE_TOPIC]
+    assert (stamps[-1] - stamps[0]) / (len(stamps) - 1) >= 0.095e9, stamps
+
+
+def test_files_roll_over_by_size_and_only_the_newest_are_kept(tmp_path: Path) -> None:
+    # A few images fill 0.05 MB: a new file every few, and three kept.
+    settings = RecordSettings(tmp_path, room="lab", fps=RECORD_FPS, max_mb=0.05, max_files=3)
+    recorder = asyncio.run(_record(settings, 2.0))
+    kept = sorted(tmp_path.glob("*.mcap"))
+    assert len(recorder.files) == 3 and kept == sorted(recorder.files)
+    for path in kept:
+        channels, messages = _read(path)  # each file is complete on its own
+        assert IMAGE_TOPIC in channels and messages
+
+
+def test_the_options_are_checked_and_the_demo_passes_them_on_unchanged(tmp_path: Path) -> None:
+    vehicle = argparse.ArgumentParser()
+    agent_cli.add_arguments(vehicle)
+    with pytest.raises(SystemExit):
+        vehicle.parse_args(["--record", "x", "--record-quality", "0"])
+    demo = argparse.ArgumentParser()
+    recorder.add_arguments(demo)
+    asked = demo.parse_args(["--record", str(tmp_path), "--record-fps", "5", "--record-keep", "2"])
+    passed = vehicle.parse_args(recorder.arguments_of(asked))
+    assert recorder.settings_from(passed, "r") == recorder.settings_from(asked, "r")
+    assert recorder.settings_from(passed, "r") == RecordSettings(tmp_path, "r", 5.0, max_files=2)
+    assert recorder.arguments_of(demo.parse_args([])) == []

@@ -1,0 +1,376 @@
+"""The flight recorder: what the vehicle saw, was told and did, in MCAP files Foxglove opens.
+
+``autopilot vehicle --record DIR`` writes ``DIR/autopilot-<room>-<UTC time>.mcap``: the camera as
+``foxglove.CompressedImage`` (JPEG, each with its frame tag), the turtle's pose, every Twist sent,
+every goal received (seq, op, frame tag) or dropped, mode changes, drive commands and link events.
+
+Why ``mcap`` with JSON Schema rather than ``foxglove-sdk`` with protobuf: the agent already has
+every message as a JSON-able dict (its event log), the schemas read like the wire protocol's, and
+Foxglove and Lichtblick read JSON-schema channels natively; the base64 of the images costs a
+third more bytes before compression, and zstd chunk compression wins most of it back.
+
+Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
+converts, JPEG-encodes and writes. A full queue drops the item (counted, logged once) rather than
+slow the loop. Log times are one clock (``time.time_ns()``), taken when the event happened. Files
+roll over by size and age, and only the newest ``max_files`` are kept, so a day's run cannot fill
+the disk unnoticed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import base64
+import json
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import IO, Any, Final
+
+import av
+import cv2
+import numpy as np
+from aiortc import MediaStreamTrack
+from mcap.writer import CompressionType, Writer
+
+from app.arguments import positive_number
+from vehicle_agent.events import Event
+from vehicle_agent.video import read_frame_tag
+
+log = logging.getLogger(__name__)
+
+IMAGE_TOPIC: Final = "/camera/image/compressed"
+# Event-log kinds (vehicle_agent/events.py) and the topic each is recorded on.
+EVENT_TOPICS: Final = {
+    "pose": "/turtle1/pose",
+    "twist": "/turtle1/cmd_vel",
+    "goal": "/autopilot/goal",
+    "goal_dropped": "/autopilot/goal_dropped",
+    "mode": "/autopilot/mode",
+    "drive": "/autopilot/drive",
+    "link": "/autopilot/link",
+}
+
+_STAMP = {
+    "type": "object",
+    "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
+}
+# foxglove.CompressedImage as Foxglove's JSON schema has it, plus the frame tag.
+IMAGE_SCHEMA: Final = "foxglove.CompressedImage"
+_IMAGE_PROPERTIES: Final[dict[str, Any]] = {
+    "timestamp": _STAMP,
+    "frame_id": {"type": "string"},
+    "data": {"type": "string", "contentEncoding": "base64"},
+    "format": {"type": "string"},
+    "frame": {"type": ["integer", "null"], "description": "frame tag (docs/contracts.md)"},
+}
+_NUMBER = {"type": "number"}
+_MAYBE_INT = {"type": ["integer", "null"]}
+_MAYBE_STR = {"type": ["string", "null"]}
+# One schema per event kind: the fields the event log writes (``t``: monotonic seconds).
+_EVENT_SCHEMAS: Final[dict[str, tuple[str, dict[str, Any]]]] = {
+    "pose": ("turtlesim.Pose", {"x": _NUMBER, "y": _NUMBER, "theta": _NUMBER}),
+    "twist": (
+        "autopilot.Twist",
+        {"linear": _NUMBER, "angular": _NUMBER, "seq": _MAYBE_INT, "frame": _MAYBE_INT},
+    ),
+    "goal": (
+        "autopilot.Goal",
+        {
+            "seq": {"type": "integer"},
+            "op": {"type": "string"},
+            "frame": _MAYBE_INT,
+            "x": _NUMBER,
+            "y": _NUMBER,
+            "w": _NUMBER,
+            "h": _NUMBER,
+        },
+    ),
+    "goal_dropped": (
+        "autopilot.GoalDropped",
+        {"seq": {"type": "integer"}, "frame": _MAYBE_INT, "why": {"type": "string"}},
+    ),
+    "mode": ("autopilot.Mode", {"mode": {"type": "string"}, "operator": _MAYBE_STR}),
+    "drive": (
+        "autopilot.Drive",
+        {"seq": {"type": "integer"}, "applied": {"type": "boolean"}, "moving": {"type": "boolean"}},
+    ),
+    "link": (
+        "autopilot.Link",
+        {
+            "state": {"type": "string"},
+            "relay": {"type": "string"},
+            "reason": _MAYBE_STR,
+            "selected": _MAYBE_STR,
+        },
+    ),
+}
+
+# Items waiting for the writer thread; beyond this the recorder drops rather than queue memory.
+QUEUE_LIMIT: Final = 512
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    """How to record: images per second, JPEG quality, when to roll over, how many to keep."""
+
+    folder: Path
+    room: str = "default"
+    fps: float = 10.0
+    jpeg_quality: int = 80
+    max_mb: float = 100.0
+    max_minutes: float = 60.0
+    max_files: int = 20
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The recording options (``autopilot vehicle``; ``autopilot demo`` passes them on)."""
+    defaults = RecordSettings(Path())
+    group = parser.add_argument_group("flight recorder")
+    group.add_argument(
+        "--record",
+        type=Path,
+        metavar="DIR",
+        help="record camera, pose, goals, Twists, mode and link events as MCAP files in DIR",
+    )
+    group.add_argument(
+        "--record-fps",
+        type=positive_number,
+        default=defaults.fps,
+        help=f"camera images recorded per second (default {defaults.fps:g})",
+    )
+    group.add_argument(
+        "--record-quality",
+        type=_quality,
+        default=defaults.jpeg_quality,
+        help=f"JPEG quality of the images, 1-100 (default {defaults.jpeg_quality})",
+    )
+    group.add_argument(
+        "--record-max-mb",
+        type=positive_number,
+        default=defaults.max_mb,
+        help=f"start a new file past this size (default {defaults.max_mb:g} MB)",
+    )
+    group.add_argument(
+        "--record-max-minutes",
+        type=positive_number,
+        default=defaults.max_minutes,
+        help=f"start a new file past this age (default {defaults.max_minutes:g} min)",
+    )
+    group.add_argument(
+        "--record-keep",
+        type=int,
+        default=defaults.max_files,
+        metavar="N",
+        help=f"keep only the newest N files, deleting older ones (default {defaults.max_files})",
+    )
+
+
+def settings_from(args: argparse.Namespace, room: str) -> RecordSettings | None:
+    """The recording asked for on the command line, or None without ``--record``."""
+    if args.record is None:
+        return None
+    return RecordSettings(
+        folder=args.record,
+        room=room,
+        fps=args.record_fps,
+        jpeg_quality=args.record_quality,
+        max_mb=args.record_max_mb,
+        max_minutes=args.record_max_minutes,
+        max_files=max(1, args.record_keep),
+    )
+
+
+def arguments_of(args: argparse.Namespace) -> list[str]:
+    """The recording options of ``args`` as a command line, to pass on (none without
+    ``--record``)."""
+    if args.record is None:
+        return []
+    return [
+        "--record",
+        str(args.record.resolve()),
+        "--record-fps",
+        str(args.record_fps),
+        "--record-quality",
+        str(args.record_quality),
+        "--record-max-mb",
+        str(args.record_max_mb),
+        "--record-max-minutes",
+        str(args.record_max_minutes),
+        "--record-keep",
+        str(args.record_keep),
+    ]
+
+
+def _quality(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"JPEG quality must be 1 to 100, not {text!r}")
+    return value
+
+
+class FlightRecorder:
+    """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
+
+    def __init__(self, settings: RecordSettings) -> None:
+        settings.folder.mkdir(parents=True, exist_ok=True)
+        self.settings = settings
+        self.files: list[Path] = []
+        self.images = 0
+        self.messages = 0
+        self.dropped = 0
+        self._queue: queue.Queue[tuple[str, int, Any] | None] = queue.Queue(QUEUE_LIMIT)
+        self._thread = threading.Thread(target=self._write_all, name="flight-recorder")
+        self._file: IO[bytes] | None = None
+        self._writer: Writer | None = None
+        self._channels: dict[str, int] = {}
+        self._opened_ns = 0
+        self._bytes = 0
+        self._thread.start()
+
+    # --- the agent's side: stamp and queue, never wait --------------------------------------
+
+    def on_event(self, event: Event) -> None:
+        """An event-log listener: queue the kinds that are recorded."""
+        if event["ev"] in EVENT_TOPICS:
+            self._put(event["ev"], event)
+
+    async def record_video(self, track: MediaStreamTrack) -> None:
+        """Queue ``track``'s frames at the recording rate, until cancelled or the track ends."""
+        period_ns = int(1e9 / self.settings.fps)
+        next_ns = 0
+        try:
+            while True:
+                frame = await track.recv()
+                now = time.time_ns()
+                if now >= next_ns:
+                    # Paced from the due time, not from now, so that the rate holds on a jittery
+                    # source; from now after a gap (the first frame, a stalled camera).
+                    behind = next_ns <= now - period_ns
+                    next_ns = (now if behind else next_ns) + period_ns
+                    self._put("image", frame)
+        except Exception as exc:  # MediaStreamError and whatever the source raises
+            log.info("recording the camera stopped: %s", exc or type(exc).__name__)
+
+    def _put(self, kind: str, payload: Any) -> None:
+        try:
+            self._queue.put_nowait((kind, time.time_ns(), payload))
+        except queue.Full:
+            if self.dropped == 0:
+                log.warning("flight recorder falling behind: dropping what it cannot write")
+            self.dropped += 1
+
+    async def close(self) -> None:
+        """Write what is queued, finish the file and stop the writer thread."""
+        await asyncio.to_thread(self._stop)
+
+    def _stop(self) -> None:
+        self._queue.put(None)
+        self._thread.join()
+
+    # --- the writer thread ------------------------------------------------------------------
+
+    def _write_all(self) -> None:
+        try:
+            while (item := self._queue.get()) is not None:
+                kind, log_ns, payload = item
+                if kind == "image":
+                    self._write(IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
+                    self.images += 1
+                else:
+                    self._write(EVENT_TOPICS[kind], log_ns, _fields(kind, payload))
+        except Exception:
+            log.exception("flight recorder stopped")
+        finally:
+            self._finish()
+
+    def _image(self, frame: av.VideoFrame, log_ns: int) -> dict[str, Any]:
+        rgb = np.asarray(frame.to_ndarray(format="rgb24"), np.uint8)
+        quality = [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality]
+        ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), quality)
+        if not ok:
+            raise RuntimeError("JPEG encoding failed")
+        return {
+            "timestamp": {"sec": log_ns // 1_000_000_000, "nsec": log_ns % 1_000_000_000},
+            "frame_id": "camera",
+            "format": "jpeg",
+            "data": base64.b64encode(jpeg.tobytes()).decode("ascii"),
+            "frame": read_frame_tag(rgb),
+        }
+
+    def _write(self, topic: str, log_ns: int, message: dict[str, Any]) -> None:
+        writer = self._writer_for(log_ns)
+        data = json.dumps(message, separators=(",", ":")).encode()
+        writer.add_message(self._channels[topic], log_time=log_ns, data=data, publish_time=log_ns)
+        self.messages += 1
+        self._bytes += len(data)
+
+    def _writer_for(self, now_ns: int) -> Writer:
+        """The open file's writer; a new file when the current one is too big or too old."""
+        limits = self.settings
+        if self._writer is not None:
+            # Counted before compression (the writer holds a chunk back until it is full): a
+            # file ends up no larger than the limit.
+            too_big = self._bytes >= limits.max_mb * 1e6
+            too_old = now_ns - self._opened_ns >= limits.max_minutes * 60e9
+            if not (too_big or too_old):
+                return self._writer
+            self._finish()
+        return self._open(now_ns)
+
+    def _open(self, now_ns: int) -> Writer:
+        stamp = datetime.fromtimestamp(now_ns / 1e9, UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+        room = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.settings.room)
+        path = self.settings.folder / f"autopilot-{room}-{stamp}.mcap"
+        self._file = path.open("wb")
+        writer = Writer(self._file, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="webrtc-autopilot flight recorder")
+        self._channels = {}
+        for topic, title, properties in _schemas():
+            schema = json.dumps({"title": title, "type": "object", "properties": properties})
+            schema_id = writer.register_schema(
+                name=title, encoding="jsonschema", data=schema.encode()
+            )
+            self._channels[topic] = writer.register_channel(
+                topic=topic, message_encoding="json", schema_id=schema_id
+            )
+        self._writer = writer
+        self._opened_ns = now_ns
+        self._bytes = 0
+        self.files.append(path)
+        log.info("recording to %s", path)
+        self._prune()
+        return writer
+
+    def _prune(self) -> None:
+        """Keep the newest ``max_files`` recordings of this run."""
+        while len(self.files) > self.settings.max_files:
+            oldest = self.files.pop(0)
+            log.warning("removing the oldest recording %s (keeping %d)", oldest, len(self.files))
+            oldest.unlink(missing_ok=True)
+
+    def _finish(self) -> None:
+        if self._writer is not None:
+            self._writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
+            self._writer = None
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+def _schemas() -> list[tuple[str, str, dict[str, Any]]]:
+    """Every channel: its topic, schema name and properties."""
+    events = [(EVENT_TOPICS[kind], *spec) for kind, spec in _EVENT_SCHEMAS.items()]
+    return [(IMAGE_TOPIC, IMAGE_SCHEMA, _IMAGE_PROPERTIES), *events]
+
+
+def _fields(kind: str, event: Event) -> dict[str, Any]:
+    """The event's recorded fields (the schema's), without the log's own ``ev`` and ``t``."""
+    return {name: event.get(name) for name in _EVENT_SCHEMAS[kind][1]}
