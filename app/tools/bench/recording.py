@@ -1,7 +1,7 @@
 """``autopilot bench --recorder``: what the flight recorder costs the vehicle (issue 21).
 
 The default-profile stack runs twice on the same browser and server, first as it is and then
-with the agent recording (``--record``, the recorder's defaults: 10 JPEG images a second at
+with the agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at
 quality 80), each for the same number of seconds. Per run: the agent process's cores over the
 measured window (its CPU time from /proc / the window), and the vehicle's share of the latency
 (goal received → its Twist) and the whole glass-to-command, from the agent's own event log.
@@ -38,8 +38,9 @@ async def run(browser: Browser, server_url: str, seconds: float, fps: float) -> 
             except StackError as exc:
                 figures["problems"][name] = str(exc)
                 continue
+            cores = measured.agent_cores
             figures[name] = {
-                "agent_cores": measured.agent_cores,
+                "agent_cores": None if cores is None else round(cores, 4),
                 "glass_to_command_ms": _rounded(measured.glass_ms()),
                 "goal_to_command_ms": _rounded(measured.goal_to_command_ms()),
             }
@@ -66,7 +67,7 @@ def write_report(out: Path, figures: dict[str, Any]) -> Path:
         "# Flight recorder cost",
         "",
         f"Default profile, {figures['seconds']:g} s per run at {figures['fps']:g} fps, the agent "
-        "without and with `--record` (10 JPEG images/s, quality 80).",
+        "without and with `--record` (its defaults: 5 JPEG images/s, quality 80).",
         "",
         "| run | agent cores | glass → command p50 / p95 (ms) | goal → Twist p50 / p95 (ms) |",
         "|---|---|---|---|",

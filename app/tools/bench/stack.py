@@ -28,7 +28,7 @@ from playwright.async_api import TimeoutError as PlaywrightTimeout
 from app.protocol.constants import VIDEO_FPS, VIDEO_SIZE
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
-from app.tools.bench.cpu import cores_used, tree_cpu_s
+from app.tools.bench.cpu import tree_cpu_s
 from app.tools.bench.results import MemorySample, ProfileRun
 from app.tools.bench.stats import (
     FaceSample,
@@ -152,10 +152,8 @@ async def run_profile(
         log.info("%s run: goals flowing, measuring for %.0f s", name, options.duration_s)
         cpu_before = tree_cpu_s({"agent": [agent.pid]})
         run.window = await _measure(relay, options, run)
-        cpu = cores_used(
-            cpu_before, tree_cpu_s({"agent": [agent.pid]}), run.window[1] - run.window[0]
-        )
-        run.agent_cores = cpu["agent"]
+        used = tree_cpu_s({"agent": [agent.pid]})["agent"] - cpu_before["agent"]
+        run.agent_cores = used / (run.window[1] - run.window[0])
         await client.get_by_role("button", name="Stop Piloting").click()
     _read_events(run, events_path, options)
     return run
