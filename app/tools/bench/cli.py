@@ -45,6 +45,8 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 # The follow run spans three cycles of the synthetic face's path (20 s each).
 # bench --recorder: seconds per run (with and without recording).
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
+# bench --relay-cost: seconds measured.
+RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
 FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "lock_s": 60.0, "frames": 43}
 
 
@@ -92,6 +94,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " and with --record",
     )
     parser.add_argument(
+        "--relay-cost",
+        action="store_true",
+        help="measure where one relayed room's cores go instead: the relay's Chromium per"
+        " thread and stage, codec counters, worker timers (relay-cost.md)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -119,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
         log.warning("no private network namespace here: WebRTC runs on the host's interfaces")
     if args.recorder:
         return asyncio.run(_recorder(args))
+    if args.relay_cost:
+        return asyncio.run(_relay_cost(args))
     obj = asyncio.run(_bench(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
@@ -175,6 +185,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--json")
     if args.recorder:
         argv.append("--recorder")
+    if args.relay_cost:
+        argv.append("--relay-cost")
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -206,6 +218,36 @@ async def _recorder(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
     return 1 if figures["problems"] or "agent_cpu_increase_pct" not in figures else 0
+
+
+async def _relay_cost(args: argparse.Namespace) -> int:
+    """Where one room's relay cores go: print the figures, write relay-cost.md."""
+    from playwright.async_api import async_playwright
+
+    from app.server.serve import start_in_thread
+    from app.tools.bench import relaycost
+    from app.tools.browser import launch_options
+
+    seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            # The relay alone in a Chromium of its own: all its threads are the relay's.
+            relay = await playwright.chromium.launch(
+                **launch_options(extra_args=[relaycost.MARKER])
+            )
+            client = await playwright.chromium.launch(**launch_options())
+            try:
+                found = await relaycost.run(relay, client, server.url, seconds, args.fps)
+            finally:
+                await relay.close()
+                await client.close()
+    finally:
+        server.stop()
+    log.info("relay cost report: %s", relaycost.write_report(args.out, found))
+    if args.json:
+        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    return 0
 
 
 async def _bench(args: argparse.Namespace) -> dict[str, Any]:
@@ -352,6 +394,8 @@ def _command(args: argparse.Namespace) -> str:
     parts = ["autopilot bench"]
     if args.quick:
         parts.append("--quick")
+    if args.relay_cost:
+        parts.append("--relay-cost")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

@@ -103,10 +103,17 @@ async def run_profile(
     options: StackOptions,
     workdir: Path,
     prepare: Callable[[Page, Page], Awaitable[None]] | None = None,
+    client_browser: Browser | None = None,
+    finish: Callable[[Page, Page], Awaitable[None]] | None = None,
+    relay_init_script: str | None = None,
 ) -> ProfileRun:
     """Bring the stack up under ``options.profile``, pilot for ``duration_s``, take it down.
 
     ``prepare(relay, client)``, when given, runs once goals flow, before the measurement.
+    ``client_browser``, when given, holds the client page, so that ``browser``'s processes
+    are the relay's alone. ``finish(relay, client)``, when given, runs right after the
+    measurement, while the pages still pilot. ``relay_init_script`` runs in the relay page
+    before its own scripts (a benchmark's probe).
     """
     run = ProfileRun(options.profile)
     name = options.name or options.profile
@@ -114,7 +121,7 @@ async def run_profile(
     events_path = workdir / f"events-{name}.jsonl"
     agent_log = workdir / f"agent-{name}.log"
     async with AsyncExitStack() as stack:
-        relay = await _open_page(stack, browser, "relay")
+        relay = await _open_page(stack, browser, "relay", relay_init_script)
         await relay.goto(
             page_url(server_url, "relay", room, name="relay", auto=1, profile=options.profile)
         )
@@ -126,7 +133,7 @@ async def run_profile(
         )
         agent = await _start_agent(server_url, room, options, events_path, agent_log)
         stack.push_async_callback(_stop_agent, agent, agent_log)
-        client = await _open_page(stack, browser, "client")
+        client = await _open_page(stack, client_browser or browser, "client")
         await client.goto(page_url(server_url, "client", room, name="client", auto=1))
         start = client.get_by_role("button", name="Start Piloting")
         await _unless_agent_exits(
@@ -154,6 +161,8 @@ async def run_profile(
         run.window = await _measure(relay, options, run)
         used = tree_cpu_s({"agent": [agent.pid]})["agent"] - cpu_before["agent"]
         run.agent_cores = used / (run.window[1] - run.window[0])
+        if finish is not None:
+            await finish(relay, client)
         await client.get_by_role("button", name="Stop Piloting").click()
     _read_events(run, events_path, options)
     return run
@@ -206,9 +215,13 @@ async def _unless_agent_exits(
     raise StackError(f"the vehicle agent exited with status {agent.returncode}: {tail}")
 
 
-async def _open_page(stack: AsyncExitStack, browser: Browser, role: str) -> Page:
+async def _open_page(
+    stack: AsyncExitStack, browser: Browser, role: str, init_script: str | None = None
+) -> Page:
     context = await browser.new_context()
     stack.push_async_callback(context.close)
+    if init_script is not None:
+        await context.add_init_script(init_script)
     page = await context.new_page()
 
     def on_console(message: ConsoleMessage) -> None:

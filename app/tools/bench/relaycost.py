@@ -1,0 +1,343 @@
+"""``autopilot bench --relay-cost``: where one relayed room's cores go (issue 22).
+
+One room, default profile, the Python agent sending its synthetic 640x480 video at ``--fps``
+(30): the relay page runs in a Chromium of its own (the client page in another), so that every
+process and thread of that Chromium is the relay's. Over the measured window:
+
+- **threads**: each thread's CPU time from ``/proc/<pid>/task/<tid>/stat``, over the relay
+  Chromium's process tree, divided by the window (cores);
+- **Chromium's codec counters**: ``getStats()`` ``totalDecodeTime`` of the vehicle's video and
+  ``totalEncodeTime`` of the forward to the client (read through a probe script that keeps the
+  page's ``RTCPeerConnection``\\ s; the page itself exposes none);
+- **the worker's own timers**: per snapshot, the pixel copy and conversion (``workMs - ms``)
+  and the cascade (``ms``), from the page's ``autopilotStatus``;
+- **the page's main thread**: CDP ``Performance.getMetrics`` (task and script time).
+
+:func:`breakdown` turns these into stages; ``relay-cost.md`` (and ``.json``) shows both the
+stages and the busiest threads, so the attribution can be checked.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from playwright.async_api import Browser, CDPSession, Page
+
+from app.tools.bench.cpu import PROC, ThreadCpu, thread_cpu
+from app.tools.bench.stack import StackOptions, run_profile
+from app.tools.bench.stats import summarize
+
+# On the relay's Chromium alone (Chromium hands no unknown switch to its children, and ignores
+# it): finds that browser's main process in /proc.
+MARKER = "--autopilot-bench-relay-cost"
+
+# Keeps every RTCPeerConnection the relay page makes, for getStats() (runs before its scripts).
+PROBE = """(() => {
+  const Native = window.RTCPeerConnection;
+  const kept = [];
+  window.__benchPeerConnections = kept;
+  window.RTCPeerConnection = function RTCPeerConnection(...args) {
+    const pc = new Native(...args);
+    kept.push(pc);
+    return pc;
+  };
+  window.RTCPeerConnection.prototype = Native.prototype;
+})();"""
+
+# Codec counters summed over the relay's connections: the vehicle's video in, the forwards out.
+_CODEC_JS = """async () => {
+  const out = { decodeS: 0, decoded: 0, encodeS: 0, encoded: 0, sent: [] };
+  for (const pc of window.__benchPeerConnections ?? []) {
+    (await pc.getStats()).forEach((s) => {
+      if (s.kind !== 'video') return;
+      if (s.type === 'inbound-rtp') {
+        out.decodeS += s.totalDecodeTime ?? 0;
+        out.decoded += s.framesDecoded ?? 0;
+      } else if (s.type === 'outbound-rtp') {
+        out.encodeS += s.totalEncodeTime ?? 0;
+        out.encoded += s.framesEncoded ?? 0;
+        out.sent.push({ width: s.frameWidth ?? null, height: s.frameHeight ?? null,
+          bytesSent: s.bytesSent ?? 0 });
+      }
+    });
+  }
+  return out;
+}"""
+
+# The worker's per-snapshot timers since snapshot `seen` (the page keeps bounded rings).
+_TIMERS_JS = """(seen) => {
+  const s = window.autopilotStatus;
+  const k = Math.min(s.snapshots - seen, s.workMs.length);
+  return { snapshots: s.snapshots, work: k > 0 ? s.workMs.slice(-k) : [],
+    detect: k > 0 ? s.detectMs.slice(-k) : [] };
+}"""
+
+STAGES = (
+    "vision worker: pixel copy and RGBA conversion",
+    "vision worker: cascade (detect)",
+    "video encode (forward to the client)",
+    "video decode (vehicle's video)",
+    "page main thread (JS, frame reading, DOM)",
+    "showing the video (compositors, GPU process)",
+    "WebRTC transport (RTP, SRTP, sockets)",
+    "renderer thread pool, other",
+    "browser process and the rest",
+)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What is read at each end of the window."""
+
+    threads: list[ThreadCpu]
+    codec: dict[str, Any]
+    main_thread: dict[str, float]
+    snapshots: int
+
+
+def find_marked_browser(marker: str = MARKER) -> int:
+    """The pid of the Chromium main process launched with ``marker``."""
+    for entry in PROC.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        if marker in argv.replace("\0", " ").split(" "):
+            return int(entry.name)
+    raise RuntimeError(f"no process runs with {marker}")
+
+
+def _stage_of(thread: ThreadCpu) -> str:
+    """The stage a thread's time goes to (its codec and worker shares are split later)."""
+    if thread.process == "renderer":
+        if thread.name.startswith("DedicatedWorker"):
+            return "worker"
+        if thread.tid == thread.pid:
+            return STAGES[4]
+        if thread.name.startswith(("Compositor", "VideoFrameCompo")):
+            return STAGES[5]
+        if thread.name.startswith(("WebRTC", "Chrome_ChildIOT")):
+            return STAGES[6]
+        if thread.name.startswith("ThreadPool"):
+            return "pool"
+        return STAGES[8]
+    if thread.process == "gpu-process":
+        return STAGES[5]
+    if thread.process == "utility:network.mojom.NetworkService":
+        return STAGES[6]
+    return STAGES[8]
+
+
+def thread_cores(
+    before: Sequence[ThreadCpu], after: Sequence[ThreadCpu], seconds: float
+) -> list[tuple[ThreadCpu, float]]:
+    """Each thread alive at the end with the cores it used over the window, busiest first."""
+    start = {(t.pid, t.tid): t.cpu_s for t in before}
+    used = [(t, max(0.0, t.cpu_s - start.get((t.pid, t.tid), 0.0)) / seconds) for t in after]
+    return sorted(used, key=lambda pair: -pair[1])
+
+
+def breakdown(
+    threads: Sequence[tuple[ThreadCpu, float]],
+    encode_cores: float,
+    decode_cores: float,
+    pixel_share: float,
+) -> dict[str, float]:
+    """Cores per stage (:data:`STAGES`) and ``total``.
+
+    The vision worker's thread is split by its own timers (``pixel_share``: the pixel copy's
+    part of its time); the renderer's thread pool, where Chromium runs the video codecs, by the
+    codec counters (``getStats`` times, which are wall time: a pool that used less CPU than
+    they say is all codec, and the rest of the pool shows as 0).
+    """
+    by_stage = dict.fromkeys((*STAGES, "worker", "pool"), 0.0)
+    for thread, cores in threads:
+        by_stage[_stage_of(thread)] += cores
+    worker, pool = by_stage.pop("worker"), by_stage.pop("pool")
+    by_stage[STAGES[0]] = worker * pixel_share
+    by_stage[STAGES[1]] = worker * (1 - pixel_share)
+    codecs = encode_cores + decode_cores
+    # Within the pool, the two codecs in proportion to their own counters.
+    in_pool = min(pool, codecs)
+    by_stage[STAGES[2]] = in_pool * encode_cores / codecs if codecs else 0.0
+    by_stage[STAGES[3]] = in_pool * decode_cores / codecs if codecs else 0.0
+    by_stage[STAGES[7]] = pool - in_pool
+    found = {stage: round(by_stage[stage], 3) for stage in STAGES}
+    found["total"] = round(sum(cores for _, cores in threads), 3)
+    return found
+
+
+async def _main_thread(cdp: CDPSession) -> dict[str, float]:
+    metrics = (await cdp.send("Performance.getMetrics"))["metrics"]
+    return {m["name"]: float(m["value"]) for m in metrics}
+
+
+async def run(
+    browser: Browser, client_browser: Browser, server_url: str, seconds: float, fps: float
+) -> dict[str, Any]:
+    """Measure one room for ``seconds``; ``browser`` must have been launched with
+    :data:`MARKER` and hold nothing else."""
+    root = find_marked_browser()
+    state: dict[str, Any] = {}
+
+    async def sample(relay: Page) -> Sample:
+        return Sample(
+            thread_cpu(root),
+            await relay.evaluate(_CODEC_JS),
+            await _main_thread(state["cdp"]),
+            (await relay.evaluate(_TIMERS_JS, 0))["snapshots"],
+        )
+
+    async def prepare(relay: Page, _client: Page) -> None:
+        state["cdp"] = await relay.context.new_cdp_session(relay)
+        await state["cdp"].send("Performance.enable")
+        state["before"] = await sample(relay)
+        state["t0"] = os.times().elapsed
+
+    async def finish(relay: Page, _client: Page) -> None:
+        state["after"] = await sample(relay)
+        state["seconds"] = os.times().elapsed - state["t0"]
+        state["timers"] = await relay.evaluate(_TIMERS_JS, state["before"].snapshots)
+
+    with tempfile.TemporaryDirectory(prefix="autopilot-bench-relay-cost-") as tmp:
+        measured = await run_profile(
+            browser,
+            server_url,
+            StackOptions("default", seconds, fps=fps, name="relay-cost"),
+            Path(tmp),
+            prepare=prepare,
+            client_browser=client_browser,
+            finish=finish,
+            relay_init_script=PROBE,
+        )
+    return figures(
+        state,
+        measured.processing_summary(),
+        measured.glass_ms(),
+        measured.relay_goals,
+        measured.window,
+        fps,
+    )
+
+
+def figures(
+    state: Mapping[str, Any],
+    processing: Any,
+    glass_ms: list[float],
+    goals: int,
+    window: tuple[float, float] | None,
+    fps: float,
+) -> dict[str, Any]:
+    """The report's figures from the two samples and the stack run's own."""
+    before, after, seconds = state["before"], state["after"], state["seconds"]
+    threads = thread_cores(before.threads, after.threads, seconds)
+    work, detect = state["timers"]["work"], state["timers"]["detect"]
+    pixels = [w - d for w, d in zip(work, detect, strict=True)]
+    pixel_share = sum(pixels) / sum(work) if sum(work) > 0 else 0.0
+    counters = ("decodeS", "decoded", "encodeS", "encoded")
+    codec = {key: after.codec[key] - before.codec[key] for key in counters}
+    main = {
+        key: (after.main_thread.get(key, 0) - before.main_thread.get(key, 0)) / seconds
+        for key in ("TaskDuration", "ScriptDuration")
+    }
+    glass = summarize(glass_ms)
+    return {
+        "seconds": round(seconds, 1),
+        "fps": fps,
+        "relay_cores": breakdown(
+            threads, codec["encodeS"] / seconds, codec["decodeS"] / seconds, pixel_share
+        ),  # fmt: skip
+        "threads": [
+            {"process": t.process, "thread": t.name, "cores": round(c, 3)}
+            for t, c in threads
+            if c >= 0.005
+        ],
+        "per_snapshot_ms": {
+            "pixels_p50": _p50(pixels),
+            "detect_p50": _p50(detect),
+            "worker_p50": _p50(work),
+            "snapshots": len(work),
+        },
+        "codecs": {
+            "decode_ms_per_frame": _per(codec["decodeS"], codec["decoded"]),
+            "encode_ms_per_frame": _per(codec["encodeS"], codec["encoded"]),
+            "frames_decoded_per_s": round(codec["decoded"] / seconds, 1),
+            "frames_encoded_per_s": round(codec["encoded"] / seconds, 1),
+            "forward": after.codec["sent"],
+        },
+        "main_thread_busy": {k: round(v, 3) for k, v in main.items()},
+        "processing_ms": None
+        if processing is None
+        else {"p50": round(processing.p50, 1), "p95": round(processing.p95, 1)},
+        "glass_to_command_ms": None
+        if glass is None
+        else {"p50": round(glass.p50, 1), "p95": round(glass.p95, 1)},
+        "goals_per_s": None if window is None else round(goals / (window[1] - window[0]), 1),
+        "load_average": round(os.getloadavg()[0], 2),
+    }
+
+
+def _p50(values: list[float]) -> float | None:
+    return round(statistics.median(values), 2) if values else None
+
+
+def _per(seconds: float, frames: float) -> float | None:
+    return round(1000 * seconds / frames, 2) if frames else None
+
+
+def write_report(out: Path, found: dict[str, Any]) -> Path:
+    """``relay-cost.md`` and ``relay-cost.json`` in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "relay-cost.json").write_text(json.dumps(found, indent=2) + "\n")
+    cores = found["relay_cores"]
+    lines = [
+        "# Where one relayed room's cores go",
+        "",
+        f"`autopilot bench --relay-cost`: one room, default profile, {found['fps']:g} fps, "
+        f"measured for {found['seconds']:g} s (load average {found['load_average']} at the end).",
+        "",
+        "| stage | cores |",
+        "|---|---:|",
+        *(f"| {stage} | {cores[stage]:.3f} |" for stage in STAGES),
+        f"| **the relay's Chromium in all** | **{cores['total']:.3f}** |",
+        "",
+        "| figure | value |",
+        "|---|---|",
+    ]
+    snap, codecs = found["per_snapshot_ms"], found["codecs"]
+    rows = {
+        "worker per snapshot, p50: pixels / detect / both (ms)":
+            f"{snap['pixels_p50']} / {snap['detect_p50']} / {snap['worker_p50']}"
+            f" ({snap['snapshots']} snapshots)",
+        "decode, encode per frame (ms, getStats)":
+            f"{codecs['decode_ms_per_frame']}, {codecs['encode_ms_per_frame']}",
+        "frames decoded, encoded per s":
+            f"{codecs['frames_decoded_per_s']}, {codecs['frames_encoded_per_s']}",
+        "forward to the client": ", ".join(
+            f"{s['width']}x{s['height']}" for s in codecs["forward"]),
+        "main thread busy (task, script; s per s, CDP)":
+            f"{found['main_thread_busy']['TaskDuration']}, "
+            f"{found['main_thread_busy']['ScriptDuration']}",
+        "snapshot → goal p50 / p95 (ms)": _pair(found["processing_ms"]),
+        "glass-to-command p50 / p95 (ms)": _pair(found["glass_to_command_ms"]),
+        "goals per second": str(found["goals_per_s"]),
+    }  # fmt: skip
+    lines += [f"| {name} | {value} |" for name, value in rows.items()]
+    lines += ["", "Busiest threads (cores):", "", "| process | thread | cores |", "|---|---|---:|"]
+    lines += [f"| {t['process']} | {t['thread']} | {t['cores']} |" for t in found["threads"]]
+    path = out / "relay-cost.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _pair(found: dict[str, float] | None) -> str:
+    return "–" if found is None else f"{found['p50']} / {found['p95']}"
