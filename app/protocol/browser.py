@@ -48,6 +48,8 @@ def browser_protocol() -> dict[str, Any]:
         "world": {"size": c.WORLD_SIZE, "terrainCentre": c.TERRAIN_CENTRE},
         # The frame size the vehicle page asks its camera for.
         "video": {"width": c.VIDEO_SIZE[0], "height": c.VIDEO_SIZE[1]},
+        # How much smaller the relay's forward to a client is, per side.
+        "clientForwardScaleDown": c.CLIENT_FORWARD_SCALE_DOWN,
         "frameTag": {
             "blocksPerWidth": c.TAG_BLOCKS_PER_WIDTH,
             "markerBlocks": c.TAG_MARKER_BLOCKS,

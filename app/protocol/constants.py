@@ -58,6 +58,11 @@ TERRAIN_CENTRE: Final = 5.544445
 # goal's latency.
 VIDEO_SIZE: Final = (640, 480)
 VIDEO_FPS: Final = 30.0
+# The relay re-encodes the vehicle's video for each client at this fraction of its size per side
+# (RTCRtpEncodingParameters.scaleResolutionDownBy): the operator watches it, the relay analyses
+# the full-size decoded frames, and the encode is the relay's largest cost after the cascade
+# (docs/bench/relay-cost.md).
+CLIENT_FORWARD_SCALE_DOWN: Final = 2.0
 
 # Frame tag (docs/contracts.md, "Frame tag"): a row of square blocks along the top edge, each
 # floor(width / TAG_BLOCKS_PER_WIDTH) px; TAG_MARKER_BLOCKS marker blocks (white, black), then

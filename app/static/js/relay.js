@@ -19,6 +19,11 @@ const overlay = byTestId('overlay');
 
 // null: a snapshot per decoded video frame; otherwise one every this many ms.
 const SNAPSHOT_PERIOD_MS = PROTOCOL.relayProfiles[config.profile].snapshotPeriodMs;
+// Snapshots are the track's decoded frames (readFrames), not what the video element shows.
+const FRAMES_FROM_TRACK = SNAPSHOT_PERIOD_MS === null && typeof MediaStreamTrackProcessor === 'function';
+// A relay nobody watches (?video=0) shows neither the video nor the boxes, which cost it a tenth
+// of a core per room (docs/bench/relay-cost.md), unless the element is its source of frames.
+const SHOW_VIDEO = config.showVideo || !FRAMES_FROM_TRACK;
 
 /**
  * The page's one status object, read-only, for tests and benchmarks: its fields are the
@@ -209,7 +214,22 @@ async function sendVideoOn(pc) {
     if (pc.signalingState === 'have-remote-offer') transceiver.direction = 'sendonly';
     // Chromium's default degradation (balanced) on purpose: see vehicle.js.
     await transceiver.sender.replaceTrack(session.vehicleTrack);
+    await forwardSmaller(transceiver.sender);
   }
+}
+
+/**
+ * Encode the forward to a client at PROTOCOL.clientForwardScaleDown of the vehicle's size per
+ * side: the encode is the relay's largest cost after the cascade (docs/bench/relay-cost.md).
+ */
+async function forwardSmaller(sender) {
+  const params = sender.getParameters();
+  // Before the answer the sender may have no encoding yet; sendVideoOn runs again with the track.
+  if (params.encodings.length === 0) return;
+  const scale = PROTOCOL.clientForwardScaleDown;
+  if (params.encodings.every((encoding) => encoding.scaleResolutionDownBy === scale)) return;
+  for (const encoding of params.encodings) encoding.scaleResolutionDownBy = scale;
+  await sender.setParameters(params);
 }
 
 function onVehicleTrack({ track, receiver }) {
@@ -223,7 +243,7 @@ function onVehicleTrack({ track, receiver }) {
     stopLoop();
     startLoop();
   }
-  video.srcObject = new MediaStream([track]);
+  if (SHOW_VIDEO) video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
     sendVideoOn(client.peer.pc).catch((err) => log.error(`could not forward video: ${err.message}`));
@@ -452,7 +472,7 @@ function createLoop(analyzer) {
   loop.addEventListener('detections', (event) => {
     const detections = event.detail;
     broadcast(detections);
-    drawDetections(overlay, detections);
+    if (SHOW_VIDEO) drawDetections(overlay, detections);
     show('goals-sent', String(loop.stats.goalsSent));
     show('ms-per-snapshot', fmt(detections.ms));
     show('goals-per-s', fmt(detections.goalsPerS));
@@ -469,7 +489,7 @@ function startLoop() {
     session.timer = setInterval(snapshot, SNAPSHOT_PERIOD_MS);
     return;
   }
-  if (typeof MediaStreamTrackProcessor === 'function') {
+  if (FRAMES_FROM_TRACK) {
     if (session.vehicleTrack !== null) readFrames(session.vehicleTrack);
     return;
   }

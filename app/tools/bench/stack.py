@@ -122,8 +122,11 @@ async def run_profile(
     agent_log = workdir / f"agent-{name}.log"
     async with AsyncExitStack() as stack:
         relay = await _open_page(stack, browser, "relay", relay_init_script)
+        # Headless, as `autopilot relay` opens it: nobody watches, so it shows no video.
         await relay.goto(
-            page_url(server_url, "relay", room, name="relay", auto=1, profile=options.profile)
+            page_url(
+                server_url, "relay", room, name="relay", auto=1, profile=options.profile, video=0
+            )
         )
         await wait_for(
             relay,
