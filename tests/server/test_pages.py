@@ -190,3 +190,9 @@ def test_vehicle_page_loads_the_vendored_roslib_not_a_cdn(server: RunningServer)
     assert '<script src="/static/vendor/roslib.min.js"></script>' in html
     assert not re.search(r'src="(https?:)?//', html)
     assert httpx.get(f"{server.url}/static/vendor/roslib.min.js").status_code == 200
+
+
+def test_the_relay_shows_its_video_unless_switched_off(server: RunningServer) -> None:
+    on = embedded_config(httpx.get(f"{server.url}/relay").text)
+    off = embedded_config(httpx.get(f"{server.url}/relay?video=0").text)
+    assert (on["showVideo"], off["showVideo"]) == (True, False)

@@ -7,7 +7,9 @@ import subprocess
 import sys
 import time
 
-from app.tools.bench.cpu import cores_used, tree_cpu_s
+import pytest
+
+from app.tools.bench.cpu import chromium_type, cores_used, parse_stat, thread_cpu, tree_cpu_s
 
 BUSY = "import time\nend = time.monotonic() + 1.5\nwhile time.monotonic() < end: pass\n"
 IDLE = "import time\ntime.sleep(1.5)\n"
@@ -45,3 +47,43 @@ def test_a_process_that_is_gone_counts_as_nothing() -> None:
     done = subprocess.Popen([sys.executable, "-c", "pass"])
     done.wait(10)
     assert tree_cpu_s({"gone": [done.pid]}) == {"gone": 0.0}
+
+
+def test_threads_are_named_and_timed_with_their_process_kind() -> None:
+    # A spinning thread named by the kernel (comm): it shows up under this process, busy.
+    import threading
+
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            pass
+
+    worker = threading.Thread(target=spin, name="spinner")
+    worker.start()
+    try:
+        time.sleep(0.3)
+        found = thread_cpu(os.getpid())
+    finally:
+        stop.set()
+        worker.join()
+    mine = [t for t in found if t.pid == os.getpid()]
+    assert {t.process for t in mine} == {"browser"}  # no --type: a main process
+    assert any(t.tid == os.getpid() for t in mine)
+    spinner = [t for t in mine if t.tid == worker.native_id]
+    assert spinner and spinner[0].cpu_s > 0.05, spinner
+
+
+def test_chromium_process_kinds_from_their_command_lines() -> None:
+    assert chromium_type(["/usr/lib/chromium/chromium", "--headless=new"]) == "browser"
+    # Chromium rewrites its titles: the arguments may come joined by spaces.
+    assert chromium_type(["/usr/lib/chromium/chromium --type=renderer --lang=en"]) == "renderer"
+    utility = "chromium --type=utility --utility-sub-type=network.mojom.NetworkService --x"
+    assert chromium_type([utility]) == "utility:network.mojom.NetworkService"
+
+
+def test_a_stat_line_with_parentheses_in_the_name_parses() -> None:
+    stat = "42 (Web (Content)) S 7 42 42 0 -1 4194560 10 0 0 0 250 50 0 0 20 0 1 0"
+    name, parent, seconds = parse_stat(stat)
+    assert (name, parent) == ("Web (Content)", 7)
+    assert seconds == pytest.approx(300 / os.sysconf("SC_CLK_TCK"))

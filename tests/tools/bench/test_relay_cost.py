@@ -1,0 +1,93 @@
+"""``autopilot bench --relay-cost``: the stage breakdown from threads and counters, and the
+bench as a user runs it (its figures' sizes are the report's business, never asserted)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from app.tools.bench.cpu import ThreadCpu
+from app.tools.bench.relaycost import STAGES, breakdown, thread_cores
+
+
+def _thread(process: str, name: str, tid: int, cpu_s: float, pid: int = 10) -> ThreadCpu:
+    return ThreadCpu(process, pid, tid, name, cpu_s)
+
+
+RENDERER = [
+    _thread("renderer", "chromium", 10, 1.0),  # the main thread: tid == pid
+    _thread("renderer", "DedicatedWorker", 11, 4.0),
+    _thread("renderer", "ThreadPoolPrese", 12, 2.0),
+    _thread("renderer", "ThreadPoolPrese", 13, 0.5),
+    _thread("renderer", "WebRTC_W_and_N", 14, 0.5),
+    _thread("renderer", "Compositor", 15, 0.2),
+    _thread("gpu-process", "VizCompositorTh", 21, 0.3, pid=20),
+    _thread("utility:network.mojom.NetworkService", "Chrome_ChildIOT", 31, 0.1, pid=30),
+    _thread("browser", "chromium", 1, 0.4, pid=1),
+]
+
+
+def test_threads_are_measured_over_the_window_and_new_ones_from_zero() -> None:
+    before = [_thread("renderer", "chromium", 10, 5.0)]
+    after = [_thread("renderer", "chromium", 10, 7.0), _thread("renderer", "Media", 16, 1.0)]
+    used = thread_cores(before, after, seconds=10.0)
+    assert [(t.tid, cores) for t, cores in used] == [(10, 0.2), (16, 0.1)]
+
+
+def test_every_threads_time_goes_to_one_stage() -> None:
+    threads = thread_cores([], RENDERER, seconds=10.0)
+    stages = breakdown(threads, encode_cores=0.15, decode_cores=0.05, pixel_share=0.25)
+    assert set(stages) == {*STAGES, "total"}
+    assert stages["total"] == pytest.approx(0.9)
+    assert sum(stages[s] for s in STAGES) == pytest.approx(stages["total"])
+    # The worker's thread, split by its own timers.
+    assert stages[STAGES[0]] == pytest.approx(0.1)
+    assert stages[STAGES[1]] == pytest.approx(0.3)
+    # The thread pool (0.25 cores) holds both codecs as their counters say, and the rest.
+    assert stages[STAGES[2]] == pytest.approx(0.15)
+    assert stages[STAGES[3]] == pytest.approx(0.05)
+    assert stages[STAGES[7]] == pytest.approx(0.05)
+    assert stages[STAGES[4]] == pytest.approx(0.1)  # the page's main thread
+    assert stages[STAGES[5]] == pytest.approx(0.05)  # renderer compositor + GPU process
+    assert stages[STAGES[6]] == pytest.approx(0.06)  # WebRTC threads + network service
+    assert stages[STAGES[8]] == pytest.approx(0.04)  # the browser process
+
+
+def test_codec_counters_beyond_the_pool_cap_at_its_cpu() -> None:
+    # getStats times are wall time: on a busy machine they can exceed the pool's CPU time.
+    pool = [_thread("renderer", "ThreadPoolPrese", 12, 1.0)]
+    stages = breakdown(thread_cores([], pool, 10.0), 0.3, 0.1, pixel_share=0.0)
+    assert stages[STAGES[2]] == pytest.approx(0.075)
+    assert stages[STAGES[3]] == pytest.approx(0.025)
+    assert stages[STAGES[7]] == 0.0
+
+
+@pytest.mark.bench
+@pytest.mark.slow
+@pytest.mark.browser
+@pytest.mark.timeout(300)
+def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: Path) -> None:
+    argv = [sys.executable, "-m", "app.cli", "bench", "--relay-cost", "--json"]
+    argv += ["--seconds", "4", "--fps", "10", "--out", str(tmp_path)]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0, done.stderr[-3000:]
+    found = json.loads(done.stdout.splitlines()[-1])
+    cores = found["relay_cores"]
+    # The relay's Chromium worked (the worker and the codecs above all), on two cores at most.
+    assert 0 < cores["total"] < 2, cores
+    assert cores[STAGES[1]] > 0 and cores[STAGES[2]] > 0 and cores[STAGES[3]] > 0, cores
+    assert any(t["thread"].startswith("DedicatedWorker") for t in found["threads"])
+    assert found["codecs"]["frames_decoded_per_s"] > 0
+    assert found["codecs"]["frames_encoded_per_s"] > 0
+    # The forward to the client is encoded at half the vehicle's 640x480 per side (or less,
+    # when Chromium's balanced degradation scales it down further).
+    assert [s["width"] for s in found["codecs"]["forward"]] != []
+    assert all(0 < s["width"] <= 320 for s in found["codecs"]["forward"]), found["codecs"]
+    assert found["per_snapshot_ms"]["snapshots"] > 0
+    report = (tmp_path / "relay-cost.md").read_text()
+    assert "the relay's Chromium in all" in report and "DedicatedWorker" in report
+    assert json.loads((tmp_path / "relay-cost.json").read_text()) == found
