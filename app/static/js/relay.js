@@ -27,6 +27,7 @@ const SNAPSHOT_PERIOD_MS = PROTOCOL.relayProfiles[config.profile].snapshotPeriod
 const status = {
   profile: config.profile,
   analyzerReady: false,
+  opencvBuild: null, // 'simd' or 'official', once the analyzer is ready
   op: null,
   piloting: false,
   vehicle: null, // name of the connected vehicle
@@ -95,9 +96,10 @@ const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer))
     session.loop = createLoop(created);
     if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
     status.analyzerReady = true;
+    status.opencvBuild = created.build;
     status.op = created.defaultOp;
     show('operation', status.op);
-    log.info(`OpenCV.js ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
+    log.info(`OpenCV.js (${created.build} build) ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
     broadcastState();
     return created;
   },
