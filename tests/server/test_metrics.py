@@ -28,21 +28,11 @@ from app.server.serve import RunningServer
 from app.server.websocket import Outboxes, SocketPolicy
 from app.signaling.hub import REFUSALS
 from app.supervise import free_port, stop_process
+from tests.helpers.metrics import scrape
 from tests.helpers.sockets import login, recv, rosbridge_url
 from tests.helpers.waiting import eventually, wait_until
 
 SECRET = "metrics-test-secret-0123456789"
-
-
-def scrape(url: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
-    """``/metrics`` at ``url``, parsed: (sample name, sorted labels) -> value."""
-    with urllib.request.urlopen(url, timeout=5) as response:
-        text = response.read().decode()
-    return {
-        (sample.name, tuple(sorted(sample.labels.items()))): sample.value
-        for family in text_string_to_metric_families(text)
-        for sample in family.samples
-    }
 
 
 def value(registry: CollectorRegistry, name: str, **labels: str) -> float:
