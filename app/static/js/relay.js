@@ -19,6 +19,12 @@ const overlay = byTestId('overlay');
 
 // null: a snapshot per decoded video frame; otherwise one every this many ms.
 const SNAPSHOT_PERIOD_MS = PROTOCOL.relayProfiles[config.profile].snapshotPeriodMs;
+// Whether the page shows the vehicle's video. An unattended relay (`?preview=0`, as `autopilot
+// relay` opens it) that reads frames from the decoder needs no preview, and drawing one cost
+// Chromium's compositor about 0.08 cores at 30 fps (docs/bench/relay-cost.md). The thesis
+// profile snapshots the video element, so it always shows it.
+const PREVIEW =
+  config.preview || SNAPSHOT_PERIOD_MS !== null || typeof MediaStreamTrackProcessor !== 'function';
 
 /**
  * The page's one status object, read-only, for tests and benchmarks: its fields are the
@@ -225,7 +231,7 @@ function onVehicleTrack({ track, receiver }) {
     stopLoop();
     startLoop();
   }
-  video.srcObject = new MediaStream([track]);
+  if (PREVIEW) video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
     sendVideoOn(client.peer.pc).catch((err) => log.error(`could not forward video: ${err.message}`));
