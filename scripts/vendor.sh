@@ -30,5 +30,17 @@ fetch() { # fetch PKG FILE_IN_PACKAGE DEST
     echo
     echo ']}'
 } > app/static/VENDORED.json.tmp
+# Keep the entries this script does not fetch (the SIMD build of scripts/build-opencv-js).
+python3 - <<'PY'
+import json
+from pathlib import Path
+
+old, new = Path("app/static/VENDORED.json"), Path("app/static/VENDORED.json.tmp")
+fetched = json.loads(new.read_text())
+paths = {entry["path"] for entry in fetched["files"]}
+kept = [e for e in json.loads(old.read_text())["files"] if e["path"] not in paths] if old.exists() else []
+lines = [json.dumps(entry) for entry in fetched["files"] + kept]
+new.write_text('{"source": ' + json.dumps(fetched["source"]) + ', "files": [\n    ' + ",\n    ".join(lines) + "\n]}\n")
+PY
 mv app/static/VENDORED.json.tmp app/static/VENDORED.json
 cat app/static/VENDORED.json

@@ -55,9 +55,8 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         "control": _control(query.get("standoff")),
         # The vehicle page's spawn step (turn to face up at start); ?spawn=0 switches it off.
         "spawnStep": query.get("spawn") not in ("0", "false", "no"),
-        # The relay page's video and boxes; ?video=0 for a relay nobody watches (the relay
-        # service and pools), which spares it their drawing (docs/bench/relay-cost.md).
-        "showVideo": query.get("video") not in ("0", "false", "no"),
+        # The relay's own video preview (?preview=0: none, for an unattended relay).
+        "preview": query.get("preview") not in ("0", "false", "no"),
         "rosbridge": rosbridge,
         # The page's token (read from the URL fragment) goes only to this server's rosbridge.
         "rosbridgeAuth": rosbridge == own_rosbridge,

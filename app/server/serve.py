@@ -13,6 +13,8 @@ from typing import Any
 
 import uvicorn
 from pydantic import ValidationError
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
+from websockets.protocol import State
 
 from app.arguments import port
 from app.metrics import add_metrics_arguments, serve_metrics
@@ -147,6 +149,20 @@ class _QuietInvalidUtf8(logging.Filter):
         return True
 
 
+class _SansIOWebSocket(WebSocketsSansIOProtocol):
+    """uvicorn's sans-I/O WebSocket protocol without one crash: a text frame that is not UTF-8
+    makes it close with 1007, and a second such frame read in the same chunk made it try to close
+    again ("Fatal error: protocol.data_received() call failed", InvalidState). Frames that arrive
+    once the closing handshake has begun are dropped, as RFC 6455 allows."""
+
+    def send_receive_event_to_app(self) -> None:
+        """Hand a whole message to the app, unless the connection is already closing."""
+        if self.conn.state is not State.OPEN:
+            self.frames = []
+            return
+        super().send_receive_event_to_app()
+
+
 def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> dict[str, Any]:
     """What every uvicorn we start needs: the WebSocket frame size limit from ``settings``
     (uvicorn refuses a larger frame before buffering it, closing with 1009) and TLS ``files``."""
@@ -154,6 +170,7 @@ def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> di
     if not any(isinstance(f, _QuietInvalidUtf8) for f in logger.filters):
         logger.addFilter(_QuietInvalidUtf8())
     return {
+        "ws": _SansIOWebSocket,
         "ws_max_size": settings.max_message_bytes,
         "ssl_certfile": None if files is None else str(files.certfile),
         "ssl_keyfile": None if files is None else str(files.keyfile),

@@ -25,7 +25,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 from playwright.sync_api import Page, sync_playwright
@@ -46,6 +46,9 @@ IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".webp", ".gif"}
 READY_TIMEOUT_MS = 180_000
 
 Box = tuple[int, int, int, int]
+# Which OpenCV.js the analyzer loads (app/static/js/vision-worker.js).
+OpenCvBuild = Literal["auto", "simd", "official"]
+OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
 
 
 def iou(a: Sequence[int], b: Sequence[int]) -> float:
@@ -99,6 +102,8 @@ class Report:
     images: list[str] = field(default_factory=list)
     unreadable: dict[str, str] = field(default_factory=dict)
     details: list[Pair] = field(default_factory=list)
+    # The OpenCV.js build the browser side ran ("simd" or "official"; "" before it ran).
+    opencv: str = ""
 
     @property
     def agree(self) -> int:
@@ -119,6 +124,7 @@ class Report:
         """The ``--json`` object."""
         return {
             "images": self.images,
+            "opencv": self.opencv,
             "pairs": len(self.details),
             "agree": self.agree,
             "disagree": self.disagree,
@@ -133,9 +139,11 @@ class Harness:
     Use :func:`open_harness`; one harness serves a whole batch of images.
     """
 
-    def __init__(self, page: Page, spec: Spec) -> None:
+    def __init__(self, page: Page, spec: Spec, build: str) -> None:
         self.page = page
         self.spec = spec
+        # The OpenCV.js build the page loaded: "simd" or "official".
+        self.build = build
 
     def run(
         self,
@@ -232,8 +240,11 @@ def _pair(
 
 
 @contextmanager
-def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
-    """Start the server and headless Chromium on the parity page; stop both afterwards."""
+def open_harness(
+    settings: Settings | None = None, build: OpenCvBuild = "auto"
+) -> Iterator[Harness]:
+    """Start the server and headless Chromium on the parity page, with the OpenCV.js ``build``
+    (``auto``: SIMD where the browser has it); stop both afterwards."""
     settings = settings or Settings()
     spec = load_spec(settings.operations_spec)
     server = start_in_thread(settings)
@@ -243,7 +254,7 @@ def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
             try:
                 page = browser.new_page()
                 page.on("console", lambda m: log.debug("page console: %s", m.text))
-                page.goto(f"{server.url}/parity")
+                page.goto(f"{server.url}/parity?opencv={build}")
                 # A function, not an expression: Playwright evals a bare expression inside the
                 # page, which the page's CSP (no 'unsafe-eval') refuses.
                 page.wait_for_function(
@@ -251,7 +262,7 @@ def open_harness(settings: Settings | None = None) -> Iterator[Harness]:
                 )
                 if page.evaluate("document.body.dataset.ready") != "true":
                     raise RuntimeError(f"parity page: {page.text_content('#state')}")
-                yield Harness(page, spec)
+                yield Harness(page, spec, page.evaluate("document.body.dataset.opencv"))
             finally:
                 browser.close()
     finally:
@@ -277,6 +288,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("paths", nargs="*", type=Path, metavar="PATH", help="images or folders")
     parser.add_argument("--op", default="all", help="operation id, or 'all' (default)")
     add_relay_profile(parser, "relay profile whose parameters to check")
+    parser.add_argument(
+        "--opencv",
+        choices=OPENCV_BUILDS,
+        default="auto",
+        help="OpenCV.js build: simd (scripts/build-opencv-js), official (npm) or auto (default:"
+        " SIMD where the browser supports it)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -302,7 +320,8 @@ def run(args: argparse.Namespace) -> int:
     images, missing = expand(args.paths)
     report = Report(unreadable=dict(missing))
     if images:
-        with open_harness(settings) as harness:
+        with open_harness(settings, args.opencv) as harness:
+            report.opencv = harness.build
             for path in images:
                 harness.check(path, op_ids, report, args.profile)
     if args.json:
@@ -317,7 +336,8 @@ def run(args: argparse.Namespace) -> int:
                 f"    python {_format_boxes(pair.py_boxes)}\n"
             )
         sys.stdout.write(
-            f"{len(report.images)} images, {len(report.details)} pairs: "
+            f"{len(report.images)} images, {len(report.details)} pairs"
+            f" (OpenCV.js {report.opencv or 'not loaded'}): "
             f"{report.agree} agree, {report.disagree} disagree\n"
         )
     for message in report.unreadable.values():

@@ -41,9 +41,9 @@ class RelayServiceError(RuntimeError):
 
 
 def relay_url(server: str, room: str, name: str, profile: str, token: str | None = None) -> str:
-    """The relay page URL that joins ``room`` unattended and shows no video (nobody watches
-    it); the token rides in the fragment, which never reaches the server's access log."""
-    url = page_url(server, "relay", room, name=name, auto=1, profile=profile, video=0)
+    """The relay page URL that joins ``room`` unattended, without a video preview nobody
+    watches; the token rides in the fragment, which never reaches the server's access log."""
+    url = page_url(server, "relay", room, name=name, auto=1, profile=profile, preview=0)
     return url + (f"#token={token}" if token else "")
 
 

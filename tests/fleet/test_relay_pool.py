@@ -68,8 +68,13 @@ async def test_the_pool_serves_a_vehicle_s_room_and_survives_its_browser_dying(
             assert message == {"type": "leave", "from": "relay"}
             await until(relay_in_room, "the relay to come back in a new browser")
             await eventually(lambda: list(pool.served) == ["lab"], 10, "the room still served")
-            await metrics.poll_once(pool.pages())  # the new page, in the new browser
-            assert metrics.registry.get_sample_value("autopilot_relay_pages") == 1
+
+            # The new page, in the new browser (the pool lists it once its open() returns).
+            async def new_page_answers() -> bool:
+                await metrics.poll_once(pool.pages())
+                return metrics.registry.get_sample_value("autopilot_relay_pages") == 1
+
+            await until(new_page_answers, "the metrics' poll to read the new page")
     finally:
         stop.set()
         await asyncio.wait_for(task, 30)

@@ -11,9 +11,9 @@ from app.server.config import Settings
 from app.tools import parity
 
 
-def open_harness() -> AbstractContextManager[parity.Harness]:
-    """The harness on a development server that asks for no token."""
-    return parity.open_harness(Settings(environment="development", token=None))
+def open_harness(build: parity.OpenCvBuild = "auto") -> AbstractContextManager[parity.Harness]:
+    """The harness on a development server that asks for no token, with OpenCV.js ``build``."""
+    return parity.open_harness(Settings(environment="development", token=None), build)
 
 
 @contextmanager

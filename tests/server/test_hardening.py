@@ -105,6 +105,33 @@ async def test_invalid_utf8_closes_with_1007_and_logs_no_traceback(
         assert "malformed" in json.dumps(await recv(ws))
 
 
+@pytest.mark.parametrize("endpoint", ["/ws", "/rosbridge"])
+async def test_a_bad_frame_read_with_the_peer_s_close_logs_no_traceback(
+    server: RunningServer, server_log: Records, endpoint: str
+) -> None:
+    """One read holding a text frame that is not UTF-8 and then the peer's close (a fuzz test's
+    peer closing right after its last frame): the close is parsed before the text frame is handed
+    on, so the connection is closing already; the frame is dropped, not closed over with 1007."""
+    host, port = server.url.removeprefix("http://").split(":")
+    reader, writer = await asyncio.open_connection(host, int(port))
+    writer.write(
+        f"GET {endpoint} HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+        "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+        "Sec-WebSocket-Version: 13\r\n\r\n".encode()
+    )
+    assert b" 101 " in await reader.readuntil(b"\r\n\r\n")
+    bad = b'{"type": "\xff\xfe"}'
+    not_utf8 = bytes([0x81, 0x80 | len(bad)]) + bytes(4) + bad  # masked with a zero key
+    close = bytes([0x88, 0x82]) + bytes(4) + (1000).to_bytes(2, "big")
+    writer.write(not_utf8 + close)
+    await writer.drain()
+    closing = await asyncio.wait_for(reader.read(4), TIMEOUT_S)
+    assert closing[:1] == b"\x88" and closing[2:4] == (1000).to_bytes(2, "big")  # the echo
+    writer.close()
+    await asyncio.sleep(0.1)
+    assert server_log.tracebacks() == []
+
+
 async def test_a_flooding_client_is_closed_and_the_slow_relay_is_not(server: RunningServer) -> None:
     async with connect(server.ws_url) as relay, connect(server.ws_url) as client:
         await login(relay, "r", "relay")

@@ -192,7 +192,7 @@ def test_vehicle_page_loads_the_vendored_roslib_not_a_cdn(server: RunningServer)
     assert httpx.get(f"{server.url}/static/vendor/roslib.min.js").status_code == 200
 
 
-def test_the_relay_shows_its_video_unless_switched_off(server: RunningServer) -> None:
+def test_the_relay_previews_its_video_unless_switched_off(server: RunningServer) -> None:
     on = embedded_config(httpx.get(f"{server.url}/relay").text)
-    off = embedded_config(httpx.get(f"{server.url}/relay?video=0").text)
-    assert (on["showVideo"], off["showVideo"]) == (True, False)
+    off = embedded_config(httpx.get(f"{server.url}/relay?preview=0").text)
+    assert (on["preview"], off["preview"]) == (True, False)

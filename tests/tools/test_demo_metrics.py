@@ -9,33 +9,17 @@ import os
 import signal
 import subprocess
 import sys
-import urllib.request
 from pathlib import Path
 
 import pytest
-from prometheus_client.parser import text_string_to_metric_families
 
 from app.supervise import free_port
+from tests.helpers.metrics import peers
 from tests.helpers.processes import descendants, wait_all_gone
 from tests.helpers.waiting import wait_until
 from tests.server.test_prometheus import PROMETHEUS, api, running_prometheus, wait_for_scrape
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
-
-
-def peers(url: str) -> dict[str, float]:
-    """``autopilot_peers`` by role from ``/metrics`` at ``url``; empty while nothing listens."""
-    try:
-        with urllib.request.urlopen(url, timeout=5) as response:
-            text = response.read().decode()
-    except OSError:
-        return {}
-    return {
-        s.labels["role"]: s.value
-        for family in text_string_to_metric_families(text)
-        if family.name == "autopilot_peers"
-        for s in family.samples
-    }
 
 
 @pytest.mark.skipif(not Path(PROMETHEUS).exists(), reason="Debian's prometheus is not installed")

@@ -29,9 +29,12 @@ SPEC = load_spec(OPERATIONS_SPEC)
 ALL_OPS = [o.id for o in SPEC.operations]
 
 
-@pytest.fixture(scope="module")
-def harness() -> Iterator[parity.Harness]:
-    with open_harness() as opened:
+# Both OpenCV.js builds the relay can load: ours with WebAssembly SIMD (scripts/build-opencv-js),
+# which Chromium takes by default, and the official one from npm, for browsers without SIMD.
+@pytest.fixture(scope="module", params=["simd", "official"])
+def harness(request: pytest.FixtureRequest) -> Iterator[parity.Harness]:
+    with open_harness(request.param) as opened:
+        assert opened.build == request.param  # loaded, not fallen back to the other
         yield opened
 
 
@@ -178,4 +181,5 @@ def test_cli_text_output_lists_both_box_lists() -> None:
     assert js[0] == "js" and python[0] == "python" and js[1:] == python[1:] != ["[]"]
     assert lines[3].startswith(f"{FACES / 'two_people.jpg'} face (window around (")
     assert lines[3].endswith("): agree")
-    assert lines[-1] == "1 images, 2 pairs: 2 agree, 0 disagree"
+    # Chromium validates WebAssembly SIMD: the SIMD build is the one checked by default.
+    assert lines[-1] == "1 images, 2 pairs (OpenCV.js simd): 2 agree, 0 disagree"

@@ -10,34 +10,18 @@ import os
 import subprocess
 import sys
 import time
-import urllib.request
 from collections.abc import Iterator
 
 import pytest
-from prometheus_client.parser import text_string_to_metric_families
 from websockets.asyncio.client import connect
 
 from app.server.serve import RunningServer
 from app.supervise import free_port, stop_process
+from tests.helpers.metrics import Samples, scrape
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 ROOM = "metrics"
-Samples = dict[tuple[str, tuple[tuple[str, str], ...]], float]
-
-
-def scrape(url: str) -> Samples:
-    """``/metrics`` at ``url``, parsed; empty while nothing listens there yet."""
-    try:
-        with urllib.request.urlopen(url, timeout=5) as response:
-            text = response.read().decode()
-    except OSError:
-        return {}
-    return {
-        (s.name, tuple(sorted(s.labels.items()))): s.value
-        for family in text_string_to_metric_families(text)
-        for s in family.samples
-    }
 
 
 @pytest.fixture

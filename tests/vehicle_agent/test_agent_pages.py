@@ -41,6 +41,10 @@ async def page_until(page: Page, expression: str, timeout: float, what: str) -> 
         raise AssertionError(f"timed out after {timeout:g} s waiting for {what}") from exc
 
 
+# Whether the relay page shows the vehicle's video (?preview=0 turns it off where it can).
+PREVIEW_JS = "() => document.querySelector('[data-testid=video]').srcObject !== null"
+
+
 class Scene:
     """The agent, its turtle and synthetic face, the relay service, and the client page."""
 
@@ -123,6 +127,9 @@ async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) ->
         # Goals echo the frame tag the relay read out of the video.
         goal = next(e for e in reversed(s.events) if e["ev"] == "goal")
         assert goal["frame"] is not None and goal["w"] == W
+        # The unattended relay reads the decoder's frames and shows no preview.
+        assert s.relay.page is not None
+        assert await s.relay.page.evaluate(PREVIEW_JS) is False
         # The face moves to the right: the turtle follows.
         s.path.x = 0.8
         await eventually(lambda: 0 < s.heading_deg() < 30, 30, "the turtle to face right")
@@ -184,6 +191,9 @@ async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
     async with scene(server, profile="thesis") as s:
         await s.start_piloting()
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
+        # The thesis profile snapshots the video element: it keeps the preview, even unattended.
+        assert s.relay.page is not None
+        assert await s.relay.page.evaluate(PREVIEW_JS) is True
 
         def moves() -> list[float]:
             return [e["t"] for e in s.events if e["ev"] == "twist" and e["seq"] is not None]

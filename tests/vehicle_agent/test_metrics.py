@@ -5,13 +5,11 @@ from __future__ import annotations
 
 import json
 import time
-import urllib.request
 from typing import Any
-
-from prometheus_client.parser import text_string_to_metric_families
 
 from app.metrics import start_metrics_server
 from tests.helpers.agent import H, Vehicle, W
+from tests.helpers.metrics import scrape
 from vehicle_agent.metrics import DROP_REASONS, VehicleMetrics
 
 
@@ -19,16 +17,6 @@ def goal(seq: int, t_ms: float) -> str:
     return json.dumps(
         {"type": "goal", "seq": seq, "op": "face", "x": 10, "y": 100, "w": W, "h": H, "t": t_ms}
     )
-
-
-def scrape(url: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
-    with urllib.request.urlopen(url, timeout=5) as response:
-        text = response.read().decode()
-    return {
-        (s.name, tuple(sorted(s.labels.items()))): s.value
-        for family in text_string_to_metric_families(text)
-        for s in family.samples
-    }
 
 
 def test_goals_twists_and_mode_of_the_real_agent_are_served() -> None:

@@ -77,7 +77,8 @@ createAnalyzer().then(
     window.runPixels = runPixels;
     window.toBase64 = toBase64;
     window.fromBase64 = fromBase64;
-    state.textContent = `ready: ${analyzer.ops.map((op) => op.id).join(', ')}`;
+    state.textContent = `ready (OpenCV.js ${analyzer.build}): ${analyzer.ops.map((op) => op.id).join(', ')}`;
+    document.body.dataset.opencv = analyzer.build;
     document.body.dataset.ready = 'true';
   },
   (error) => {

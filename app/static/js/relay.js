@@ -19,11 +19,12 @@ const overlay = byTestId('overlay');
 
 // null: a snapshot per decoded video frame; otherwise one every this many ms.
 const SNAPSHOT_PERIOD_MS = PROTOCOL.relayProfiles[config.profile].snapshotPeriodMs;
-// Snapshots are the track's decoded frames (readFrames), not what the video element shows.
-const FRAMES_FROM_TRACK = SNAPSHOT_PERIOD_MS === null && typeof MediaStreamTrackProcessor === 'function';
-// A relay nobody watches (?video=0) shows neither the video nor the boxes, which cost it a tenth
-// of a core per room (docs/bench/relay-cost.md), unless the element is its source of frames.
-const SHOW_VIDEO = config.showVideo || !FRAMES_FROM_TRACK;
+// Whether the page shows the vehicle's video. An unattended relay (`?preview=0`, as `autopilot
+// relay` opens it) that reads frames from the decoder needs no preview, and drawing one cost
+// Chromium's compositor about 0.08 cores at 30 fps (docs/bench/relay-cost.md). The thesis
+// profile snapshots the video element, so it always shows it.
+const PREVIEW =
+  config.preview || SNAPSHOT_PERIOD_MS !== null || typeof MediaStreamTrackProcessor !== 'function';
 
 /**
  * The page's one status object, read-only, for tests and benchmarks: its fields are the
@@ -32,6 +33,7 @@ const SHOW_VIDEO = config.showVideo || !FRAMES_FROM_TRACK;
 const status = {
   profile: config.profile,
   analyzerReady: false,
+  opencvBuild: null, // 'simd' or 'official', once the analyzer is ready
   op: null,
   piloting: false,
   vehicle: null, // name of the connected vehicle
@@ -104,9 +106,10 @@ const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer))
     session.loop = createLoop(created);
     if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
     status.analyzerReady = true;
+    status.opencvBuild = created.build;
     status.op = created.defaultOp;
     show('operation', status.op);
-    log.info(`OpenCV.js ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
+    log.info(`OpenCV.js (${created.build} build) ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
     broadcastState();
     return created;
   },
@@ -247,7 +250,7 @@ function onVehicleTrack({ track, receiver }) {
     stopLoop();
     startLoop();
   }
-  if (SHOW_VIDEO) video.srcObject = new MediaStream([track]);
+  if (PREVIEW) video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
     sendVideoOn(client.peer.pc).catch((err) => log.error(`could not forward video: ${err.message}`));
@@ -476,7 +479,7 @@ function createLoop(analyzer) {
   loop.addEventListener('detections', (event) => {
     const detections = event.detail;
     broadcast(detections);
-    if (SHOW_VIDEO) drawDetections(overlay, detections);
+    if (PREVIEW) drawDetections(overlay, detections);
     // Every redraw of the page costs the compositor: the figures change a few times a second.
     const now = performance.now();
     if (now - session.figuresShownAt < FIGURES_PERIOD_MS) return;
@@ -497,7 +500,7 @@ function startLoop() {
     session.timer = setInterval(snapshot, SNAPSHOT_PERIOD_MS);
     return;
   }
-  if (FRAMES_FROM_TRACK) {
+  if (typeof MediaStreamTrackProcessor === 'function') {
     if (session.vehicleTrack !== null) readFrames(session.vehicleTrack);
     return;
   }

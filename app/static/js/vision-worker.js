@@ -2,13 +2,34 @@
 // script (importScripts), while operation modules are ES modules loaded with import().
 //
 // Protocol (vision.js is the only other side):
-//   worker -> page  {type: 'ready', ops, defaultOp} | {type: 'failed', error}
+//   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'} | {type: 'failed', error}
 //   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, lock}
 //                   {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
 'use strict';
 
-importScripts('/static/opencv.js');
+// Two builds of OpenCV.js 4.12: the official one (npm) and ours with WebAssembly SIMD
+// (scripts/build-opencv-js). `?opencv=simd|official` chooses; by default SIMD where the browser
+// validates a module that uses a v128 instruction (wasm-feature-detect's probe), else official.
+const SIMD_PROBE = new Uint8Array([
+  0, 97, 115, 109, 1, 0, 0, 0, 1, 5, 1, 96, 0, 1, 123, 3, 2, 1, 0, 10, 10, 1, 8, 0, 65, 0, 253, 15, 253, 98, 11,
+]);
+const OPENCV_BUILDS = { simd: '/static/opencv-simd.js', official: '/static/opencv.js' };
+const OPENCV_BUILD = (() => {
+  const asked = new URLSearchParams(self.location.search).get('opencv');
+  const wanted = asked in OPENCV_BUILDS ? asked : WebAssembly.validate(SIMD_PROBE) ? 'simd' : 'official';
+  if (wanted === 'simd') {
+    try {
+      importScripts(OPENCV_BUILDS.simd);
+      return 'simd';
+    } catch (error) {
+      // A server without the SIMD file (or a browser refusing it) still gets a working relay.
+      console.warn(`the SIMD build of OpenCV.js did not load (${error.message}); using the official one`);
+    }
+  }
+  importScripts(OPENCV_BUILDS.official);
+  return 'official';
+})();
 
 // From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits}, defaultProfile,
 // lock: the target lock's rule}.
@@ -81,6 +102,7 @@ async function init() {
   return {
     ops: session.spec.operations.map(({ id, label, description }) => ({ id, label, description })),
     defaultOp: session.spec.default,
+    build: OPENCV_BUILD,
   };
 }
 

@@ -4,18 +4,20 @@
 
 import { PROTOCOL } from './protocol.js';
 
-// The worker has no page config: what it needs of the protocol rides in its URL.
+// The worker has no page config: what it needs of the protocol rides in its URL, and so does
+// the page's `?opencv=simd|official` (which OpenCV.js build; default: SIMD where supported).
 const WORKER_URL = `/static/js/vision-worker.js?${new URLSearchParams({
   protocol: JSON.stringify({
     frameTag: PROTOCOL.frameTag,
     defaultProfile: PROTOCOL.defaultProfile,
     lock: PROTOCOL.lock,
   }),
+  opencv: new URLSearchParams(globalThis.location?.search ?? '').get('opencv') ?? 'auto',
 })}`;
 
 /**
  * Start the worker and wait until OpenCV.js, the cascades and every operation module are loaded.
- * Resolves to {ops, defaultOp, analyze(source, opId, options), memory(), close()}.
+ * Resolves to {ops, defaultOp, build, analyze(source, opId, options), memory(), close()}.
  */
 export async function createAnalyzer() {
   const worker = new Worker(WORKER_URL);
@@ -62,6 +64,8 @@ export async function createAnalyzer() {
     ops: ready.ops,
     /** The spec's default operation id. */
     defaultOp: ready.defaultOp,
+    /** The OpenCV.js build the worker loaded: 'simd' or 'official'. */
+    build: ready.build,
 
     /**
      * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so

@@ -122,10 +122,10 @@ async def run_profile(
     agent_log = workdir / f"agent-{name}.log"
     async with AsyncExitStack() as stack:
         relay = await _open_page(stack, browser, "relay", relay_init_script)
-        # Headless, as `autopilot relay` opens it: nobody watches, so it shows no video.
+        # Unattended, as `autopilot relay` opens it: no preview for nobody to watch.
         await relay.goto(
             page_url(
-                server_url, "relay", room, name="relay", auto=1, profile=options.profile, video=0
+                server_url, "relay", room, name="relay", auto=1, profile=options.profile, preview=0
             )
         )
         await wait_for(
