@@ -32,7 +32,7 @@ from playwright.async_api import Browser, CDPSession, Page
 
 from app.tools.bench.cpu import PROC, ThreadCpu, thread_cpu
 from app.tools.bench.stack import StackOptions, run_profile
-from app.tools.bench.stats import summarize
+from app.tools.bench.stats import Summary, summarize
 
 # On the relay's Chromium alone (Chromium hands no unknown switch to its children, and ignores
 # it): finds that browser's main process in /proc.
@@ -85,7 +85,7 @@ STAGES = (
     "video encode (forward to the client)",
     "video decode (vehicle's video)",
     "page main thread (JS, frame reading, DOM)",
-    "showing the video (compositors, GPU process)",
+    "drawing the page and its video (compositors, GPU process)",
     "WebRTC transport (RTP, SRTP, sockets)",
     "renderer thread pool, other",
     "browser process and the rest",
@@ -231,7 +231,7 @@ async def run(
 
 def figures(
     state: Mapping[str, Any],
-    processing: Any,
+    processing: Summary | None,
     glass_ms: list[float],
     goals: int,
     window: tuple[float, float] | None,
