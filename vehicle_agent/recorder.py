@@ -9,6 +9,12 @@ every message as a JSON-able dict (its event log), the schemas read like the wir
 Foxglove and Lichtblick read JSON-schema channels natively; the base64 of the images costs a
 third more bytes before compression, and zstd chunk compression wins most of it back.
 
+Which camera images are kept: ``--record-fps`` of them, and by preference the frames the relay
+sent goals for (a goal names its frame by tag), so that ``autopilot replay`` can check the goals
+against their own images; the loop holds the last second of frames (references, their tags read
+from the top rows only) to pick from. When no goal names a held frame (autopilot off, a camera
+without tags) the newest frame is kept a little after it was due, so the rate holds either way.
+
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
 drains the queue ten times a second, JPEG-encodes and writes. A full queue drops the item
 (counted, logged once) rather than slow the loop. Log times are one clock (``time.time_ns()``),
@@ -39,11 +45,20 @@ from mcap.writer import CompressionType, Writer
 
 from app.arguments import positive_number
 from vehicle_agent.events import Event
-from vehicle_agent.video import read_frame_tag
+from vehicle_agent.video import read_frame_tag, tag_block_size
 
 log = logging.getLogger(__name__)
 
 IMAGE_TOPIC: Final = "/camera/image/compressed"
+# How long camera frames are held for a goal to name one (glass-to-goal is tens of milliseconds;
+# a loaded relay's, hundreds).
+HOLD_NS: Final = 1_000_000_000
+# Pixel formats whose first plane the tag is read from as it is: the luma (the tag's blocks are
+# white and black in it too) or packed RGB; by channels per pixel.
+_FIRST_PLANE_CHANNELS: Final = {
+    **dict.fromkeys(("yuv420p", "yuvj420p", "yuv422p", "yuv444p", "nv12", "gray"), 1),
+    **dict.fromkeys(("rgb24", "bgr24"), 3),
+}
 # Event-log kinds (vehicle_agent/events.py) and the topic each is recorded on.
 EVENT_TOPICS: Final = {
     "pose": "/turtle1/pose",
@@ -219,6 +234,28 @@ def _quality(text: str) -> int:
     return value
 
 
+@dataclass(frozen=True, slots=True)
+class _Held:
+    """A camera frame the recorder may still keep: when it arrived and its tag."""
+
+    arrived_ns: int
+    tag: int | None
+    frame: av.VideoFrame
+
+
+def frame_tag(frame: av.VideoFrame) -> int | None:
+    """``frame``'s tag, read from its top rows only (the luma or packed RGB plane as it is, no
+    conversion of the whole frame): cheap enough for every frame of the camera."""
+    rows = tag_block_size(frame.width)
+    channels = _FIRST_PLANE_CHANNELS.get(frame.format.name)
+    if channels is None:
+        return read_frame_tag(np.asarray(frame.to_ndarray(format="gray"), np.uint8))
+    plane = frame.planes[0]
+    top = np.frombuffer(memoryview(plane), np.uint8, count=rows * plane.line_size)
+    pixels = top.reshape(rows, plane.line_size)[:, : frame.width * channels]
+    return read_frame_tag(pixels.reshape(rows, frame.width, channels))
+
+
 class FlightRecorder:
     """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
 
@@ -238,6 +275,10 @@ class FlightRecorder:
         self._channels: dict[str, int] = {}
         self._opened_ns = 0
         self._bytes = 0
+        # The camera's last second (record_video) and when the next image is due.
+        self._held: collections.deque[_Held] = collections.deque()
+        self._period_ns = int(1e9 / settings.fps)
+        self._due_ns = 0
         self._thread.start()
 
     # --- the agent's side: stamp and queue, never wait --------------------------------------
@@ -246,31 +287,51 @@ class FlightRecorder:
         """An event-log listener: queue the kinds that are recorded."""
         if event["ev"] in EVENT_TOPICS:
             self._put(event["ev"], event)
+        if event["ev"] == "goal":
+            self._image_for_goal(event)
 
     async def record_video(self, track: MediaStreamTrack) -> None:
-        """Queue ``track``'s frames at the recording rate, until cancelled or the track ends."""
-        period_ns = int(1e9 / self.settings.fps)
-        next_ns = 0
+        """Hold ``track``'s recent frames and queue them at the recording rate (a goal's own
+        frame when one names it, see :meth:`on_event`), until cancelled or the track ends."""
         try:
             while True:
                 frame = await track.recv()
+                if not isinstance(frame, av.VideoFrame):
+                    continue
                 now = time.time_ns()
-                if now >= next_ns:
-                    # Paced from the due time, not from now, so that the rate holds on a jittery
-                    # source; from now after a gap (the first frame, a stalled camera).
-                    behind = next_ns <= now - period_ns
-                    next_ns = (now if behind else next_ns) + period_ns
-                    self._put("image", frame)
+                self._held.append(_Held(now, frame_tag(frame), frame))
+                while self._held[0].arrived_ns < now - HOLD_NS:
+                    self._held.popleft()
+                # No goal took this period's image in time: the newest frame does.
+                if now >= self._due_ns + self._period_ns // 2:
+                    self._keep_image(self._held[-1], now)
         except Exception as exc:  # MediaStreamError and whatever the source raises
             log.info("recording the camera stopped: %s", exc or type(exc).__name__)
 
-    def _put(self, kind: str, payload: Any) -> None:
+    def _image_for_goal(self, event: Event) -> None:
+        now = time.time_ns()
+        if now < self._due_ns or event.get("frame") is None:
+            return
+        for held in reversed(self._held):
+            if held.tag == event["frame"]:
+                self._keep_image(held, now)
+                return
+
+    def _keep_image(self, held: _Held, now: int) -> None:
+        # Paced from the due time, not from now, so that the rate holds on a jittery source;
+        # from now after a gap (the first frame, a stalled camera).
+        behind = self._due_ns <= now - self._period_ns
+        self._due_ns = (now if behind else self._due_ns) + self._period_ns
+        # Stamped when the frame arrived: the image sits beside the pose the turtle had then.
+        self._put("image", held.frame, held.arrived_ns)
+
+    def _put(self, kind: str, payload: Any, log_ns: int | None = None) -> None:
         if len(self._queue) >= QUEUE_LIMIT:
             if self.dropped == 0:
                 log.warning("flight recorder falling behind: dropping what it cannot write")
             self.dropped += 1
             return
-        self._queue.append((kind, time.time_ns(), payload))
+        self._queue.append((kind, time.time_ns() if log_ns is None else log_ns, payload))
 
     async def close(self) -> None:
         """Write what is queued, finish the file and stop the writer thread."""

@@ -27,7 +27,7 @@ from vehicle_agent.recorder import (
     FlightRecorder,
     RecordSettings,
 )
-from vehicle_agent.video import SyntheticVideo, read_frame_tag
+from vehicle_agent.video import FrameInfo, SyntheticVideo, read_frame_tag
 
 FPS = 30.0
 RECORD_FPS = 10.0
@@ -121,6 +121,40 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     assert min(b - a for a, b in zip(tags, tags[1:], strict=False)) >= 2, tags
     stamps = [t for topic, t, _ in messages if topic == IMAGE_TOPIC]
     assert (stamps[-1] - stamps[0]) / (len(stamps) - 1) >= 0.095e9, stamps
+
+
+async def _record_with_goals(settings: RecordSettings, seconds: float) -> FlightRecorder:
+    """Record a synthetic camera while goals arrive, 60 ms late, for every third frame only."""
+    recorder = FlightRecorder(settings)
+    events = EventLog()
+    events.listeners.append(recorder.on_event)
+    loop = asyncio.get_running_loop()
+
+    def goal_later(info: FrameInfo) -> None:
+        if info.frame % 3 == 0:
+            goal = {"op": "face", "x": 1.0, "y": 2.0, "w": 640, "h": 480}
+            loop.call_later(
+                0.06, lambda: events.emit("goal", seq=info.frame, frame=info.frame, **goal)
+            )
+
+    video = SyntheticVideo(fps=FPS, on_frame=goal_later)
+    camera = asyncio.create_task(recorder.record_video(video))
+    await asyncio.sleep(seconds)
+    camera.cancel()
+    video.stop()
+    await recorder.close()
+    return recorder
+
+
+def test_the_images_kept_are_the_frames_goals_were_sent_for(tmp_path: Path) -> None:
+    recorder = asyncio.run(_record_with_goals(RecordSettings(tmp_path, room="lab", fps=10), 2.0))
+    _, messages = _read(recorder.files[0])
+    goals = {fields["frame"] for topic, _, fields in messages if topic == EVENT_TOPICS["goal"]}
+    tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
+    # The first image is due before any goal; every later one is a frame a goal named (a third
+    # of the camera's frames: sampled by time alone, two in three images would not be).
+    assert len(tags) >= 10, tags
+    assert all(tag in goals for tag in tags[1:]), (tags, sorted(goals))
 
 
 def test_files_roll_over_by_size_and_only_the_newest_are_kept(tmp_path: Path) -> None:
