@@ -394,6 +394,10 @@ def _override_section(results: dict[str, Any]) -> list[str]:
         verdict = "not measured" if value is None else "met" if met else "missed"
         lines.append(f"- {LABELS[key]}: {_fmt(value)}; **{target['text']}**: {verdict}.")
     lines.append(f"- {LABELS['override_ms_p95']}: {_fmt(results['override_ms_p95'])}.")
+    lines.append(
+        f"- Presses answered within their second: {counts.get('answered', 0)} of"
+        f" {counts.get('presses', 0)} (the others are not in the figures)."
+    )
     return lines
 
 

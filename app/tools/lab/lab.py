@@ -256,10 +256,19 @@ class Lab:
         if process in self._processes:
             self._processes.remove(process)
 
-    def wait_for_tcp(self, site: str, address: tuple[str, int], timeout_s: float = 30.0) -> None:
-        """Return once ``address`` accepts TCP connections from ``site``."""
+    def wait_for_tcp(
+        self,
+        site: str,
+        address: tuple[str, int],
+        timeout_s: float = 60.0,
+        server: subprocess.Popen[Any] | None = None,
+    ) -> None:
+        """Return once ``address`` accepts TCP connections from ``site``; raise at once when
+        ``server``, the process that is to listen there, has exited."""
         deadline = time.monotonic() + timeout_s
         while True:
+            if server is not None and server.poll() is not None:
+                raise netns.LabError(f"the server for {address} exited with {server.returncode}")
             with contextlib.closing(self.socket(site, socket.SOCK_STREAM)) as sock:
                 sock.settimeout(1)
                 try:

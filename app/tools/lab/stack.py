@@ -22,6 +22,7 @@ from playwright.sync_api import Error as PlaywrightError
 
 from app.tools.browser import chromium_path, launch_options
 from app.tools.lab.lab import CLOUD, Lab
+from app.tools.lab.netns import LabError
 
 PORT = 8000
 SERVER = f"http://{CLOUD}:{PORT}"
@@ -79,16 +80,20 @@ def field_stack(
             for name in ("server", "relay", "agent")
         }
         try:
-            started.append(
-                lab.python(
-                    "cloud",
-                    ["-m", "app.cli", "serve", "--host", CLOUD, "--port", str(PORT)],
-                    env=lab.server_env(),
-                    stdout=logs["server"],
-                    stderr=subprocess.STDOUT,
-                )
+            server = lab.python(
+                "cloud",
+                ["-m", "app.cli", "serve", "--host", CLOUD, "--port", str(PORT)],
+                env=lab.server_env(),
+                stdout=logs["server"],
+                stderr=subprocess.STDOUT,
             )
-            lab.wait_for_tcp("cloud", (CLOUD, PORT))
+            started.append(server)
+            try:
+                lab.wait_for_tcp("cloud", (CLOUD, PORT), server=server)
+            except LabError as exc:
+                logs["server"].flush()
+                tail = (folder / "server.log").read_text()[-2000:]
+                raise LabError(f"{exc}; the server's log ends:\n{tail}") from exc
             started.append(
                 lab.python(
                     "cloud",
