@@ -13,7 +13,7 @@ Which camera images are kept: ``--record-fps`` of them, and by preference the fr
 sent goals for (a goal names its frame by tag), so that ``autopilot replay`` can check the goals
 against their own images; the loop holds the last second of frames (references, their tags read
 from the top rows only) to pick from. When no goal names a held frame (autopilot off, a camera
-without tags) the newest frame is kept a little after it was due, so the rate holds either way.
+without tags) the newest frame is kept a period after it was due, so the rate holds either way.
 
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
 drains the queue ten times a second, JPEG-encodes and writes. A full queue drops the item
@@ -279,6 +279,7 @@ class FlightRecorder:
         self._held: collections.deque[_Held] = collections.deque()
         self._period_ns = int(1e9 / settings.fps)
         self._due_ns = 0
+        self._kept_ns = 0  # the last image kept: when its frame arrived
         self._thread.start()
 
     # --- the agent's side: stamp and queue, never wait --------------------------------------
@@ -302,8 +303,8 @@ class FlightRecorder:
                 self._held.append(_Held(now, frame_tag(frame), frame))
                 while self._held[0].arrived_ns < now - HOLD_NS:
                     self._held.popleft()
-                # No goal took this period's image in time: the newest frame does.
-                if now >= self._due_ns + self._period_ns // 2:
+                # No goal took this period's image within the period: the newest frame does.
+                if now >= self._due_ns + self._period_ns:
                     self._keep_image(self._held[-1], now)
         except Exception as exc:  # MediaStreamError and whatever the source raises
             log.info("recording the camera stopped: %s", exc or type(exc).__name__)
@@ -313,6 +314,8 @@ class FlightRecorder:
         if now < self._due_ns or event.get("frame") is None:
             return
         for held in reversed(self._held):
+            if held.arrived_ns <= self._kept_ns:
+                return  # images go forward in time, as the camera did
             if held.tag == event["frame"]:
                 self._keep_image(held, now)
                 return
@@ -323,6 +326,7 @@ class FlightRecorder:
         behind = self._due_ns <= now - self._period_ns
         self._due_ns = (now if behind else self._due_ns) + self._period_ns
         # Stamped when the frame arrived: the image sits beside the pose the turtle had then.
+        self._kept_ns = held.arrived_ns
         self._put("image", held.frame, held.arrived_ns)
 
     def _put(self, kind: str, payload: Any, log_ns: int | None = None) -> None:
