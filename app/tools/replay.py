@@ -10,7 +10,8 @@ of the recorded one. Not pixel equality: the relay analysed the decoded VP8 vide
 recorded JPEG of the frame before encoding, and between full scans the relay searched a window
 around the last target; the same target's goal moves by a few pixels, another target's by far
 more. Goals the relay sent for frames that were not recorded (images are kept at ``--record-fps``,
-goals come at the video's rate) are not compared.
+goals come at the video's rate; the recorder keeps goals' own frames where it can) are not
+compared.
 """
 
 from __future__ import annotations
