@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page, expect
 
+from app.protocol.constants import CLIENT_FORWARD_SCALE_DOWN
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, open_room
 from e2e.helpers import heading_error, status, turtle_state, wait_until
@@ -51,10 +52,12 @@ def stopped(vehicle: Page) -> bool:
 def healthy(client: Page) -> bool:
     """Both links measured with plausible figures, and a recent goal at the vehicle."""
     health = client.evaluate("() => structuredClone(window.autopilotHealth)")
-    for link in (health["vehicleToRelay"], health["relayToClient"]):
+    # The relay forwards the client the video at a reduced size (DESIGN §10, relay cost).
+    forward = (int(640 / CLIENT_FORWARD_SCALE_DOWN), int(480 / CLIENT_FORWARD_SCALE_DOWN))
+    for link, size in ((health["vehicleToRelay"], (640, 480)), (health["relayToClient"], forward)):
         if link is None or link["fps"] is None or link["fps"] <= 0 or link["rttMs"] is None:
             return False
-        assert link["candidate"] == "host" and (link["width"], link["height"]) == (640, 480)
+        assert link["candidate"] == "host" and (link["width"], link["height"]) == size
         assert 0 <= link["lossPct"] <= 100 and 0 <= link["rttMs"] < 10_000
     age = health["goalAgeMs"]
     return age is not None and 0 <= age < 2000

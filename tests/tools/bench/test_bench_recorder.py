@@ -11,7 +11,13 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.bench, pytest.mark.slow, pytest.mark.browser, pytest.mark.timeout(400)]
+pytestmark = [
+    pytest.mark.bench,
+    pytest.mark.slow,
+    pytest.mark.browser,
+    pytest.mark.timeout(400),
+    pytest.mark.xdist_group("benches"),  # the shorter benches' lane (test_field_quick.py)
+]
 
 
 def test_the_recorder_bench_measures_both_runs_and_writes_its_report(tmp_path: Path) -> None:

@@ -23,6 +23,9 @@ pytestmark = [
     pytest.mark.slow,
     pytest.mark.browser,
     pytest.mark.timeout(480),  # over the suite's 300 s: the run itself may take 420
+    # One lane for the shorter benches (scripts/test's workers take each group whole): four
+    # benches at once starved the flows beside them; the quick bench runs in a lane of its own.
+    pytest.mark.xdist_group("benches"),
     pytest.mark.skipif(os.geteuid() != 0, reason="the field lab builds network namespaces"),
 ]
 

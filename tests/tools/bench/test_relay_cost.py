@@ -70,6 +70,7 @@ def test_codec_counters_beyond_the_pool_cap_at_its_cpu() -> None:
 @pytest.mark.slow
 @pytest.mark.browser
 @pytest.mark.timeout(300)
+@pytest.mark.xdist_group("benches")  # the shorter benches' lane (test_field_quick.py)
 def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: Path) -> None:
     argv = [sys.executable, "-m", "app.cli", "bench", "--relay-cost", "--json"]
     argv += ["--seconds", "4", "--fps", "10", "--out", str(tmp_path)]
