@@ -106,13 +106,16 @@ def status(page: Page) -> dict[str, Any]:
 
 
 @contextmanager
-def module_page(server: RunningServer, browser: Browser, module: str) -> Iterator[Page]:
-    """A page of the server with ``/static/js/<module>.js`` imported as ``window.<module>``,
-    to run a page module's pure functions against their Python twins."""
+def module_page(
+    server: RunningServer, browser: Browser, module: str, name: str | None = None
+) -> Iterator[Page]:
+    """A page of the server with ``/static/js/<module>.js`` imported as ``window.<name>``
+    (default: the module's name), to run a page module's pure functions against their Python
+    twins."""
     opened = browser.new_page()
     opened.goto(server.url + "/")
     url = f"/static/js/{module}.js"
-    opened.evaluate(f"async () => {{ window[{module!r}] = await import({url!r}); }}")
+    opened.evaluate(f"async () => {{ window[{name or module!r}] = await import({url!r}); }}")
     try:
         yield opened
     finally:

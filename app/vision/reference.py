@@ -93,6 +93,7 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
     gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
     region = None
     ox = oy = 0
+    min_size, max_size = params.min_size, params.max_size
     if around is not None:
         height, width = gray.shape[:2]
         region = window.search_region(around, factor, width, height, params.window_margin)
@@ -100,6 +101,9 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
             return Detection(boxes=[], target=None, region=region)
         ox, oy = region[:2]
         gray = window.crop(gray, region)
+        min_size, max_size = window.search_sizes(
+            around, factor, params.window_size_ratio, min_size, max_size
+        )
     boxes: list[Box] = []
     for name in params.cascades:
         found = _classifier(name).detectMultiScale(
@@ -107,8 +111,8 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
             scaleFactor=params.scale_factor,
             minNeighbors=params.min_neighbors,
             flags=0,
-            minSize=params.min_size,
-            maxSize=params.max_size,
+            minSize=min_size,
+            maxSize=max_size,
         )
         for x, y, w, h in found:
             boxes.append(_scale_box((int(x) + ox, int(y) + oy, int(w), int(h)), factor))

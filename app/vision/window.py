@@ -1,8 +1,9 @@
 """Detect, then track: the search window around the last target, and when to scan it all.
 
 Once an operation has found its target, the next snapshots search only a window around the last
-target box, in the same detection image (same reduction, same cascade, same parameters), so the
-cascade runs over a fraction of the pixels. The whole frame is scanned again every
+target box, in the same detection image (same reduction, same cascade, same parameters), and
+only for sizes near the target's own, so the cascade runs over a fraction of the pixels and of
+the scales. The whole frame is scanned again every
 ``full_scan_every`` snapshots, and at once, on the same snapshot, when the window finds nothing.
 
 This module is the Python side of ``app/static/js/window.js``; both compute the same window from
@@ -20,6 +21,7 @@ from typing import Literal, Protocol, TypeVar
 from cv2.typing import MatLike
 
 Box = tuple[int, int, int, int]
+Size = tuple[int, int]
 Scan = Literal["full", "window"]
 
 
@@ -39,6 +41,25 @@ def search_region(around: Box, factor: float, width: int, height: int, margin: f
     if x1 <= x0 or y1 <= y0:
         return None
     return x0, y0, x1 - x0, y1 - y0
+
+
+def search_sizes(
+    around: Box, factor: float, ratio: float, min_size: Size, max_size: Size
+) -> tuple[Size, Size]:
+    """The smallest and largest object sizes a window search looks for, in detection-image pixels.
+
+    From the last target's sides: the shorter divided by ``ratio`` and the longer multiplied by
+    it, within the operation's own ``min_size`` and ``max_size`` (``(0, 0)``: no limit). A tracked
+    target changes size little from one snapshot to the next, and the small scales are the
+    cascade's costly ones (the most positions); a target that grew or shrank past the range
+    leaves the window empty, and the full scan that follows finds it on the same snapshot.
+    """
+    shortest = math.floor(min(around[2], around[3]) / factor / ratio)
+    longest = math.ceil(max(around[2], around[3]) / factor * ratio)
+    smallest = (max(min_size[0], shortest), max(min_size[1], shortest))
+    if max_size[0] == 0 or max_size[1] == 0:
+        return smallest, (longest, longest)
+    return smallest, (min(max_size[0], longest), min(max_size[1], longest))
 
 
 def crop(image: MatLike, region: Box) -> MatLike:

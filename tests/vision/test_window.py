@@ -40,6 +40,29 @@ def test_the_window_grows_the_box_and_stays_in_the_image() -> None:
     assert window.search_region((700, 500, 40, 40), 2.0, 320, 240, 0.5) is None
 
 
+def test_the_window_looks_for_sizes_near_the_last_target() -> None:
+    # A 60x40 box of the full frame at half size: 20 / 1.5 = 13.3 and 30 * 1.5 = 45 pixels.
+    assert window.search_sizes((0, 0, 60, 40), 2.0, 1.5, (0, 0), (0, 0)) == ((13, 13), (45, 45))
+    # The operation's own limits still hold, the larger of the minimums and smaller of maximums.
+    assert window.search_sizes((0, 0, 60, 40), 2.0, 1.5, (24, 20), (40, 50)) == ((24, 20), (40, 45))
+
+
+def test_a_face_much_smaller_than_the_last_target_is_left_to_the_full_scan() -> None:
+    video, _ = scene(FixedPath(0.3, 0.42))
+    frame = rgba(video, 0)
+    (face,) = reference.detect(FACE, frame).boxes
+    x, y, w, h = face
+    # A last target twice the face's size, centred on it: the window covers the face, but
+    # looks only for sizes from 2 / ratio of the face's up.
+    twice = (x - w // 2, y - h // 2, 2 * w, 2 * h)
+    assert FACE.params.window_size_ratio < 2
+    assert reference.detect(FACE, frame, around=twice).boxes == []
+    tracker = window.Tracker(EVERY)
+    tracker.record(twice, "full")
+    found, scan = window.step(tracker, lambda around: reference.detect(FACE, frame, around=around))
+    assert scan == "full" and found.boxes == [face]
+
+
 def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:
     video, _ = scene(FixedPath(0.3, 0.42))
     frame = rgba(video, 0)

@@ -2,7 +2,7 @@
 //
 // Once an operation has found its target, the next snapshots search only a window around the
 // last target box, in the same detection image (same reduction, same cascade, same
-// parameters). The whole frame is scanned again every `fullScanEvery` snapshots, and at once,
+// parameters), for sizes near the target's own. The whole frame is scanned again every `fullScanEvery` snapshots, and at once,
 // on the same snapshot, when the window finds nothing. The vision worker holds one Tracker per
 // operation and profile; cascade operations take the window through detect(rgba, around).
 //
@@ -22,6 +22,21 @@ export function searchRegion(around, factor, width, height, margin) {
   const y1 = Math.min(height, Math.ceil(y + h + h * margin));
   if (x1 <= x0 || y1 <= y0) return null;
   return { x: x0, y: y0, width: x1 - x0, height: y1 - y0 };
+}
+
+/**
+ * The smallest and largest object sizes a window search looks for, {min: [w, h], max: [w, h]}
+ * in detection-image pixels: the last target's (`around`, full-frame) shorter side divided by
+ * `ratio` and longer side multiplied by it, within the operation's own `minSize` and `maxSize`
+ * ([0, 0]: no limit). The small scales are the cascade's costly ones; a target that grew or
+ * shrank past the range leaves the window empty, and the full scan that follows finds it.
+ */
+export function searchSizes(around, factor, ratio, minSize, maxSize) {
+  const shortest = Math.floor(Math.min(around[2], around[3]) / factor / ratio);
+  const longest = Math.ceil(Math.max(around[2], around[3]) / factor * ratio);
+  const min = [Math.max(minSize[0], shortest), Math.max(minSize[1], shortest)];
+  if (maxSize[0] === 0 || maxSize[1] === 0) return { min, max: [longest, longest] };
+  return { min, max: [Math.min(maxSize[0], longest), Math.min(maxSize[1], longest)] };
 }
 
 /** The largest box, the first of equal areas (the one whose centre is the target). */

@@ -4,8 +4,9 @@
 // same RGBA pixels finds the same rectangles: RGBA -> gray, reduce to detectWidth with
 // INTER_AREA, detectMultiScale per cascade, boxes scaled back to full-frame pixels. Given a box
 // to search around (detect, then track: ../window.js), only that window of the detection image
-// is searched, and its boxes are moved back by the window's origin before scaling.
-import { searchRegion } from '../window.js';
+// is searched, for sizes near the box's own, and its boxes are moved back by the window's origin
+// before scaling.
+import { searchRegion, searchSizes } from '../window.js';
 
 /** Size of the detection image, or null when the frame is used as it is (see _reduction). */
 export function reduction(width, height, detectWidth) {
@@ -73,9 +74,13 @@ export function createCascadeOperation(cv, spec, files) {
       cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
       const { input, factor } = reduce(cv, gray, small, p.detectWidth);
       let region = null;
+      let [sizeMin, sizeMax] = [minSize, maxSize];
       if (around !== null) {
         region = searchRegion(around, factor, input.cols, input.rows, p.windowMargin);
         if (region === null) return { boxes: [], target: null, region };
+        const sizes = searchSizes(around, factor, p.windowSizeRatio, p.minSize, p.maxSize);
+        sizeMin = new cv.Size(...sizes.min);
+        sizeMax = new cv.Size(...sizes.max);
       }
       const boxes = [];
       const searched = region === null ? input : input.roi(region);
@@ -83,7 +88,7 @@ export function createCascadeOperation(cv, spec, files) {
       const oy = region?.y ?? 0;
       try {
         for (const c of classifiers) {
-          c.detectMultiScale(searched, rects, p.scaleFactor, p.minNeighbors, 0, minSize, maxSize);
+          c.detectMultiScale(searched, rects, p.scaleFactor, p.minNeighbors, 0, sizeMin, sizeMax);
           for (let i = 0; i < rects.size(); i += 1) {
             const r = rects.get(i);
             boxes.push(scaleBox([r.x + ox, r.y + oy, r.width, r.height], factor));
