@@ -64,10 +64,12 @@ class CascadeParams(_Model):
     # Detect, then track (app/vision/window.py): after a hit, snapshots search a window around
     # the last target grown by window_margin of its size on each side; the whole frame is
     # scanned every full_scan_every snapshots and whenever the window finds nothing. 1: off.
-    # The window looks only for sizes within window_size_ratio of the last target's.
+    # The window looks only for sizes within window_size_ratio of the last target's: per
+    # operation, small enough to skip the costly small scales, large enough that the window
+    # still finds the box a search of every size finds (docs/bench/relay-cost.md).
     full_scan_every: int = Field(1, ge=1)
     window_margin: float = Field(0.5, gt=0.0)
-    window_size_ratio: float = Field(1.5, gt=1.0)
+    window_size_ratio: float = Field(2.0, gt=1.0)
 
 
 class HsvRange(_Model):
