@@ -209,6 +209,13 @@ async def _main(args: argparse.Namespace) -> int:
         if flight is not None and camera is not None:
             camera.cancel()
             await flight.close()
+            totals = flight.totals()
+            log.info(
+                "flight recorder: %(images)d images, %(messages)d messages (%(dropped)d dropped) "
+                "in %(files)d file(s); its CPU %(cpu_s).2f s over %(seconds).0f s",
+                totals,
+            )
+            events.emit("recorder", **totals)
         events.close()
         if metrics is not None:
             metrics.close()

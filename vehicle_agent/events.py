@@ -18,7 +18,10 @@ processes of one machine):
   ``local_candidates``: the candidate types gathered, and ``selected``: this side's candidate
   type in the nominated pair, or null) or down (with ``reason``);
 * ``{"ev": "spawn", "ok", "t", ...}`` -- the spawn step turned the turtle (``x``, ``y``,
-  ``theta``) or failed (``reason``).
+  ``theta``) or failed (``reason``);
+* ``{"ev": "recorder", "images", "messages", "dropped", "files", "cpu_s", "loop_cpu_s",
+  "writer_cpu_s", "seconds", "t"}`` -- the flight recorder's totals when it stopped
+  (``FlightRecorder.totals``), its own CPU time included.
 """
 
 from __future__ import annotations

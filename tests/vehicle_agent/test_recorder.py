@@ -101,6 +101,11 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     # 1.5 s of a 30 fps camera at 10 images a second (fewer if a loaded machine delays frames).
     assert 5 <= counts[IMAGE_TOPIC] <= 16, counts
     assert recorder.images == counts[IMAGE_TOPIC] and recorder.dropped == 0
+    # What the recorder counts of itself: the same images and messages, and the CPU they took.
+    totals = recorder.totals()
+    assert totals["images"] == recorder.images and totals["messages"] == len(messages)
+    assert totals["dropped"] == 0 and totals["files"] == 1 and totals["seconds"] >= 1.5
+    assert 0 < totals["writer_cpu_s"] < totals["cpu_s"] < totals["seconds"], totals
 
     # On each channel, in the order written (an image is stamped when its frame arrived, a
     # moment before it was chosen, so channels interleave).
@@ -111,15 +116,19 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     goal = next(fields for topic, _, fields in messages if topic == EVENT_TOPICS["goal"])
     assert goal == {"seq": 1, "op": "face", "frame": 1, "x": 100.0, "y": 200.0, "w": 640, "h": 480}
     images = [fields for topic, _, fields in messages if topic == IMAGE_TOPIC]
+    camera_video = SyntheticVideo(fps=FPS)
     tags = []
     for image in images:
         assert image["format"] == "jpeg"
         jpeg = np.frombuffer(base64.b64decode(image["data"]), np.uint8)
         bgr = cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
         assert bgr is not None and bgr.shape == (480, 640, 3)
-        # The tag survives the JPEG: the image is the frame its "frame" field names.
+        # The tag survives the JPEG: the image is the frame its "frame" field names, in its
+        # own colours (channels in the wrong order would be far off the camera's frame).
         rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), np.uint8)
         assert read_frame_tag(rgb) == image["frame"]
+        camera = camera_video.render(image["frame"]).astype(np.int16)
+        assert np.abs(rgb.astype(np.int16) - camera).mean() < 4
         tags.append(image["frame"])
     # Never two camera frames in a row, and no more than 10 images a second on average.
     assert min(b - a for a, b in zip(tags, tags[1:], strict=False)) >= 2, tags

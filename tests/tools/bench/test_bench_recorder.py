@@ -32,8 +32,13 @@ def test_the_recorder_bench_measures_both_runs_and_writes_its_report(tmp_path: P
         assert 0 < run["agent_cores"] < 2, run
         for key in ("glass_to_command_ms", "goal_to_command_ms"):
             assert 0 <= run[key]["p50"] <= run[key]["p95"] < 5000, run
-    assert figures["recording"]["mcap_bytes"] > 0
+    recording = figures["recording"]
+    assert recording["mcap_bytes"] > 0
     assert isinstance(figures["agent_cpu_increase_pct"], float)
+    # The recorder's own CPU, from the agent's event log: some, the writer's part of it.
+    assert 0 < recording["recorder_writer_cores"] <= recording["recorder_cores"] < 1, recording
+    assert 0 < recording["recorder_share_pct"] < 100 and recording["recorder_images"] > 0
     report = (tmp_path / "recorder.md").read_text()
     assert "| recording |" in report and "Agent CPU with recording" in report
+    assert "The recorder's own CPU" in report
     assert json.loads((tmp_path / "recorder.json").read_text()) == figures
