@@ -12,8 +12,9 @@ third more bytes before compression, and zstd chunk compression wins most of it 
 Which camera images are kept: ``--record-fps`` of them, and by preference the frames the relay
 sent goals for (a goal names its frame by tag), so that ``autopilot replay`` can check the goals
 against their own images; the loop holds the last second of frames (references, their tags read
-from the top rows only) to pick from. When no goal names a held frame (autopilot off, a camera
-without tags) the newest frame is kept a period after it was due, so the rate holds either way.
+from the top rows only, and only when a search asks) to pick from. When no goal names a held
+frame (autopilot off, a camera without tags) the newest frame is kept a period after it was due,
+so the rate holds either way.
 
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
 drains the queue ten times a second, JPEG-encodes and writes. A full queue drops the item
@@ -39,7 +40,7 @@ import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any, Final
+from typing import IO, Any, Final, Literal
 
 import av
 import cv2
@@ -238,13 +239,24 @@ def _quality(text: str) -> int:
     return value
 
 
-@dataclass(frozen=True, slots=True)
 class _Held:
-    """A camera frame the recorder may still keep: when it arrived and its tag."""
+    """A camera frame the recorder may still keep: when it arrived, and its tag once read."""
 
-    arrived_ns: int
-    tag: int | None
-    frame: av.VideoFrame
+    __slots__ = ("_tag", "arrived_ns", "frame")
+
+    def __init__(self, arrived_ns: int, frame: av.VideoFrame) -> None:
+        self.arrived_ns = arrived_ns
+        self.frame = frame
+        self._tag: int | None | Literal[False] = False  # False: not read yet
+
+    @property
+    def tag(self) -> int | None:
+        """The frame's tag, read on first use: most held frames are never asked for it (only
+        those a due goal's search passes, and the images kept), and reading a fresh frame's top
+        rows is the loop's costliest step per frame."""
+        if self._tag is False:
+            self._tag = frame_tag(self.frame)
+        return self._tag
 
 
 def frame_tag(frame: av.VideoFrame) -> int | None:
@@ -317,7 +329,7 @@ class FlightRecorder:
 
     def _hold(self, frame: av.VideoFrame) -> None:
         now = time.time_ns()
-        self._held.append(_Held(now, frame_tag(frame), frame))
+        self._held.append(_Held(now, frame))
         while self._held[0].arrived_ns < now - HOLD_NS:
             self._held.popleft()
         # No goal took this period's image within the period: the newest frame does.
@@ -398,8 +410,13 @@ class FlightRecorder:
             self._finish()
 
     def _image(self, held: _Held, log_ns: int) -> dict[str, Any]:
-        # Converted to BGR, OpenCV's order, in one step from whatever format the camera gives.
-        bgr = np.asarray(held.frame.to_ndarray(format="bgr24"), np.uint8)
+        # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
+        # packed RGB's channels is three times faster in OpenCV (the synthetic camera's frames).
+        if held.frame.format.name == "rgb24":
+            rgb = held.frame.to_ndarray(format="rgb24")
+            bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
+        else:
+            bgr = np.asarray(held.frame.to_ndarray(format="bgr24"), np.uint8)
         quality = [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality]
         ok, jpeg = cv2.imencode(".jpg", bgr, quality)
         if not ok:
