@@ -3,8 +3,8 @@
 Once an operation has found its target, the next snapshots search only a window around the last
 target box, in the same detection image (same reduction, same cascade, same parameters), and
 only for sizes near the target's own, so the cascade runs over a fraction of the pixels and of
-the scales. The whole frame is scanned again every
-``full_scan_every`` snapshots, and at once, on the same snapshot, when the window finds nothing.
+the scales. The whole frame is scanned again every ``full_scan_every`` snapshots, and at once,
+on the same snapshot, when the window finds nothing.
 
 This module is the Python side of ``app/static/js/window.js``; both compute the same window from
 the same doubles and take the same decisions, so ``autopilot parity`` can compare the windowed

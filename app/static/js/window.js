@@ -2,9 +2,10 @@
 //
 // Once an operation has found its target, the next snapshots search only a window around the
 // last target box, in the same detection image (same reduction, same cascade, same
-// parameters), for sizes near the target's own. The whole frame is scanned again every `fullScanEvery` snapshots, and at once,
-// on the same snapshot, when the window finds nothing. The vision worker holds one Tracker per
-// operation and profile; cascade operations take the window through detect(rgba, around).
+// parameters), for sizes near the target's own. The whole frame is scanned again every
+// `fullScanEvery` snapshots, and at once, on the same snapshot, when the window finds nothing.
+// The vision worker holds one Tracker per operation and profile; cascade operations take the
+// window through detect(rgba, around).
 //
 // The Python side is app/vision/window.py: the same window from the same doubles and the same
 // decisions, so `autopilot parity` compares the windowed path box for box.
