@@ -68,12 +68,14 @@ def test_the_size_range_keeps_the_box_a_search_of_every_size_finds() -> None:
     # window finds the very box it would find looking for every size (too small a ratio drops
     # raw hits that the grouping averages into the box, and moves it by a few pixels).
     video = SyntheticVideo()
-    every_size = FACE.params.model_copy(update={"window_size_ratio": 1e6})
+    every_size = FACE.model_copy(
+        update={"params": FACE.params.model_copy(update={"window_size_ratio": 1e6})}
+    )
     for i in range(0, 1200, 20):
         frame = rgba(video, i)
         (face,) = reference.detect(FACE, frame).boxes
         windowed = reference.detect(FACE, frame, around=face)
-        assert windowed.boxes == reference._detect_cascade(every_size, frame, face).boxes, i
+        assert windowed.boxes == reference.detect(every_size, frame, around=face).boxes, i
 
 
 def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:

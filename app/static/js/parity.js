@@ -37,7 +37,8 @@ function fromBase64(text) {
 async function runImage(base64, opIds, profile, windowOps = []) {
   let decoded;
   try {
-    decoded = await createImageBitmap(new Blob([fromBase64(base64)]), { colorSpaceConversion: 'none' });
+    const blob = new Blob([fromBase64(base64)]);
+    decoded = await createImageBitmap(blob, { colorSpaceConversion: 'none' });
   } catch (error) {
     return { unreadable: error.message };
   }
