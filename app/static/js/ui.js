@@ -28,9 +28,14 @@ export function button(action) {
   return el;
 }
 
-/** Set the text of a `data-testid` element. */
+/**
+ * Set the text of a `data-testid` element. Unchanged text is left alone: some fields are fed
+ * many times a second (a still turtle's pose at 60 Hz), and each write costs a layout and a
+ * repaint even when the text is the same.
+ */
 export function show(id, text) {
-  byTestId(id).textContent = text;
+  const el = byTestId(id);
+  if (el.textContent !== text) el.textContent = text;
 }
 
 const LOG_LIMIT = 300;
