@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import hashlib
 import json
 import logging
 import sys
@@ -36,7 +37,7 @@ from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.tools.browser import launch_options
 from app.vision.reference import Detection, detect
-from app.vision.spec import CascadeOperation, Spec, load_spec
+from app.vision.spec import CascadeOperation, ColourOperation, Spec, load_spec
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +47,11 @@ IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".webp", ".gif"}
 READY_TIMEOUT_MS = 180_000
 
 Box = tuple[int, int, int, int]
+# The Python reference is a pure function of an operation's parameters and the pixels: a process
+# that checks the same decoded images against both OpenCV.js builds (the test suite does) runs
+# it once per image. Bounded, for a long batch of images.
+_REFERENCES: dict[tuple[str, bytes, Box | None], Detection] = {}
+_REFERENCES_KEPT = 512
 # Which OpenCV.js the analyzer loads (app/static/js/vision-worker.js).
 OpenCvBuild = Literal["auto", "simd", "official"]
 OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
@@ -205,17 +211,37 @@ class Harness:
             report.unreadable[name] = f"cannot read image {name}: {exc}"
             return
         report.images.append(name)
+        # The pixels' identity (shape and digest), for the reference's results.
+        pixels = str(rgba.shape).encode() + hashlib.blake2b(rgba.tobytes(), digest_size=16).digest()
         for op_id in op_ids:
             op = self.spec.op(op_id)
-            py = detect(op, rgba, profile)
+            py = _reference(op, rgba, pixels, profile)
             js = results[op_id]
             report.details.append(_pair(name, op_id, js, py))
             windowed = js.get("window")
             if windowed is not None:
                 # The windowed path: both sides searched the window around the same box.
                 around = windowed["around"]
-                py = detect(op, rgba, profile, around=tuple(around))
+                py = _reference(op, rgba, pixels, profile, tuple(around))
                 report.details.append(_pair(name, op_id, windowed, py, around=around))
+
+
+def _reference(
+    op: CascadeOperation | ColourOperation,
+    rgba: np.ndarray[Any, np.dtype[np.uint8]],
+    pixels: bytes,
+    profile: Profile,
+    around: Box | None = None,
+) -> Detection:
+    """:func:`detect`, once per parameters, pixels (``pixels``: their digest) and window."""
+    key = (op.kind + op.params_for(profile).model_dump_json(), pixels, around)
+    found = _REFERENCES.get(key)
+    if found is None:
+        found = detect(op, rgba, profile, around=around)
+        if len(_REFERENCES) >= _REFERENCES_KEPT:
+            del _REFERENCES[next(iter(_REFERENCES))]
+        _REFERENCES[key] = found
+    return found
 
 
 def _pair(
