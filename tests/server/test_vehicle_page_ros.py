@@ -12,19 +12,26 @@ from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import pytest
-from playwright.async_api import Browser, async_playwright
+import pytest_asyncio
+from playwright.async_api import Browser, Page, async_playwright
 
 from app.protocol.ros import RosFlavour, page_config
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.tools.browser import launch_options
 
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+# One Chromium for the module (its launch cost more than most of these tests), on the module's
+# event loop; each test gets a context of its own, closed after it.
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.timeout(120),
+    pytest.mark.asyncio(loop_scope="module"),
+]
 
 POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
 
 
-@pytest.fixture
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
 async def browser() -> AsyncIterator[Browser]:
     async with async_playwright() as playwright:
         browser = await playwright.chromium.launch(**launch_options())
@@ -34,12 +41,20 @@ async def browser() -> AsyncIterator[Browser]:
             await browser.close()
 
 
+@pytest_asyncio.fixture(loop_scope="module")
+async def page(browser: Browser) -> AsyncIterator[Page]:
+    context = await browser.new_context()
+    try:
+        yield await context.new_page()
+    finally:
+        await context.close()
+
+
 @pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
 async def test_vehicle_page_learns_the_flavour_and_drives(
-    browser: Browser, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+    page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
 ) -> None:
     robot = start_server(Settings(environment="development", token=None, ros=flavour))
-    page = await browser.new_page()
     # No ros= in the query: the page's setting is "auto".
     await page.goto(f"{robot.url}/vehicle?room=flavour-{flavour}")
     await page.wait_for_function(
@@ -63,14 +78,13 @@ async def test_vehicle_page_learns_the_flavour_and_drives(
     ],
 )
 async def test_pick_types_follows_the_python_rule(
-    browser: Browser,
+    page: Page,
     server: RunningServer,
     setting: str,
     pose: str | None,
     twist: str | None,
     expected: tuple[str, bool],
 ) -> None:
-    page = await browser.new_page()
     await page.goto(f"{server.url}/healthz")
     picked: dict[str, Any] = await page.evaluate(
         """async ([table, setting, pose, twist]) => {
