@@ -1,8 +1,9 @@
 """Fixtures for the end-to-end tests: the server, headless Chromium, a fake camera video.
 
-Pages run in Debian's Chromium through Playwright (``app.tools.browser``). The vehicle gets its own
-browser because the fake-camera file is a per-browser flag. Every page's screenshot and console
-are kept under ``artifacts/<test>/`` whether the test passes or fails.
+Pages run in Debian's Chromium through Playwright (``app.tools.browser``), one browser per module
+whose fake camera (a per-browser flag) shows the face on the left; a scene with another camera
+launches its own browser for the vehicle. Every page's screenshot and console are kept under
+``artifacts/<test>/`` whether the test passes or fails.
 """
 
 from __future__ import annotations
@@ -57,19 +58,19 @@ def playwright() -> Iterator[Playwright]:
 
 
 @pytest.fixture(scope="module")
-def browser(playwright: Playwright) -> Iterator[Browser]:
-    """Chromium for the relay and client pages (default fake camera, unused)."""
-    launched = playwright.chromium.launch(**launch_options())
+def browser(playwright: Playwright, face_left_video: Path) -> Iterator[Browser]:
+    """Chromium for the role pages, each in a context of its own; its camera (a per-browser
+    flag) shows the face on the left, and only vehicle pages ask for it."""
+    launched = playwright.chromium.launch(**launch_options(face_left_video))
     yield launched
     launched.close()
 
 
 @pytest.fixture(scope="module")
-def vehicle_browser(playwright: Playwright, face_left_video: Path) -> Iterator[Browser]:
-    """Chromium whose camera shows the face on the left."""
-    launched = playwright.chromium.launch(**launch_options(face_left_video))
-    yield launched
-    launched.close()
+def vehicle_browser(browser: Browser) -> Browser:
+    """The vehicle pages' Chromium: the same as the others' (a launch costs more than most
+    tests); a scene with another camera launches its own."""
+    return browser
 
 
 @dataclass

@@ -122,6 +122,12 @@ class Lab:
         for name in self.namespaces.values():
             netns.ip("netns", "add", name)
             self._built.append(name)
+            # No IPv6 link-local addresses on the links made next: they would appear seconds
+            # later (duplicate address detection), and Chromium fails the requests in flight
+            # at that moment with ERR_NETWORK_CHANGED.
+            netns.run_checked(
+                netns.exec_argv(name, ["sysctl", "-qw", "net.ipv6.conf.default.addr_gen_mode=1"])
+            )
             netns.ip("link", "set", "lo", "up", namespace=name)
         ns = self.namespaces
         netns.ip("link", "add", "br0", "type", "bridge", namespace=ns["wan"])
