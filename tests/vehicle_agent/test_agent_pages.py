@@ -13,8 +13,9 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
+import pytest_asyncio
+from playwright.async_api import Browser, Page, async_playwright
 from playwright.async_api import Error as PlaywrightError
-from playwright.async_api import Page, async_playwright
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
@@ -28,7 +29,14 @@ from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
-pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
+# One Chromium for the module's client pages, on the module's event loop (the relay service
+# launches its own, as `autopilot relay` does).
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.e2e,
+    pytest.mark.slow,
+    pytest.mark.asyncio(loop_scope="module"),
+]
 
 W, H = 640, 480
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
@@ -84,8 +92,20 @@ class Scene:
         await self.client.get_by_role("button", name="Stop Piloting").click()
 
 
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def browser() -> AsyncIterator[Browser]:
+    async with async_playwright() as playwright:
+        launched = await playwright.chromium.launch(**launch_options())
+        try:
+            yield launched
+        finally:
+            await launched.close()
+
+
 @contextlib.asynccontextmanager
-async def scene(server: RunningServer, profile: str = "default") -> AsyncIterator[Scene]:
+async def scene(
+    server: RunningServer, browser: Browser, profile: str = "default"
+) -> AsyncIterator[Scene]:
     events: list[Event] = []
     log = EventLog()
     log.listeners.append(events.append)
@@ -101,26 +121,27 @@ async def scene(server: RunningServer, profile: str = "default") -> AsyncIterato
     relay = RelayService(server.url, profile=profile)
     stop_relay = asyncio.Event()
     relay_task = asyncio.create_task(relay.run(stop_relay))
-    async with async_playwright() as pw:
-        browser = await pw.chromium.launch(**launch_options())
-        client = await browser.new_page()
-        try:
-            await client.goto(f"{server.url}/client?room=default&name=client&auto=1")
-            yield Scene(agent, turtle, path, relay, client, events)
-        finally:
-            # Kept whether the test passed or failed, for a person to look at.
-            ARTIFACTS.mkdir(exist_ok=True)
-            await client.screenshot(path=str(ARTIFACTS / f"agent-pages-client-{profile}.png"))
-            await browser.close()
-            stop_relay.set()
-            await asyncio.wait_for(relay_task, 30)
-            agent_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await agent_task
+    context = await browser.new_context()
+    client = await context.new_page()
+    try:
+        await client.goto(f"{server.url}/client?room=default&name=client&auto=1")
+        yield Scene(agent, turtle, path, relay, client, events)
+    finally:
+        # Kept whether the test passed or failed, for a person to look at.
+        ARTIFACTS.mkdir(exist_ok=True)
+        await client.screenshot(path=str(ARTIFACTS / f"agent-pages-client-{profile}.png"))
+        await context.close()
+        stop_relay.set()
+        await asyncio.wait_for(relay_task, 30)
+        agent_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await agent_task
 
 
-async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) -> None:
-    async with scene(server) as s:
+async def test_agent_is_piloted_by_the_real_relay_page(
+    server: RunningServer, browser: Browser
+) -> None:
+    async with scene(server, browser) as s:
         await s.start_piloting()
         # The synthetic face on the left: the turtle turns to face it (≈170°).
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
@@ -186,9 +207,9 @@ async def test_agent_is_piloted_by_the_real_relay_page(server: RunningServer) ->
         await eventually(lambda: 150 < s.heading_deg() <= 180, 30, "the turtle to face left again")
 
 
-async def test_thesis_profile_end_to_end(server: RunningServer) -> None:
+async def test_thesis_profile_end_to_end(server: RunningServer, browser: Browser) -> None:
     """Relay snapshots every 1.5 s, the agent publishes the latest goal every 1.1 s."""
-    async with scene(server, profile="thesis") as s:
+    async with scene(server, browser, profile="thesis") as s:
         await s.start_piloting()
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
         # The thesis profile snapshots the video element: it keeps the preview, even unattended.
@@ -264,9 +285,11 @@ async def held_at_standoff(s: Scene, pixel: tuple[float, float], what: str) -> f
     return terrain_distance(s, pixel)
 
 
-async def test_follow_drives_to_the_standoff_from_the_face(server: RunningServer) -> None:
+async def test_follow_drives_to_the_standoff_from_the_face(
+    server: RunningServer, browser: Browser
+) -> None:
     """Issue 12: the turtle drives toward the face's terrain point and keeps its distance."""
-    async with scene(server, profile="follow") as s:
+    async with scene(server, browser, profile="follow") as s:
         start = s.turtle.sim.pose("turtle1")
         face = (s.path.x * W, s.path.y * H)
         await s.start_piloting()
@@ -286,10 +309,10 @@ async def test_follow_drives_to_the_standoff_from_the_face(server: RunningServer
 
 
 async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame(
-    server: RunningServer,
+    server: RunningServer, browser: Browser
 ) -> None:
     """Issue 12: the demo scene's flame is elsewhere; face -> fire takes the turtle to it."""
-    async with scene(server, profile="follow") as s:
+    async with scene(server, browser, profile="follow") as s:
         face = (s.path.x * W, s.path.y * H)
         video = s.agent.video
         assert isinstance(video, SyntheticVideo)
