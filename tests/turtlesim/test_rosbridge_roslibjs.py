@@ -6,7 +6,8 @@ from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import pytest
-from playwright.async_api import Page, async_playwright
+import pytest_asyncio
+from playwright.async_api import Browser, Page, async_playwright
 
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
@@ -14,7 +15,12 @@ from app.server.serve import RunningServer
 from app.tools.browser import launch_options
 from app.turtlesim.sim import TurtleSim
 
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+# One Chromium for the module, on the module's event loop; each test gets a context of its own.
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.timeout(120),
+    pytest.mark.asyncio(loop_scope="module"),
+]
 
 # Runs in the page: talks to /rosbridge the way the vehicle page does, and reports what it saw.
 SCRIPT = """
@@ -61,18 +67,27 @@ async (url) => {
 """
 
 
-@pytest.fixture
-async def page(server: RunningServer) -> AsyncIterator[Page]:
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def browser() -> AsyncIterator[Browser]:
     async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(**launch_options())
+        launched = await playwright.chromium.launch(**launch_options())
         try:
-            page = await browser.new_page()
-            # Any page of the app gives roslib.js the server's origin; no CDN is involved.
-            await page.goto(server.url + "/healthz")
-            await page.add_script_tag(url=server.url + "/static/vendor/roslib.min.js")
-            yield page
+            yield launched
         finally:
-            await browser.close()
+            await launched.close()
+
+
+@pytest_asyncio.fixture(loop_scope="module")
+async def page(browser: Browser, server: RunningServer) -> AsyncIterator[Page]:
+    context = await browser.new_context()
+    try:
+        page = await context.new_page()
+        # Any page of the app gives roslib.js the server's origin; no CDN is involved.
+        await page.goto(server.url + "/healthz")
+        await page.add_script_tag(url=server.url + "/static/vendor/roslib.min.js")
+        yield page
+    finally:
+        await context.close()
 
 
 async def test_roslibjs_subscribes_publishes_and_calls_services(
