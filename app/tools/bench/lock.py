@@ -9,6 +9,8 @@ goal echoes), over the measured window; the default choice would put them all on
 
 from __future__ import annotations
 
+import logging
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -20,9 +22,16 @@ from vehicle_agent.video import TWO_FACES, TwoFaceVideo
 if TYPE_CHECKING:
     from playwright.async_api import Browser, Page
 
+log = logging.getLogger(__name__)
+
 KEY = "lock_held_pct"
 TARGET = Target(KEY, 95.0, False, "lock held on the smaller face >= 95 % of goals (two faces)")
 LOCKED_TIMEOUT_S = 30.0
+# The click lands where the smaller face was in the relay's latest frame; on a loaded machine the
+# face can drift off that spot before the click reaches the relay (seen once: no lock in 30 s).
+# A person would click again: so does the bench, when a click has not locked within this time.
+CLICK_AGAIN_S = 5.0
+_LOCKED_JS = "() => window.autopilotStatus.lock?.state === 'locked'"
 
 
 def click_position(width: float, height: float, x: float, y: float) -> tuple[float, float]:
@@ -39,7 +48,7 @@ async def run(
     """Run the stack on the two-face scene, lock on the smaller face, measure ``seconds``."""
     scene = TwoFaceVideo(*VIDEO_SIZE, fps)
 
-    async def lock_the_smaller_face(relay: Page, client: Page) -> None:
+    async def click_the_smaller_face(relay: Page, client: Page) -> None:
         # Where the smaller face is in the latest frame the relay analysed.
         frame = await relay.evaluate("() => window.autopilotStatus.lastGoal?.frame ?? null")
         if frame is None:
@@ -50,12 +59,25 @@ async def run(
             raise StackError("the client's video is not on show")
         px, py = click_position(box["width"], box["height"], *scene.small_centre(int(frame)))
         await video.click(position={"x": px, "y": py})
-        await wait_for(
-            client,
-            "() => window.autopilotStatus.lock?.state === 'locked'",
-            LOCKED_TIMEOUT_S,
-            "a click on the smaller face did not lock it",
-        )
+
+    async def lock_the_smaller_face(relay: Page, client: Page) -> None:
+        deadline = time.monotonic() + LOCKED_TIMEOUT_S
+        clicks = 0
+        while True:
+            await click_the_smaller_face(relay, client)
+            clicks += 1
+            # Never 0: Playwright takes a timeout of 0 as none.
+            wait_s = min(CLICK_AGAIN_S, max(0.1, deadline - time.monotonic()))
+            try:
+                await wait_for(client, _LOCKED_JS, wait_s, "no lock")
+                break
+            except StackError:
+                if time.monotonic() >= deadline:
+                    raise StackError(
+                        f"{clicks} clicks on the smaller face did not lock it"
+                        f" within {LOCKED_TIMEOUT_S:.0f} s"
+                    ) from None
+        log.info("the smaller face locked after %d click(s)", clicks)
 
     options = StackOptions("default", seconds, fps=fps, video=TWO_FACES, name="lock")
     try:
