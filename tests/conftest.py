@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 
 import pytest
+import pytest_asyncio
+from playwright.async_api import Browser, Page, async_playwright
 
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
+from app.tools.browser import launch_options
 from tests.helpers.sockets import Records
 
 
@@ -53,3 +56,26 @@ def server_log() -> Iterator[Records]:
     yield records
     for logger in loggers:
         logger.removeHandler(records)
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def module_browser() -> AsyncIterator[Browser]:
+    """One headless Chromium for a module of async browser tests (its launch costs more than
+    most of them), on the module's event loop: the module marks its tests
+    ``pytest.mark.asyncio(loop_scope="module")``."""
+    async with async_playwright() as playwright:
+        launched = await playwright.chromium.launch(**launch_options())
+        try:
+            yield launched
+        finally:
+            await launched.close()
+
+
+@pytest_asyncio.fixture(loop_scope="module")
+async def context_page(module_browser: Browser) -> AsyncIterator[Page]:
+    """A page of ``module_browser`` in a browser context of its own, closed after the test."""
+    context = await module_browser.new_context()
+    try:
+        yield await context.new_page()
+    finally:
+        await context.close()

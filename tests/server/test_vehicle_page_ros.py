@@ -8,20 +8,17 @@ turns the turtle to pi/2. The fallback rule is checked on the page's own module.
 from __future__ import annotations
 
 import math
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from typing import Any
 
 import pytest
-import pytest_asyncio
-from playwright.async_api import Browser, Page, async_playwright
+from playwright.async_api import Page
 
 from app.protocol.ros import RosFlavour, page_config
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
 
-# One Chromium for the module (its launch cost more than most of these tests), on the module's
-# event loop; each test gets a context of its own, closed after it.
+# One Chromium for the module, a context per test (tests/conftest.py), on the module's loop.
 pytestmark = [
     pytest.mark.browser,
     pytest.mark.timeout(120),
@@ -31,38 +28,19 @@ pytestmark = [
 POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtlesim_msgs/msg/Pose"}
 
 
-@pytest_asyncio.fixture(scope="module", loop_scope="module")
-async def browser() -> AsyncIterator[Browser]:
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(**launch_options())
-        try:
-            yield browser
-        finally:
-            await browser.close()
-
-
-@pytest_asyncio.fixture(loop_scope="module")
-async def page(browser: Browser) -> AsyncIterator[Page]:
-    context = await browser.new_context()
-    try:
-        yield await context.new_page()
-    finally:
-        await context.close()
-
-
 @pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
 async def test_vehicle_page_learns_the_flavour_and_drives(
-    page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+    context_page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
 ) -> None:
     robot = start_server(Settings(environment="development", token=None, ros=flavour))
     # No ros= in the query: the page's setting is "auto".
-    await page.goto(f"{robot.url}/vehicle?room=flavour-{flavour}")
-    await page.wait_for_function(
+    await context_page.goto(f"{robot.url}/vehicle?room=flavour-{flavour}")
+    await context_page.wait_for_function(
         "() => { const s = window.autopilotStatus;"
         " return s.pose !== null && Math.abs(s.pose.theta - Math.PI / 2) < 1e-3; }",
         timeout=30_000,
     )
-    status: dict[str, Any] = await page.evaluate("() => window.autopilotStatus")
+    status: dict[str, Any] = await context_page.evaluate("() => window.autopilotStatus")
     assert (status["rosFlavour"], status["rosTypesFrom"]) == (flavour, "robot")
     assert status["pose"]["theta"] == pytest.approx(math.pi / 2, abs=1e-3)
 
@@ -78,15 +56,15 @@ async def test_vehicle_page_learns_the_flavour_and_drives(
     ],
 )
 async def test_pick_types_follows_the_python_rule(
-    page: Page,
+    context_page: Page,
     server: RunningServer,
     setting: str,
     pose: str | None,
     twist: str | None,
     expected: tuple[str, bool],
 ) -> None:
-    await page.goto(f"{server.url}/healthz")
-    picked: dict[str, Any] = await page.evaluate(
+    await context_page.goto(f"{server.url}/healthz")
+    picked: dict[str, Any] = await context_page.evaluate(
         """async ([table, setting, pose, twist]) => {
           const { pickTypes } = await import('/static/js/rosflavour.js');
           return pickTypes(table, setting, pose, twist);

@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 import pytest_asyncio
-from playwright.async_api import Browser, Page, async_playwright
+from playwright.async_api import Page
 
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
 from app.turtlesim.sim import TurtleSim
 
-# One Chromium for the module, on the module's event loop; each test gets a context of its own.
+# One Chromium for the module, a context per test (tests/conftest.py), on the module's loop.
 pytestmark = [
     pytest.mark.browser,
     pytest.mark.timeout(120),
@@ -67,34 +66,20 @@ async (url) => {
 """
 
 
-@pytest_asyncio.fixture(scope="module", loop_scope="module")
-async def browser() -> AsyncIterator[Browser]:
-    async with async_playwright() as playwright:
-        launched = await playwright.chromium.launch(**launch_options())
-        try:
-            yield launched
-        finally:
-            await launched.close()
-
-
 @pytest_asyncio.fixture(loop_scope="module")
-async def page(browser: Browser, server: RunningServer) -> AsyncIterator[Page]:
-    context = await browser.new_context()
-    try:
-        page = await context.new_page()
-        # Any page of the app gives roslib.js the server's origin; no CDN is involved.
-        await page.goto(server.url + "/healthz")
-        await page.add_script_tag(url=server.url + "/static/vendor/roslib.min.js")
-        yield page
-    finally:
-        await context.close()
+async def roslib_page(context_page: Page, server: RunningServer) -> Page:
+    """A page of the app (any gives roslib.js the server's origin; no CDN is involved) with
+    roslib.js loaded."""
+    await context_page.goto(server.url + "/healthz")
+    await context_page.add_script_tag(url=server.url + "/static/vendor/roslib.min.js")
+    return context_page
 
 
 async def test_roslibjs_subscribes_publishes_and_calls_services(
-    page: Page, server: RunningServer
+    roslib_page: Page, server: RunningServer
 ) -> None:
     url = server.url.replace("http", "ws", 1) + "/rosbridge"
-    seen: dict[str, Any] = await page.evaluate(SCRIPT, url)
+    seen: dict[str, Any] = await roslib_page.evaluate(SCRIPT, url)
     centre = TurtleSim.WORLD_SIZE / 2
     start, turned = seen["start"], seen["turned"]
     assert (start["x"], start["y"], start["theta"]) == pytest.approx((centre, centre, 0.0))
@@ -142,14 +127,14 @@ POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtles
 
 @pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
 async def test_roslibjs_rosapi_helpers(
-    page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
+    context_page: Page, start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
 ) -> None:
     robot = start_server(Settings(environment="development", token=None, ros=flavour))
     # The page must come from the robot's own origin: its /rosbridge refuses other sites.
-    await page.goto(robot.url + "/healthz")
-    await page.add_script_tag(url=robot.url + "/static/vendor/roslib.min.js")
+    await context_page.goto(robot.url + "/healthz")
+    await context_page.add_script_tag(url=robot.url + "/static/vendor/roslib.min.js")
     url = robot.url.replace("http", "ws", 1) + "/rosbridge"
-    seen: dict[str, Any] = await page.evaluate(ROSAPI_SCRIPT, url)
+    seen: dict[str, Any] = await context_page.evaluate(ROSAPI_SCRIPT, url)
     listed = dict(zip(seen["topics"]["topics"], seen["topics"]["types"], strict=True))
     assert listed["/turtle1/pose"] == POSE_TYPE[flavour]
     assert "/rosout" in listed

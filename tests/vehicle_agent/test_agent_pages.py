@@ -14,14 +14,12 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
-import pytest_asyncio
-from playwright.async_api import Browser, Page, async_playwright
+from playwright.async_api import Browser, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
 from app.tools.relay_service import RelayService
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
@@ -30,8 +28,8 @@ from vehicle_agent.events import Event, EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
-# One Chromium for the module's client pages, on the module's event loop (the relay service
-# launches its own, as `autopilot relay` does).
+# One Chromium for the module's client pages (tests/conftest.py), on the module's event loop
+# (the relay service launches its own, as `autopilot relay` does).
 pytestmark = [
     pytest.mark.browser,
     pytest.mark.e2e,
@@ -93,16 +91,6 @@ class Scene:
         await self.client.get_by_role("button", name="Stop Piloting").click()
 
 
-@pytest_asyncio.fixture(scope="module", loop_scope="module")
-async def browser() -> AsyncIterator[Browser]:
-    async with async_playwright() as playwright:
-        launched = await playwright.chromium.launch(**launch_options())
-        try:
-            yield launched
-        finally:
-            await launched.close()
-
-
 @contextlib.asynccontextmanager
 async def scene(
     server: RunningServer, browser: Browser, profile: str = "default"
@@ -140,9 +128,9 @@ async def scene(
 
 
 async def test_agent_is_piloted_by_the_real_relay_page(
-    server: RunningServer, browser: Browser
+    server: RunningServer, module_browser: Browser
 ) -> None:
-    async with scene(server, browser) as s:
+    async with scene(server, module_browser) as s:
         await s.start_piloting()
         # The synthetic face on the left: the turtle turns to face it (≈170°).
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
@@ -208,9 +196,9 @@ async def test_agent_is_piloted_by_the_real_relay_page(
         await eventually(lambda: 150 < s.heading_deg() <= 180, 30, "the turtle to face left again")
 
 
-async def test_thesis_profile_end_to_end(server: RunningServer, browser: Browser) -> None:
+async def test_thesis_profile_end_to_end(server: RunningServer, module_browser: Browser) -> None:
     """Relay snapshots every 1.5 s, the agent publishes the latest goal every 1.1 s."""
-    async with scene(server, browser, profile="thesis") as s:
+    async with scene(server, module_browser, profile="thesis") as s:
         await s.start_piloting()
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
         # The thesis profile snapshots the video element: it keeps the preview, even unattended.
@@ -288,10 +276,10 @@ async def held_at_standoff(s: Scene, pixel: tuple[float, float], what: str) -> f
 
 
 async def test_follow_drives_to_the_standoff_from_the_face(
-    server: RunningServer, browser: Browser
+    server: RunningServer, module_browser: Browser
 ) -> None:
     """Issue 12: the turtle drives toward the face's terrain point and keeps its distance."""
-    async with scene(server, browser, profile="follow") as s:
+    async with scene(server, module_browser, profile="follow") as s:
         start = s.turtle.sim.pose("turtle1")
         face = (s.path.x * W, s.path.y * H)
         await s.start_piloting()
@@ -311,10 +299,10 @@ async def test_follow_drives_to_the_standoff_from_the_face(
 
 
 async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame(
-    server: RunningServer, browser: Browser
+    server: RunningServer, module_browser: Browser
 ) -> None:
     """Issue 12: the demo scene's flame is elsewhere; face -> fire takes the turtle to it."""
-    async with scene(server, browser, profile="follow") as s:
+    async with scene(server, module_browser, profile="follow") as s:
         face = (s.path.x * W, s.path.y * H)
         video = s.agent.video
         assert isinstance(video, SyntheticVideo)
