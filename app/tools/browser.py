@@ -16,8 +16,37 @@ from app.server.tls import spki_sha256
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
-# Flags that work headless as root on these machines (DESIGN §8). mDNS host candidates are
-# turned off so that aiortc and other Chromium instances can reach a page's host candidate.
+# Features turned off. Chromium reads only the last --disable-features, and ours comes after
+# Playwright's, so it repeats Playwright's list (its chromiumSwitches.ts, less the Windows and
+# Edge ones): without it Chromium would look for Cast devices on the network (MediaRouter), fetch
+# optimization hints, ask for the network time, preconnect to a search engine and try HTTPS first
+# for our plain-HTTP pages. Then ours:
+# - mDNS host candidates, so that aiortc and other Chromium instances can reach a page's host
+#   candidate;
+# - the omnibox popup drawn as a web page, which Chromium 156 preloads in a renderer of its own
+#   at every start even headless, where nothing can open it: 0.7 of the 1.3 CPU-seconds a
+#   launch costs (the suite launches about 80).
+DISABLED_FEATURES = (
+    "AvoidUnnecessaryBeforeUnloadCheckSync",
+    "DestroyProfileOnBrowserClose",
+    "HttpsUpgrades",
+    "HttpsFirstBalancedModeAutoEnable",
+    "LensOverlay",
+    "MediaRouter",
+    "PaintHolding",
+    "ThirdPartyStoragePartitioning",
+    "AvoidCorsURLLoaderRestartOnRedirect",
+    "OptimizationHints",
+    "NetworkTimeServiceQuerying",
+    "AimEnabled",
+    "PreconnectToSearch",
+    "WebRtcHideLocalIpsWithMdns",
+    "WebUIOmniboxPopup",
+    "WebUIOmniboxAimPopup",
+    "WebUIOmniboxFullPopup",
+)
+
+# Flags that work headless as root on these machines (DESIGN §8).
 BASE_FLAGS = [
     "--headless=new",
     "--no-sandbox",
@@ -30,7 +59,7 @@ BASE_FLAGS = [
     "--use-fake-ui-for-media-stream",
     "--use-fake-device-for-media-stream",
     "--autoplay-policy=no-user-gesture-required",
-    "--disable-features=WebRtcHideLocalIpsWithMdns",
+    f"--disable-features={','.join(DISABLED_FEATURES)}",
     # A hidden or unfocused headless page must keep its timers and video frames running.
     "--disable-background-timer-throttling",
     "--disable-renderer-backgrounding",
