@@ -1,9 +1,10 @@
 """``autopilot parity``: OpenCV.js in the relay's analyzer against the Python OpenCV reference.
 
 Every image is decoded in headless Chromium and sent through the analyzer the relay uses
-(``vision.js``: ImageBitmap -> worker -> OffscreenCanvas -> cv.Mat -> the operation module). The
-RGBA pixels that the worker analysed come back and :func:`app.vision.spec.detect` runs on exactly
-those pixels, so decoding differences between browser and Python cannot hide or fake a mismatch.
+(``vision.js``: ImageBitmap -> worker -> OffscreenCanvas -> cv.Mat -> the operation module), and
+:func:`app.vision.spec.detect` runs on exactly the RGBA pixels that the worker analysed (they come
+back, unless Python's own decoding of the file has the same SHA-256), so decoding differences
+between browser and Python cannot hide or fake a mismatch.
 
 The windowed path (detect, then track: ``app/vision/window.py``) is checked too: for every
 cascade operation that found a target, both sides search the window around the same box on the
@@ -28,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
 
+import cv2
 import numpy as np
 from playwright.sync_api import Page, sync_playwright
 
@@ -163,15 +165,49 @@ class Harness:
         Each op of ``window_ops`` that found something also searches the window around its
         largest box; its result carries ``window: {around, boxes, target}``. Raises
         ``ValueError`` when the browser cannot decode the image.
+
+        The pixels come back from the browser only where they differ from Python's own decoding
+        of ``data`` (the page compares SHA-256 digests): a large photo's RGBA through the
+        DevTools protocol cost more than its analysis.
         """
-        out = self.page.evaluate(
-            "([data, ops, profile, windowOps]) => window.runImage(data, ops, profile, windowOps)",
-            [base64.b64encode(data).decode("ascii"), list(op_ids), profile, list(window_ops)],
+        here = _decoded_here(data)
+        digest = "base64" if here is None else hashlib.sha256(here.tobytes()).hexdigest()
+        out = self._run_image(data, op_ids, profile, window_ops, digest)
+        if out.get("sameDigest"):
+            assert here is not None and here.shape == (out["height"], out["width"], 4)
+            return here, out["results"]
+        rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
+        return rgba.reshape(out["height"], out["width"], 4), out["results"]
+
+    def results(
+        self, data: bytes, op_ids: Sequence[str], profile: Profile = "default"
+    ) -> dict[str, Any]:
+        """Decode ``data`` in the browser and run each op; only the JS results."""
+        results: dict[str, Any] = self._run_image(data, op_ids, profile, (), "none")["results"]
+        return results
+
+    def _run_image(
+        self,
+        data: bytes,
+        op_ids: Sequence[str],
+        profile: Profile,
+        window_ops: Sequence[str],
+        pixels: str,
+    ) -> dict[str, Any]:
+        out: dict[str, Any] = self.page.evaluate(
+            "([data, ops, profile, windowOps, pixels]) =>"
+            " window.runImage(data, ops, profile, windowOps, pixels)",
+            [
+                base64.b64encode(data).decode("ascii"),
+                list(op_ids),
+                profile,
+                list(window_ops),
+                pixels,
+            ],
         )
         if "unreadable" in out:
             raise ValueError(f"the browser cannot decode it ({out['unreadable']})")
-        rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
-        return rgba.reshape(out["height"], out["width"], 4), out["results"]
+        return out
 
     def analyze_pixels(
         self,
@@ -224,6 +260,14 @@ class Harness:
                 around = windowed["around"]
                 py = _reference(op, rgba, pixels, profile, tuple(around))
                 report.details.append(_pair(name, op_id, windowed, py, around=around))
+
+
+def _decoded_here(data: bytes) -> np.ndarray[Any, np.dtype[np.uint8]] | None:
+    """``data`` decoded by Python OpenCV, as RGBA; None where it cannot decode it."""
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if image is None:
+        return None
+    return np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGBA), np.uint8)
 
 
 def _reference(

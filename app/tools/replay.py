@@ -190,8 +190,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
 
         def analyse(jpeg: bytes, op: str) -> dict[str, Any] | None:
-            _, results = harness.run(jpeg, [op], profile)
-            target: dict[str, Any] | None = results[op]["target"]
+            target: dict[str, Any] | None = harness.results(jpeg, [op], profile)[op]["target"]
             return target
 
         replay = compare(recording, analyse, args.op)

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from app.resources import OPERATIONS_SPEC
@@ -127,6 +128,30 @@ def test_unreadable_image_is_reported_by_name(harness: parity.Harness, tmp_path:
     harness.check(bad, ["face"], report)
     assert not report.ok
     assert "not-a-picture.png" in report.unreadable[str(bad)]
+
+
+def test_the_reference_gets_the_pixels_the_browser_analysed(harness: parity.Harness) -> None:
+    # An opaque photo decodes alike on both sides: the page confirms the digest and sends no
+    # pixels, and they are Python's own decoding.
+    photo = (FACES / "obama.jpg").read_bytes()
+    rgba, _ = harness.run(photo, ["fire"])
+    here = cv2.cvtColor(
+        cv2.imdecode(np.frombuffer(photo, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGBA
+    )
+    assert np.array_equal(rgba, here)
+    # A half-transparent PNG does not: Python's decoding drops the alpha the browser keeps, so the
+    # digests differ and the browser's own pixels come back, alpha and all.
+    frame = np.zeros((120, 160, 4), np.uint8)
+    frame[:, :, 1] = 200
+    frame[:, :, 3] = 128
+    ok, png = cv2.imencode(".png", frame)
+    assert ok
+    rgba, results = harness.run(png.tobytes(), ["fire"])
+    assert rgba.shape == (120, 160, 4)
+    assert (rgba[:, :, 3] == 128).all(), np.unique(rgba[:, :, 3])
+    assert results["fire"]["boxes"] == []
+    # Without pixels at all (the replay's way), the same results.
+    assert harness.results(png.tobytes(), ["fire"]) == results
 
 
 def test_matching_rule() -> None:

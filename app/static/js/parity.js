@@ -28,13 +28,26 @@ function fromBase64(text) {
 }
 
 /**
+ * SHA-256 of a byte array in hex, or null where the page has no WebCrypto (not a secure
+ * context: the harness runs on loopback, which is one).
+ */
+async function sha256Hex(bytes) {
+  if (!window.crypto?.subtle) return null;
+  const digest = new Uint8Array(await crypto.subtle.digest('SHA-256', bytes));
+  return Array.from(digest, (b) => b.toString(16).padStart(2, '0')).join('');
+}
+
+/**
  * Decode an image (base64 file bytes) in the browser and run each op on it; each op of
  * `windowOps` that found something runs again on the window around its largest box (the
- * detect-then-track path). Returns {width, height, rgba: base64 of the pixels analysed,
- * results: {opId: {boxes, target, window?: {around, boxes, target}}}}, or {unreadable: reason}
- * when the browser cannot decode the bytes.
+ * detect-then-track path). Returns {width, height, rgba, results: {opId: {boxes, target,
+ * window?: {around, boxes, target}}}}, or {unreadable: reason} when the browser cannot decode
+ * the bytes. `rgba` is the base64 of the pixels analysed, except where `pixels` says otherwise:
+ * 'none' returns none; a SHA-256 in hex (the caller's own decoding of the file) returns none
+ * when the analysed pixels have that digest (`sameDigest: true`), so that megabytes of
+ * identical pixels need not cross the DevTools protocol.
  */
-async function runImage(base64, opIds, profile, windowOps = []) {
+async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = 'base64') {
   let decoded;
   try {
     const blob = new Blob([fromBase64(base64)]);
@@ -51,7 +64,7 @@ async function runImage(base64, opIds, profile, windowOps = []) {
     for (const opId of opIds) {
       const result = await window.analyzer.analyze(await copy(), opId, {
         profile,
-        returnPixels: pixels === null,
+        returnPixels: pixels === null && pixelsWanted !== 'none',
       });
       if (pixels === null) pixels = { width: result.w, height: result.h, rgba: result.rgba };
       results[opId] = { boxes: result.boxes, target: result.target };
@@ -64,7 +77,12 @@ async function runImage(base64, opIds, profile, windowOps = []) {
   } finally {
     decoded.close();
   }
-  return { width: pixels.width, height: pixels.height, rgba: await toBase64(pixels.rgba), results };
+  const out = { width: pixels.width, height: pixels.height, results };
+  if (pixelsWanted === 'none') return out;
+  if (pixelsWanted !== 'base64' && (await sha256Hex(pixels.rgba)) === pixelsWanted) {
+    return { ...out, sameDigest: true };
+  }
+  return { ...out, rgba: await toBase64(pixels.rgba) };
 }
 
 /**
