@@ -133,21 +133,27 @@ def measure(
     rows = []
     for cap in CAPS[plan]:
         lab.apply(cap)
-        for hint, preference in VARIANTS:
-            browsers = [
-                playwright.chromium.launch(
-                    **launch_options(executable=str(lab.chromium(site, chromium_path())))
-                )
-                for site in ("robot", "cloud")
-            ]
-            try:
+        browsers = [
+            playwright.chromium.launch(
+                **launch_options(executable=str(lab.chromium(site, chromium_path())))
+            )
+            for site in ("robot", "cloud")
+        ]
+        try:
+            for hint, preference in VARIANTS:
+                # Fresh pages, hence a fresh peer connection with its own bandwidth estimate
+                # and encoder, in the same two browsers.
                 sender, receiver = (browser.new_page() for browser in browsers)
-                row = _run(sender, receiver, hint, preference, settle_s, window_s)
+                try:
+                    row = _run(sender, receiver, hint, preference, settle_s, window_s)
+                finally:
+                    sender.close()
+                    receiver.close()
                 rows.append({"condition": cap, "hint": hint or "(none)", **row})
-            finally:
-                for browser in browsers:
-                    browser.close()
-            log.info("video under %s: %s", cap, rows[-1])
+                log.info("video under %s: %s", cap, rows[-1])
+        finally:
+            for browser in browsers:
+                browser.close()
     return rows
 
 
