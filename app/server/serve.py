@@ -22,7 +22,6 @@ from app.protocol.constants import ROLES
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
-from app.server.app import create_app
 from app.server.config import Settings, describe_settings_error
 from app.server.metrics import ServerMetrics
 from app.vision.spec import SpecError
@@ -78,10 +77,14 @@ def run(args: argparse.Namespace) -> int:
     """Serve until interrupted; a bad setting or operations spec is one line and exit 1."""
     try:
         settings = Settings(**({"ros": args.ros} if getattr(args, "ros", None) else {}))
-        app = create_app(settings)
     except ValidationError as exc:
         log.error("cannot start: %s", describe_settings_error(exc))
         return 1
+    # Imported here: FastAPI costs half a CPU-second, which a bad setting need not wait for.
+    from app.server.app import create_app
+
+    try:
+        app = create_app(settings)
     except SpecError as exc:
         log.error("cannot start: %s", exc)
         return 1
@@ -211,6 +214,8 @@ def start_in_thread(
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     port = sock.getsockname()[1]
+    from app.server.app import create_app
+
     settings = settings or Settings()
     app = create_app(settings)
     config = uvicorn.Config(
