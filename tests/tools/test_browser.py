@@ -51,7 +51,7 @@ async def test_only_the_page_gets_a_renderer(module_browser: Browser) -> None:
     renderers = [args for args in descendants(browser_pid).values() if "--type=renderer" in args]
     assert renderers, "the page's renderer is missing: the walk found no renderer"
     # Chromium 156 preloads its omnibox popup, a web page, in a renderer of its own at every
-    # start (0.6 CPU-seconds); BASE_FLAGS turn it off. A new Chromium that renames the
+    # start (0.7 CPU-seconds); BASE_FLAGS turn it off. A new Chromium that renames the
     # feature shows up here.
     ui = [args for args in renderers if "--top-chrome-webui" in args]
     assert not ui, ui
