@@ -6,16 +6,9 @@ import json
 import logging
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only: never look for a display
-
-import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
-from matplotlib.figure import Figure  # noqa: E402
-
-from app.tools.bench.results import (  # noqa: E402
+from app.tools.bench.results import (
     FIGURE_KEYS,
     FOLLOW_TARGET,
     POSITION_KEYS,
@@ -26,6 +19,9 @@ from app.tools.bench.results import (  # noqa: E402
     THESIS_PROCESSING_SD_MS,
     ProfileRun,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 log = logging.getLogger(__name__)
 
@@ -70,10 +66,21 @@ def write(out: Path, results: dict[str, Any], default: ProfileRun, thesis: Profi
     log.info("report written to %s", out / "report.md")
 
 
+def _subplots(*grid: int, figsize: tuple[float, float], squeeze: bool = True) -> tuple[Figure, Any]:
+    """A figure of its own (no pyplot, no display: ``savefig`` draws it with Agg) and its axes.
+
+    matplotlib is imported here, not with the module: it costs half a CPU-second, which the
+    test suite's collection and every bench that writes no plot need not pay.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*grid, squeeze=squeeze)
+
+
 def _save(fig: Figure, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _empty(ax: Any, text: str) -> None:
@@ -83,7 +90,7 @@ def _empty(ax: Any, text: str) -> None:
 def _processing_plot(runs: tuple[ProfileRun, ...]) -> Figure:
     """Per profile, in the manner of the thesis's Figure 31: the delay of each snapshot in order,
     with its mean and one standard deviation, next to the histogram."""
-    fig, axes = plt.subplots(len(runs), 2, figsize=(11, 3.6 * len(runs)), squeeze=False)
+    fig, axes = _subplots(len(runs), 2, figsize=(11, 3.6 * len(runs)), squeeze=False)
     for (series_ax, hist_ax), run in zip(axes, runs, strict=True):
         delays = [ms for _, ms in run.processing]
         title = f"{run.profile} profile: snapshot taken -> goal sent"
@@ -124,7 +131,7 @@ def _processing_plot(runs: tuple[ProfileRun, ...]) -> Figure:
 
 
 def _heading_plot(runs: tuple[ProfileRun, ...]) -> Figure:
-    fig, axes = plt.subplots(len(runs), 1, figsize=(11, 3.4 * len(runs)), squeeze=False)
+    fig, axes = _subplots(len(runs), 1, figsize=(11, 3.4 * len(runs)), squeeze=False)
     for (ax,), run in zip(axes, runs, strict=True):
         ax.set_title(f"{run.profile} profile: turtle heading against the true face direction")
         ax.set_xlabel("time (s)")
@@ -145,7 +152,7 @@ def _heading_plot(runs: tuple[ProfileRun, ...]) -> Figure:
 
 
 def _latency_plot(runs: tuple[ProfileRun, ...]) -> Figure:
-    fig, axes = plt.subplots(1, len(runs), figsize=(5.5 * len(runs), 3.6), squeeze=False)
+    fig, axes = _subplots(1, len(runs), figsize=(5.5 * len(runs), 3.6), squeeze=False)
     for ax, run in zip(axes[0], runs, strict=True):
         latencies = run.glass_ms()
         ax.set_title(f"{run.profile} profile: frame sent -> Twist published")
@@ -164,7 +171,7 @@ def _latency_plot(runs: tuple[ProfileRun, ...]) -> Figure:
 
 
 def _js_native_plot(runs: tuple[ProfileRun, ...]) -> Figure:
-    fig, ax = plt.subplots(figsize=(7, 3.6))
+    fig, ax = _subplots(figsize=(7, 3.6))
     data, labels = [], []
     for run in runs:
         for side, values in (("OpenCV.js", run.js_ms), ("Python", run.native_ms)):
@@ -184,7 +191,7 @@ def _js_native_plot(runs: tuple[ProfileRun, ...]) -> Figure:
 
 
 def _memory_plot(runs: tuple[ProfileRun, ...]) -> Figure:
-    fig, (js_ax, wasm_ax) = plt.subplots(1, 2, figsize=(11, 3.6))
+    fig, (js_ax, wasm_ax) = _subplots(1, 2, figsize=(11, 3.6))
     js_ax.set_title("relay page JS heap (after GC)")
     wasm_ax.set_title("OpenCV WASM heap (vision worker)")
     for ax in (js_ax, wasm_ax):
