@@ -42,10 +42,10 @@ async function sha256Hex(bytes) {
  * `windowOps` that found something runs again on the window around its largest box (the
  * detect-then-track path). Returns {width, height, rgba, results: {opId: {boxes, target,
  * window?: {around, boxes, target}}}}, or {unreadable: reason} when the browser cannot decode
- * the bytes. `rgba` is the base64 of the pixels analysed, except where `pixels` says otherwise:
- * 'none' returns none; a SHA-256 in hex (the caller's own decoding of the file) returns none
- * when the analysed pixels have that digest (`sameDigest: true`), so that megabytes of
- * identical pixels need not cross the DevTools protocol.
+ * the bytes. `rgba` is the base64 of the pixels analysed, except where `pixelsWanted` says
+ * otherwise: 'none' returns none; a SHA-256 in hex (the caller's own decoding of the file)
+ * returns none when the analysed pixels have that digest (`sameDigest: true`), so that
+ * megabytes of identical pixels need not cross the DevTools protocol.
  */
 async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = 'base64') {
   let decoded;
