@@ -52,7 +52,7 @@ Box = tuple[int, int, int, int]
 # The Python reference is a pure function of an operation's parameters and the pixels: a process
 # that checks the same decoded images against both OpenCV.js builds (the test suite does) runs
 # it once per image. Bounded, for a long batch of images.
-_REFERENCES: dict[tuple[str, bytes, Box | None], Detection] = {}
+_REFERENCES: dict[tuple[str, str, Box | None], Detection] = {}
 _REFERENCES_KEPT = 512
 # Which OpenCV.js the analyzer loads (app/static/js/vision-worker.js).
 OpenCvBuild = Literal["auto", "simd", "official"]
@@ -170,14 +170,23 @@ class Harness:
         of ``data`` (the page compares SHA-256 digests): a large photo's RGBA through the
         DevTools protocol cost more than its analysis.
         """
+        rgba, _, results = self._analyse(data, op_ids, profile, window_ops)
+        return rgba, results
+
+    def _analyse(
+        self, data: bytes, op_ids: Sequence[str], profile: Profile, window_ops: Sequence[str]
+    ) -> tuple[np.ndarray[Any, np.dtype[np.uint8]], str, dict[str, Any]]:
+        """:meth:`run`, and the SHA-256 of the pixels it returns (the reference's memo key)."""
         here = _decoded_here(data)
-        digest = "base64" if here is None else hashlib.sha256(here.tobytes()).hexdigest()
-        out = self._run_image(data, op_ids, profile, window_ops, digest)
+        digest = None if here is None else _sha256(here)
+        out = self._run_image(data, op_ids, profile, window_ops, digest or "base64")
         if out.get("sameDigest"):
-            assert here is not None and here.shape == (out["height"], out["width"], 4)
-            return here, out["results"]
+            assert here is not None and digest is not None
+            assert here.shape == (out["height"], out["width"], 4)
+            return here, digest, out["results"]
         rgba = np.frombuffer(base64.b64decode(out["rgba"]), np.uint8)
-        return rgba.reshape(out["height"], out["width"], 4), out["results"]
+        rgba = rgba.reshape(out["height"], out["width"], 4)
+        return rgba, _sha256(rgba), out["results"]
 
     def results(
         self, data: bytes, op_ids: Sequence[str], profile: Profile = "default"
@@ -242,13 +251,13 @@ class Harness:
         name = str(path)
         cascades = [i for i in op_ids if isinstance(self.spec.op(i), CascadeOperation)]
         try:
-            rgba, results = self.run(path.read_bytes(), op_ids, profile, cascades)
+            rgba, digest, results = self._analyse(path.read_bytes(), op_ids, profile, cascades)
         except (OSError, ValueError) as exc:
             report.unreadable[name] = f"cannot read image {name}: {exc}"
             return
         report.images.append(name)
         # The pixels' identity (shape and digest), for the reference's results.
-        pixels = str(rgba.shape).encode() + hashlib.blake2b(rgba.tobytes(), digest_size=16).digest()
+        pixels = f"{rgba.shape} {digest}"
         for op_id in op_ids:
             op = self.spec.op(op_id)
             py = _reference(op, rgba, pixels, profile)
@@ -262,6 +271,11 @@ class Harness:
                 report.details.append(_pair(name, op_id, windowed, py, around=around))
 
 
+def _sha256(pixels: np.ndarray[Any, np.dtype[np.uint8]]) -> str:
+    """SHA-256 in hex of an array's bytes, as the parity page computes it."""
+    return hashlib.sha256(np.ascontiguousarray(pixels).data).hexdigest()
+
+
 def _decoded_here(data: bytes) -> np.ndarray[Any, np.dtype[np.uint8]] | None:
     """``data`` decoded by Python OpenCV, as RGBA; None where it cannot decode it."""
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
@@ -273,7 +287,7 @@ def _decoded_here(data: bytes) -> np.ndarray[Any, np.dtype[np.uint8]] | None:
 def _reference(
     op: CascadeOperation | ColourOperation,
     rgba: np.ndarray[Any, np.dtype[np.uint8]],
-    pixels: bytes,
+    pixels: str,
     profile: Profile,
     around: Box | None = None,
 ) -> Detection:
