@@ -212,7 +212,8 @@ async def _main(args: argparse.Namespace) -> int:
             totals = flight.totals()
             log.info(
                 "flight recorder: %(images)d images, %(messages)d messages (%(dropped)d dropped) "
-                "in %(files)d file(s); its CPU %(cpu_s).2f s over %(seconds).0f s",
+                "in %(files)d file(s), %(frames_held)d of %(frames)d camera frames held; its CPU "
+                "%(cpu_s).2f s over %(seconds).0f s",
                 totals,
             )
             events.emit("recorder", **totals)

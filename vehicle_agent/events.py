@@ -19,9 +19,9 @@ processes of one machine):
   type in the nominated pair, or null) or down (with ``reason``);
 * ``{"ev": "spawn", "ok", "t", ...}`` -- the spawn step turned the turtle (``x``, ``y``,
   ``theta``) or failed (``reason``);
-* ``{"ev": "recorder", "images", "messages", "dropped", "files", "cpu_s", "loop_cpu_s",
-  "writer_cpu_s", "seconds", "t"}`` -- the flight recorder's totals when it stopped
-  (``FlightRecorder.totals``), its own CPU time included.
+* ``{"ev": "recorder", "images", "messages", "dropped", "files", "frames", "frames_held",
+  "cpu_s", "loop_cpu_s", "writer_cpu_s", "seconds", "t"}`` -- the flight recorder's totals when
+  it stopped (``FlightRecorder.totals``), its own CPU time included.
 """
 
 from __future__ import annotations

@@ -11,13 +11,17 @@ third more bytes before compression, and zstd chunk compression wins most of it 
 
 Which camera images are kept: ``--record-fps`` of them, and by preference the frames the relay
 sent goals for (a goal names its frame by tag), so that ``autopilot replay`` can check the goals
-against their own images; the loop holds the last second of frames (references, their tags read
-from the top rows only, and only when a search asks) to pick from. When no goal names a held
-frame (autopilot off, a camera without tags) the newest frame is kept a period after it was due,
-so the rate holds either way.
+against their own images. The loop holds camera frames to pick from (references, their tags read
+from the top rows only, and only when a search asks), but only from shortly before an image is
+due: from as long before as the last goal took to come back for its frame, plus a margin (from a
+second before, after a period that no goal filled). Holding every frame for a second cost the
+loop most of its share of the recorder (whoever lets go of a 640×480 frame last pays for freeing
+it) and 27 MB of memory; holding from the lead keeps two or three frames a period on a quick
+link and still finds a slow link's goals. When no goal names a held frame (autopilot off, a camera
+without tags) the newest frame is kept a period after it was due, so the rate holds either way.
 
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
-drains the queue ten times a second, JPEG-encodes and writes. A full queue drops the item
+drains the queue once a second, JPEG-encodes and writes. A full queue drops the item
 (counted, logged once) rather than slow the loop. Log times are one clock (``time.time_ns()``),
 taken when the event happened. Files roll over by size and age, and only the newest
 ``max_files`` are kept, so a day's run cannot fill the disk unnoticed.
@@ -55,9 +59,13 @@ from vehicle_agent.video import read_frame_tag, tag_block_size
 log = logging.getLogger(__name__)
 
 IMAGE_TOPIC: Final = "/camera/image/compressed"
-# How long camera frames are held for a goal to name one (glass-to-goal is tens of milliseconds;
-# a loaded relay's, hundreds).
+# How long camera frames are held at most for a goal to name one (glass-to-goal is tens of
+# milliseconds; a loaded relay's, hundreds).
 HOLD_NS: Final = 1_000_000_000
+# Holding starts this long before the next image is due beyond the last goal's own delay (frame
+# arrival to its goal): a frame of a 30 fps camera, for the delay's jitter. A goal that still
+# names a frame from before the lead costs only a wait for the next goal.
+LEAD_MARGIN_NS: Final = 35_000_000
 # Pixel formats whose first plane the tag is read from as it is: the luma (the tag's blocks are
 # white and black in it too) or packed RGB; by channels per pixel.
 _FIRST_PLANE_CHANNELS: Final = {
@@ -130,11 +138,15 @@ _EVENT_SCHEMAS: Final[dict[str, tuple[str, dict[str, Any]]]] = {
     ),
 }
 
-# Items waiting for the writer thread; beyond this the recorder drops rather than queue memory.
+# Items waiting for the writer thread (about a hundred a second under the autopilot); beyond
+# this the recorder drops rather than queue memory.
 QUEUE_LIMIT: Final = 512
 # The writer thread drains the queue this often. Not woken per item: a wake-up per event would
-# hand the GIL back and forth with the agent's loop dozens of times a second.
-DRAIN_PERIOD_S: Final = 0.1
+# hand the GIL back and forth with the agent's loop dozens of times a second; and a second's
+# items in one go cost the thread a quarter less than a tenth's ten times (JPEG included: its
+# code and tables stay in the cache), 2026-11-26. Nothing is lost for it: a file is only
+# readable up to its last whole chunk (1 MB, tens of seconds) until it is finished.
+DRAIN_PERIOD_S: Final = 1.0
 
 
 @dataclass(frozen=True)
@@ -296,11 +308,15 @@ class FlightRecorder:
         self._channels: dict[str, int] = {}
         self._opened_ns = 0
         self._bytes = 0
-        # The camera's last second (record_video) and when the next image is due.
+        # The camera's frames held (record_video), when the next image is due, and how long
+        # before that holding starts (module docstring).
         self._held: collections.deque[_Held] = collections.deque()
         self._period_ns = int(1e9 / settings.fps)
         self._due_ns = 0
+        self._lead_ns = HOLD_NS
         self._kept_ns = 0  # the last image kept: when its frame arrived
+        self._frames = 0
+        self._frames_held = 0
         self._thread.start()
 
     # --- the agent's side: stamp and queue, never wait --------------------------------------
@@ -329,11 +345,20 @@ class FlightRecorder:
 
     def _hold(self, frame: av.VideoFrame) -> None:
         now = time.time_ns()
-        self._held.append(_Held(now, frame))
-        while self._held[0].arrived_ns < now - HOLD_NS:
+        self._frames += 1
+        # Frames no search can take any more: kept or older than the last image kept (images go
+        # forward in time), too old, or from before the lead of the image now due.
+        oldest = max(self._kept_ns + 1, now - HOLD_NS, self._due_ns - self._lead_ns)
+        while self._held and self._held[0].arrived_ns < oldest:
             self._held.popleft()
-        # No goal took this period's image within the period: the newest frame does.
+        if now < self._due_ns - self._lead_ns:
+            return  # not held: the camera's own pipeline lets go of it
+        self._held.append(_Held(now, frame))
+        self._frames_held += 1
+        # No goal took this period's image within the period: the newest frame does, and the
+        # next period holds from a second before, to find a slow link's goals again.
         if now >= self._due_ns + self._period_ns:
+            self._lead_ns = HOLD_NS
             self._keep_image(self._held[-1], now)
 
     def _image_for_goal(self, event: Event) -> None:
@@ -344,6 +369,7 @@ class FlightRecorder:
             if held.arrived_ns <= self._kept_ns:
                 return  # images go forward in time, as the camera did
             if held.tag == event["frame"]:
+                self._lead_ns = min(HOLD_NS, now - held.arrived_ns + LEAD_MARGIN_NS)
                 self._keep_image(held, now)
                 return
 
@@ -369,15 +395,18 @@ class FlightRecorder:
         await asyncio.to_thread(self._stop)
 
     def totals(self) -> dict[str, Any]:
-        """What was recorded and what it cost: images, messages, items dropped, files, and CPU
-        seconds (``cpu_s`` = ``loop_cpu_s`` + ``writer_cpu_s``) over ``seconds`` of recording.
-        Not counted: the camera relay's hand-over of each frame to the recorder's tap."""
+        """What was recorded and what it cost: images, messages, items dropped, files, camera
+        frames seen and held, and CPU seconds (``cpu_s`` = ``loop_cpu_s`` + ``writer_cpu_s``)
+        over ``seconds`` of recording. Not counted: the camera relay's hand-over of each frame to
+        the recorder's tap."""
         loop, writer = self._loop_cpu_s, self._writer_cpu_s
         return {
             "images": self.images,
             "messages": self.messages,
             "dropped": self.dropped,
             "files": len(self.files),
+            "frames": self._frames,
+            "frames_held": self._frames_held,
             "cpu_s": round(loop + writer, 4),
             "loop_cpu_s": round(loop, 4),
             "writer_cpu_s": round(writer, 4),

@@ -171,6 +171,21 @@ def test_the_images_kept_are_the_frames_goals_were_sent_for(tmp_path: Path) -> N
     assert tags == sorted(tags)  # never a frame older than the last one kept
 
 
+def test_frames_are_held_only_from_shortly_before_an_image_is_due(tmp_path: Path) -> None:
+    # Two images a second from a 30 fps camera, goals 60 ms late: after the first period (held
+    # whole, no goal delay known yet), each period of 15 frames holds those from the goals' delay
+    # and a margin before it is due until a goal names one, about 6; not every frame.
+    settings = RecordSettings(tmp_path, room="lab", fps=2)
+    recorder = asyncio.run(_record_with_goals(settings, 3.0))
+    totals = recorder.totals()
+    assert totals["images"] >= 4, totals
+    assert 0 < totals["frames_held"] <= 0.75 * totals["frames"], totals
+    _, messages = _read(recorder.files[0])
+    goals = {fields["frame"] for topic, _, fields in messages if topic == EVENT_TOPICS["goal"]}
+    tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
+    assert all(tag in goals for tag in tags[1:]), (tags, sorted(goals))
+
+
 def test_files_roll_over_by_size_and_only_the_newest_are_kept(tmp_path: Path) -> None:
     # A few images fill 0.05 MB: a new file every few, and three kept.
     settings = RecordSettings(tmp_path, room="lab", fps=RECORD_FPS, max_mb=0.05, max_files=3)

@@ -77,6 +77,7 @@ def _recorder_share(events_path: Path, agent_cores: float | None) -> dict[str, A
         "recorder_cores": round(cores, 4),
         "recorder_writer_cores": round(totals["writer_cpu_s"] / totals["seconds"], 4),
         "recorder_images": totals["images"],
+        "recorder_frames_held_pct": round(100 * totals["frames_held"] / max(totals["frames"], 1)),
     }
     if agent_cores:
         found["recorder_share_pct"] = round(100 * cores / agent_cores, 1)
@@ -121,7 +122,7 @@ def write_report(out: Path, figures: dict[str, Any]) -> Path:
             f"The recorder's own CPU (its loop work and writer thread, from the agent's event "
             f"log): {recording['recorder_cores']} cores, {share:.1f} % of the recording agent's "
             f"(writer thread {recording['recorder_writer_cores']}; {recording['recorder_images']} "
-            "images)."
+            f"images; {recording['recorder_frames_held_pct']} % of the camera's frames held)."
         )
     if "mcap_bytes" in recording:
         size = recording["mcap_bytes"] / 1e6

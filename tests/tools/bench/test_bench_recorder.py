@@ -38,6 +38,7 @@ def test_the_recorder_bench_measures_both_runs_and_writes_its_report(tmp_path: P
     # The recorder's own CPU, from the agent's event log: some, the writer's part of it.
     assert 0 < recording["recorder_writer_cores"] <= recording["recorder_cores"] < 1, recording
     assert 0 < recording["recorder_share_pct"] < 100 and recording["recorder_images"] > 0
+    assert 0 < recording["recorder_frames_held_pct"] <= 100
     report = (tmp_path / "recorder.md").read_text()
     assert "| recording |" in report and "Agent CPU with recording" in report
     assert "The recorder's own CPU" in report
