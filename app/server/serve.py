@@ -9,7 +9,7 @@ import logging
 import socket
 import threading
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
 
 import uvicorn
 from pydantic import ValidationError
@@ -180,6 +180,15 @@ def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> di
     }
 
 
+# How long a server started by start_in_thread waits for its connections' handlers to end once
+# asked to stop, before it cancels them and shuts the app down (the fleet bus leaves Redis): by
+# default uvicorn waits for as long as they take, and a page that never lets go of its socket
+# kept a test's server, and its fleet bus, running after the test had stopped their Redis.
+GRACEFUL_SHUTDOWN_S: Final = 5
+# And how long after that for the app's own shutdown.
+STOP_TIMEOUT_S: Final = 10
+
+
 @dataclass
 class RunningServer:
     """A server started by :func:`start_in_thread`."""
@@ -196,9 +205,12 @@ class RunningServer:
         return ws_endpoint(self.url)
 
     def stop(self) -> None:
-        """Ask uvicorn to exit and wait for its thread."""
+        """Ask uvicorn to exit and wait for its thread; raises ``RuntimeError`` if it lives on
+        (a server left running would go on talking to what its caller stops next, its Redis)."""
         self.server.should_exit = True
-        self.thread.join(timeout=10)
+        self.thread.join(timeout=GRACEFUL_SHUTDOWN_S + STOP_TIMEOUT_S)
+        if self.thread.is_alive():
+            raise RuntimeError(f"the server at {self.url} did not stop")
 
 
 def start_in_thread(
@@ -223,6 +235,7 @@ def start_in_thread(
         **uvicorn_options(settings, tls_files),
         log_level=log_level,
         lifespan="on",
+        timeout_graceful_shutdown=GRACEFUL_SHUTDOWN_S,
     )
     server = uvicorn.Server(config)
     thread = threading.Thread(
