@@ -7,7 +7,7 @@ import { preferLowLatency, RelayLink, sendJson, serveChannel } from './peer.js';
 import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { TurtleView } from './turtleview.js';
-import { button, byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
+import { button, byTestId, drawDetections, FIGURES_PERIOD_MS, fmt, Log, readConfig, show, throttle } from './ui.js';
 import { Wheel } from './wheel.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
@@ -123,13 +123,13 @@ function onState(msg) {
 function onDetections(msg) {
   status.detections += 1;
   status.lastDetections = msg;
+  // The boxes go with the video's frames; the figures and the map change a few times a second.
   drawDetections(overlay, msg);
   session.recentMs.push(msg.ms);
   if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
-  show('ms-per-snapshot', fmt(median(session.recentMs)));
-  show('goals-per-s', fmt(msg.goalsPerS));
   const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
   turtleView.setTarget(target);
+  showFigures();
 }
 
 function onPose(msg) {
@@ -139,9 +139,21 @@ function onPose(msg) {
   status.poses += 1;
   turtleView.addPose(pose);
   status.routeM = turtleView.routeLength;
-  show('pose', `x ${fmt(pose.x, 2)} m   y ${fmt(pose.y, 2)} m   θ ${fmt(pose.theta, 3)} rad`);
-  show('route', `route ${fmt(status.routeM, 1)} m driven`);
+  showFigures();
 }
+
+const showFigures = throttle(FIGURES_PERIOD_MS, () => {
+  const detections = status.lastDetections;
+  if (detections !== null) {
+    show('ms-per-snapshot', fmt(median(session.recentMs)));
+    show('goals-per-s', fmt(detections.goalsPerS));
+  }
+  const { pose } = status;
+  if (pose !== null) {
+    show('pose', `x ${fmt(pose.x, 2)} m   y ${fmt(pose.y, 2)} m   θ ${fmt(pose.theta, 3)} rad`);
+    show('route', `route ${fmt(status.routeM, 1)} m driven`);
+  }
+});
 
 function onHealth(msg) {
   health.vehicleToRelay = msg.link;

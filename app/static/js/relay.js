@@ -8,7 +8,7 @@ import { BadMessage, Peer, preferLowLatency, sendJson, serveChannel } from './pe
 import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
 import { RoomSession } from './room.js';
 import { SnapshotLoop } from './snapshot-loop.js';
-import { byTestId, drawDetections, fmt, Log, readConfig, show } from './ui.js';
+import { byTestId, drawDetections, FIGURES_PERIOD_MS, fmt, Log, readConfig, show, throttle } from './ui.js';
 import { createAnalyzer } from './vision.js';
 
 const config = readConfig();
@@ -89,11 +89,7 @@ const session = {
   frameCallback: null, // a snapshot per frame: the pending requestVideoFrameCallback
   frameReader: null, // default profile: the reader of the vehicle track's decoded frames
   driveSeq: 0, // the seq of the last drive command forwarded to the vehicle
-  figuresShownAt: -Infinity, // performance.now() when the snapshot figures were last shown
 };
-
-// The page's snapshot figures are redrawn at most this often.
-const FIGURES_PERIOD_MS = 250;
 
 const ANALYZER_SLOW_MS = 30000;
 const slowAnalyzer = setTimeout(
@@ -476,17 +472,17 @@ function createLoop(analyzer) {
       return sendJson(vehicle?.stateChannel ?? vehicle?.channel, goal);
     },
   });
-  loop.addEventListener('detections', (event) => {
-    const detections = event.detail;
-    broadcast(detections);
-    if (PREVIEW) drawDetections(overlay, detections);
-    // Every redraw of the page costs the compositor: the figures change a few times a second.
-    const now = performance.now();
-    if (now - session.figuresShownAt < FIGURES_PERIOD_MS) return;
-    session.figuresShownAt = now;
+  let latest = null;
+  const showFigures = throttle(FIGURES_PERIOD_MS, () => {
     show('goals-sent', String(loop.stats.goalsSent));
-    show('ms-per-snapshot', fmt(detections.ms));
-    show('goals-per-s', fmt(detections.goalsPerS));
+    show('ms-per-snapshot', fmt(latest.ms));
+    show('goals-per-s', fmt(latest.goalsPerS));
+  });
+  loop.addEventListener('detections', (event) => {
+    latest = event.detail;
+    broadcast(latest);
+    if (PREVIEW) drawDetections(overlay, latest);
+    showFigures();
   });
   loop.addEventListener('lock', (event) => onLockChanged(event.detail));
   loop.addEventListener('failure', (event) => log.error(`snapshot failed: ${event.detail}`));

@@ -1,9 +1,13 @@
 // A turtlesim look-alike drawn from pose telemetry: the blue terrain (the world size comes from
 // the page config, 45 px per metre at 500 px), the pen trail (the route), and the turtle itself.
+import { throttle } from './ui.js';
 
 const BACKGROUND = 'rgb(69, 86, 255)'; // turtlesim's default background
 const PEN = 'rgb(179, 184, 255)'; // turtlesim's default pen
 const TRAIL_LIMIT = 20000;
+// Poses and goals arrive 30 to 60 times a second, and each redraw paints the whole route: the
+// view is redrawn at most 20 times a second (a turtle at 2 m/s moves 4.5 px between two).
+const REDRAW_PERIOD_MS = 50;
 
 /** Draws the turtle and its route on a square canvas `worldSize` metres wide. */
 export class TurtleView {
@@ -11,6 +15,7 @@ export class TurtleView {
   #pose = null;
   #target = null;
   #routeM = 0;
+  #redraw = throttle(REDRAW_PERIOD_MS, () => this.draw());
 
   constructor(canvas, worldSize) {
     this.canvas = canvas;
@@ -28,7 +33,7 @@ export class TurtleView {
     return this.#trail.length;
   }
 
-  /** Add a pose {x, y, theta} (terrain metres, radians) and redraw. */
+  /** Add a pose {x, y, theta} (terrain metres, radians); redrawn within REDRAW_PERIOD_MS. */
   addPose(pose) {
     const last = this.#trail.at(-1);
     // The pen only draws when the turtle moves; rotating in place leaves no mark.
@@ -39,13 +44,13 @@ export class TurtleView {
       if (this.#trail.length > TRAIL_LIMIT) this.#trail.splice(0, this.#trail.length - TRAIL_LIMIT);
     }
     this.#pose = pose;
-    this.draw();
+    this.#redraw();
   }
 
   /** Show where the current goal lies on the terrain ({x, y} metres), or hide it with null. */
   setTarget(target) {
     this.#target = target;
-    this.draw();
+    this.#redraw();
   }
 
   draw() {

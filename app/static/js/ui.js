@@ -76,6 +76,30 @@ export function fmt(value, digits = 1) {
   return value === null || value === undefined || Number.isNaN(value) ? '–' : value.toFixed(digits);
 }
 
+// The role pages redraw their figures at most this often: a person reads a few changes a
+// second, and every redraw costs a layout, a paint and the compositor.
+export const FIGURES_PERIOD_MS = 250;
+
+/**
+ * `fn` called at most once every `periodMs`: a call within the period is deferred to its end
+ * rather than dropped, so the last state always shows.
+ */
+export function throttle(periodMs, fn) {
+  let shownAt = -Infinity;
+  let timer = null;
+  const run = () => {
+    timer = null;
+    shownAt = performance.now();
+    fn();
+  };
+  return () => {
+    if (timer !== null) return;
+    const wait = shownAt + periodMs - performance.now();
+    if (wait <= 0) run();
+    else timer = setTimeout(run, wait);
+  };
+}
+
 /**
  * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on the canvas laid
  * over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas covers the <video>, whose
@@ -84,8 +108,11 @@ export function fmt(value, digits = 1) {
 export function drawDetections(canvas, detections) {
   const rect = canvas.getBoundingClientRect();
   const dpr = window.devicePixelRatio || 1;
-  canvas.width = Math.round(rect.width * dpr);
-  canvas.height = Math.round(rect.height * dpr);
+  // Sizing a canvas, even to the size it has, reallocates and clears it: only when it changed.
+  const width = Math.round(rect.width * dpr);
+  const height = Math.round(rect.height * dpr);
+  if (canvas.width !== width) canvas.width = width;
+  if (canvas.height !== height) canvas.height = height;
   const ctx = canvas.getContext('2d');
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (detections === null || !detections.w || !detections.h) return;
