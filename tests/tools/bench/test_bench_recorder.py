@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from app.tools.bench import recording as recording_bench
+
 pytestmark = [
     pytest.mark.bench,
     pytest.mark.slow,
@@ -35,11 +37,17 @@ def test_the_recorder_bench_measures_both_runs_and_writes_its_report(tmp_path: P
     recording = figures["recording"]
     assert recording["mcap_bytes"] > 0
     assert isinstance(figures["agent_cpu_increase_pct"], float)
+    # Alternating rounds (plain, recording, plain, recording), each with its own increase.
+    assert len(figures["rounds"]) == recording_bench.ROUNDS >= 2, figures["rounds"]
+    for found in figures["rounds"]:
+        assert 0 < found["plain_cores"] < 2 and 0 < found["recording_cores"] < 2, found
+        assert isinstance(found["increase_pct"], float)
     # The recorder's own CPU, from the agent's event log: some, the writer's part of it.
     assert 0 < recording["recorder_writer_cores"] <= recording["recorder_cores"] < 1, recording
     assert 0 < recording["recorder_share_pct"] < 100 and recording["recorder_images"] > 0
     assert 0 < recording["recorder_frames_held_pct"] <= 100
     report = (tmp_path / "recorder.md").read_text()
     assert "| recording |" in report and "Agent CPU with recording" in report
+    assert "round by round" in report
     assert "The recorder's own CPU" in report
     assert json.loads((tmp_path / "recorder.json").read_text()) == figures
