@@ -181,9 +181,9 @@ def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> di
 
 
 # How long a server started by start_in_thread waits for its connections' handlers to end once
-# asked to stop, before it cancels them and shuts the app down (the fleet bus leaves Redis): by
-# default uvicorn waits for as long as they take, and a page that never lets go of its socket
-# kept a test's server, and its fleet bus, running after the test had stopped their Redis.
+# asked to stop, before it cancels them and shuts the app down (the fleet bus leaves Redis). By
+# default uvicorn waits for as long as they take: the likely way a test's server, and its fleet
+# bus, outlived the Redis its test had stopped (two suite runs printed the bus's failed ticks).
 GRACEFUL_SHUTDOWN_S: Final = 5
 # And how long after that for the app's own shutdown.
 STOP_TIMEOUT_S: Final = 10
