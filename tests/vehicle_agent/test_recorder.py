@@ -179,7 +179,8 @@ def test_frames_are_held_only_from_shortly_before_an_image_is_due(tmp_path: Path
     recorder = asyncio.run(_record_with_goals(settings, 3.0))
     totals = recorder.totals()
     assert totals["images"] >= 4, totals
-    assert 0 < totals["frames_held"] <= 0.75 * totals["frames"], totals
+    # (About 40 % on an idle machine; a loaded one delays the goals, and the lead grows with them.)
+    assert 0 < totals["frames_held"] <= 0.8 * totals["frames"], totals
     _, messages = _read(recorder.files[0])
     goals = {fields["frame"] for topic, _, fields in messages if topic == EVENT_TOPICS["goal"]}
     tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
