@@ -346,12 +346,13 @@ class FlightRecorder:
     def _hold(self, frame: av.VideoFrame) -> None:
         now = time.time_ns()
         self._frames += 1
+        holding_from = self._due_ns - self._lead_ns
         # Frames no search can take any more: kept or older than the last image kept (images go
         # forward in time), too old, or from before the lead of the image now due.
-        oldest = max(self._kept_ns + 1, now - HOLD_NS, self._due_ns - self._lead_ns)
+        oldest = max(self._kept_ns + 1, now - HOLD_NS, holding_from)
         while self._held and self._held[0].arrived_ns < oldest:
             self._held.popleft()
-        if now < self._due_ns - self._lead_ns:
+        if now < holding_from:
             return  # not held: the camera's own pipeline lets go of it
         self._held.append(_Held(now, frame))
         self._frames_held += 1
