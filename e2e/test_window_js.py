@@ -65,3 +65,31 @@ def test_search_region_and_sizes_match_python(page: Page) -> None:
         limited += max_size[0] > 0 and max_size[1] > 0 and largest[0] == max_size[0]
     # Both kinds of branch occurred, so agreeing means something.
     assert 0 < empty < SAMPLES and 0 < limited < SAMPLES
+
+
+def test_source_rect_matches_python(page: Page) -> None:
+    rng = random.Random(12)
+    cases = []
+    for _ in range(SAMPLES):
+        width, height = rng.choice([(640, 480), (1280, 720), (800, 600), (1366, 768), (320, 240)])
+        detect_width = rng.choice([256, 320, 480])
+        size = (detect_width, int(height * detect_width / width + 0.5))
+        x0, y0 = rng.randrange(size[0]), rng.randrange(size[1])
+        region = (x0, y0, rng.randint(1, size[0] - x0), rng.randint(1, size[1] - y0))
+        cases.append((region, width, height, size))
+    got = page.evaluate(
+        """(cases) => cases.map(([[x, y, width, height], w, h, [sw, sh]]) => {
+          const size = { width: sw, height: sh };
+          const rects = searchWindow.sourceRect({ x, y, width, height }, w, h, size);
+          const box = (r) => [r.x, r.y, r.width, r.height];
+          return rects && [box(rects.reduced), box(rects.source)];
+        })""",
+        cases,
+    )
+    exact = 0
+    for case, have in zip(cases, got, strict=True):
+        rects = window.source_rect(*case)
+        assert have == (rects and [list(rects[0]), list(rects[1])]), case
+        exact += rects is not None
+    # Both grids occurred: exact ones (640 → 256) and inexact ones (640 → 480).
+    assert 0 < exact < SAMPLES

@@ -89,18 +89,44 @@ def _classifier(name: str) -> cv2.CascadeClassifier:
     return _classifiers[name]
 
 
+def _gray(rgba: MatLike) -> MatLike:
+    return cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY)
+
+
+def _window_image(rgba: Rgba, region: Box, size: tuple[int, int] | None) -> MatLike:
+    """The detection image's pixels inside ``region``: converted and reduced from the window's
+    own part of the frame where the reduction's grid allows it (``window.source_rect``), else
+    cropped from the whole frame's detection image."""
+    if size is None:
+        return _gray(window.crop(rgba, region))
+    height, width = rgba.shape[:2]
+    rects = window.source_rect(region, width, height, size)
+    if rects is None:
+        return window.crop(cv2.resize(_gray(rgba), size, interpolation=cv2.INTER_AREA), region)
+    (x0, y0, w0, h0), source = rects
+    part = cv2.resize(_gray(window.crop(rgba, source)), (w0, h0), interpolation=cv2.INTER_AREA)
+    x, y, w, h = region
+    return window.crop(part, (x - x0, y - y0, w, h))
+
+
 def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> Detection:
-    gray, factor = _reduce(cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY), params.detect_width)
     region = None
     ox = oy = 0
     min_size, max_size = params.min_size, params.max_size
-    if around is not None:
-        height, width = gray.shape[:2]
-        region = window.search_region(around, factor, width, height, params.window_margin)
+    if around is None:
+        gray, factor = _reduce(_gray(rgba), params.detect_width)
+    else:
+        height, width = rgba.shape[:2]
+        size = _reduction(width, height, params.detect_width)
+        factor = 1.0 if size is None else width / size[0]
+        reduced_width, reduced_height = size or (width, height)
+        region = window.search_region(
+            around, factor, reduced_width, reduced_height, params.window_margin
+        )
         if region is None:
             return Detection(boxes=[], target=None, region=region)
         ox, oy = region[:2]
-        gray = window.crop(gray, region)
+        gray = _window_image(rgba, region, size)
         min_size, max_size = window.search_sizes(
             around, factor, params.window_size_ratio, min_size, max_size
         )

@@ -62,6 +62,39 @@ def search_sizes(
     return smallest, (min(max_size[0], longest), min(max_size[1], longest))
 
 
+def source_rect(region: Box, width: int, height: int, size: Size) -> tuple[Box, Box] | None:
+    """Where to reduce only the window: ``(reduced, source)``, the window grown to the
+    reduction's grid (detection-image pixels) and the part of the ``width`` × ``height`` frame
+    that reduces to exactly it; None when the grid is not exact in doubles (then the whole frame
+    is reduced and the window cropped from it, as before).
+
+    INTER_AREA makes each detection pixel a weighted mean of the frame pixels under it, with
+    weights that repeat every ``period`` detection pixels (``period`` × scale frame pixels, a
+    whole number). A part of the frame that starts and ends on that grid reduces to exactly the
+    pixels the whole frame's reduction has there, for a fraction of the work. OpenCV computes the
+    weights from index × scale in doubles, exact on both sides only when the scale is a binary
+    fraction: a power-of-two ``period``.
+    """
+    x = _on_grid(region[0], region[0] + region[2], width, size[0])
+    y = _on_grid(region[1], region[1] + region[3], height, size[1])
+    if x is None or y is None:
+        return None
+    (x0, x1, sx0, sx1), (y0, y1, sy0, sy1) = x, y
+    return (x0, y0, x1 - x0, y1 - y0), (sx0, sy0, sx1 - sx0, sy1 - sy0)
+
+
+def _on_grid(start: int, end: int, frame: int, reduced: int) -> tuple[int, int, int, int] | None:
+    """One axis of :func:`source_rect`: ``[start, end)`` of the detection image grown to the
+    grid, and the frame pixels under it."""
+    common = math.gcd(frame, reduced)
+    period, step = reduced // common, frame // common
+    if period & (period - 1):
+        return None
+    lo = start // period * period
+    hi = min(reduced, -(-end // period) * period)
+    return lo, hi, lo // period * step, hi // period * step
+
+
 def crop(image: MatLike, region: Box) -> MatLike:
     """The part of ``image`` inside ``region`` (a view, no copy), as OpenCV.js's ``roi``."""
     x, y, w, h = region

@@ -78,6 +78,45 @@ def test_the_size_range_keeps_the_box_a_search_of_every_size_finds() -> None:
         assert windowed.boxes == reference.detect(every_size, frame, around=face).boxes, i
 
 
+@pytest.mark.parametrize(
+    ("width", "height", "detect_width"),
+    [(640, 480, 256), (1280, 720, 256), (800, 600, 256), (1920, 1080, 256), (320, 240, 256)],
+)
+def test_reducing_the_window_part_alone_gives_the_pixels_of_the_whole_reduction(
+    width: int, height: int, detect_width: int
+) -> None:
+    # The window search converts and reduces only its part of the frame: for that to change
+    # nothing, the part reduced on the grid must equal the same pixels of the whole frame reduced.
+    rng = np.random.default_rng(5)
+    frame = cv2.resize(SyntheticVideo().render(7), (width, height))
+    noisy = np.clip(frame + rng.integers(-30, 30, frame.shape), 0, 255).astype(np.uint8)
+    gray = cv2.cvtColor(noisy, cv2.COLOR_RGB2GRAY)
+    size = (detect_width, int(height * detect_width / width + 0.5))
+    whole = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+    for _ in range(200):
+        x0, y0 = int(rng.integers(0, size[0] - 1)), int(rng.integers(0, size[1] - 1))
+        x1, y1 = int(rng.integers(x0 + 1, size[0] + 1)), int(rng.integers(y0 + 1, size[1] + 1))
+        region = (x0, y0, x1 - x0, y1 - y0)
+        rects = window.source_rect(region, width, height, size)
+        assert rects is not None
+        (gx, gy, gw, gh), source = rects
+        assert gx <= x0 and gy <= y0 and gx + gw >= x1 and gy + gh >= y1
+        part = cv2.resize(window.crop(gray, source), (gw, gh), interpolation=cv2.INTER_AREA)
+        assert np.array_equal(
+            window.crop(part, (x0 - gx, y0 - gy, x1 - x0, y1 - y0)), window.crop(whole, region)
+        ), region
+
+
+def test_a_grid_that_is_not_exact_in_doubles_reduces_the_whole_frame() -> None:
+    # 640 → 480 is a scale of 4/3: its weights are not exact in doubles, so no part is reduced
+    # alone; 640 → 256 (5/2) repeats every 2 detection pixels, i.e. every 5 frame pixels.
+    assert window.source_rect((10, 10, 50, 40), 640, 480, (480, 360)) is None
+    assert window.source_rect((11, 11, 50, 40), 640, 480, (256, 192)) == (
+        (10, 10, 52, 42),
+        (25, 25, 130, 105),
+    )
+
+
 def test_the_windowed_search_finds_the_face_the_full_scan_found() -> None:
     video, _ = scene(FixedPath(0.3, 0.42))
     frame = rgba(video, 0)

@@ -40,6 +40,38 @@ export function searchSizes(around, factor, ratio, minSize, maxSize) {
   return { min, max: [Math.min(maxSize[0], longest), Math.min(maxSize[1], longest)] };
 }
 
+/**
+ * Where to reduce only the window: {reduced, source}, the window `region` ({x, y, width,
+ * height}, detection-image pixels) grown to the reduction's grid, and the part of the `width` ×
+ * `height` frame that reduces to exactly it; null when the grid is not exact in doubles (then
+ * the whole frame is reduced and the window cropped from it). `size` is the detection image's
+ * {width, height}. Why this holds: app/vision/window.py source_rect.
+ */
+export function sourceRect(region, width, height, size) {
+  const x = onGrid(region.x, region.x + region.width, width, size.width);
+  const y = onGrid(region.y, region.y + region.height, height, size.height);
+  if (x === null || y === null) return null;
+  return {
+    reduced: { x: x.lo, y: y.lo, width: x.hi - x.lo, height: y.hi - y.lo },
+    source: { x: x.from, y: y.from, width: x.to - x.from, height: y.to - y.from },
+  };
+}
+
+function gcd(a, b) {
+  return b === 0 ? a : gcd(b, a % b);
+}
+
+/** One axis of sourceRect: [start, end) grown to the grid, and the frame pixels under it. */
+function onGrid(start, end, frame, reduced) {
+  const common = gcd(frame, reduced);
+  const period = reduced / common;
+  const step = frame / common;
+  if ((period & (period - 1)) !== 0) return null;
+  const lo = Math.floor(start / period) * period;
+  const hi = Math.min(reduced, Math.ceil(end / period) * period);
+  return { lo, hi, from: (lo / period) * step, to: (hi / period) * step };
+}
+
 /** The largest box, the first of equal areas (the one whose centre is the target). */
 export function largest(boxes) {
   let best = null;
