@@ -71,21 +71,31 @@ export function createCascadeOperation(cv, spec, files) {
    * (window.js sourceRect), else cropped from the whole frame's detection image.
    */
   function windowImage(rgba, region, size) {
-    const rects = size === null ? null : sourceRect(region, rgba.cols, rgba.rows, size);
+    const { x, y, width, height } = region;
+    if (size === null) {
+      grayOf(rgba, region);
+      return gray.roi({ x: 0, y: 0, width, height });
+    }
+    const rects = sourceRect(region, rgba.cols, rgba.rows, size);
     if (rects === null) {
-      const view = size === null ? rgba.roi(region) : rgba;
-      cv.cvtColor(view, gray, cv.COLOR_RGBA2GRAY);
-      if (view !== rgba) view.delete();
-      if (size === null) return gray.roi({ x: 0, y: 0, width: region.width, height: region.height });
-      return reduce(cv, gray, small, p.detectWidth).input.roi(region);
+      cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
+      cv.resize(gray, small, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
+      return small.roi(region);
     }
     const { reduced, source } = rects;
-    const view = rgba.roi(source);
-    cv.cvtColor(view, gray, cv.COLOR_RGBA2GRAY);
-    view.delete();
+    grayOf(rgba, source);
     cv.resize(gray, small, new cv.Size(reduced.width, reduced.height), 0, 0, cv.INTER_AREA);
-    const { x, y, width, height } = region;
     return small.roi({ x: x - reduced.x, y: y - reduced.y, width, height });
+  }
+
+  /** `rect` of the RGBA frame, grey, into `gray`. */
+  function grayOf(rgba, rect) {
+    const view = rgba.roi(rect);
+    try {
+      cv.cvtColor(view, gray, cv.COLOR_RGBA2GRAY);
+    } finally {
+      view.delete();
+    }
   }
 
   return {
