@@ -52,11 +52,12 @@ async def run(browser: Browser, server_url: str, seconds: float, fps: float) -> 
     figures: dict[str, Any] = {"seconds": seconds, "fps": fps, "rounds": [], "problems": {}}
     modes = {name: _Mode() for name in RUNS}
     with tempfile.TemporaryDirectory(prefix="autopilot-bench-recorder-") as tmp:
+        folder = Path(tmp) / "recording"
         for round_no in range(1, ROUNDS + 1):
             cores: dict[str, float] = {}
             for name in RUNS:
                 recorded = name == "recording"
-                extra = ("--record", str(Path(tmp) / "recording")) if recorded else ()
+                extra = ("--record", str(folder)) if recorded else ()
                 options = StackOptions(
                     "default",
                     seconds / ROUNDS,
@@ -82,7 +83,7 @@ async def run(browser: Browser, server_url: str, seconds: float, fps: float) -> 
                     {
                         "plain_cores": round(off, 4),
                         "recording_cores": round(on, 4),
-                        "increase_pct": round(100 * (on / off - 1), 1),
+                        "increase_pct": _increase_pct(off, on),
                     }
                 )
         for name, mode in modes.items():
@@ -95,14 +96,20 @@ async def run(browser: Browser, server_url: str, seconds: float, fps: float) -> 
                 "goal_to_command_ms": _rounded(mode.goal_ms),
             }
             if name == "recording":
-                files = sorted((Path(tmp) / "recording").glob("*.mcap"))
+                files = sorted(folder.glob("*.mcap"))
                 figures[name]["mcap_bytes"] = sum(f.stat().st_size for f in files)
                 figures[name] |= _recorder_share(mode.events, agent)
     plain, recording = figures.get("plain"), figures.get("recording")
     if plain and recording and plain["agent_cores"] and recording["agent_cores"] is not None:
-        increase = 100 * (recording["agent_cores"] / plain["agent_cores"] - 1)
-        figures["agent_cpu_increase_pct"] = round(increase, 1)
+        figures["agent_cpu_increase_pct"] = _increase_pct(
+            plain["agent_cores"], recording["agent_cores"]
+        )
     return figures
+
+
+def _increase_pct(plain_cores: float, recording_cores: float) -> float:
+    """How much more CPU the agent used recording, in percent of its plain runs' (one decimal)."""
+    return round(100 * (recording_cores / plain_cores - 1), 1)
 
 
 def _recorder_share(events_paths: list[Path], agent_cores: float | None) -> dict[str, Any]:
