@@ -49,6 +49,11 @@ def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, 
     return detect_width, math.floor(height * detect_width / width + 0.5)
 
 
+def _factor(width: int, size: tuple[int, int] | None) -> float:
+    """What scales detection-image coordinates back to a frame ``width`` wide."""
+    return 1.0 if size is None else width / size[0]
+
+
 def _reduce(image: MatLike, detect_width: int | None) -> tuple[MatLike, float]:
     """The detection image (reduced with INTER_AREA when wider than ``detect_width``) and the
     factor that scales its coordinates back to the full frame."""
@@ -56,7 +61,7 @@ def _reduce(image: MatLike, detect_width: int | None) -> tuple[MatLike, float]:
     size = _reduction(width, height, detect_width)
     if size is None:
         return image, 1.0
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), width / size[0]
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA), _factor(width, size)
 
 
 def _scale_box(box: Box, factor: float) -> Box:
@@ -118,7 +123,7 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
     else:
         height, width = rgba.shape[:2]
         size = _reduction(width, height, params.detect_width)
-        factor = 1.0 if size is None else width / size[0]
+        factor = _factor(width, size)
         reduced_width, reduced_height = size or (width, height)
         region = window.search_region(
             around, factor, reduced_width, reduced_height, params.window_margin

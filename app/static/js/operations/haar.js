@@ -15,6 +15,11 @@ export function reduction(width, height, detectWidth) {
   return { width: detectWidth, height: Math.floor((height * detectWidth) / width + 0.5) };
 }
 
+/** What scales detection-image coordinates back to a frame `width` wide (see _factor). */
+function factorOf(width, size) {
+  return size === null ? 1 : width / size.width;
+}
+
 /**
  * Reduce `src` into `dst` (INTER_AREA) when it is wider than `detectWidth`: the detection image
  * and the factor that scales its coordinates back to the full frame.
@@ -23,7 +28,7 @@ export function reduce(cv, src, dst, detectWidth) {
   const size = reduction(src.cols, src.rows, detectWidth);
   if (size === null) return { input: src, factor: 1 };
   cv.resize(src, dst, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
-  return { input: dst, factor: src.cols / size.width };
+  return { input: dst, factor: factorOf(src.cols, size) };
 }
 
 /** Scale a detection-image box back to the full frame, rounding halves up as Python does. */
@@ -114,7 +119,7 @@ export function createCascadeOperation(cv, spec, files) {
         ({ input: searched, factor } = reduce(cv, gray, small, p.detectWidth));
       } else {
         const size = reduction(rgba.cols, rgba.rows, p.detectWidth);
-        factor = size === null ? 1 : rgba.cols / size.width;
+        factor = factorOf(rgba.cols, size);
         const { width, height } = size ?? { width: rgba.cols, height: rgba.rows };
         region = searchRegion(around, factor, width, height, p.windowMargin);
         if (region === null) return { boxes: [], target: null, region };
