@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -20,6 +21,7 @@ import pytest
 from playwright.sync_api import Page
 
 from app.resources import OPERATIONS_SPEC
+from app.vision import window
 from app.vision.reference import detect
 from app.vision.spec import load_spec
 from tests.helpers.harness import analyzer_page
@@ -117,3 +119,76 @@ def test_frames_sent_back_to_back_are_each_analysed_on_their_own_pixels(page: Pa
     assert all(
         len(boxes) == 1 and close_to(boxes[0], box) for boxes, box in zip(found, drawn, strict=True)
     ), (found, drawn)
+
+
+# A decoded video's frames as Chromium's VP8 decoder tags them: BT.601, limited range. The worker
+# copies their planes as they are and converts, with OpenCV, only what an operation reads.
+LIMITED_HELPERS = """() => {
+window.i420LimitedFrame = (width, height, b64) => new VideoFrame(fromBase64(b64), {
+  format: 'I420', codedWidth: width, codedHeight: height, timestamp: 0,
+  colorSpace: { primaries: 'smpte170m', transfer: 'smpte170m', matrix: 'smpte170m',
+                fullRange: false },
+});
+window.analyzeInTurn = async (calls) => {
+  const results = [];
+  for (const [[w, h, b64], op, options] of calls) {
+    const r = await window.analyzer.analyze(i420LimitedFrame(w, h, b64), op, options);
+    results.push(r.rgba ? { ...r, rgba: await toBase64(r.rgba) } : r);
+  }
+  return results;
+};
+}"""
+
+FACE_PHOTO = Path(__file__).parents[1] / "data" / "faces" / "obama-480p.jpg"
+
+
+def face_scene() -> npt.NDArray[np.uint8]:
+    """A 640×480 BGR photo of one face."""
+    photo = cv2.imread(str(FACE_PHOTO))
+    assert photo is not None, FACE_PHOTO
+    return np.asarray(cv2.resize(photo, (WIDTH, HEIGHT), interpolation=cv2.INTER_AREA), np.uint8)
+
+
+def as_rgba_by_python(bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """What Python OpenCV makes of the frame's I420 planes."""
+    return np.asarray(cv2.cvtColor(i420(bgr), cv2.COLOR_YUV2RGBA_I420), np.uint8)
+
+
+def test_a_bt601_frame_converts_in_opencv_as_python_opencv_does(page: Page) -> None:
+    page.evaluate(LIMITED_HELPERS)
+    scene = face_scene()
+    [result] = page.evaluate(
+        "(calls) => analyzeInTurn(calls)", [[i420_payload(scene), "face", {"returnPixels": True}]]
+    )
+    assert np.array_equal(analyzed_rgba(result), as_rgba_by_python(scene))
+    assert result["converted"] >= WIDTH * HEIGHT
+    python = detect(SPEC.op("face"), as_rgba_by_python(scene))
+    assert len(python.boxes) == 1 and [list(b) for b in python.boxes] == result["boxes"]
+
+
+def test_a_window_search_converts_only_its_part_and_finds_what_python_finds(page: Page) -> None:
+    # The frame Mat first holds noise, converted whole; the face frame's window search must
+    # then see the face frame wherever it reads, though it converts only a part of it.
+    page.evaluate(LIMITED_HELPERS)
+    scene = face_scene()
+    rgba = as_rgba_by_python(scene)
+    (face,) = detect(SPEC.op("face"), rgba).boxes
+    noise = np.random.default_rng(3).integers(0, 256, scene.shape, np.uint8)
+    noise_call = [i420_payload(noise), "face", {}]
+    window_call = [i420_payload(scene), "face", {"around": list(face), "returnPixels": True}]
+    _, windowed = page.evaluate("(calls) => analyzeInTurn(calls)", [noise_call, window_call])
+    python = detect(SPEC.op("face"), rgba, around=face)
+    assert python.boxes and [list(b) for b in python.boxes] == windowed["boxes"]
+    assert python.region is not None and windowed["region"] == list(python.region)
+    # Every pixel the window search reads is the face frame's; less than half the frame was
+    # converted, and the rest still holds the noise.
+    detect_width = SPEC.op("face").params.detect_width
+    assert detect_width is not None
+    size = (detect_width, HEIGHT * detect_width // WIDTH)
+    rects = window.source_rect(python.region, WIDTH, HEIGHT, size)
+    assert rects is not None
+    read = window.crop(rgba, rects[1])
+    analysed = analyzed_rgba(windowed)
+    assert np.array_equal(window.crop(analysed, rects[1]), read)
+    assert 0 < windowed["converted"] < WIDTH * HEIGHT / 2, windowed["converted"]
+    assert not np.array_equal(analysed, rgba)

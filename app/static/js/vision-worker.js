@@ -49,6 +49,9 @@ const session = {
   canvas: null,
   ctx: null,
   frame: null, // cv.Mat CV_8UC4 reused while the frame size stays the same
+  yuv: null, // cv.Mat CV_8UC1 of a VideoFrame's I420 planes as they are (convertsInOpenCv)
+  unconverted: false, // whether the frame Mat still waits for parts of `yuv` (ensurePixels)
+  converted: 0, // pixels of the current frame converted into the frame Mat so far
   queue: Promise.resolve(), // the message being handled; the next waits for it
 };
 
@@ -137,12 +140,52 @@ function frameMat(width, height) {
   return session.frame;
 }
 
+// The YUV matrices OpenCV's COLOR_YUV2RGBA_I420 implements (BT.601, limited range): a decoded
+// frame tagged with one of them converts in OpenCV as Chromium converts it (within a level).
+const OPENCV_YUV_MATRICES = ['smpte170m', 'bt470bg'];
+
 /**
- * Put the source's RGBA pixels into the frame Mat and return it. A VideoFrame converts itself
- * straight into the Mat's WASM memory (one copy, no canvas); an ImageBitmap is drawn on a
- * canvas and read back; raw RGBA is copied as it is. Frames and bitmaps are closed.
+ * Whether the frame's I420 planes can be copied as they are and converted by OpenCV, part by
+ * part: Chromium's own conversion into RGBA costs ~0.8 ms a 640×480 frame however little of it
+ * an operation reads, the planes' copy 0.1 ms (docs/bench/relay-cost.md).
+ */
+function convertsInOpenCv(frame) {
+  const { format, colorSpace, visibleRect: r } = frame;
+  return (
+    format === 'I420' &&
+    colorSpace?.fullRange === false &&
+    OPENCV_YUV_MATRICES.includes(colorSpace?.matrix) &&
+    [r.x, r.y, r.width, r.height].every((v) => v % 2 === 0)
+  );
+}
+
+/** The reused I420 Mat for a width×height frame: Y, then U, then V, packed as OpenCV wants. */
+function yuvMat(width, height) {
+  const { cv } = session;
+  if (!session.yuv || session.yuv.cols !== width || session.yuv.rows !== (height * 3) / 2) {
+    session.yuv?.delete();
+    session.yuv = new cv.Mat((height * 3) / 2, width, cv.CV_8UC1);
+  }
+  return session.yuv;
+}
+
+/**
+ * Put the source's RGBA pixels into the frame Mat and return it. A VideoFrame of a BT.601
+ * I420 video leaves its planes in `session.yuv`, converted later where an operation reads
+ * (ensurePixels); another VideoFrame converts itself straight into the Mat's WASM memory (one
+ * copy, no canvas); an ImageBitmap is drawn on a canvas and read back; raw RGBA is copied as it
+ * is. Frames and bitmaps are closed.
  */
 async function readPixels(source) {
+  session.unconverted = false;
+  const mat = await framePixels(source);
+  if (!session.unconverted) session.converted = mat.cols * mat.rows;
+  return mat;
+}
+
+/** readPixels' copy, by the kind of source. */
+async function framePixels(source) {
+  session.converted = 0;
   if (source.data) {
     const mat = frameMat(source.width, source.height);
     mat.data.set(source.data);
@@ -152,6 +195,18 @@ async function readPixels(source) {
     if (source instanceof VideoFrame) {
       const { width, height } = source.visibleRect;
       const mat = frameMat(width, height);
+      if (convertsInOpenCv(source)) {
+        const yuv = yuvMat(width, height);
+        const luma = width * height;
+        const layout = [
+          { offset: 0, stride: width },
+          { offset: luma, stride: width / 2 },
+          { offset: luma + luma / 4, stride: width / 2 },
+        ];
+        await source.copyTo(yuv.data, { layout });
+        session.unconverted = true;
+        return mat;
+      }
       await source.copyTo(mat.data, { format: 'RGBA', colorSpace: 'srgb' });
       return mat;
     }
@@ -169,6 +224,57 @@ async function readPixels(source) {
     return mat;
   } finally {
     source.close();
+  }
+}
+
+/**
+ * Make `rect` ({x, y, width, height}; null: all) of the frame Mat hold the current frame's
+ * pixels, converting that part of `session.yuv` when the frame came as planes. A part from even
+ * coordinates converts exactly as the whole frame does (each 2×2 pixels share their chroma).
+ */
+function ensurePixels(mat, rect) {
+  if (!session.unconverted) return;
+  const { cv } = session;
+  if (rect === null) {
+    cv.cvtColor(session.yuv, mat, cv.COLOR_YUV2RGBA_I420);
+    session.unconverted = false;
+    session.converted += mat.cols * mat.rows;
+    return;
+  }
+  if (rect.width <= 0 || rect.height <= 0) return;
+  const x = rect.x - (rect.x % 2);
+  const y = rect.y - (rect.y % 2);
+  const w = Math.min(mat.cols, rect.x + rect.width + ((rect.x + rect.width) % 2)) - x;
+  const h = Math.min(mat.rows, rect.y + rect.height + ((rect.y + rect.height) % 2)) - y;
+  const planes = new cv.Mat((h * 3) / 2, w, cv.CV_8UC1);
+  const rgba = new cv.Mat();
+  const view = mat.roi(new cv.Rect(x, y, w, h));
+  try {
+    // The views of WASM memory are taken after the last allocation, which may move it.
+    copyPlanesPart(session.yuv.data, mat.cols, mat.rows, planes.data, { x, y, w, h });
+    cv.cvtColor(planes, rgba, cv.COLOR_YUV2RGBA_I420);
+    rgba.copyTo(view);
+    session.converted += w * h;
+  } finally {
+    planes.delete();
+    rgba.delete();
+    view.delete();
+  }
+}
+
+/** Copy the part {x, y, w, h} (even) of a width×height frame's I420 planes, packed, into `dst`. */
+function copyPlanesPart(src, width, height, dst, { x, y, w, h }) {
+  for (let r = 0; r < h; r += 1) {
+    const from = (y + r) * width + x;
+    dst.set(src.subarray(from, from + w), r * w);
+  }
+  const [cw, pw] = [width / 2, w / 2];
+  const [uFrom, uTo] = [width * height, w * h];
+  const [vFrom, vTo] = [uFrom + cw * (height / 2), uTo + pw * (h / 2)];
+  for (let r = 0; r < h / 2; r += 1) {
+    const from = (y / 2 + r) * cw + x / 2;
+    dst.set(src.subarray(uFrom + from, uFrom + from + pw), uTo + r * pw);
+    dst.set(src.subarray(vFrom + from, vFrom + from + pw), vTo + r * pw);
   }
 }
 
@@ -214,12 +320,18 @@ function describe(error) {
  * parity checks), the window around it alone is searched; otherwise the whole frame.
  */
 function detectIn(instance, frame, track, around, choose) {
+  const search = (box) => {
+    // Only what the operation reads of the frame is converted (an operation without `reads`
+    // reads it all).
+    ensurePixels(frame, instance.op.reads?.(frame.cols, frame.rows, box) ?? null);
+    return instance.op.detect(frame, box);
+  };
   if (around != null) {
     if (!instance.windowed) throw new Error('this operation has no windowed search');
-    return { found: instance.op.detect(frame, around), scan: 'window' };
+    return { found: search(around), scan: 'window' };
   }
-  if (track) return session.window.step(instance.tracker, (box) => instance.op.detect(frame, box), choose);
-  return { found: instance.op.detect(frame), scan: 'full' };
+  if (track) return session.window.step(instance.tracker, search, choose);
+  return { found: search(null), scan: 'full' };
 }
 
 async function analyze({
@@ -248,8 +360,10 @@ async function analyze({
   const locked = lock === null ? null : choose(boxes);
   let { target } = found;
   if (lock !== null) target = locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
-  const done = performance.now();
   const { cols: width, rows: height } = frame;
+  // The tag's blocks are the top row's (decodeFrameTag).
+  ensurePixels(frame, { x: 0, y: 0, width, height: Math.floor(width / PROTOCOL.frameTag.blocksPerWidth) });
+  const done = performance.now();
   const result = {
     op: opId,
     boxes,
@@ -259,6 +373,7 @@ async function analyze({
     ms: done - detectStarted,
     workMs: done - started,
     frame: decodeFrameTag(width, height, frame.data),
+    converted: session.converted,
     scan,
     region,
     locked,
@@ -295,6 +410,8 @@ async function handle(message) {
       session.instances.clear();
       session.frame?.delete();
       session.frame = null;
+      session.yuv?.delete();
+      session.yuv = null;
       self.close();
       break;
     default:

@@ -71,17 +71,35 @@ export function createCascadeOperation(cv, spec, files) {
   const maxSize = new cv.Size(p.maxSize[0], p.maxSize[1]);
 
   /**
-   * The detection image's pixels inside `region`, as a new Mat header to delete: converted and
-   * reduced from the window's own part of the frame where the reduction's grid allows it
-   * (window.js sourceRect), else cropped from the whole frame's detection image.
+   * How a search around the full-frame box `around` goes on a width×height frame: the detection
+   * image's size (null: the frame as it is) and its factor, the window in detection-image pixels
+   * (null: nothing to search), the parts window.js sourceRect reduces alone (null: the grid does
+   * not allow it), and `reads`, the part of the frame the search reads (null: all of it).
    */
-  function windowImage(rgba, region, size) {
+  function windowPlan(width, height, around) {
+    const size = reduction(width, height, p.detectWidth);
+    const factor = factorOf(width, size);
+    const reduced = size ?? { width, height };
+    const region = searchRegion(around, factor, reduced.width, reduced.height, p.windowMargin);
+    const rects = region === null || size === null ? null : sourceRect(region, width, height, size);
+    let reads = null;
+    if (region === null) reads = { x: 0, y: 0, width: 0, height: 0 };
+    else if (size === null) reads = region;
+    else if (rects !== null) reads = rects.source;
+    return { size, factor, region, rects, reads };
+  }
+
+  /**
+   * The detection image's pixels inside the plan's window, as a new Mat header to delete:
+   * converted and reduced from the window's own part of the frame where the reduction's grid
+   * allows it (window.js sourceRect), else cropped from the whole frame's detection image.
+   */
+  function windowImage(rgba, { region, size, rects }) {
     const { x, y, width, height } = region;
     if (size === null) {
       grayOf(rgba, region);
       return gray.roi({ x: 0, y: 0, width, height });
     }
-    const rects = sourceRect(region, rgba.cols, rgba.rows, size);
     if (rects === null) {
       cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
       cv.resize(gray, small, new cv.Size(size.width, size.height), 0, 0, cv.INTER_AREA);
@@ -118,15 +136,13 @@ export function createCascadeOperation(cv, spec, files) {
         cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
         ({ input: searched, factor } = reduce(cv, gray, small, p.detectWidth));
       } else {
-        const size = reduction(rgba.cols, rgba.rows, p.detectWidth);
-        factor = factorOf(rgba.cols, size);
-        const { width, height } = size ?? { width: rgba.cols, height: rgba.rows };
-        region = searchRegion(around, factor, width, height, p.windowMargin);
+        const plan = windowPlan(rgba.cols, rgba.rows, around);
+        ({ factor, region } = plan);
         if (region === null) return { boxes: [], target: null, region };
         const sizes = searchSizes(around, factor, p.windowSizeRatio, p.minSize, p.maxSize);
         sizeMin = new cv.Size(...sizes.min);
         sizeMax = new cv.Size(...sizes.max);
-        searched = windowImage(rgba, region, size);
+        searched = windowImage(rgba, plan);
       }
       const boxes = [];
       const ox = region?.x ?? 0;
@@ -145,6 +161,13 @@ export function createCascadeOperation(cv, spec, files) {
       sortBoxes(boxes);
       const searchedBox = region && [region.x, region.y, region.width, region.height];
       return { boxes, target: centreOfLargest(boxes), region: searchedBox };
+    },
+    /**
+     * The part {x, y, width, height} of a width×height frame that detect(frame, around) reads,
+     * or null for all of it: the worker converts no more of a frame than that (vision-worker.js).
+     */
+    reads(width, height, around = null) {
+      return around === null ? null : windowPlan(width, height, around).reads;
     },
     delete() {
       for (const c of classifiers) c.delete();
