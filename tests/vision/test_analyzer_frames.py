@@ -33,23 +33,29 @@ WIDTH, HEIGHT = 640, 480
 BACKGROUND_BGR = (140, 90, 60)
 FLAME_BGR = (0, 120, 255)
 
-# An I420 VideoFrame from base64 planes (Y, then U, then V): full-range BT.601 as OpenCV's
-# BGR2YUV_I420 writes them, with sRGB primaries and transfer so that converting it to sRGB is
-# the YUV matrix alone; and the analyzer run on several such frames at once (the harness page
-# has toBase64 and fromBase64).
+# An I420 VideoFrame from base64 planes (Y, then U, then V): by default full-range BT.601 as
+# OpenCV's BGR2YUV_I420 writes them, with sRGB primaries and transfer so that converting it to
+# sRGB is the YUV matrix alone; the analyzer run on several such frames at once, or one call
+# after another with options of their own (the harness page has toBase64 and fromBase64).
 PAGE_HELPERS = """() => {
-window.i420Frame = (width, height, b64) => {
-  return new VideoFrame(fromBase64(b64), {
-    format: 'I420', codedWidth: width, codedHeight: height, timestamp: 0,
-    colorSpace: { primaries: 'bt709', transfer: 'iec61966-2-1', matrix: 'smpte170m',
-                  fullRange: true },
-  });
-};
+window.i420Frame = (width, height, b64, colorSpace = {
+  primaries: 'bt709', transfer: 'iec61966-2-1', matrix: 'smpte170m', fullRange: true,
+}) => new VideoFrame(fromBase64(b64), {
+  format: 'I420', codedWidth: width, codedHeight: height, timestamp: 0, colorSpace,
+});
+const encoded = async (r) => (r.rgba ? { ...r, rgba: await toBase64(r.rgba) } : r);
 window.analyzeAll = async (frames, op, options) => {
   const results = await Promise.all(
     frames.map(([w, h, b64]) => window.analyzer.analyze(i420Frame(w, h, b64), op, options)));
-  const encode = async (r) => (r.rgba ? { ...r, rgba: await toBase64(r.rgba) } : r);
-  return Promise.all(results.map(encode));
+  return Promise.all(results.map(encoded));
+};
+window.analyzeInTurn = async (calls, colorSpace) => {
+  const results = [];
+  for (const [[w, h, b64], op, options] of calls) {
+    const frame = i420Frame(w, h, b64, colorSpace);
+    results.push(await encoded(await window.analyzer.analyze(frame, op, options)));
+  }
+  return results;
 };
 }"""
 
@@ -123,21 +129,13 @@ def test_frames_sent_back_to_back_are_each_analysed_on_their_own_pixels(page: Pa
 
 # A decoded video's frames as Chromium's VP8 decoder tags them: BT.601, limited range. The worker
 # copies their planes as they are and converts, with OpenCV, only what an operation reads.
-LIMITED_HELPERS = """() => {
-window.i420LimitedFrame = (width, height, b64) => new VideoFrame(fromBase64(b64), {
-  format: 'I420', codedWidth: width, codedHeight: height, timestamp: 0,
-  colorSpace: { primaries: 'smpte170m', transfer: 'smpte170m', matrix: 'smpte170m',
-                fullRange: false },
-});
-window.analyzeInTurn = async (calls) => {
-  const results = [];
-  for (const [[w, h, b64], op, options] of calls) {
-    const r = await window.analyzer.analyze(i420LimitedFrame(w, h, b64), op, options);
-    results.push(r.rgba ? { ...r, rgba: await toBase64(r.rgba) } : r);
-  }
-  return results;
-};
-}"""
+BT601_LIMITED = {
+    "primaries": "smpte170m",
+    "transfer": "smpte170m",
+    "matrix": "smpte170m",
+    "fullRange": False,
+}
+IN_TURN = "([calls, colorSpace]) => analyzeInTurn(calls, colorSpace)"
 
 FACE_PHOTO = Path(__file__).parents[1] / "data" / "faces" / "obama-480p.jpg"
 
@@ -155,11 +153,9 @@ def as_rgba_by_python(bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
 
 
 def test_a_bt601_frame_converts_in_opencv_as_python_opencv_does(page: Page) -> None:
-    page.evaluate(LIMITED_HELPERS)
     scene = face_scene()
-    [result] = page.evaluate(
-        "(calls) => analyzeInTurn(calls)", [[i420_payload(scene), "face", {"returnPixels": True}]]
-    )
+    call = [i420_payload(scene), "face", {"returnPixels": True}]
+    [result] = page.evaluate(IN_TURN, [[call], BT601_LIMITED])
     assert np.array_equal(analyzed_rgba(result), as_rgba_by_python(scene))
     assert result["converted"] >= WIDTH * HEIGHT
     python = detect(SPEC.op("face"), as_rgba_by_python(scene))
@@ -169,14 +165,13 @@ def test_a_bt601_frame_converts_in_opencv_as_python_opencv_does(page: Page) -> N
 def test_a_window_search_converts_only_its_part_and_finds_what_python_finds(page: Page) -> None:
     # The frame Mat first holds noise, converted whole; the face frame's window search must
     # then see the face frame wherever it reads, though it converts only a part of it.
-    page.evaluate(LIMITED_HELPERS)
     scene = face_scene()
     rgba = as_rgba_by_python(scene)
     (face,) = detect(SPEC.op("face"), rgba).boxes
     noise = np.random.default_rng(3).integers(0, 256, scene.shape, np.uint8)
     noise_call = [i420_payload(noise), "face", {}]
     window_call = [i420_payload(scene), "face", {"around": list(face), "returnPixels": True}]
-    _, windowed = page.evaluate("(calls) => analyzeInTurn(calls)", [noise_call, window_call])
+    _, windowed = page.evaluate(IN_TURN, [[noise_call, window_call], BT601_LIMITED])
     python = detect(SPEC.op("face"), rgba, around=face)
     assert python.boxes and [list(b) for b in python.boxes] == windowed["boxes"]
     assert python.region is not None and windowed["region"] == list(python.region)

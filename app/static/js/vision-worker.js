@@ -179,13 +179,12 @@ function yuvMat(width, height) {
 async function readPixels(source) {
   session.unconverted = false;
   const mat = await framePixels(source);
-  if (!session.unconverted) session.converted = mat.cols * mat.rows;
+  session.converted = session.unconverted ? 0 : mat.cols * mat.rows;
   return mat;
 }
 
 /** readPixels' copy, by the kind of source. */
 async function framePixels(source) {
-  session.converted = 0;
   if (source.data) {
     const mat = frameMat(source.width, source.height);
     mat.data.set(source.data);
