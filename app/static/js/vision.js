@@ -77,8 +77,9 @@ export async function createAnalyzer() {
      * window alone is searched (parity); lock: {box, anywhere} from a lock.js TargetLock query,
      * to follow that target instead of the largest. Resolves to {op, boxes, target, w, h, ms,
      * workMs, frame, scan: 'full' | 'window', region: the window searched in detection-image
-     * pixels or null, locked: the locked target's box or null, converted: how many of the frame's pixels were converted
-     * into RGBA (fewer than all for a windowed search of a BT.601 VideoFrame)[, rgba]}.
+     * pixels or null, locked: the locked target's box or null, converted: how many of the
+     * frame's pixels were converted into RGBA (fewer than all for a windowed search of a BT.601
+     * VideoFrame)[, rgba]}.
      */
     analyze(
       source,
