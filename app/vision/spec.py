@@ -66,7 +66,9 @@ class CascadeParams(_Model):
     # scanned every full_scan_every snapshots and whenever the window finds nothing. 1: off.
     # The window looks only for sizes within window_size_ratio of the last target's: per
     # operation, small enough to skip the costly small scales, large enough that the window
-    # still finds the box a search of every size finds (docs/bench/relay-cost.md).
+    # still finds the box a search of every size finds (docs/bench/relay-cost.md). The margin
+    # is how far the target may move between two snapshots and stay in the window; past it the
+    # window misses and the full scan finds the target on the same snapshot, at its price.
     full_scan_every: int = Field(1, ge=1)
     window_margin: float = Field(0.5, gt=0.0)
     window_size_ratio: float = Field(2.0, gt=1.0)

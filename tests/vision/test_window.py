@@ -78,6 +78,26 @@ def test_the_size_range_keeps_the_box_a_search_of_every_size_finds() -> None:
         assert windowed.boxes == reference.detect(every_size, frame, around=face).boxes, i
 
 
+@pytest.mark.parametrize(("dx", "dy"), [(1, 0), (-1, 0), (0, 1), (0, -1)])
+def test_the_window_follows_a_face_that_moved_a_quarter_of_its_size(dx: int, dy: int) -> None:
+    # The margin is how far a target may move between two snapshots and stay in the window: a
+    # quarter of the face's size (7 face widths a second at 30 frames/s) is searched in the
+    # window and found where the face now is; a move of its whole size is left to the full scan.
+    video, path = scene(FixedPath(0.45, 0.42))
+    (face,) = reference.detect(FACE, rgba(video, 0)).boxes
+    for share, expected in ((0.25, "window"), (1.0, "full")):
+        path.x = 0.45 + dx * share * face[2] / video.width
+        path.y = 0.42 + dy * share * face[3] / video.height
+        frame = rgba(video, 0)
+        tracker = window.Tracker(EVERY)
+        tracker.record(face, "full")
+        found, scan = window.step(
+            tracker, lambda around, frame=frame: reference.detect(FACE, frame, around=around)
+        )
+        assert scan == expected, (share, found)
+        assert contains(window.largest(found.boxes), video.face_centre(0)), (share, found)
+
+
 @pytest.mark.parametrize(
     ("width", "height", "detect_width"),
     [(640, 480, 256), (1280, 720, 256), (800, 600, 256), (1920, 1080, 256), (320, 240, 256)],
