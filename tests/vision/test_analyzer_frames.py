@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import base64
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -25,6 +24,7 @@ from app.vision import window
 from app.vision.reference import detect
 from app.vision.spec import load_spec
 from tests.helpers.harness import analyzer_page
+from tests.vision.frames import FACES
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -137,7 +137,7 @@ BT601_LIMITED = {
 }
 IN_TURN = "([calls, colorSpace]) => analyzeInTurn(calls, colorSpace)"
 
-FACE_PHOTO = Path(__file__).parents[1] / "data" / "faces" / "obama-480p.jpg"
+FACE_PHOTO = FACES / "obama-480p.jpg"
 
 
 def face_scene() -> npt.NDArray[np.uint8]:

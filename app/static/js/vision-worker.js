@@ -277,13 +277,18 @@ function copyPlanesPart(src, width, height, dst, { x, y, w, h }) {
   }
 }
 
+/** The side of a frame tag's square blocks on a frame `width` pixels wide (its top rows). */
+function tagBlockSize(width) {
+  return Math.floor(width / PROTOCOL.frameTag.blocksPerWidth);
+}
+
 /**
  * The frame number the synthetic video writes into the top row of blocks (docs/contracts.md,
  * "Frame tag"), or null when the marker blocks do not read white, black.
  */
 function decodeFrameTag(width, height, data) {
-  const { blocksPerWidth, markerBlocks, bits } = PROTOCOL.frameTag;
-  const b = Math.floor(width / blocksPerWidth);
+  const { markerBlocks, bits } = PROTOCOL.frameTag;
+  const b = tagBlockSize(width);
   if (b < 2 || height < b) return null;
   const lo = Math.floor(b / 4);
   const hi = lo + Math.max(1, Math.floor(b / 2));
@@ -361,7 +366,7 @@ async function analyze({
   if (lock !== null) target = locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (decodeFrameTag).
-  ensurePixels(frame, { x: 0, y: 0, width, height: Math.floor(width / PROTOCOL.frameTag.blocksPerWidth) });
+  ensurePixels(frame, { x: 0, y: 0, width, height: tagBlockSize(width) });
   const done = performance.now();
   const result = {
     op: opId,
