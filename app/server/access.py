@@ -1,17 +1,17 @@
 """Who may do what on ``/rosbridge`` and ``/turtlesim/state``, decided by room/role tokens.
 
 Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bearer`` header) and
-each text frame, and gets back whether to pass the frame on to the rosbridge session, a reply to
-send, and whether to close. A connection proves itself with its first message: the rosbridge
-``auth`` op (``{"op": "auth", "token": T}``; roslib.js's ``authenticate()`` puts it in ``mac``) or
-any op carrying a ``token`` field. A vehicle token may drive the simulator; a relay or client
-token of any room may only read (subscribe, and the ``/rosapi`` services). With no secret
-configured (development) every connection is let through.
+each frame, parsed once (:func:`app.turtlesim.rosbridge.parse_frame`), and gets back whether to
+pass the frame on to the rosbridge session, a reply to send, and whether to close. A connection
+proves itself with its first message: the rosbridge ``auth`` op (``{"op": "auth", "token": T}``;
+roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field. A vehicle
+token may drive the simulator; a relay or client token of any room may only read (subscribe, and
+the ``/rosapi`` services). With no secret configured (development) every connection is let
+through.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -19,6 +19,7 @@ from typing import Any
 from app.protocol import tokens
 from app.protocol.constants import CloseCode, Role
 from app.protocol.tokens import Claims, TokenError
+from app.turtlesim.rosbridge import Auth, CallService, Operation, Refused, status
 
 # Ops that only read the simulator; everything else (publish, advertise, services) changes it.
 READ_ONLY_OPS = frozenset({"subscribe", "unsubscribe", "set_level"})
@@ -60,51 +61,44 @@ class RosbridgeGate:
             return str(exc)
         return None
 
-    def check(self, text: str, now: float) -> Decision:
-        """The decision on one text frame from the client."""
+    def check(self, frame: Operation | Refused, now: float) -> Decision:
+        """The decision on one parsed frame from the client (a malformed one included: the
+        session explains it, once the connection has proved a token)."""
         if self.secret is None:
-            return Decision(forward=not _is_auth(_parse(text)))
-        if self.claims is not None and self.claims.role in DRIVING_ROLES:
-            return Decision(forward=True)  # a vehicle may do anything: no need to look inside
-        message = _parse(text)
+            return Decision(forward=not isinstance(frame, Auth))
         if self.claims is None:
-            refused = self._authenticate(message, now)
+            refused = self._authenticate(frame, now)
             if refused is not None:
                 return refused
-        return self._permit(message)
-
-    def _permit(self, message: dict[str, Any] | None) -> Decision:
-        if _is_auth(message):
+        if isinstance(frame, Auth):
             return Decision(forward=False)  # already authenticated; nothing for the session
-        refusal = self._refusal(message)
+        refusal = None if isinstance(frame, Refused) else self._refusal(frame)
         if refusal is None:
             return Decision(forward=True)
-        return Decision(forward=False, reply=_status(refusal, message))
+        return Decision(forward=False, reply=status("error", refusal, frame.id))
 
-    def _authenticate(self, message: dict[str, Any] | None, now: float) -> Decision | None:
-        """None once the message's token is accepted; else the refusal that ends the connection."""
+    def _authenticate(self, frame: Operation | Refused, now: float) -> Decision | None:
+        """None once the frame's token is accepted; else the refusal that ends the connection."""
         assert self.secret is not None
-        token = None if message is None else message.get("token", message.get("mac"))
-        if not isinstance(token, str):
-            return _refuse(AUTH_HINT, message)
+        token = _token_of(frame)
+        if token is None:
+            return _refuse(AUTH_HINT, frame)
         try:
             self.claims = tokens.verify(self.secret, token, now=now)
         except TokenError as exc:
-            return _refuse(str(exc), message)
+            return _refuse(str(exc), frame)
         return None
 
-    def _refusal(self, message: dict[str, Any] | None) -> str | None:
+    def _refusal(self, operation: Operation) -> str | None:
         assert self.claims is not None
-        if self.claims.role in DRIVING_ROLES or message is None:
-            return None  # a vehicle; or not JSON, which the session itself explains
-        op = message.get("op")
-        if op in READ_ONLY_OPS:
+        if self.claims.role in DRIVING_ROLES or operation.op in READ_ONLY_OPS:
             return None
-        service = message.get("service")
-        if op == "call_service" and str(service).startswith(READ_ONLY_SERVICE_PREFIX):
+        if isinstance(operation, CallService) and operation.service.startswith(
+            READ_ONLY_SERVICE_PREFIX
+        ):
             return None
         return (
-            f"{op!r} changes the simulator and needs a vehicle token; "
+            f"{operation.op!r} changes the simulator and needs a vehicle token; "
             f"this connection has a {self.claims.role} token"
         )
 
@@ -122,29 +116,19 @@ def state_refusal(secret: str | None, token: str | None, now: float) -> str | No
     return None
 
 
-def _parse(text: str) -> dict[str, Any] | None:
-    try:
-        message = json.loads(text)
-    except (ValueError, RecursionError):
+def _token_of(frame: Operation | Refused) -> str | None:
+    """The token a frame offers: the ``auth`` op's, or a ``token`` field on any other op."""
+    if isinstance(frame, Refused):
         return None
-    return message if isinstance(message, dict) else None
+    if isinstance(frame, Auth):
+        return frame.proof
+    token = (frame.model_extra or {}).get("token")
+    return token if isinstance(token, str) else None
 
 
-def _is_auth(message: dict[str, Any] | None) -> bool:
-    return message is not None and message.get("op") == "auth"
-
-
-def _status(text: str, message: dict[str, Any] | None) -> dict[str, Any]:
-    status: dict[str, Any] = {"op": "status", "level": "error", "msg": text}
-    op_id = None if message is None else message.get("id")
-    if isinstance(op_id, str | int) and not isinstance(op_id, bool):
-        status["id"] = op_id
-    return status
-
-
-def _refuse(text: str, message: dict[str, Any] | None) -> Decision:
+def _refuse(text: str, frame: Operation | Refused) -> Decision:
     return Decision(
         forward=False,
-        reply=_status(text, message),
+        reply=status("error", text, frame.id),
         close=(CloseCode.POLICY_VIOLATION, "token refused"),
     )

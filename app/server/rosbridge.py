@@ -25,7 +25,7 @@ from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.turtlesim.rosbridge import Refused, RosbridgeHub, RosbridgeSession, parse_frame
 from app.turtlesim.sim import TurtleSim
 
 log = logging.getLogger(__name__)
@@ -158,8 +158,11 @@ async def rosbridge(websocket: WebSocket) -> None:
             metrics.refused("invalid")
             replies = session.error(reason)
         else:
-            decision = gate.check(text, time.time())
-            replies = session.receive(text) if decision.forward else []
+            frame = parse_frame(text)
+            decision = gate.check(frame, time.time())
+            if decision.forward and isinstance(frame, Refused):
+                metrics.refused("invalid")
+            replies = session.handle(frame) if decision.forward else []
             if decision.reply is not None:  # the gate replies only to refuse: no token, or a
                 metrics.refused("auth")  # role that may not do this
                 replies.append(decision.reply)

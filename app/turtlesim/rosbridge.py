@@ -1,11 +1,11 @@
 """The rosbridge v2 protocol over a :class:`TurtleSim`, without any I/O.
 
 A :class:`RosbridgeHub` holds the simulator and every open :class:`RosbridgeSession` (one per
-WebSocket connection). The adapter hands each received text frame to
-:meth:`RosbridgeSession.receive`, which returns the direct replies (``service_response``, and
-``status`` for a client that asked for them); after each simulator step it calls
-:meth:`RosbridgeHub.tick` and sends what :meth:`RosbridgeSession.take_publications` returns
-(``publish`` messages for subscribed topics).
+WebSocket connection). The adapter parses each text frame once (:func:`parse_frame`: a typed
+operation, or a :class:`Refused` saying why it is none) and hands it to
+:meth:`RosbridgeSession.handle`, which returns the direct replies (``service_response`` and
+``status``); after each simulator step it calls :meth:`RosbridgeHub.tick` and sends what
+:meth:`RosbridgeSession.take_publications` returns (``publish`` messages for subscribed topics).
 
 Behaviour follows ``rosbridge_server``: topic and service names with or without the leading
 slash, replies that echo the client's spelling and ``id``, subscriptions with ``throttle_rate``
@@ -13,9 +13,11 @@ slash, replies that echo the client's spelling and ``id``, subscriptions with ``
 names in rosapi's answers, and only its spellings accepted in ``advertise`` and ``subscribe``
 (``type`` is checked when given, never required; ``call_service``'s ``type`` is not checked, as
 rosbridge does not). A failed call gets ``service_response`` with ``result: false`` and the
-reason in ``values``; ``status`` messages are sent only after the client's ``set_level``, since
-current rosbridge_suite sends none. rosapi's services are answered by
-:class:`app.turtlesim.rosapi.RosGraph`.
+reason in ``values``. A request that is well formed but cannot be served gets a ``status`` only
+after the client's ``set_level``, since current rosbridge_suite sends none; a frame that is no
+rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
+always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
+answered by :class:`app.turtlesim.rosapi.RosGraph`.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Annotated, Any, Final, Literal, TypeVar
+from typing import Annotated, Any, Final, Literal, TypeVar, get_args
 
 from pydantic import (
     BaseModel,
@@ -35,6 +37,7 @@ from pydantic import (
     Field,
     StrictInt,
     StrictStr,
+    TypeAdapter,
     ValidationError,
     field_validator,
 )
@@ -85,13 +88,13 @@ class _Op(BaseModel):
     # rosbridge messages carry optional fields we do not use (fragment_size, latch, ...).
     model_config = ConfigDict(extra="allow")
 
-    op: StrictStr
     id: MessageId = None
 
 
 class Advertise(_Op):
     """``advertise``: the client will publish on ``topic``."""
 
+    op: Literal["advertise"]
     topic: StrictStr
     type: StrictStr | None = None
 
@@ -99,12 +102,14 @@ class Advertise(_Op):
 class Unadvertise(_Op):
     """``unadvertise``: the client stops publishing on ``topic``."""
 
+    op: Literal["unadvertise"]
     topic: StrictStr
 
 
 class Publish(_Op):
     """``publish``: one message on ``topic``."""
 
+    op: Literal["publish"]
     topic: StrictStr
     msg: dict[str, Any]
 
@@ -112,6 +117,7 @@ class Publish(_Op):
 class Subscribe(_Op):
     """``subscribe``: send ``topic``'s messages, at most one per ``throttle_rate`` ms."""
 
+    op: Literal["subscribe"]
     topic: StrictStr
     type: StrictStr | None = None
     throttle_rate: float = Field(
@@ -124,12 +130,14 @@ class Subscribe(_Op):
 class Unsubscribe(_Op):
     """``unsubscribe``: drop the subscription with this ``id``, or all on ``topic``."""
 
+    op: Literal["unsubscribe"]
     topic: StrictStr
 
 
 class CallService(_Op):
     """``call_service``: call ``service`` with ``args``; answered by ``service_response``."""
 
+    op: Literal["call_service"]
     service: StrictStr
     args: dict[str, Any] = Field(default_factory=dict)
     type: StrictStr | None = None
@@ -138,7 +146,75 @@ class CallService(_Op):
 class SetLevel(_Op):
     """``set_level``: which ``status`` messages this client receives."""
 
+    op: Literal["set_level"]
     level: Literal["info", "warning", "error", "none"]
+
+
+class Auth(_Op):
+    """``auth``: the client proves a token (``token``; roslib.js's ``authenticate()`` sends it
+    as ``mac``). Checked by the server's gate (``app/server/access.py``), not by the session."""
+
+    op: Literal["auth"]
+    token: StrictStr | None = None
+    mac: StrictStr | None = None
+
+    @property
+    def proof(self) -> str | None:
+        """The token this message carries, whichever field holds it."""
+        return self.token if self.token is not None else self.mac
+
+
+Operation = Annotated[
+    Advertise | Unadvertise | Publish | Subscribe | Unsubscribe | CallService | SetLevel | Auth,
+    Field(discriminator="op"),
+]
+OPS: frozenset[str] = frozenset(
+    get_args(model.model_fields["op"].annotation)[0]  # each model's one Literal value
+    for model in get_args(get_args(Operation)[0])
+)
+_operation_adapter: TypeAdapter[Operation] = TypeAdapter(Operation)
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A frame that is not a rosbridge message this server serves; ``id`` is its id, if any."""
+
+    reason: str
+    id: MessageId = None
+
+
+def parse_frame(text: str) -> Operation | Refused:
+    """Parse and validate one text frame; whatever it holds, a :class:`Refused` says why not.
+
+    The one parse of a ``/rosbridge`` frame: the server's gate and the session both read the
+    operation it returns.
+    """
+    try:
+        message = jsonedge.loads(text)
+    except jsonedge.JsonEdgeError as exc:
+        return Refused(str(exc))
+    if not isinstance(message, dict):
+        return Refused("a rosbridge message must be a JSON object")
+    raw_id = message.get("id")
+    op_id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
+    op = message.get("op")
+    if not isinstance(op, str):
+        return Refused("message has no string 'op' field", op_id)
+    if op not in OPS:
+        return Refused(f"unknown op {op!r}", op_id)
+    try:
+        return _operation_adapter.validate_python(message)
+    except ValidationError as exc:
+        # The first element of loc is the union tag (the op); the rest is the field.
+        return Refused(f"{op}: {describe(exc, skip=1)}", op_id)
+
+
+def status(level: str, text: str, op_id: object = None) -> Json:
+    """A rosbridge ``status`` message (``id`` echoed when there is one)."""
+    message: Json = {"op": "status", "level": level, "msg": text}
+    if op_id is not None:
+        message["id"] = op_id
+    return message
 
 
 # -- message and service payloads ----------------------------------------------------------
@@ -381,7 +457,7 @@ class RosbridgeSession:
         # No status messages until the client asks for them with set_level.
         self._level: int | None = None
         self._outbox: list[Json] = []
-        self._handlers: dict[str, Callable[[Json], list[Json]]] = {
+        self._handlers: dict[str, Callable[[Any], list[Json]]] = {
             "advertise": self._advertise,
             "unadvertise": self._unadvertise,
             "publish": self._publish,
@@ -389,34 +465,40 @@ class RosbridgeSession:
             "unsubscribe": self._unsubscribe,
             "call_service": self._call_service,
             "set_level": self._set_level,
+            # The gate in front of the session checks tokens; a session alone has none to check.
+            "auth": lambda _auth: [],
         }
+        assert set(self._handlers) == OPS, "one handler per op"
 
     # -- the adapter's side -------------------------------------------------------------
 
     def receive(self, text: str) -> list[Json]:
         """Handle one text frame; returns the replies to send back, in order."""
+        return self.handle(parse_frame(text))
+
+    def handle(self, frame: Operation | Refused) -> list[Json]:
+        """Serve one parsed frame (:func:`parse_frame`); returns the replies, in order."""
+        if isinstance(frame, Refused):
+            return self.refuse(frame)
         try:
-            message = jsonedge.loads(text)
-        except jsonedge.JsonEdgeError as exc:
-            return self._status("error", str(exc), None)
-        if not isinstance(message, dict):
-            return self._status("error", "a rosbridge message must be a JSON object", None)
-        raw_id = message.get("id")
-        op_id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
-        op = message.get("op")
-        if not isinstance(op, str):
-            return self._status("error", "message has no string 'op' field", op_id)
-        handler = self._handlers.get(op)
-        if handler is None:
-            return self._status("error", f"unknown op {op!r}", op_id)
-        try:
-            return handler(message)
+            return self._handlers[frame.op](frame)
         except ProtocolError as exc:
-            return self._status("error", f"{op}: {exc}", op_id)
+            return self._status("error", f"{frame.op}: {exc}", frame.id)
+
+    def refuse(self, refused: Refused) -> list[Json]:
+        """The ``status`` error a malformed frame gets: sent unless the client asked for none.
+
+        rosbridge_suite sends no statuses at all; a frame that is not a rosbridge message comes
+        from no rosbridge client, so it is told why rather than met with silence.
+        """
+        log.debug("rosbridge frame refused: %r", refused.reason)
+        if self._level == _LEVELS["none"]:
+            return []
+        return [status("error", refused.reason, refused.id)]
 
     def error(self, text: str) -> list[Json]:
-        """A ``status`` error for a problem the adapter found (binary or oversize frame)."""
-        return self._status("error", text, None)
+        """A ``status`` error for a frame the adapter refused (binary or oversize)."""
+        return self.refuse(Refused(text))
 
     def take_publications(self) -> list[Json]:
         """Publications gathered since the last call (from ticks and other clients' messages)."""
@@ -459,8 +541,7 @@ class RosbridgeSession:
 
     # -- ops ----------------------------------------------------------------------------
 
-    def _advertise(self, message: Json) -> list[Json]:
-        msg = _parse(Advertise, message)
+    def _advertise(self, msg: Advertise) -> list[Json]:
         topic = self._typed_topic(msg.topic, msg.type)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -469,15 +550,13 @@ class RosbridgeSession:
         self._advertised.add(msg.topic)
         return []
 
-    def _unadvertise(self, message: Json) -> list[Json]:
-        msg = _parse(Unadvertise, message)
+    def _unadvertise(self, msg: Unadvertise) -> list[Json]:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
         return []
 
-    def _publish(self, message: Json) -> list[Json]:
-        msg = _parse(Publish, message)
+    def _publish(self, msg: Publish) -> list[Json]:
         topic = resolve_topic(msg.topic)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -489,8 +568,7 @@ class RosbridgeSession:
         self._hub.broadcast(topic, twist.model_dump())
         return []
 
-    def _subscribe(self, message: Json) -> list[Json]:
-        msg = _parse(Subscribe, message)
+    def _subscribe(self, msg: Subscribe) -> list[Json]:
         topic = self._typed_topic(msg.topic, msg.type)
         if topic.leaf == "pose" and topic.turtle not in self._hub.sim.names():
             raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
@@ -503,8 +581,7 @@ class RosbridgeSession:
         sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
         return []
 
-    def _unsubscribe(self, message: Json) -> list[Json]:
-        msg = _parse(Unsubscribe, message)
+    def _unsubscribe(self, msg: Unsubscribe) -> list[Json]:
         sub = self._subscriptions.get(msg.topic)
         if sub is None or (msg.id is not None and msg.id not in sub.by_id):
             return self._status("warning", f"unsubscribe: not subscribed to {msg.topic}", msg.id)
@@ -516,8 +593,7 @@ class RosbridgeSession:
             del self._subscriptions[msg.topic]
         return []
 
-    def _call_service(self, message: Json) -> list[Json]:
-        msg = _parse(CallService, message)
+    def _call_service(self, msg: CallService) -> list[Json]:
         reply: Json = {"op": "service_response", "service": msg.service}
         if msg.id is not None:
             reply["id"] = msg.id
@@ -531,8 +607,8 @@ class RosbridgeSession:
             return [*self._status("error", f"call_service {msg.service}: {text}", msg.id), failure]
         return [{**reply, "values": values, "result": True}]
 
-    def _set_level(self, message: Json) -> list[Json]:
-        self._level = _LEVELS[_parse(SetLevel, message).level]
+    def _set_level(self, msg: SetLevel) -> list[Json]:
+        self._level = _LEVELS[msg.level]
         return []
 
     # -- helpers ------------------------------------------------------------------------
@@ -569,10 +645,7 @@ class RosbridgeSession:
         log.debug("rosbridge status %s: %s", level, text)
         if self._level is None or _LEVELS[level] < self._level:
             return []
-        status: Json = {"op": "status", "level": level, "msg": text}
-        if op_id is not None:
-            status["id"] = op_id
-        return [status]
+        return [status(level, text, op_id)]
 
 
 class RosbridgeHub:

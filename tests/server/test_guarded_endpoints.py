@@ -19,6 +19,7 @@ from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.server.tls import ROSBRIDGE_TLS_FIX
+from tests.helpers.sockets import Records
 from tests.server.test_pages import embedded_config
 
 SECRET = "guarded-endpoints-test-secret"
@@ -135,6 +136,28 @@ async def test_a_bad_header_token_is_refused_before_accept(guarded: RunningServe
         ):
             pass
     assert refused.value.response.status_code == 403
+
+
+@pytest.mark.parametrize("role", ["client", "relay", "vehicle"])
+async def test_frames_whose_op_is_not_a_string_get_a_status_and_the_connection_lives(
+    guarded: RunningServer, server_log: Records, role: tokens.Role
+) -> None:
+    # Issue 37.2: with a client token, 200 frames whose op was a list or an object gave 200
+    # tracebacks and each killed its connection's reader.
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": _token(role)}))
+        for op in [["publish"], {"op": "publish"}, [], {}, 7, None, True]:
+            await ws.send(json.dumps({"op": op, "id": "bad", "topic": "/turtle1/cmd_vel"}))
+            reply = await _recv(ws)
+            assert reply == {
+                "op": "status",
+                "level": "error",
+                "msg": "message has no string 'op' field",
+                "id": "bad",
+            }
+        reply = await _call(ws, "/rosapi/topics")
+        assert reply["op"] == "service_response" and reply["result"] is True
+    assert server_log.tracebacks() == []
 
 
 def _state(server: RunningServer) -> dict[str, Any]:
