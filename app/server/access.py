@@ -4,27 +4,58 @@ Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bear
 each frame, parsed once (:func:`app.turtlesim.rosbridge.parse_frame`), and gets back whether to
 pass the frame on to the rosbridge session, a reply to send, and whether to close. A connection
 proves itself with its first message: the rosbridge ``auth`` op (``{"op": "auth", "token": T}``;
-roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field. A vehicle
-token may drive the simulator; a relay or client token of any room may only read (subscribe, and
-the ``/rosapi`` services). With no secret configured (development) every connection is let
-through.
+roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field.
+
+What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token (of any room:
+the simulator is one for the whole server) drives; a relay or client token only reads -- it may
+subscribe and call rosapi's reading services, and nothing that publishes, changes the simulator
+or sets a parameter. With no secret configured (development) every connection is let through.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from app.protocol import tokens
 from app.protocol.constants import CloseCode, Role
 from app.protocol.tokens import Claims, TokenError
-from app.turtlesim.rosbridge import Auth, CallService, Operation, Refused, status
+from app.turtlesim.rosapi import ROSAPI_READS
+from app.turtlesim.rosbridge import (
+    OPS,
+    Auth,
+    CallService,
+    Operation,
+    Refused,
+    service_path,
+    status,
+)
 
-# Ops that only read the simulator; everything else (publish, advertise, services) changes it.
-READ_ONLY_OPS = frozenset({"subscribe", "unsubscribe", "set_level"})
-READ_ONLY_SERVICE_PREFIX = "/rosapi/"
-DRIVING_ROLES: tuple[Role, ...] = ("vehicle",)
+
+@dataclass(frozen=True)
+class Rights:
+    """What a token's role may do on ``/rosbridge``: these ops, and ``call_service`` on these
+    services (named as :func:`~app.turtlesim.rosbridge.service_path` names them; None: any)."""
+
+    ops: frozenset[str]
+    services: frozenset[str] | None
+
+    def allows(self, operation: Operation) -> bool:
+        """True when ``operation`` is among these rights."""
+        if operation.op not in self.ops:
+            return False
+        if isinstance(operation, CallService) and self.services is not None:
+            return service_path(operation.service) in self.services
+        return True
+
+
+DRIVE = Rights(ops=OPS, services=None)
+READ = Rights(
+    ops=frozenset({"auth", "subscribe", "unsubscribe", "set_level", "call_service"}),
+    services=frozenset(f"rosapi/{name}" for name in ROSAPI_READS),
+)
+ROSBRIDGE_RIGHTS: Final[Mapping[Role, Rights]] = {"vehicle": DRIVE, "relay": READ, "client": READ}
 AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autopilot token>"}'
 
 
@@ -91,16 +122,14 @@ class RosbridgeGate:
 
     def _refusal(self, operation: Operation) -> str | None:
         assert self.claims is not None
-        if self.claims.role in DRIVING_ROLES or operation.op in READ_ONLY_OPS:
+        role = self.claims.role
+        if ROSBRIDGE_RIGHTS[role].allows(operation):
             return None
-        if isinstance(operation, CallService) and operation.service.startswith(
-            READ_ONLY_SERVICE_PREFIX
-        ):
-            return None
-        return (
-            f"{operation.op!r} changes the simulator and needs a vehicle token; "
-            f"this connection has a {self.claims.role} token"
-        )
+        if isinstance(operation, CallService):
+            what = f"call_service {operation.service!r}"
+        else:
+            what = repr(operation.op)
+        return f"{what} needs a vehicle token: a {role} token may only read"
 
 
 def state_refusal(secret: str | None, token: str | None, now: float) -> str | None:

@@ -209,6 +209,12 @@ def parse_frame(text: str) -> Operation | Refused:
         return Refused(f"{op}: {describe(exc, skip=1)}", op_id)
 
 
+def service_path(service: str) -> str:
+    """A service's name as this server looks it up: ``/rosapi/topics`` and ``rosapi/topics``
+    are both ``rosapi/topics``, as rosbridge accepts either."""
+    return service[1:] if service.startswith("/") else service
+
+
 def status(level: str, text: str, op_id: object = None) -> Json:
     """A rosbridge ``status`` message (``id`` echoed when there is one)."""
     message: Json = {"op": "status", "level": level, "msg": text}
@@ -631,7 +637,7 @@ class RosbridgeSession:
         return topic
 
     def _run_service(self, msg: CallService) -> Json:
-        name = msg.service[1:] if msg.service.startswith("/") else msg.service
+        name = service_path(msg.service)
         if name.startswith("rosapi/"):
             return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args)
         if name in GLOBAL_SERVICES:

@@ -9,12 +9,13 @@ import pytest
 from app.protocol import tokens
 from app.protocol.constants import CloseCode
 from app.server.access import (
+    ROSBRIDGE_RIGHTS,
     Decision,
     RosbridgeGate,
     bearer_token,
     state_refusal,
 )
-from app.turtlesim.rosbridge import parse_frame
+from app.turtlesim.rosbridge import Operation, Refused, parse_frame
 
 SECRET = "rosbridge-gate-test-secret"
 NOW = 1_800_000_000.0
@@ -71,10 +72,82 @@ def test_other_roles_only_read(role: tokens.Role) -> None:
     assert _check(gate, KILL).reply == {
         "op": "status",
         "level": "error",
-        "msg": f"'call_service' changes the simulator and needs a vehicle token; "
-        f"this connection has a {role} token",
+        "msg": f"call_service '/kill' needs a vehicle token: a {role} token may only read",
         "id": 7,
     }
+
+
+def _op(op: str, **fields: object) -> Operation:
+    frame = parse_frame(json.dumps({"op": op, **fields}))
+    assert not isinstance(frame, Refused), frame
+    return frame
+
+
+def _service(name: str) -> Operation:
+    return _op("call_service", service=name)
+
+
+# What a reader may do: watch the turtles and ask rosapi about the graph, parameters and clock.
+READS = [
+    _op("subscribe", topic="/turtle1/pose"),
+    _op("subscribe", topic="/turtle1/cmd_vel"),
+    _op("unsubscribe", topic="/turtle1/pose"),
+    _op("set_level", level="error"),
+    *[
+        _service(f"{slash}rosapi/{name}")
+        for slash in ("/", "")
+        for name in (
+            "topics",
+            "topics_and_raw_types",
+            "topic_type",
+            "services",
+            "service_type",
+            "nodes",
+            "node_details",
+            "get_param",
+            "get_param_names",
+            "get_time",
+        )
+    ],
+]
+# ... and nothing that publishes, changes the simulator or sets a parameter (issue 37.3).
+WRITES = [
+    _op("publish", topic="/turtle1/cmd_vel", msg={}),
+    _op("advertise", topic="/turtle1/cmd_vel"),
+    _op("unadvertise", topic="/turtle1/cmd_vel"),
+    *[
+        _service(name)
+        for name in (
+            "/spawn",
+            "kill",
+            "/reset",
+            "/clear",
+            "/turtle1/teleport_absolute",
+            "/turtle1/teleport_relative",
+            "/turtle1/set_pen",
+            "/rosapi/set_param",
+            "rosapi/set_param",
+            "/rosapi/delete_param",
+            "/rosapi/../spawn",
+            "//rosapi/topics",
+        )
+    ],
+]
+
+
+@pytest.mark.parametrize("role", ["relay", "client"])
+def test_readers_rights_are_the_reads_and_nothing_else(role: tokens.Role) -> None:
+    rights = ROSBRIDGE_RIGHTS[role]
+    assert [op for op in READS if not rights.allows(op)] == []
+    assert [op for op in WRITES if rights.allows(op)] == []
+
+
+def test_a_vehicle_may_do_everything() -> None:
+    assert all(ROSBRIDGE_RIGHTS["vehicle"].allows(op) for op in READS + WRITES)
+
+
+def test_every_role_has_its_rights_written_down() -> None:
+    assert set(ROSBRIDGE_RIGHTS) == set(tokens.ROLES)
 
 
 def test_a_token_in_the_first_message_itself_and_roslibjs_mac() -> None:

@@ -138,6 +138,29 @@ async def test_a_bad_header_token_is_refused_before_accept(guarded: RunningServe
     assert refused.value.response.status_code == 403
 
 
+BACKGROUND_R = "/turtlesim:background_r"  # turtlesim's parameter, as ROS 2 names it (69)
+
+
+@pytest.mark.parametrize("role", ["client", "relay"])
+async def test_a_reader_token_of_another_room_sets_no_parameter(
+    guarded: RunningServer, role: tokens.Role
+) -> None:
+    # Issue 37.3: /rosapi/set_param succeeded with a client token of another room.
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": _token(role, room="elsewhere")}))
+        for service in ("/rosapi/set_param", "rosapi/set_param"):
+            reply = await _call(ws, service, name=BACKGROUND_R, value="7")
+            assert reply["op"] == "status" and "needs a vehicle token" in reply["msg"]
+        reply = await _call(ws, "/rosapi/get_param", name=BACKGROUND_R)
+        assert reply["result"] is True and json.loads(reply["values"]["value"]) == 69
+    async with connect(_ws(guarded, "/rosbridge")) as ws:  # a vehicle token still may
+        await ws.send(json.dumps({"op": "auth", "token": _token("vehicle")}))
+        reply = await _call(ws, "/rosapi/set_param", name=BACKGROUND_R, value="7")
+        assert reply["result"] is True and reply["values"]["successful"] is True
+        reply = await _call(ws, "/rosapi/get_param", name=BACKGROUND_R)
+        assert json.loads(reply["values"]["value"]) == 7
+
+
 @pytest.mark.parametrize("role", ["client", "relay", "vehicle"])
 async def test_frames_whose_op_is_not_a_string_get_a_status_and_the_connection_lives(
     guarded: RunningServer, server_log: Records, role: tokens.Role
