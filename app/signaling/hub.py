@@ -12,7 +12,7 @@ import itertools
 import logging
 import shlex
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal, Protocol, assert_never
 
@@ -44,9 +44,16 @@ log = logging.getLogger(__name__)
 
 ConnId = str
 
-# Peers per room: a vehicle, a relay and clients. Also bounds each roster update, which every
-# join and leave sends to everyone in the room (N messages of N entries).
-MAX_ROOM_PEERS: Final = 32
+# Places in a room, by role: each role has its own, so clients never take the relay's or the
+# vehicle's. One relay; a second vehicle place lets a restarted vehicle (under a new name) in
+# before its predecessor's socket is known to be gone.
+ROOM_PLACES: Final[Mapping[Role, int]] = {"vehicle": 2, "relay": 1, "client": 29}
+# Peers per room. Also bounds each roster update, which every join and leave sends to everyone
+# in the room (N messages of N entries).
+MAX_ROOM_PEERS: Final = sum(ROOM_PLACES.values())
+# Sessions one token may hold in its room at once (a person's few tabs), so one token handed
+# around or stolen cannot take every client place.
+MAX_TOKEN_SESSIONS: Final = 4
 # Per-sender rate limit (a token bucket): a burst of this many messages, refilled at this rate.
 # Trickled ICE candidates come in bursts of a few dozen; a client flooding ``stop`` is refused
 # (and, after ``max_errors_in_a_row``, closed) before the relay it targets falls behind.
@@ -112,6 +119,8 @@ class _Peer:
     name: str
     role: Role
     room: str
+    # The token it logged in with (None without a secret): its sessions are counted.
+    token: str | None = field(default=None, repr=False)
 
     def info(self) -> PeerInfo:
         return PeerInfo(name=self.name, role=self.role)
@@ -278,17 +287,15 @@ class Hub:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
             )
-        if len(room) >= MAX_ROOM_PEERS:
-            return self._refuse_login(
-                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)", why="caps"
-            )
         relay = _relay_of(room)
         if login.role == "relay" and relay is not None:
             return self._refuse_login(
                 connection, f"room {login.room!r} already has a relay ({relay.name!r})"
             )
+        if (no_place := _no_place(room, login)) is not None:
+            return self._refuse_login(connection, no_place, why="caps")
         others = list(room.values())
-        peer = _Peer(connection.id, login.name, login.role, login.room)
+        peer = _Peer(connection.id, login.name, login.role, login.room, login.token)
         self._rooms.setdefault(login.room, room)[peer.name] = peer
         connection.peer = peer
         connection.errors_in_a_row = 0
@@ -412,6 +419,22 @@ class Hub:
         """A failed login reply, followed by the ``error`` every refused message gets."""
         reply = LoginReply(success=False, reason=reason).model_dump(exclude_none=True)
         return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login", why)]
+
+
+def _no_place(room: dict[str, _Peer], login: Login) -> str | None:
+    """Why ``login`` finds no place in ``room`` (its role's places are taken, or its token's
+    sessions), in words; None when it may join."""
+    places = ROOM_PLACES[login.role]
+    if sum(peer.role == login.role for peer in room.values()) >= places:
+        return f"room {login.room!r} has no place for another {login.role} ({places})"
+    if login.token is not None:
+        sessions = sum(peer.token == login.token for peer in room.values())
+        if sessions >= MAX_TOKEN_SESSIONS:
+            return (
+                f"this token already has {sessions} sessions in room {login.room!r}, the most "
+                "one token may hold: close one, or get a token of your own"
+            )
+    return None
 
 
 def _relay_of(room: dict[str, _Peer]) -> _Peer | None:

@@ -5,10 +5,14 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from app.protocol import tokens
+from app.protocol.constants import Role
 from app.signaling.hub import (
     MAX_ROOM_PEERS,
+    MAX_TOKEN_SESSIONS,
     RATE_BURST,
     RATE_PER_S,
+    ROOM_PLACES,
     Action,
     Close,
     Hub,
@@ -70,14 +74,14 @@ def test_the_rate_limit_refills_and_names_itself() -> None:
     assert passed == 10 <= RATE_PER_S
 
 
-def test_a_room_holds_a_bounded_number_of_peers() -> None:
+def test_a_room_holds_a_bounded_number_of_clients() -> None:
     hub = Hub()
-    for n in range(MAX_ROOM_PEERS):
+    for n in range(ROOM_PLACES["client"]):
         conn, actions = login(hub, f"p{n}", "client")
         assert to(conn, actions)[0]["success"] is True
     late, actions = login(hub, "late", "client")
     reply = to(late, actions)[0]
-    assert reply["success"] is False and "full" in reply["reason"]
+    assert reply["success"] is False and "no place" in reply["reason"]
     # Another room still takes peers.
     other, actions = login(hub, "late", "client", "elsewhere")
     assert to(other, actions)[0]["success"] is True
@@ -99,3 +103,60 @@ def test_logged_in_reports_the_login_deadline_condition() -> None:
     assert not hub.logged_in(conn)
     hub.receive(conn, '{"type": "login", "name": "c", "role": "client"}')
     assert hub.logged_in(conn)
+
+
+SECRET = "hub-limits-test-secret"
+
+
+def login_with(hub: Hub, name: str, role: Role, token: str, room: str = "lab") -> dict[str, Any]:
+    """Log in a new connection with ``token``; the login reply."""
+    conn = hub.connect()
+    message = {"type": "login", "name": name, "role": role, "room": room, "token": token}
+    return to(conn, hub.receive(conn, json.dumps(message)))[0]
+
+
+def token_for(role: Role, clock: Clock, room: str = "lab", n: int = 0) -> str:
+    """A token for ``role``; tokens with different ``n`` differ (they expire a second apart)."""
+    return tokens.sign(SECRET, room, role, now=clock.now, ttl_s=600 + n)
+
+
+def test_one_client_token_cannot_fill_a_room() -> None:
+    # Issue 37.5: 32 logins on one client token, and the vehicle and relay were refused.
+    clock = Clock()
+    hub = Hub(secret=SECRET, clock=clock)
+    shared = token_for("client", clock)
+    replies = [login_with(hub, f"c{n}", "client", shared) for n in range(32)]
+    accepted = [r for r in replies if r["success"]]
+    assert 1 <= len(accepted) == MAX_TOKEN_SESSIONS < 32
+    refused = next(r for r in replies if not r["success"])
+    assert f"already has {MAX_TOKEN_SESSIONS} sessions" in refused["reason"]
+    assert login_with(hub, "v", "vehicle", token_for("vehicle", clock))["success"] is True
+    assert login_with(hub, "r", "relay", token_for("relay", clock))["success"] is True
+
+
+def test_clients_fill_only_their_own_places() -> None:
+    clock = Clock()
+    hub = Hub(secret=SECRET, clock=clock)
+    for n in range(ROOM_PLACES["client"]):
+        token = token_for("client", clock, n=n)
+        assert login_with(hub, f"c{n}", "client", token)["success"] is True
+    late = login_with(hub, "late", "client", token_for("client", clock, n=100))
+    assert late["success"] is False
+    assert late["reason"] == f"room 'lab' has no place for another client ({ROOM_PLACES['client']})"
+    # Clients never take the vehicle's or the relay's place.
+    assert ROOM_PLACES["client"] < MAX_ROOM_PEERS
+    assert login_with(hub, "v", "vehicle", token_for("vehicle", clock))["success"] is True
+    assert login_with(hub, "r", "relay", token_for("relay", clock))["success"] is True
+    assert hub.census().peers == {"client": ROOM_PLACES["client"], "vehicle": 1, "relay": 1}
+
+
+def test_a_room_keeps_a_place_for_one_relay_and_a_vehicle_whatever_fills_it() -> None:
+    assert ROOM_PLACES["relay"] == 1 and ROOM_PLACES["vehicle"] >= 1
+    assert sum(ROOM_PLACES.values()) == MAX_ROOM_PEERS
+    hub = Hub()
+    for role, places in ROOM_PLACES.items():
+        for n in range(places):
+            conn, actions = login(hub, f"{role}{n}", role)
+            assert to(conn, actions)[0]["success"] is True
+        conn, actions = login(hub, f"{role}-late", role)
+        assert to(conn, actions)[0]["success"] is False
