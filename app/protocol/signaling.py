@@ -7,8 +7,9 @@ the sender's name on everything it relays, whatever the peer wrote there.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, get_args
+from typing import Annotated, Any, Final, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -171,6 +172,19 @@ class ParseError:
     ref: str | None
 
 
+# The largest frame of these types, in bytes of UTF-8: a trickled candidate is one line of a few
+# hundred bytes and the rest carry next to nothing. Peers may add fields to any message (they are
+# relayed as sent), so the frame is bounded, not only the fields the models know. Offers and
+# answers carry an SDP of tens of KB and get the socket's own limit.
+MAX_FRAME_BYTES: Final[Mapping[str, int]] = {
+    "candidate": 4096,
+    "leave": 1024,
+    "start": 1024,
+    "stop": 1024,
+    "getOps": 1024,
+}
+
+
 def parse(text: str) -> Incoming | ParseError:
     """Parse one text frame into its message model, or say precisely why it is not one."""
     try:
@@ -184,6 +198,10 @@ def parse(text: str) -> Incoming | ParseError:
         return ParseError("missing or non-string field 'type'", None)
     if kind not in INCOMING_TYPES:
         return ParseError(f"unknown message type {kind!r}", kind)
+    if kind in MAX_FRAME_BYTES:
+        size, limit = len(text.encode("utf-8")), MAX_FRAME_BYTES[kind]
+        if size > limit:
+            return ParseError(f"{kind} message of {size} bytes exceeds its limit of {limit}", kind)
     try:
         return _incoming_adapter.validate_python(data)
     except ValidationError as exc:

@@ -54,11 +54,16 @@ MAX_ROOM_PEERS: Final = sum(ROOM_PLACES.values())
 # Sessions one token may hold in its room at once (a person's few tabs), so one token handed
 # around or stolen cannot take every client place.
 MAX_TOKEN_SESSIONS: Final = 4
-# Per-sender rate limit (a token bucket): a burst of this many messages, refilled at this rate.
+# Per-sender rate limits (token buckets): a burst of this many messages, refilled at this rate ...
 # Trickled ICE candidates come in bursts of a few dozen; a client flooding ``stop`` is refused
 # (and, after ``max_errors_in_a_row``, closed) before the relay it targets falls behind.
 RATE_BURST: Final = 100
 RATE_PER_S: Final = 50.0
+# ... and a burst of this many bytes, refilled at this rate. A relay answering every client of a
+# full room at once sends a few hundred KB; a sender's burst stays well inside one receiver's
+# outbox (Settings.outbox_bytes, 1 MiB), so no one sender can make its receiver a slow reader.
+BYTES_BURST: Final = 256 * 1024
+BYTES_PER_S: Final = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -127,22 +132,35 @@ class _Peer:
 
 
 @dataclass
+class _Bucket:
+    """A token bucket: holds at most ``burst``, refilled at ``per_s``."""
+
+    burst: float
+    per_s: float
+    checked_at: float
+    level: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.level = self.burst
+
+    def take(self, amount: float, now: float) -> bool:
+        """Take ``amount`` out at time ``now``; False (and nothing taken) when it is short."""
+        self.level = min(self.burst, self.level + (now - self.checked_at) * self.per_s)
+        self.checked_at = now
+        if self.level < amount:
+            return False
+        self.level -= amount
+        return True
+
+
+@dataclass
 class _Connection:
     id: ConnId
-    allowance: float
-    checked_at: float
+    messages: _Bucket
+    bytes: _Bucket
     peer: _Peer | None = None
     errors_in_a_row: int = 0
     closing: bool = False
-
-    def spend(self, now: float) -> bool:
-        """Take one message from the sender's token bucket; False when it is empty."""
-        self.allowance = min(RATE_BURST, self.allowance + (now - self.checked_at) * RATE_PER_S)
-        self.checked_at = now
-        if self.allowance < 1.0:
-            return False
-        self.allowance -= 1.0
-        return True
 
 
 @dataclass
@@ -170,8 +188,10 @@ class Hub:
 
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
-        conn = f"c{next(self._ids)}"
-        self._connections[conn] = _Connection(conn, RATE_BURST, self.clock())
+        conn, now = f"c{next(self._ids)}", self.clock()
+        self._connections[conn] = _Connection(
+            conn, _Bucket(RATE_BURST, RATE_PER_S, now), _Bucket(BYTES_BURST, BYTES_PER_S, now)
+        )
         return conn
 
     def logged_in(self, conn: ConnId) -> bool:
@@ -198,7 +218,8 @@ class Hub:
     def receive(self, conn: ConnId, text: str) -> list[Action]:
         """Handle one text frame from ``conn``."""
         connection = self._connections[conn]
-        if (turned_away := self._turn_away(connection)) is not None:
+        size = len(text.encode("utf-8"))
+        if (turned_away := self._turn_away(connection, size)) is not None:
             return turned_away
         if (too_large := oversize(text, self.max_message_bytes)) is not None:
             self._count("other")
@@ -215,7 +236,7 @@ class Hub:
     def receive_binary(self, conn: ConnId) -> list[Action]:
         """Handle one binary frame from ``conn``: always refused, signaling is JSON text."""
         connection = self._connections[conn]
-        if (turned_away := self._turn_away(connection)) is not None:
+        if (turned_away := self._turn_away(connection, 0)) is not None:
             return turned_away
         self._count("other")
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
@@ -229,22 +250,22 @@ class Hub:
 
     # -- dispatch -------------------------------------------------------------------------------
 
-    def _turn_away(self, connection: _Connection) -> list[Action] | None:
-        """What a frame gets before it is read: nothing while closing, a refusal over the rate.
+    def _turn_away(self, connection: _Connection, size: int) -> list[Action] | None:
+        """What a frame of ``size`` bytes gets before it is read: nothing while closing, a
+        refusal over the sender's message or byte rate. None when the frame may be read.
 
-        None when the frame may be read.
+        Refused before parsing: a flood costs its sender, never the peer it targets.
         """
         if connection.closing:
             return []
-        if not connection.spend(self.clock()):
-            # Refused before parsing: the flood costs its sender, not the peer it targets.
-            return self._refuse(
-                connection,
-                f"rate limit: more than {RATE_PER_S:g} messages per second",
-                None,
-                why="rate_limit",
-            )
-        return None
+        now = self.clock()
+        if not connection.messages.take(1, now):
+            limit = f"more than {RATE_PER_S:g} messages per second"
+        elif not connection.bytes.take(size, now):
+            limit = f"more than {BYTES_PER_S // 1024} KiB per second"
+        else:
+            return None
+        return self._refuse(connection, f"rate limit: {limit}", None, why="rate_limit")
 
     def _dispatch(self, connection: _Connection, message: Incoming) -> list[Action]:
         peer = connection.peer

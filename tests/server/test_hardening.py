@@ -8,6 +8,7 @@ import contextlib
 import json
 import time
 from collections.abc import AsyncIterator, Callable
+from typing import Any
 
 import httpx
 import pytest
@@ -152,6 +153,48 @@ async def test_a_flooding_client_is_closed_and_the_slow_relay_is_not(server: Run
         assert kinds == {"stop", "leave"}
         await relay.send('{"type": "getOps"}')  # still logged in: refused only for its role
         assert "client" in (await recv(relay))["reason"]
+
+
+@pytest.mark.parametrize("kind", ["candidate", "offer"])
+async def test_a_client_s_flood_of_big_messages_costs_the_client_and_never_the_relay(
+    server: RunningServer, server_log: Records, kind: str
+) -> None:
+    # Issue 37.6: 100 candidates of 60 KB each from a client to a relay reading at a normal pace,
+    # and the server closed the relay as a slow reader.
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as client:
+        await login(relay, "r", "relay")
+        await login(client, "c", "client")
+        received: list[dict[str, Any]] = []
+
+        async def read() -> None:  # as a page does: every message as it comes
+            with contextlib.suppress(ConnectionClosed):
+                async for text in relay:
+                    received.append(json.loads(text))
+
+        reader = asyncio.create_task(read())
+        padding = "x" * 60_000
+        if kind == "candidate":
+            candidate = {"candidate": f"candidate:1 1 udp 1 10.0.0.1 9 typ host {padding}"}
+            message = {"type": "candidate", "to": "r", "candidate": candidate}
+        else:  # an SDP may be large, but not 100 of them at once
+            message = {"type": "offer", "to": "r", "sdp": f"v=0 {padding}"}
+        for _ in range(100):
+            try:
+                await client.send(json.dumps(message))
+            except ConnectionClosed:
+                break
+        code, _ = await closed(client)  # the flooding client pays ...
+        assert code == 1008
+        await asyncio.sleep(0.5)
+        assert relay.close_code is None  # ... and the relay is still here, still served
+        await relay.send('{"type": "getOps"}')
+        async with asyncio.timeout(TIMEOUT_S):
+            while not any(m.get("ref") == "getOps" for m in received):
+                await asyncio.sleep(0.05)
+        reader.cancel()
+        relayed = sum(len(json.dumps(m)) for m in received if m["type"] == kind)
+        assert relayed < Settings().outbox_bytes / 2
+    assert server_log.tracebacks() == []
 
 
 async def test_a_socket_that_never_logs_in_is_closed_at_the_deadline(

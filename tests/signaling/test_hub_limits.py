@@ -7,7 +7,9 @@ from typing import Any
 
 from app.protocol import tokens
 from app.protocol.constants import Role
+from app.server.config import Settings
 from app.signaling.hub import (
+    BYTES_BURST,
     MAX_ROOM_PEERS,
     MAX_TOKEN_SESSIONS,
     RATE_BURST,
@@ -160,3 +162,47 @@ def test_a_room_keeps_a_place_for_one_relay_and_a_vehicle_whatever_fills_it() ->
             assert to(conn, actions)[0]["success"] is True
         conn, actions = login(hub, f"{role}-late", role)
         assert to(conn, actions)[0]["success"] is False
+
+
+def test_a_candidate_has_a_sensible_size() -> None:
+    hub = Hub()
+    relay, _ = login(hub, "r", "relay")
+    client, _ = login(hub, "c", "client")
+    line = "candidate:1 1 udp 2122260223 192.168.1.20 54321 typ host generation 0 ufrag abcd"
+    fine = {"type": "candidate", "to": "r", "candidate": {"candidate": line, "sdpMid": "0"}}
+    assert to(relay, hub.receive(client, json.dumps(fine)))[0]["candidate"]["candidate"] == line
+    padded = {**fine, "candidate": {"candidate": line + " x" * 30_000}}
+    actions = hub.receive(client, json.dumps(padded))
+    assert to(relay, actions) == []
+    (error,) = to(client, actions)
+    assert error["ref"] == "candidate" and "exceeds its limit of 4096" in error["reason"]
+
+
+def test_a_sender_s_bytes_are_budgeted_so_it_never_fills_its_receiver() -> None:
+    clock = Clock()
+    hub = Hub(clock=clock)
+    relay, _ = login(hub, "r", "relay")
+    vehicle, _ = login(hub, "v", "vehicle")
+    offer = json.dumps({"type": "offer", "to": "r", "sdp": "v=0 " + "x" * 60_000})
+    delivered = refused = 0
+    for _ in range(100):  # 6 MB of offers in no time at all
+        actions = hub.receive(vehicle, offer)
+        delivered += sum(len(json.dumps(m)) for m in to(relay, actions))
+        refused += sum("KiB per second" in m.get("reason", "") for m in to(vehicle, actions))
+        if any(isinstance(a, Close) for a in actions):
+            break
+    # The relay got at most the sender's burst, far inside the outbox a slow reader would fill.
+    assert 0 < delivered <= BYTES_BURST < Settings().outbox_bytes / 2
+    assert refused > 0 and not hub.logged_in(vehicle) and hub.logged_in(relay)
+
+
+def test_the_byte_budget_refills() -> None:
+    clock = Clock()
+    hub = Hub(clock=clock)
+    relay, _ = login(hub, "r", "relay")
+    vehicle, _ = login(hub, "v", "vehicle")
+    offer = json.dumps({"type": "offer", "to": "r", "sdp": "x" * 60_000})
+    passed = [bool(to(relay, hub.receive(vehicle, offer))) for _ in range(6)]
+    assert passed == [True] * 4 + [False] * 2  # 256 KiB of 60 KB offers
+    clock.now += 1.0  # a second later 64 KiB more may pass: one offer
+    assert [bool(to(relay, hub.receive(vehicle, offer))) for _ in range(2)] == [True, False]
