@@ -4,6 +4,10 @@ A token is ``<payload>.<signature>``, both base64url without padding: the payloa
 JSON ``{"room": R, "role": ROLE, "exp": UNIX_SECONDS}`` and the signature is HMAC-SHA256 of the
 encoded payload under the server's secret. Nothing here reads a clock or the environment: callers
 pass ``now`` and the secret, so the rules are tested directly.
+
+A room's roles (vehicle, relay, client) are the peers' own. One more, ``fleet``, is the scope of
+the fleet view (``/fleet/rooms``) of every room: its room is :data:`ALL_ROOMS`, and it admits to
+nothing else -- :func:`verify` accepts only the room roles unless told otherwise.
 """
 
 from __future__ import annotations
@@ -16,11 +20,17 @@ import json
 import math
 from collections.abc import Collection
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Final, Literal, get_args
 
 from app.protocol.constants import Role as Role  # re-exported: tokens.Role
 
 ROLES: tuple[Role, ...] = get_args(Role)
+# What a token may grant: a role in a room, or the fleet view of every room.
+TokenRole = Role | Literal["fleet"]
+TOKEN_ROLES: tuple[TokenRole, ...] = (*ROLES, "fleet")
+# The room a fleet token names: every room (no room may be named so in a login that matters,
+# since a fleet token logs in nowhere).
+ALL_ROOMS: Final = "*"
 
 DEFAULT_TTL_S = 12 * 3600
 # A secret shorter than this is refused: HMAC is only as strong as the key an attacker must guess.
@@ -44,7 +54,7 @@ class Claims:
     """What a valid token grants: ``role`` in ``room`` until ``exp`` (Unix seconds)."""
 
     room: str
-    role: Role
+    role: TokenRole
     exp: int
 
 
@@ -58,11 +68,16 @@ def check_secret(secret: str) -> None:
         )
 
 
-def sign(secret: str, room: str, role: Role, *, now: float, ttl_s: float = DEFAULT_TTL_S) -> str:
-    """A token granting ``role`` in ``room`` for ``ttl_s`` seconds from ``now``."""
+def sign(
+    secret: str, room: str, role: TokenRole, *, now: float, ttl_s: float = DEFAULT_TTL_S
+) -> str:
+    """A token granting ``role`` in ``room`` (a fleet token: :data:`ALL_ROOMS`) for ``ttl_s``
+    seconds from ``now``."""
     check_secret(secret)
-    if role not in ROLES:
-        raise ValueError(f"role must be one of {', '.join(ROLES)}, not {role!r}")
+    if role not in TOKEN_ROLES:
+        raise ValueError(f"role must be one of {', '.join(TOKEN_ROLES)}, not {role!r}")
+    if (role == "fleet") != (room == ALL_ROOMS):
+        raise ValueError(f"a fleet token, and only a fleet token, is for room {ALL_ROOMS!r}")
     # NaN and infinity would fail in int() below, or mint a token that never expires.
     if not math.isfinite(ttl_s) or ttl_s <= 0:
         raise ValueError(f"ttl must be a positive finite number of seconds, not {ttl_s}")
@@ -79,11 +94,12 @@ def verify(
     *,
     now: float,
     room: str | None = None,
-    roles: Collection[Role] | None = None,
+    roles: Collection[TokenRole] = ROLES,
 ) -> Claims:
     """The claims of ``token`` if it is genuine, unexpired and fits; else :class:`TokenError`.
 
-    ``room=None`` accepts any room and ``roles=None`` any role (reading the simulator's state).
+    ``room=None`` accepts any room; ``roles`` are the roles accepted, by default a room's
+    (a fleet token is accepted only where ``roles`` names it).
     """
     if not isinstance(token, str) or len(token) > MAX_TOKEN_CHARS or token.count(".") != 1:
         raise TokenError("malformed", "expected <payload>.<signature>")
@@ -100,7 +116,7 @@ def verify(
         raise TokenError("expired", f"{int(now - claims.exp)} s ago")
     if room is not None and claims.room != room:
         raise TokenError("wrong room", f"token is for room {claims.room!r}, not {room!r}")
-    if roles is not None and claims.role not in roles:
+    if claims.role not in roles:
         raise TokenError(
             "wrong role", f"token is for {claims.role!r}, this needs {' or '.join(roles)}"
         )
@@ -115,7 +131,7 @@ def _claims(body: str) -> Claims:
     if not isinstance(data, dict):
         raise TokenError("malformed", "payload is not an object")
     room, role, exp = data.get("room"), data.get("role"), data.get("exp")
-    if not isinstance(room, str) or role not in ROLES or type(exp) is not int:
+    if not isinstance(room, str) or role not in TOKEN_ROLES or type(exp) is not int:
         raise TokenError("malformed", "payload needs room, role and exp")
     return Claims(room=room, role=role, exp=exp)
 

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from typing import Any, Final
 
 from app.protocol import tokens
-from app.protocol.constants import CloseCode, Role
-from app.protocol.tokens import Claims, TokenError
+from app.protocol.constants import CloseCode
+from app.protocol.tokens import Claims, TokenError, TokenRole
 from app.turtlesim.rosapi import ROSAPI_READS
 from app.turtlesim.rosbridge import (
     OPS,
@@ -55,7 +55,14 @@ READ = Rights(
     ops=frozenset({"auth", "subscribe", "unsubscribe", "set_level", "call_service"}),
     services=frozenset(f"rosapi/{name}" for name in ROSAPI_READS),
 )
-ROSBRIDGE_RIGHTS: Final[Mapping[Role, Rights]] = {"vehicle": DRIVE, "relay": READ, "client": READ}
+# A fleet token is for the fleet view alone: verify() refuses it here, and it has no rights.
+NOTHING = Rights(ops=frozenset(), services=frozenset())
+ROSBRIDGE_RIGHTS: Final[Mapping[TokenRole, Rights]] = {
+    "vehicle": DRIVE,
+    "relay": READ,
+    "client": READ,
+    "fleet": NOTHING,
+}
 AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autopilot token>"}'
 
 

@@ -100,24 +100,34 @@ async def test_tokens_deadline_and_takeover_with_expired_tokens(
         }
 
 
-async def test_fleet_rooms_need_a_client_token_when_a_secret_is_set(
+async def test_fleet_rooms_show_a_room_token_its_room_and_a_fleet_token_every_room(
     redis_url: str, start_server: Callable[[Settings], RunningServer]
 ) -> None:
     server = start_server(Settings(environment="development", secret=SECRET, redis_url=redis_url))
-    async with connect(server.ws_url) as ws:
-        vehicle = Peer(ws)
-        assert (await login(vehicle, "v", "vehicle", "r1", token("r1", "vehicle")))["success"]
+    async with connect(server.ws_url) as one, connect(server.ws_url) as two:
+        for ws, name, room in ((one, "v1", "r1"), (two, "v2", "r2")):
+            reply = await login(Peer(ws), name, "vehicle", room, token(room, "vehicle"))
+            assert reply["success"], reply
         url = f"{server.url}/fleet/rooms"
+
+        async def seen(tok: str | None) -> tuple[int, Any]:
+            headers = {} if tok is None else {"Authorization": f"Bearer {tok}"}
+            response = await http.get(url, headers=headers)
+            return response.status_code, response.json()
+
         async with httpx.AsyncClient(timeout=10) as http:
-            assert (await http.get(url)).status_code == 401
-            for refused in (token("r1", "vehicle"), "not.a-token"):
-                response = await http.get(url, headers={"Authorization": f"Bearer {refused}"})
-                assert response.status_code == 401, response.text
-            # A client token of any room, not only of the rooms listed.
-            good = {"Authorization": f"Bearer {token('elsewhere', 'client')}"}
-            response = await http.get(url, headers=good)
-            assert response.status_code == 200, response.text
-            assert [row["room"] for row in response.json()] == ["r1"]
+            assert (await seen(None))[0] == 401
+            assert (await seen("not.a-token"))[0] == 401
+            # A room's token, of any role, sees that room alone (issue 37.7).
+            for role in ("vehicle", "relay", "client"):
+                status, rows = await seen(token("r2", role))  # type: ignore[arg-type]
+                assert status == 200 and [(r["room"], r["vehicles"]) for r in rows] == [
+                    ("r2", ["v2"])
+                ]
+            assert await seen(token("elsewhere", "client")) == (200, [])
+            fleet = tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60)
+            status, rows = await seen(fleet)
+            assert status == 200 and [r["room"] for r in rows] == ["r1", "r2"]
             # The page holds no data: it loads, and asks for its rows with the fragment's token.
             assert (await http.get(f"{server.url}/fleet")).status_code == 200
 

@@ -147,7 +147,8 @@ def test_a_vehicle_may_do_everything() -> None:
 
 
 def test_every_role_has_its_rights_written_down() -> None:
-    assert set(ROSBRIDGE_RIGHTS) == set(tokens.ROLES)
+    assert set(ROSBRIDGE_RIGHTS) == set(tokens.TOKEN_ROLES)
+    assert ROSBRIDGE_RIGHTS["fleet"].ops == frozenset()
 
 
 def test_a_token_in_the_first_message_itself_and_roslibjs_mac() -> None:

@@ -183,6 +183,55 @@ async def test_frames_whose_op_is_not_a_string_get_a_status_and_the_connection_l
     assert server_log.tracebacks() == []
 
 
+async def test_a_room_token_sees_its_own_room_and_only_a_fleet_token_sees_them_all(
+    guarded: RunningServer,
+) -> None:
+    # Issue 37.7: /fleet/rooms with a client token for room B listed room A's vehicle name.
+    async with connect(_ws(guarded, "/ws")) as a, connect(_ws(guarded, "/ws")) as b:
+        for ws, name, role, room in ((a, "robot-of-a", "vehicle", "a"), (b, "bob", "client", "b")):
+            token = _token(role, room=room)  # type: ignore[arg-type]
+            await ws.send(
+                json.dumps(
+                    {"type": "login", "name": name, "role": role, "room": room, "token": token}
+                )
+            )
+            assert (await _recv(ws))["success"] is True
+
+        def rooms(token: str) -> httpx.Response:
+            headers = {"Authorization": f"Bearer {token}"}
+            return httpx.get(guarded.url + "/fleet/rooms", headers=headers, timeout=10)
+
+        for role in ("client", "relay", "vehicle"):
+            seen = rooms(_token(role, room="b"))  # type: ignore[arg-type]
+            assert seen.status_code == 200, seen.text
+            assert [row["room"] for row in seen.json()] == ["b"]
+            assert "robot-of-a" not in seen.text
+        assert rooms(_token("client", room="nowhere")).json() == []
+        fleet = rooms(tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60))
+        assert [(row["room"], row["vehicles"]) for row in fleet.json()] == [
+            ("a", ["robot-of-a"]),
+            ("b", []),
+        ]
+        assert rooms("not.a-token").status_code == 401
+
+
+async def test_a_fleet_token_opens_nothing_but_the_fleet_view(guarded: RunningServer) -> None:
+    fleet = tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60)
+    async with connect(_ws(guarded, "/ws")) as ws:
+        login = {"type": "login", "name": "f", "role": "client", "room": "*", "token": fleet}
+        await ws.send(json.dumps(login))
+        reply = await _recv(ws)
+        assert reply["success"] is False and "wrong role" in reply["reason"]
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": fleet}))
+        assert "wrong role" in (await _recv(ws))["msg"]
+        with pytest.raises(ConnectionClosed):
+            await _recv(ws)
+    headers = {"Authorization": f"Bearer {fleet}"}
+    state = httpx.get(guarded.url + "/turtlesim/state", headers=headers, timeout=10)
+    assert state.status_code == 401
+
+
 def _state(server: RunningServer) -> dict[str, Any]:
     headers = {"Authorization": f"Bearer {_token('client', room='anywhere')}"}
     response = httpx.get(server.url + "/turtlesim/state", headers=headers, timeout=10)
