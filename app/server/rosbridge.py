@@ -2,8 +2,9 @@
 
 The rules live in :mod:`app.turtlesim.rosbridge`; :mod:`app.server.websocket` moves the frames
 with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge). Every tick the
-simulator steps, the hub offers each turtle's pose to the subscribers, and each connection's
-publications go to its outbox, so one slow client never holds up the tick or the other clients.
+simulator steps and each connection's writer is woken; a writer that is free then takes its
+session's publications (the latest of each subscription), so the tick costs the same whatever
+the clients subscribe to, and a client that does not read is sent nothing and slows no one.
 The tick is fixed at :attr:`TurtleSim.TICK_S` (16 ms, turtlesim's own): the simulator advances
 that much per step, so pacing the loop any other way would only change the turtle's speed.
 """
@@ -75,7 +76,7 @@ class Simulator:
     def open(self) -> tuple[RosbridgeSession, Outbox]:
         """A new rosbridge client: its session and outbox."""
         session = self.hub.open_session()
-        return session, self.outboxes.open(session)
+        return session, self.outboxes.open(session, pull=session.take_publications)
 
     def forget(self, session: RosbridgeSession) -> None:
         """The client is gone: its subscriptions go with it."""
@@ -100,15 +101,11 @@ class Simulator:
         }
 
     def tick(self) -> None:
-        """One step: the simulator, then the publications it causes."""
+        """One step: the simulator, then a word to every writer that new poses are there."""
         self.sim.step()
         self.hub.tick(time.monotonic())
-        for session, outbox in self.outboxes.items():
-            # Publications are superseded by the next tick's: a slow reader misses some
-            # rather than being closed (replies to its own requests do close it).
-            dropped = sum(not outbox.offer(p) for p in session.take_publications())
-            if dropped:
-                log.debug("rosbridge client too slow: %d publications dropped", dropped)
+        for _, outbox in self.outboxes.items():
+            outbox.wake()
 
     async def _run(self) -> None:
         next_at = time.monotonic()

@@ -152,11 +152,26 @@ class _QuietInvalidUtf8(logging.Filter):
         return True
 
 
+# The kernel's send buffer of each WebSocket connection (Linux gives twice this). Left to itself
+# Linux grows it to 4 MiB, so a peer that never reads takes megabytes before the writer ever waits:
+# until then the server goes on making and sending it messages at full speed, and only then does
+# its outbox fill. With a small buffer a peer that does not read is seen as one at once.
+SEND_BUFFER_BYTES: Final = 64 * 1024
+
+
 class _SansIOWebSocket(WebSocketsSansIOProtocol):
-    """uvicorn's sans-I/O WebSocket protocol without one crash: a text frame that is not UTF-8
-    makes it close with 1007, and a second such frame read in the same chunk made it try to close
-    again ("Fatal error: protocol.data_received() call failed", InvalidState). Frames that arrive
-    once the closing handshake has begun are dropped, as RFC 6455 allows."""
+    """uvicorn's sans-I/O WebSocket protocol with a bounded send buffer and without one crash: a
+    text frame that is not UTF-8 makes it close with 1007, and a second such frame read in the
+    same chunk made it try to close again ("Fatal error: protocol.data_received() call failed",
+    InvalidState). Frames that arrive once the closing handshake has begun are dropped, as
+    RFC 6455 allows."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """Bound the kernel's send buffer of the connection (:data:`SEND_BUFFER_BYTES`)."""
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        super().connection_made(transport)
 
     def send_receive_event_to_app(self) -> None:
         """Hand a whole message to the app, unless the connection is already closing."""

@@ -51,7 +51,7 @@ from app.turtlesim.rosapi import (
     RosapiError,
     RosGraph,
 )
-from app.turtlesim.sim import TurtleSim, float32
+from app.turtlesim.sim import MAX_TURTLES, TurtleSim, float32
 
 log = logging.getLogger(__name__)
 
@@ -63,12 +63,15 @@ _Model = TypeVar("_Model", bound=BaseModel)
 # "none" silences them all. Before set_level it receives none.
 _LEVELS = {"info": 0, "warning": 1, "error": 2, "none": 3}
 
-# Per-session caps, so one client cannot make every tick slower or its memory grow without bound:
+# Per-session caps, so one client cannot make the server's work or memory grow without bound:
 # subscriptions (topic and id pairs) and advertisements, each subscription's queue, and its
 # throttle (one minute between messages is already far slower than any real subscriber wants).
-# Each pose subscription costs a message every 16 ms tick: with 64, one hostile client spawning
-# 2000 turtles pushed /healthz p50 to 77 ms on a loaded 2-core machine; with 16, 19 ms.
+# Each pose subscription of a client that reads costs a message every 16 ms tick.
 MAX_SUBSCRIPTIONS: Final = 16
+# Publications one client is sent per second at most, across its subscriptions (two topics at
+# turtlesim's full rate); more subscriptions take turns at it, each given the latest of its topic.
+# So what the clients subscribe to cannot add up to more than the server can send beside its tick.
+MAX_PUBLICATIONS_PER_S: Final = 125.0
 MAX_ADVERTISEMENTS: Final = 64
 MAX_QUEUE_LENGTH: Final = 100
 MAX_THROTTLE_RATE_MS: Final = 60_000
@@ -403,20 +406,25 @@ def pose_message(sim: TurtleSim, turtle: str) -> Json:
 # -- subscriptions ---------------------------------------------------------------------------
 
 
+Versioned = tuple[int, Json]  # a message with its topic's version: newer ones are larger
+
+
 @dataclass
 class _Subscription:
     """A client's stream of one topic (by its spelling), shared by every subscribe ``id``.
 
     As in rosbridge, several ids on one topic give one stream: the smallest throttle and the
-    largest queue win. With a throttle and no queue a message is sent when the throttle allows
-    and dropped otherwise; with a queue the latest ``queue_length`` messages wait and one leaves
-    per throttle period.
+    largest queue win. The stream is pulled, not pushed: when the client's socket is ready for
+    more, it takes the messages of its topic it has not had -- the latest ``queue_length`` of
+    them (at least the latest one), all at once, or with a throttle the oldest of them once per
+    throttle period. A client that reads slowly misses what newer messages supersede.
     """
 
     name: str
     topic: Topic
+    # The topic's version last delivered (or current when subscribed): only newer ones are due.
+    seen: int
     by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
-    queue: deque[Json] = field(default_factory=deque)
     last_sent: float = -math.inf
 
     @property
@@ -427,27 +435,22 @@ class _Subscription:
     def queue_length(self) -> int:
         return max(q for _, q in self.by_id.values())
 
-    def offer(self, now: float, msg: Json, out: list[Json]) -> None:
-        """A new message on the topic at time ``now``."""
-        throttle = self.throttle_s
-        if throttle == 0:
-            self._send(now, msg, out)
-        elif self.queue_length == 0:
-            if now - self.last_sent >= throttle:
-                self._send(now, msg, out)
+    def take(self, now: float, newer: list[Versioned], room: int, out: list[Json]) -> None:
+        """Send what is due at time ``now`` of ``newer`` (the topic's messages since ``seen``),
+        at most ``room`` messages, oldest first."""
+        kept = newer[-max(1, self.queue_length) :]
+        if not kept or room < 1:
+            return
+        if self.throttle_s == 0:
+            due = kept[:room]
+        elif now - self.last_sent >= self.throttle_s:
+            due = kept[:1]
         else:
-            self.queue.append(msg)
-            while len(self.queue) > self.queue_length:
-                self.queue.popleft()
-
-    def drain(self, now: float, out: list[Json]) -> None:
-        """Send a queued message if the throttle period is over."""
-        if self.queue and now - self.last_sent >= self.throttle_s:
-            self._send(now, self.queue.popleft(), out)
-
-    def _send(self, now: float, msg: Json, out: list[Json]) -> None:
+            return
+        for _, msg in due:
+            out.append({"op": "publish", "topic": self.name, "msg": msg})
+        self.seen = due[-1][0]
         self.last_sent = now
-        out.append({"op": "publish", "topic": self.name, "msg": msg})
 
 
 # -- sessions --------------------------------------------------------------------------------
@@ -462,7 +465,11 @@ class RosbridgeSession:
         self._advertised: set[str] = set()
         # No status messages until the client asks for them with set_level.
         self._level: int | None = None
-        self._outbox: list[Json] = []
+        # The publications it may still be sent (a token bucket refilled in the hub's time),
+        # and the subscription whose turn it is to be served first.
+        self._allowance = float(MAX_SUBSCRIPTIONS)
+        self._allowance_at = hub.now
+        self._turn = 0
         self._handlers: dict[str, Callable[[Any], list[Json]]] = {
             "advertise": self._advertise,
             "unadvertise": self._unadvertise,
@@ -507,8 +514,30 @@ class RosbridgeSession:
         return self.refuse(Refused(text))
 
     def take_publications(self) -> list[Json]:
-        """Publications gathered since the last call (from ticks and other clients' messages)."""
-        out, self._outbox = self._outbox, []
+        """What the subscriptions have to send now (``publish`` messages): call it when the
+        client's socket is ready for more. Nothing waits for a client that does not call it,
+        so one that never reads costs the tick nothing; one that reads is sent at most
+        :data:`MAX_PUBLICATIONS_PER_S`, its subscriptions served in turn."""
+        now = self._hub.now
+        elapsed = max(0.0, now - self._allowance_at)
+        self._allowance = min(
+            float(MAX_SUBSCRIPTIONS), self._allowance + elapsed * MAX_PUBLICATIONS_PER_S
+        )
+        self._allowance_at = now
+        subs = list(self._subscriptions.values())
+        if not subs:
+            return []
+        first = self._turn % len(subs)
+        out: list[Json] = []
+        served = 0
+        for sub in subs[first:] + subs[:first]:
+            room = int(self._allowance) - len(out)
+            if room < 1:
+                break
+            sub.take(now, self._hub.newer(sub.topic, sub.seen), room, out)
+            served += 1
+        self._turn = first + served
+        self._allowance -= len(out)
         return out
 
     def close(self) -> None:
@@ -524,26 +553,6 @@ class RosbridgeSession:
     def subscription_count(self) -> int:
         """Subscriptions held, counting each (topic, id) pair."""
         return sum(len(sub.by_id) for sub in self._subscriptions.values())
-
-    # -- hub's side ---------------------------------------------------------------------
-
-    def deliver(self, now: float, topic: Topic, msg: Json) -> None:
-        """Offer a message on ``topic`` to every matching subscription of this session."""
-        for sub in self._subscriptions.values():
-            if sub.topic == topic:
-                sub.offer(now, msg, self._outbox)
-
-    def deliver_poses(self, now: float, pose_of: Callable[[str], Json | None]) -> None:
-        """Offer each subscribed turtle's pose: work per tick grows with the subscriptions,
-        not with turtles times subscriptions."""
-        for sub in self._subscriptions.values():
-            if sub.topic.leaf == "pose" and (msg := pose_of(sub.topic.turtle)) is not None:
-                sub.offer(now, msg, self._outbox)
-
-    def drain(self, now: float) -> None:
-        """Release queued messages whose throttle period is over."""
-        for sub in self._subscriptions.values():
-            sub.drain(now, self._outbox)
 
     # -- ops ----------------------------------------------------------------------------
 
@@ -583,7 +592,8 @@ class RosbridgeSession:
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
         if sub is None:
-            sub = self._subscriptions[msg.topic] = _Subscription(msg.topic, topic)
+            sub = _Subscription(msg.topic, topic, seen=self._hub.version(topic))
+            self._subscriptions[msg.topic] = sub
         sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
         return []
 
@@ -655,7 +665,8 @@ class RosbridgeSession:
 
 
 class RosbridgeHub:
-    """The simulator and every session talking to it; fans messages out to subscribers."""
+    """The simulator and every session talking to it; keeps the latest messages of each topic,
+    which each session takes when its client is ready for them."""
 
     def __init__(
         self,
@@ -667,7 +678,14 @@ class RosbridgeHub:
         self.graph = RosGraph(sim, ros, wall_clock)
         self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
-        self._now = -math.inf
+        # The time of the last tick (throttles are measured in it) and how many there were:
+        # every tick is a new version of every pose topic.
+        self.now = 0.0
+        self.ticks = 0
+        self._poses: dict[str, Json] = {}  # this tick's, made when first asked for
+        # Each turtle's latest Twists as published, with the version each was given.
+        self._twists: dict[str, deque[Versioned]] = {}
+        self._twist_version = 0
 
     def open_session(self) -> RosbridgeSession:
         """A new client connection."""
@@ -676,23 +694,39 @@ class RosbridgeHub:
         return session
 
     def tick(self, now: float) -> None:
-        """Call after each simulator step: offers every turtle's pose to its subscribers."""
-        self._now = now
-        living = set(self.sim.names())
-        poses: dict[str, Json] = {}
+        """Call after each simulator step: a new pose of every turtle, as of ``now``.
 
-        def pose_of(name: str) -> Json | None:
-            if name not in living:
-                return None
-            if name not in poses:
-                poses[name] = pose_message(self.sim, name)
-            return poses[name]
-
-        for session in self.sessions:
-            session.deliver_poses(now, pose_of)
-            session.drain(now)
+        Nothing is sent from here: whatever the sessions and their subscriptions, a tick costs
+        the same.
+        """
+        self.now = now
+        self.ticks += 1
+        self._poses.clear()
 
     def broadcast(self, topic: Topic, msg: Json) -> None:
-        """A client published ``msg``: every session subscribed to ``topic`` gets it."""
-        for session in self.sessions:
-            session.deliver(self._now, topic, msg)
+        """A client published ``msg`` on a ``cmd_vel`` topic: its subscribers take it next."""
+        if topic.turtle not in self._twists and len(self._twists) >= MAX_TURTLES:
+            living = set(self.sim.names())  # forget the Twists of turtles killed since
+            self._twists = {name: q for name, q in self._twists.items() if name in living}
+        self._twist_version += 1
+        queue = self._twists.setdefault(topic.turtle, deque(maxlen=MAX_QUEUE_LENGTH))
+        queue.append((self._twist_version, msg))
+
+    def version(self, topic: Topic) -> int:
+        """The topic's current version: a new subscription takes only what comes after it."""
+        return self.ticks if topic.leaf == "pose" else self._twist_version
+
+    def newer(self, topic: Topic, seen: int) -> list[Versioned]:
+        """The topic's messages newer than version ``seen``, oldest first: a pose topic has
+        only its latest (a newer pose supersedes the older ones)."""
+        if topic.leaf == "cmd_vel":
+            return [item for item in self._twists.get(topic.turtle, ()) if item[0] > seen]
+        if self.ticks <= seen:
+            return []
+        pose = self._poses.get(topic.turtle)
+        if pose is None:
+            try:
+                pose = self._poses[topic.turtle] = pose_message(self.sim, topic.turtle)
+            except KeyError:  # killed: its subscribers get nothing until one is spawned again
+                return []
+        return [(self.ticks, pose)]

@@ -274,3 +274,54 @@ async def test_2000_spawn_attempts_hold_the_cap_and_the_server_keeps_answering(
         assert (await http.get(f"{server.url}/healthz", timeout=TIMEOUT_S)).status_code == 200
         state = (await http.get(f"{server.url}/turtlesim/state", timeout=TIMEOUT_S)).json()
         assert len(state["turtles"]) == MAX_TURTLES
+
+
+@pytest.mark.slow
+async def test_the_tick_holds_its_rate_while_63_sessions_never_read_16_subscriptions(
+    server: RunningServer,
+) -> None:
+    """Issue 37.8: 63 read-only sessions x 16 pose subscriptions that never read dropped the
+    simulator from 62.5 ticks/s to 26.5. The ticks are counted over equal stretches of time
+    before those sessions, with them and after them: the failure is a starvation by half or
+    worse, the bound is half of the slower stretch without them (the machine's own load slows
+    every count alike)."""
+    url = rosbridge_url(server)
+    async with connect(url) as ws:
+        await ws.send(json.dumps({"op": "set_level", "level": "none"}))
+        for n in range(15):
+            spawn = {"op": "call_service", "service": "/spawn", "args": {"x": 1.0 + n / 2}}
+            await ws.send(json.dumps(spawn))
+        names = ["turtle1"] + [(await recv(ws))["values"]["name"] for _ in range(15)]
+    subscriptions = [
+        json.dumps({"op": "subscribe", "id": f"s{n}", "topic": f"/{name}/pose"})
+        for n, name in enumerate(names)
+    ]
+
+    def stuck() -> StuckClient:
+        client = StuckClient(url)
+        for subscription in subscriptions:
+            client.send(subscription)
+        return client
+
+    async with httpx.AsyncClient(timeout=TIMEOUT_S) as http:
+        state = f"{server.url}/turtlesim/state"
+
+        async def ticks_in(seconds: float) -> int:
+            first = (await http.get(state)).json()["tick"]
+            await asyncio.sleep(seconds)
+            last: int = (await http.get(state)).json()["tick"]
+            return last - first
+
+        before = await ticks_in(2.0)
+        readers = [await asyncio.to_thread(stuck) for _ in range(63)]
+        try:
+            await asyncio.sleep(1.0)  # every socket that does not read is full by now
+            beside_them = await ticks_in(2.0)
+            assert (await http.get(f"{server.url}/healthz")).status_code == 200
+        finally:
+            for client in readers:
+                client.close()
+        await asyncio.sleep(0.5)
+        after = await ticks_in(2.0)
+    alone = min(before, after)
+    assert beside_them > alone / 2, f"{beside_them} ticks in 2 s beside them, {alone} alone"
