@@ -102,8 +102,16 @@ class GetOps(_Incoming):
     type: Literal["getOps"]
 
 
+class Renew(_Incoming):
+    """A peer keeps its session past its token's expiry: with a fresh ``token`` of its room and
+    role, or with none to be given one (:class:`Renewed`) while its current token is valid."""
+
+    type: Literal["renew"]
+    token: str | None = None
+
+
 Incoming = Annotated[
-    Login | Offer | Answer | Candidate | Leave | Start | Stop | GetOps,
+    Login | Offer | Answer | Candidate | Leave | Start | Stop | GetOps | Renew,
     Field(discriminator="type"),
 ]
 INCOMING_TYPES: frozenset[str] = frozenset(
@@ -146,6 +154,19 @@ class LoginReply(BaseModel):
     reason: str | None = None
     iceServers: list[IceServer] | None = None  # noqa: N815 (the WebRTC spelling)
     iceTransportPolicy: IceTransportPolicy | None = None  # noqa: N815
+    # Seconds until the peer should send ``renew``; None when the server asks for no tokens.
+    renewIn: float | None = None  # noqa: N815 (the pages' spelling)
+
+
+class Renewed(BaseModel):
+    """The server's answer to ``renew``: the session's token now, and when to renew it next.
+
+    The session ends when its token expires (``error`` "token expired", then close 1008).
+    """
+
+    type: Literal["renewed"] = "renewed"
+    token: str
+    renewIn: float  # noqa: N815
 
 
 class Peers(BaseModel):
@@ -178,6 +199,7 @@ class ParseError:
 # answers carry an SDP of tens of KB and get the socket's own limit.
 MAX_FRAME_BYTES: Final[Mapping[str, int]] = {
     "candidate": 4096,
+    "renew": 2048,
     "leave": 1024,
     "start": 1024,
     "stop": 1024,

@@ -1,9 +1,13 @@
 """Short-lived credentials scoped to one room and one role, signed with ``AUTOPILOT_SECRET``.
 
 A token is ``<payload>.<signature>``, both base64url without padding: the payload is the compact
-JSON ``{"room": R, "role": ROLE, "exp": UNIX_SECONDS}`` and the signature is HMAC-SHA256 of the
-encoded payload under the server's secret. Nothing here reads a clock or the environment: callers
-pass ``now`` and the secret, so the rules are tested directly.
+JSON ``{"room": R, "role": ROLE, "exp": UNIX_SECONDS, "iat": UNIX_SECONDS, "gid": GRANT}`` and the
+signature is HMAC-SHA256 of the encoded payload under the server's secret. ``iat`` (when it was
+issued) gives the token's lifetime, which :func:`renewal` keeps; ``gid`` names the grant a
+renewed token continues (absent from a grant's first token, whose signature names it), so that
+what is counted per token -- its sessions in a room -- is counted per grant, renewals included.
+Tokens without ``iat`` or ``gid`` (minted before them) are still accepted. Nothing here reads a
+clock or the environment: callers pass ``now`` and the secret, so the rules are tested directly.
 
 A room's roles (vehicle, relay, client) are the peers' own. One more, ``fleet``, is the scope of
 the fleet view (``/fleet/rooms``) of every room: its room is :data:`ALL_ROOMS`, and it admits to
@@ -49,13 +53,24 @@ class TokenError(ValueError):
         self.reason: Reason = reason
 
 
+# A session renews its token once this fraction of the time it has left has passed.
+RENEW_AFTER: Final = 0.75
+
+
 @dataclass(frozen=True)
 class Claims:
-    """What a valid token grants: ``role`` in ``room`` until ``exp`` (Unix seconds)."""
+    """What a valid token grants: ``role`` in ``room`` until ``exp`` (Unix seconds), as part
+    of ``grant``; ``iat`` is when it was issued (None: a token minted before renewals)."""
 
     room: str
     role: TokenRole
     exp: int
+    grant: str
+    iat: int | None = None
+
+    def renew_in(self, now: float) -> float:
+        """Seconds from ``now`` until a session holding this token should renew it."""
+        return max(0.0, RENEW_AFTER * (self.exp - now))
 
 
 def check_secret(secret: str) -> None:
@@ -69,10 +84,16 @@ def check_secret(secret: str) -> None:
 
 
 def sign(
-    secret: str, room: str, role: TokenRole, *, now: float, ttl_s: float = DEFAULT_TTL_S
+    secret: str,
+    room: str,
+    role: TokenRole,
+    *,
+    now: float,
+    ttl_s: float = DEFAULT_TTL_S,
+    grant: str | None = None,
 ) -> str:
     """A token granting ``role`` in ``room`` (a fleet token: :data:`ALL_ROOMS`) for ``ttl_s``
-    seconds from ``now``."""
+    seconds from ``now``; ``grant`` when it renews one (:func:`renewal`)."""
     check_secret(secret)
     if role not in TOKEN_ROLES:
         raise ValueError(f"role must be one of {', '.join(TOKEN_ROLES)}, not {role!r}")
@@ -81,11 +102,25 @@ def sign(
     # NaN and infinity would fail in int() below, or mint a token that never expires.
     if not math.isfinite(ttl_s) or ttl_s <= 0:
         raise ValueError(f"ttl must be a positive finite number of seconds, not {ttl_s}")
-    payload = json.dumps(
-        {"room": room, "role": role, "exp": int(now + ttl_s)}, separators=(",", ":")
-    ).encode()
-    body = _b64encode(payload)
+    fields: dict[str, object] = {
+        "room": room,
+        "role": role,
+        "exp": int(now + ttl_s),
+        "iat": int(now),
+    }
+    if grant is not None:
+        fields["gid"] = grant
+    body = _b64encode(json.dumps(fields, separators=(",", ":")).encode())
     return f"{body}.{_b64encode(_mac(secret, body))}"
+
+
+def renewal(secret: str, claims: Claims, *, now: float) -> str:
+    """A fresh token continuing ``claims``' grant: same room and role, the same lifetime from
+    ``now``. ``ValueError`` for a token that does not say when it was issued."""
+    if claims.iat is None:
+        raise ValueError("this token predates renewals (it has no issue time)")
+    lifetime = max(1, claims.exp - claims.iat)
+    return sign(secret, claims.room, claims.role, now=now, ttl_s=lifetime, grant=claims.grant)
 
 
 def verify(
@@ -111,7 +146,7 @@ def verify(
     # Checked before the payload is even parsed: nothing unsigned reaches json.loads.
     if not hmac.compare_digest(given, _mac(secret, body)):
         raise TokenError("bad signature", "not signed with this server's secret")
-    claims = _claims(body)
+    claims = _claims(body, signature)
     if claims.exp <= now:
         raise TokenError("expired", f"{int(now - claims.exp)} s ago")
     if room is not None and claims.room != room:
@@ -123,7 +158,7 @@ def verify(
     return claims
 
 
-def _claims(body: str) -> Claims:
+def _claims(body: str, signature: str) -> Claims:
     try:
         data = json.loads(_b64decode(body))
     except (ValueError, UnicodeDecodeError) as exc:
@@ -133,7 +168,10 @@ def _claims(body: str) -> Claims:
     room, role, exp = data.get("room"), data.get("role"), data.get("exp")
     if not isinstance(room, str) or role not in TOKEN_ROLES or type(exp) is not int:
         raise TokenError("malformed", "payload needs room, role and exp")
-    return Claims(room=room, role=role, exp=exp)
+    iat, grant = data.get("iat"), data.get("gid", signature)
+    if (iat is not None and type(iat) is not int) or not isinstance(grant, str):
+        raise TokenError("malformed", "iat must be an integer and gid a string")
+    return Claims(room=room, role=role, exp=exp, grant=grant, iat=iat)
 
 
 def _mac(secret: str, body: str) -> bytes:

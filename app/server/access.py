@@ -4,7 +4,9 @@ Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bear
 each frame, parsed once (:func:`app.turtlesim.rosbridge.parse_frame`), and gets back whether to
 pass the frame on to the rosbridge session, a reply to send, and whether to close. A connection
 proves itself with its first message: the rosbridge ``auth`` op (``{"op": "auth", "token": T}``;
-roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field.
+roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field. The
+connection ends when its token expires (status error, close 1008 "token expired") unless it sends
+``auth`` again with a fresh token before then.
 
 What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token (of any room:
 the simulator is one for the whole server) drives; a relay or client token only reads -- it may
@@ -64,6 +66,7 @@ ROSBRIDGE_RIGHTS: Final[Mapping[TokenRole, Rights]] = {
     "fleet": NOTHING,
 }
 AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autopilot token>"}'
+EXPIRED = 'token expired: send {"op": "auth", "token": "<a fresh token>"} before it does'
 
 
 def bearer_token(headers: Mapping[str, str]) -> str | None:
@@ -99,17 +102,38 @@ class RosbridgeGate:
             return str(exc)
         return None
 
+    @property
+    def expires_at(self) -> float | None:
+        """When the connection's token expires (Unix seconds); None while it has none."""
+        return None if self.claims is None else float(self.claims.exp)
+
+    def expiry(self, now: float) -> Decision | None:
+        """The close of a connection whose token has expired by ``now`` (its token forgotten);
+        else None."""
+        if self.claims is None or self.claims.exp > now:
+            return None
+        self.claims = None
+        return _refuse(EXPIRED, None, "token expired")
+
     def check(self, frame: Operation | Refused, now: float) -> Decision:
         """The decision on one parsed frame from the client (a malformed one included: the
-        session explains it, once the connection has proved a token)."""
+        session explains it, once the connection has proved a token).
+
+        An ``auth`` op on a connection that has proved a token renews it: the session goes on
+        past the first token's expiry with the rights of the new one.
+        """
         if self.secret is None:
             return Decision(forward=not isinstance(frame, Auth))
+        if (expired := self.expiry(now)) is not None:
+            return expired
         if self.claims is None:
             refused = self._authenticate(frame, now)
             if refused is not None:
                 return refused
+        elif isinstance(frame, Auth):
+            return self._renew(frame, now)
         if isinstance(frame, Auth):
-            return Decision(forward=False)  # already authenticated; nothing for the session
+            return Decision(forward=False)  # authenticated; nothing for the session
         refusal = None if isinstance(frame, Refused) else self._refusal(frame)
         if refusal is None:
             return Decision(forward=True)
@@ -126,6 +150,16 @@ class RosbridgeGate:
         except TokenError as exc:
             return _refuse(str(exc), frame)
         return None
+
+    def _renew(self, auth: Auth, now: float) -> Decision:
+        """A new token for a connection that has one: kept if valid, else refused (the
+        connection goes on with the token it has, until that expires)."""
+        assert self.secret is not None
+        try:
+            self.claims = tokens.verify(self.secret, auth.proof or "", now=now)
+        except TokenError as exc:
+            return Decision(forward=False, reply=status("error", f"auth: {exc}", auth.id))
+        return Decision(forward=False)
 
     def _refusal(self, operation: Operation) -> str | None:
         assert self.claims is not None
@@ -162,9 +196,12 @@ def _token_of(frame: Operation | Refused) -> str | None:
     return token if isinstance(token, str) else None
 
 
-def _refuse(text: str, frame: Operation | Refused) -> Decision:
+def _refuse(
+    text: str, frame: Operation | Refused | None, reason: str = "token refused"
+) -> Decision:
+    """A refusal that ends the connection: ``text`` for the client, then the close."""
     return Decision(
         forward=False,
-        reply=status("error", text, frame.id),
-        close=(CloseCode.POLICY_VIOLATION, "token refused"),
+        reply=status("error", text, None if frame is None else frame.id),
+        close=(CloseCode.POLICY_VIOLATION, reason),
     )

@@ -174,9 +174,26 @@ async def rosbridge(websocket: WebSocket) -> None:
         for reply in session.error("binary frames are not supported: send JSON text"):
             outbox.send(reply)
 
+    async def end_at_expiry() -> None:
+        """Close the connection once its token has expired (a renewal moves the time on)."""
+        while True:
+            expires_at = gate.expires_at
+            await asyncio.sleep(1.0 if expires_at is None else max(0.0, expires_at - time.time()))
+            if (expired := gate.expiry(time.time())) is not None:
+                metrics.refused("auth")
+                assert expired.reply is not None and expired.close is not None
+                outbox.send(expired.reply)
+                outbox.close(*expired.close)
+                return
+
+    watchdog = None
+    if gate.secret is not None:
+        watchdog = asyncio.create_task(end_at_expiry(), name="rosbridge-expiry")
     try:
         await serve(websocket, outbox, on_text, on_binary, name="rosbridge")
     finally:
+        if watchdog is not None:
+            watchdog.cancel()
         simulator.forget(session)
 
 

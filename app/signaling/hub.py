@@ -35,6 +35,8 @@ from app.protocol.signaling import (
     ParseError,
     PeerInfo,
     Peers,
+    Renew,
+    Renewed,
     Start,
     Stop,
     parse,
@@ -124,8 +126,9 @@ class _Peer:
     name: str
     role: Role
     room: str
-    # The token it logged in with (None without a secret): its sessions are counted.
-    token: str | None = field(default=None, repr=False)
+    # The grant of the token it logged in with (None without a secret): each grant's sessions
+    # in a room are counted, renewed tokens included.
+    grant: str | None = field(default=None, repr=False)
 
     def info(self) -> PeerInfo:
         return PeerInfo(name=self.name, role=self.role)
@@ -159,6 +162,8 @@ class _Connection:
     messages: _Bucket
     bytes: _Bucket
     peer: _Peer | None = None
+    # What the peer's token grants, while it is logged in with one; it ends with ``exp``.
+    claims: tokens.Claims | None = None
     errors_in_a_row: int = 0
     closing: bool = False
 
@@ -224,6 +229,8 @@ class Hub:
         if (too_large := oversize(text, self.max_message_bytes)) is not None:
             self._count("other")
             return self._refuse(connection, too_large, None)
+        if _expired(connection, self.clock()):
+            return self._expire(connection)
         message = parse(text)
         if isinstance(message, ParseError):
             self._count(message.ref if message.ref in INCOMING_TYPES else "other")
@@ -232,6 +239,29 @@ class Hub:
             return self._refuse(connection, message.reason, message.ref)
         self._count(message.type)
         return self._dispatch(connection, message)
+
+    def expire(self) -> list[Action]:
+        """End every session whose token has expired: call it every second or so.
+
+        Each gets an ``error`` saying so and is closed (1008 "token expired"); the others in
+        its room are told it left.
+        """
+        now = self.clock()
+        actions: list[Action] = []
+        for connection in list(self._connections.values()):
+            if _expired(connection, now):
+                actions += self._expire(connection)
+        return actions
+
+    def claims_of(self, conn: ConnId) -> tokens.Claims | None:
+        """What the token of ``conn``'s session grants (None: no token asked, or not logged in)."""
+        connection = self._connections.get(conn)
+        return None if connection is None else connection.claims
+
+    def restore(self, conn: ConnId, claims: tokens.Claims) -> None:
+        """Give a session rebuilt without its token (a room taken over) the claims it had, so
+        that it still ends when they expire."""
+        self._connections[conn].claims = claims
 
     def receive_binary(self, conn: ConnId) -> list[Action]:
         """Handle one binary frame from ``conn``: always refused, signaling is JSON text."""
@@ -290,6 +320,8 @@ class Hub:
                 actions = self._to_relay(peer, message)
             case Leave():
                 actions = self._leave(connection, peer)
+            case Renew():
+                actions = self._renew(connection, peer, message)
             case _:
                 assert_never(message)
         if isinstance(actions, str):
@@ -298,10 +330,12 @@ class Hub:
         return actions
 
     def _login(self, connection: _Connection, login: Login) -> list[Action]:
+        claims: tokens.Claims | None = None
         if self.secret is not None:
-            refusal = _token_refusal(self.secret, login, self.clock())
-            if refusal is not None:
-                return self._refuse_login(connection, refusal, why="auth")
+            checked = _login_claims(self.secret, login, self.clock())
+            if isinstance(checked, str):
+                return self._refuse_login(connection, checked, why="auth")
+            claims = checked
         # Only a successful login creates a room: refused ones must not leave empty rooms behind.
         room = self._rooms.get(login.room, {})
         if login.name in room:
@@ -313,12 +347,14 @@ class Hub:
             return self._refuse_login(
                 connection, f"room {login.room!r} already has a relay ({relay.name!r})"
             )
-        if (no_place := _no_place(room, login)) is not None:
+        grant = None if claims is None else claims.grant
+        if (no_place := _no_place(room, login, grant)) is not None:
             return self._refuse_login(connection, no_place, why="caps")
         others = list(room.values())
-        peer = _Peer(connection.id, login.name, login.role, login.room, login.token)
+        peer = _Peer(connection.id, login.name, login.role, login.room, grant)
         self._rooms.setdefault(login.room, room)[peer.name] = peer
         connection.peer = peer
+        connection.claims = claims
         connection.errors_in_a_row = 0
         log.info("%s %r joined room %r", peer.role, peer.name, peer.room)
         ice_servers, policy = self.ice(peer.name) if self.ice is not None else ([], "all")
@@ -328,6 +364,7 @@ class Hub:
             peers=[p.info() for p in others],
             iceServers=ice_servers,
             iceTransportPolicy=policy,
+            renewIn=None if claims is None else claims.renew_in(self.clock()),
         )
         # The others learn about the newcomer from their roster update.
         return [
@@ -360,6 +397,42 @@ class Hub:
             return f"no relay in room {sender.room!r}"
         log.debug("relaying %s from %r to relay %r", message.type, sender.name, relay.name)
         return [Outgoing(relay.conn, _stamped(message, sender))]
+
+    def _renew(self, connection: _Connection, peer: _Peer, renew: Renew) -> list[Action] | str:
+        """Extend the session: with the token the peer brings, else with one minted here."""
+        if self.secret is None or connection.claims is None:
+            return "this server asks for no tokens: there is nothing to renew"
+        now = self.clock()
+        token = renew.token
+        try:
+            if token is None:
+                token = tokens.renewal(self.secret, connection.claims, now=now)
+            claims = tokens.verify(self.secret, token, now=now, room=peer.room, roles=(peer.role,))
+        except (tokens.TokenError, ValueError) as exc:
+            return f"cannot renew: {exc}; {_remedy(peer.room, peer.role, 'get a new one')}"
+        connection.claims = claims
+        log.debug("%s %r renewed its token until %d", peer.role, peer.name, claims.exp)
+        reply = Renewed(token=token, renewIn=claims.renew_in(now))
+        return [Outgoing(connection.id, reply.model_dump())]
+
+    def _expire(self, connection: _Connection) -> list[Action]:
+        """End a session whose token has expired: the reason, the others told, the close."""
+        peer = connection.peer
+        assert peer is not None
+        if self.metrics is not None:
+            self.metrics.refused("auth")
+        log.info("%s %r in room %r: token expired", peer.role, peer.name, peer.room)
+        reason = (
+            "token expired: renew before it does (send renew); "
+            f"{_remedy(peer.room, peer.role, 'get a new one')}"
+        )
+        connection.closing = True
+        connection.peer = connection.claims = None
+        return [
+            Outgoing(connection.id, Error(reason=reason, ref=None).model_dump()),
+            *self._remove(peer),
+            Close(connection.id, CloseCode.POLICY_VIOLATION, "token expired"),
+        ]
 
     def _leave(self, connection: _Connection, peer: _Peer) -> list[Action]:
         connection.closing = True
@@ -442,14 +515,23 @@ class Hub:
         return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login", why)]
 
 
-def _no_place(room: dict[str, _Peer], login: Login) -> str | None:
+def _expired(connection: _Connection, now: float) -> bool:
+    """True when ``connection``'s session holds a token that has expired by ``now``."""
+    return (
+        connection.peer is not None
+        and connection.claims is not None
+        and connection.claims.exp <= now
+    )
+
+
+def _no_place(room: dict[str, _Peer], login: Login, grant: str | None) -> str | None:
     """Why ``login`` finds no place in ``room`` (its role's places are taken, or its token's
-    sessions), in words; None when it may join."""
+    grant's sessions), in words; None when it may join."""
     places = ROOM_PLACES[login.role]
     if sum(peer.role == login.role for peer in room.values()) >= places:
         return f"room {login.room!r} has no place for another {login.role} ({places})"
-    if login.token is not None:
-        sessions = sum(peer.token == login.token for peer in room.values())
+    if grant is not None:
+        sessions = sum(peer.grant == grant for peer in room.values())
         if sessions >= MAX_TOKEN_SESSIONS:
             return (
                 f"this token already has {sessions} sessions in room {login.room!r}, the most "
@@ -467,15 +549,21 @@ def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:
     return {**message.model_dump(), "from": sender.name}
 
 
-def _token_refusal(secret: str, login: Login, now: float) -> str | None:
-    """Why ``login`` may not join (no token, or one not for its room and role) and how to get
-    one that will; else None."""
-    # Whoever runs the server mints tokens: the reason names the command, for a page or a log.
-    remedy = f"get one with: autopilot token --room {shlex.quote(login.room)} --role {login.role}"
+def _remedy(room: str, role: Role, what: str = "get one") -> str:
+    """How to get a token for ``role`` in ``room``: whoever runs the server mints them, so the
+    words name the command, for a page or a log."""
+    return f"{what} with: autopilot token --room {shlex.quote(room)} --role {role}"
+
+
+def _login_claims(secret: str, login: Login, now: float) -> tokens.Claims | str:
+    """What ``login``'s token grants; or why it may not join (no token, or one not for its
+    room and role) and how to get one that will."""
     if login.token is None:
-        return f"missing token: a {login.role} token for room {login.room!r} is required; {remedy}"
+        return (
+            f"missing token: a {login.role} token for room {login.room!r} is required; "
+            f"{_remedy(login.room, login.role)}"
+        )
     try:
-        tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
+        return tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
     except tokens.TokenError as exc:
-        return f"{exc}; {remedy.replace('get one', 'get a new one')}"
-    return None
+        return f"{exc}; {_remedy(login.room, login.role, 'get a new one')}"

@@ -2,13 +2,15 @@
 
 With ``AUTOPILOT_SECRET`` set, every instance checks each login's token in the room owner's hub;
 a socket logged in through another instance is not closed by its own instance's login deadline;
-and an owner that takes a room over keeps members whose (checked, expiring) tokens have expired
-since they logged in.
+and an owner that takes a room over keeps what each member's token grants, as renewed: a member
+whose token expires is ended by whichever instance owns the room then.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import json
 import signal
 import time
 from collections.abc import Callable
@@ -16,19 +18,20 @@ from contextlib import AsyncExitStack
 from typing import Any
 
 import httpx
+import pytest
 from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
 
 from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.tools.relay_pool import RelayPool
 from tests.fleet.conftest import ServeProcess
-from tests.fleet.test_fleet_signaling import _until_roster
 from tests.server.test_signaling_ws import Peer
 
 SECRET = "fleet-test-secret-0123456789abcdef"
-# Short enough that the tokens of the first logins have expired when the room is taken over.
-SHORT_TTL_S = 2.0
+# Long enough to outlive the logins and the kill, short enough to expire soon after a takeover.
+SHORT_TTL_S = 6.0
 LOGIN_TIMEOUT_S = 1.0
 RELAY: tuple[tokens.Role, ...] = ("relay",)
 
@@ -47,7 +50,16 @@ async def login(
     return await peer.recv()
 
 
-async def test_tokens_deadline_and_takeover_with_expired_tokens(
+async def _until_closed(peer: Peer) -> list[dict[str, Any]]:
+    """What the server sends ``peer`` until it closes the connection."""
+    seen: list[dict[str, Any]] = []
+    with contextlib.suppress(ConnectionClosed):
+        while True:
+            seen.append(json.loads(await asyncio.wait_for(peer.ws.recv(), SHORT_TTL_S + 15)))
+    return seen
+
+
+async def test_tokens_deadline_and_takeover_keep_what_each_token_grants(
     serve_process: ServeProcess,
 ) -> None:
     env = {"AUTOPILOT_SECRET": SECRET, "AUTOPILOT_LOGIN_TIMEOUT_S": str(LOGIN_TIMEOUT_S)}
@@ -61,7 +73,7 @@ async def test_tokens_deadline_and_takeover_with_expired_tokens(
 
         # Room "a" is created through the instance that dies, so that one owns it.
         vehicle = await peer_on(first_url)
-        reply = await login(vehicle, "v", "vehicle", "a", token("a", "vehicle", SHORT_TTL_S))
+        reply = await login(vehicle, "v", "vehicle", "a", token("a", "vehicle"))
         assert reply["success"] is True, reply
         # The owner checks logins coming through the other instance: no token, wrong room.
         stranger = await peer_on(second_url)
@@ -70,33 +82,48 @@ async def test_tokens_deadline_and_takeover_with_expired_tokens(
             assert refused["success"] is False and why in refused["reason"], refused
             # Every refused message also gets an ``error``, as on one instance.
             assert (await stranger.recv())["type"] == "error"
-        client = stranger
-        reply = await login(client, "c", "client", "a", token("a", "client", SHORT_TTL_S))
+        lapsing = stranger
+        reply = await login(lapsing, "c", "client", "a", token("a", "client", SHORT_TTL_S))
         assert reply["success"] is True, reply
         assert (await vehicle.recv())["peers"] == [{"name": "c", "role": "client"}]
+        # A second client renews through the instance that is not the owner, with a token of
+        # its own that lasts: the owner keeps that in the room's member list.
+        renewing = await peer_on(second_url)
+        reply = await login(renewing, "d", "client", "a", token("a", "client", SHORT_TTL_S))
+        assert reply["success"] is True, reply
+        lasting = token("a", "client")
+        await renewing.send({"type": "renew", "token": lasting})
+        assert await renewing.recv() == {
+            "type": "renewed",
+            "token": lasting,
+            "renewIn": pytest.approx(0.75 * 600, abs=2),
+        }
 
-        # A socket that never logs in is closed by the deadline; the client, logged in through
-        # the owner on the other instance, is not.
+        # A socket that never logs in is closed by the deadline; the clients, logged in through
+        # the owner on the other instance, are not.
         idle = await peer_on(second_url)
         assert await idle.closed() == 1008
 
-        await asyncio.sleep(SHORT_TTL_S + 0.5)  # both members' tokens have expired now
         first.send_signal(signal.SIGKILL)
         first.wait(timeout=10)
-        # The survivor takes room "a" over, replaying the client's login despite its token.
-        assert await _until_roster(client, []) == {"type": "leave", "from": "v"}
-
+        # The survivor takes room "a" over with each member's claims: the client whose token
+        # expires is ended (the instance that admitted it is dead), the renewed one stays.
+        last = await _until_closed(lapsing)
+        assert lapsing.ws.close_code == 1008 and lapsing.ws.close_reason == "token expired"
+        assert "token expired" in last[-1]["reason"]
+        seen = [await renewing.recv() for _ in range(4)]
+        assert {"type": "leave", "from": "v"} in seen and {"type": "leave", "from": "c"} in seen
         again = await peer_on(second_url)
         reply = await login(again, "v", "vehicle", "a", token("a", "vehicle"))
         assert reply["success"] is True, reply
-        assert reply["peers"] == [{"name": "c", "role": "client"}]
-        assert (await client.recv())["peers"] == [{"name": "v", "role": "vehicle"}]
-        await client.send({"type": "candidate", "to": "v", "candidate": None})
+        assert reply["peers"] == [{"name": "d", "role": "client"}]
+        assert (await renewing.recv())["peers"] == [{"name": "v", "role": "vehicle"}]
+        await renewing.send({"type": "candidate", "to": "v", "candidate": None})
         assert await again.recv() == {
             "type": "candidate",
             "to": "v",
             "candidate": None,
-            "from": "c",
+            "from": "d",
         }
 
 

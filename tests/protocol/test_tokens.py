@@ -85,3 +85,26 @@ def test_signing_needs_a_real_secret_a_known_role_and_a_positive_finite_ttl() ->
     for ttl_s in (0, -1, math.nan, math.inf):
         with pytest.raises(ValueError, match="ttl"):
             tokens.sign(SECRET, "lab", "client", now=NOW, ttl_s=ttl_s)
+
+
+def test_a_renewal_continues_the_grant_with_the_same_lifetime() -> None:
+    first = tokens.sign(SECRET, "lab", "relay", now=NOW, ttl_s=600)
+    claims = tokens.verify(SECRET, first, now=NOW + 500)
+    renewed = tokens.renewal(SECRET, claims, now=NOW + 500)
+    again = tokens.verify(SECRET, renewed, now=NOW + 1000, room="lab", roles=("relay",))
+    assert (again.exp, again.iat, again.grant) == (int(NOW + 1100), int(NOW + 500), claims.grant)
+    assert claims.renew_in(NOW + 500) == 0.75 * 100
+
+
+def _legacy(payload: dict[str, object]) -> str:
+    """A token as minted before ``iat`` and ``gid`` (signed the same way)."""
+    body = base64.urlsafe_b64encode(json.dumps(payload).encode()).rstrip(b"=").decode()
+    return f"{body}.{tokens._b64encode(tokens._mac(SECRET, body))}"
+
+
+def test_a_token_minted_before_renewals_is_accepted_but_not_renewed_by_the_server() -> None:
+    legacy = _legacy({"room": "lab", "role": "client", "exp": int(NOW + 60)})
+    claims = tokens.verify(SECRET, legacy, now=NOW)
+    assert claims.iat is None and claims.grant == legacy.split(".")[1]
+    with pytest.raises(ValueError, match="predates renewals"):
+        tokens.renewal(SECRET, claims, now=NOW)
