@@ -31,13 +31,8 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
-from app.protocol.constants import (
-    TAG_BITS,
-    TAG_BLOCKS_PER_WIDTH,
-    TAG_MARKER_BLOCKS,
-    VIDEO_FPS,
-    VIDEO_SIZE,
-)
+from app.protocol.frametag import LAYOUT
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +46,7 @@ Image = npt.NDArray[np.uint8]
 
 # Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
 # blocks first, then the bits.
-TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
+TAG_FIRST_BIT_BLOCK = LAYOUT.marker_blocks
 
 
 # The --video values of the generated scenes: the moving face (SyntheticVideo) and the
@@ -69,13 +64,14 @@ class VideoSourceError(RuntimeError):
 
 def tag_block_size(width: int) -> int:
     """Side of one tag block in pixels for a frame ``width`` pixels wide."""
-    return width // TAG_BLOCKS_PER_WIDTH
+    return width // LAYOUT.blocks_per_width
 
 
 def draw_frame_tag(rgb: Image, frame: int) -> None:
     """Write ``frame`` (mod 2**24) into the top row of ``rgb`` in place."""
     b = tag_block_size(rgb.shape[1])
-    values = [255, 0] + [255 if (frame >> (TAG_BITS - 1 - i)) & 1 else 0 for i in range(TAG_BITS)]
+    bits = LAYOUT.bits
+    values = [255, 0] + [255 if (frame >> (bits - 1 - i)) & 1 else 0 for i in range(bits)]
     for i, value in enumerate(values):
         rgb[0:b, i * b : (i + 1) * b] = value
 
@@ -85,7 +81,7 @@ def read_frame_tag(rgb: Image) -> int | None:
     b = tag_block_size(rgb.shape[1])
     if b < 2:
         return None
-    blocks = TAG_FIRST_BIT_BLOCK + TAG_BITS
+    blocks = TAG_FIRST_BIT_BLOCK + LAYOUT.bits
     lo, hi = b // 4, b // 4 + max(1, b // 2)
     # The inner square of every block at once (rows, block, columns, channel): the mean of each.
     inner = rgb[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
@@ -389,7 +385,7 @@ class SyntheticVideo(PacedVideoTrack):
         flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
-        if width < 2 * TAG_BLOCKS_PER_WIDTH or height < 48:
+        if width < 2 * LAYOUT.blocks_per_width or height < 48:
             raise VideoSourceError(
                 f"synthetic video needs at least 80x48 pixels, not {width}x{height}"
             )

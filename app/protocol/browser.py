@@ -11,8 +11,11 @@ from __future__ import annotations
 from functools import cache
 from typing import Any
 
-from app.protocol import constants as c
+from app.protocol import relay_profiles as relay
 from app.protocol.channels import (
+    AUTOPILOT_CHANNEL,
+    AUTOPILOT_STATE_CHANNEL,
+    CONTROL_CHANNEL,
     GOAL_AGE_WINDOW_S,
     GOAL_MAX_AGE_S,
     STATE_CHANNEL_MAX_RETRANSMITS,
@@ -20,24 +23,30 @@ from app.protocol.channels import (
     channel_schemas,
 )
 from app.protocol.control import PROFILES as VEHICLE_PROFILES
+from app.protocol.frametag import LAYOUT
+from app.protocol.link_health import HEALTH
+from app.protocol.lock import LockRule
+from app.protocol.rooms import DEFAULT_ROOM, ROLES
+from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
+from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
 
 
 @cache
 def browser_protocol() -> dict[str, Any]:
     """The constants and data-channel schemas every page gets (computed once, never mutated)."""
     return {
-        "roles": list(c.ROLES),
-        "defaultRoom": c.DEFAULT_ROOM,
-        "profiles": {"relay": list(c.RELAY_PROFILES), "vehicle": list(VEHICLE_PROFILES)},
-        "defaultProfile": c.DEFAULT_PROFILE,
+        "roles": list(ROLES),
+        "defaultRoom": DEFAULT_ROOM,
+        "profiles": {"relay": list(relay.PROFILES), "vehicle": list(VEHICLE_PROFILES)},
+        "defaultProfile": relay.DEFAULT_PROFILE,
         "relayProfiles": {
-            name: {"snapshotPeriodMs": c.RELAY_SNAPSHOT_PERIOD_MS[name]}
-            for name in c.RELAY_PROFILES
+            name: {"snapshotPeriodMs": relay.RELAY_SNAPSHOT_PERIOD_MS[name]}
+            for name in relay.PROFILES
         },
         "channels": {
-            "autopilot": c.AUTOPILOT_CHANNEL,
-            "autopilotState": c.AUTOPILOT_STATE_CHANNEL,
-            "control": c.CONTROL_CHANNEL,
+            "autopilot": AUTOPILOT_CHANNEL,
+            "autopilotState": AUTOPILOT_STATE_CHANNEL,
+            "control": CONTROL_CHANNEL,
         },
         # RTCDataChannelInit of the lossy state channel, and the latest-wins numbers.
         "stateChannelOptions": {
@@ -45,28 +54,28 @@ def browser_protocol() -> dict[str, Any]:
             "maxRetransmits": STATE_CHANNEL_MAX_RETRANSMITS,
         },
         "goalFreshness": {"maxAgeS": GOAL_MAX_AGE_S, "windowS": GOAL_AGE_WINDOW_S},
-        "world": {"size": c.WORLD_SIZE, "terrainCentre": c.TERRAIN_CENTRE},
+        "world": {"size": WORLD_SIZE, "terrainCentre": TERRAIN_CENTRE},
         # The frame size the vehicle page asks its camera for.
-        "video": {"width": c.VIDEO_SIZE[0], "height": c.VIDEO_SIZE[1]},
+        "video": {"width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]},
         # How much smaller the relay's forward to a client is, per side.
-        "clientForwardScaleDown": c.CLIENT_FORWARD_SCALE_DOWN,
+        "clientForwardScaleDown": CLIENT_FORWARD_SCALE_DOWN,
         "frameTag": {
-            "blocksPerWidth": c.TAG_BLOCKS_PER_WIDTH,
-            "markerBlocks": c.TAG_MARKER_BLOCKS,
-            "bits": c.TAG_BITS,
+            "blocksPerWidth": LAYOUT.blocks_per_width,
+            "markerBlocks": LAYOUT.marker_blocks,
+            "bits": LAYOUT.bits,
         },
         # The target lock's rule (app/vision/lock.py, app/static/js/lock.js).
         "lock": {
-            "searchAfterS": c.LOCK_SEARCH_AFTER_S,
-            "releaseAfterS": c.LOCK_RELEASE_AFTER_S,
-            "maxScale": c.LOCK_MAX_SCALE,
-            "reach": c.LOCK_REACH,
+            "searchAfterS": LockRule().search_after_s,
+            "releaseAfterS": LockRule().release_after_s,
+            "maxScale": LockRule().max_scale,
+            "reach": LockRule().reach,
         },
         # The link health panel's period and warning thresholds (link-health.js).
         "health": {
-            "periodS": c.HEALTH_PERIOD_S,
-            "maxLossPct": c.HEALTH_MAX_LOSS_PCT,
-            "maxRttMs": c.HEALTH_MAX_RTT_MS,
+            "periodS": HEALTH.period_s,
+            "maxLossPct": HEALTH.max_loss_pct,
+            "maxRttMs": HEALTH.max_rtt_ms,
         },
         # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
         "schemas": channel_schemas(),

@@ -12,8 +12,9 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
-from app.protocol.constants import DEFAULT_PROFILE, TERRAIN_CENTRE, WORLD_SIZE
-from app.protocol.constants import Profile as RelayProfile
+from app.protocol.relay_profiles import DEFAULT_PROFILE
+from app.protocol.relay_profiles import Profile as RelayProfile
+from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).

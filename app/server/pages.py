@@ -19,8 +19,8 @@ from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
 from app.protocol.browser import browser_protocol
-from app.protocol.constants import DEFAULT_ROOM, ROLES, Role
 from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
+from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.protocol.ros import page_config as ros_page_config
 from app.resources import TEMPLATES_DIR

@@ -17,19 +17,9 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from app.protocol import constants as c
 from app.protocol.channels import LockState
+from app.protocol.lock import LockRule
 from app.vision.window import Box, Choose, largest
-
-
-@dataclass(frozen=True)
-class LockRule:
-    """The numbers of the rule (``app.protocol.constants``, pages get them as ``PROTOCOL.lock``)."""
-
-    search_after_s: float = c.LOCK_SEARCH_AFTER_S
-    release_after_s: float = c.LOCK_RELEASE_AFTER_S
-    max_scale: float = c.LOCK_MAX_SCALE
-    reach: float = c.LOCK_REACH
 
 
 def contains(box: Box, x: float, y: float) -> bool:

@@ -18,7 +18,7 @@ from aiortc.mediastreams import MediaStreamError, MediaStreamTrack
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
-from app.protocol.constants import AUTOPILOT_CHANNEL
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from vehicle_agent.video import read_frame_tag
 
 log = logging.getLogger(__name__)

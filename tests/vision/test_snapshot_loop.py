@@ -17,7 +17,8 @@ import pytest
 from playwright.sync_api import Page
 
 from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL, DEFAULT_PROFILE
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.relay_profiles import DEFAULT_PROFILE
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
 from vehicle_agent.video import draw_frame_tag
