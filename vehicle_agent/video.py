@@ -1,8 +1,8 @@
 """Video sources for the agent, as aiortc ``MediaStreamTrack`` subclasses.
 
 * :class:`SyntheticVideo` -- a generated scene in which a real face photo moves along a known
-  path; each frame carries its number as the frame tag of docs/contracts.md, so the relay can
-  read it back and echo it in its goals (latency measurement), and
+  path; each frame carries its number as the frame tag (:mod:`app.protocol.frametag`), so the
+  relay can read it back and echo it in its goals (latency measurement), and
   :meth:`SyntheticVideo.face_centre` tells tests and benchmarks where the face truly is.
 * :class:`FileVideo` -- anything PyAV opens (``.y4m``, ``.mp4``, ...), looped forever.
 * a V4L2 device (``/dev/videoN``) through aiortc's ``MediaPlayer``.
@@ -31,7 +31,7 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
-from app.protocol.frametag import LAYOUT
+from app.protocol import frametag
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 
 log = logging.getLogger(__name__)
@@ -44,11 +44,6 @@ TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 
 Image = npt.NDArray[np.uint8]
 
-# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
-# blocks first, then the bits.
-TAG_FIRST_BIT_BLOCK = LAYOUT.marker_blocks
-
-
 # The --video values of the generated scenes: the moving face (SyntheticVideo) and the
 # target-lock scene (TwoFaceVideo).
 SYNTHETIC = "synthetic"
@@ -57,41 +52,6 @@ TWO_FACES = "two-faces"
 
 class VideoSourceError(RuntimeError):
     """A video source could not be opened; the message names the source and the problem."""
-
-
-# --- frame tag -----------------------------------------------------------------------------
-
-
-def tag_block_size(width: int) -> int:
-    """Side of one tag block in pixels for a frame ``width`` pixels wide."""
-    return width // LAYOUT.blocks_per_width
-
-
-def draw_frame_tag(rgb: Image, frame: int) -> None:
-    """Write ``frame`` (mod 2**24) into the top row of ``rgb`` in place."""
-    b = tag_block_size(rgb.shape[1])
-    bits = LAYOUT.bits
-    values = [255, 0] + [255 if (frame >> (bits - 1 - i)) & 1 else 0 for i in range(bits)]
-    for i, value in enumerate(values):
-        rgb[0:b, i * b : (i + 1) * b] = value
-
-
-def read_frame_tag(rgb: Image) -> int | None:
-    """The frame number written by :func:`draw_frame_tag`, or None when there is no tag."""
-    b = tag_block_size(rgb.shape[1])
-    if b < 2:
-        return None
-    blocks = TAG_FIRST_BIT_BLOCK + LAYOUT.bits
-    lo, hi = b // 4, b // 4 + max(1, b // 2)
-    # The inner square of every block at once (rows, block, columns, channel): the mean of each.
-    inner = rgb[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
-    bits = inner.mean(axis=(0, 2, 3)) >= 128
-    if not bits[0] or bits[1]:
-        return None
-    value = 0
-    for bit in bits[TAG_FIRST_BIT_BLOCK:]:
-        value = (value << 1) | int(bit)
-    return value
 
 
 # --- synthetic scene ---------------------------------------------------------------------
@@ -385,7 +345,7 @@ class SyntheticVideo(PacedVideoTrack):
         flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
-        if width < 2 * LAYOUT.blocks_per_width or height < 48:
+        if width < 2 * frametag.LAYOUT.blocks_per_width or height < 48:
             raise VideoSourceError(
                 f"synthetic video needs at least 80x48 pixels, not {width}x{height}"
             )
@@ -418,7 +378,7 @@ class SyntheticVideo(PacedVideoTrack):
         if flame is not None:
             draw_flame(img, flame[0], flame[1], frame)
         self._paste(img, self._sprite, self.face_centre(frame))
-        draw_frame_tag(img, frame)
+        frametag.stamp(img, frame)
         return img
 
     def _paste(self, img: Image, sprite: _FaceSprite, centre: tuple[float, float]) -> None:
@@ -470,7 +430,7 @@ class TwoFaceVideo(SyntheticVideo):
         """Frame number ``frame``: the scene with both faces, and the tag on top."""
         img = super().render(frame)
         self._paste(img, self._small, self.small_centre(frame))
-        draw_frame_tag(img, frame)
+        frametag.stamp(img, frame)
         return img
 
 
