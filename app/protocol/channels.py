@@ -155,7 +155,7 @@ class Detections(_Message):
     locked: Box | None = None
 
 
-# Of the relay's target lock (app/vision/lock.py): none: the largest box is the target; locked:
+# Of the relay's target lock (app/protocol/lock.py): none: the largest box is the target; locked:
 # seen on the last snapshot; lost: not seen, looked for near where it was; searching: lost long
 # enough to be looked for in the whole frame.
 LockState = Literal["none", "locked", "lost", "searching"]

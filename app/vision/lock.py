@@ -1,14 +1,7 @@
-"""Target lock: follow the object a person clicked, not the largest one (DESIGN §10).
+"""Target lock in Python: the rule of :mod:`app.protocol.lock` (written there, with its numbers).
 
-The relay owns the lock. A click (a point in frame pixels) locks the box that contains it; on
-each later snapshot the box that continues its track is chosen among those found (the tracker's
-window first, ``window.step``): the one that overlaps it most, else the one whose centre is
-nearest within reach, of a similar size either way. Not seen for ``search_after_s``, it is
-searched for in the whole frame (any similar box, nearest first); not seen for
-``release_after_s``, the lock is released and the largest box is the target again.
-
-This module is the Python side of ``app/static/js/lock.js``; both take the same decisions from the
-same doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
+The Python twin of the relay page's ``lock.js``: both take the same decisions from the same
+doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
 """
 
 from __future__ import annotations
