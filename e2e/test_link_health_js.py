@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.browser import browser_protocol
 from app.protocol.link_health import HEALTH
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 
@@ -90,7 +90,7 @@ def test_the_pair_is_as_relayed_as_its_most_relayed_end(
 
 
 def test_warnings_at_the_protocol_s_thresholds(page: Page) -> None:
-    limits = browser_protocol()["health"]
+    limits = to_json(page_protocol().health)
     assert limits == {
         "periodS": HEALTH.period_s,
         "maxLossPct": HEALTH.max_loss_pct,
