@@ -36,7 +36,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
     opened.goto(server.url + "/")
     opened.evaluate(
         """async (constants) => {
-             window.control = await import('/static/js/control.js');
+             window.control = await import('/static/js/core/control.js');
              window.law = new control.ControlLaw(constants);
            }""",
         to_json(control_config()),

@@ -11,7 +11,7 @@ not seen for ``search_after_s`` is searched for in the whole frame (any similar 
 first); not seen for ``release_after_s``, the lock is released and the largest box is the target
 again. Switching the operation releases the lock.
 
-Python applies the rule in :mod:`app.vision.lock`, the relay page in ``lock.js``, which gets
+Python applies the rule in :mod:`app.vision.lock`, the relay page in ``js/core/lock.js``, which gets
 these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py checks the
 rule, e2e/test_lock_js.py that the two agree on the same sequences.
 """

@@ -1,6 +1,6 @@
 """Target lock in Python: the rule of :mod:`app.protocol.lock` (written there, with its numbers).
 
-The Python twin of the relay page's ``lock.js``: both take the same decisions from the same
+The Python twin of the relay page's ``js/core/lock.js``: both take the same decisions from the same
 doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
 """
 
