@@ -45,36 +45,36 @@ class FrameTagLayout:
 LAYOUT: Final = FrameTagLayout()
 
 
-def block_size(width: int) -> int:
+def block_size(width: int, layout: FrameTagLayout = LAYOUT) -> int:
     """Side of one tag block in pixels for a frame ``width`` pixels wide."""
-    return width // LAYOUT.blocks_per_width
+    return width // layout.blocks_per_width
 
 
-def stamp(pixels: Pixels, frame: int) -> None:
+def stamp(pixels: Pixels, frame: int, layout: FrameTagLayout = LAYOUT) -> None:
     """Write ``frame`` (mod 2**bits) into the top row of blocks of ``pixels`` (H×W or H×W×C),
     in place."""
-    b = block_size(pixels.shape[1])
-    bits = LAYOUT.bits
-    marker = [WHITE] + [BLACK] * (LAYOUT.marker_blocks - 1)
+    b = block_size(pixels.shape[1], layout)
+    bits = layout.bits
+    marker = [WHITE] + [BLACK] * (layout.marker_blocks - 1)
     values = marker + [WHITE if (frame >> (bits - 1 - i)) & 1 else BLACK for i in range(bits)]
     for i, value in enumerate(values):
         pixels[0:b, i * b : (i + 1) * b] = value
 
 
-def read(pixels: Pixels) -> int | None:
+def read(pixels: Pixels, layout: FrameTagLayout = LAYOUT) -> int | None:
     """The frame number :func:`stamp` wrote into ``pixels`` (H×W or H×W×C; only the top
     ``block_size`` rows are read), or None when there is no tag."""
-    b = block_size(pixels.shape[1])
+    b = block_size(pixels.shape[1], layout)
     if b < 2 or pixels.shape[0] < b:
         return None
-    blocks = LAYOUT.marker_blocks + LAYOUT.bits
+    blocks = layout.marker_blocks + layout.bits
     lo, hi = b // 4, b // 4 + max(1, b // 2)
     # The inner square of every block at once (rows, block, columns, channel): the mean of each.
     inner = pixels[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
     white = inner.mean(axis=(0, 2, 3)) >= 128
-    if not white[0] or white[1 : LAYOUT.marker_blocks].any():
+    if not white[0] or white[1 : layout.marker_blocks].any():
         return None
     value = 0
-    for bit in white[LAYOUT.marker_blocks :]:
+    for bit in white[layout.marker_blocks :]:
         value = (value << 1) | int(bit)
     return value

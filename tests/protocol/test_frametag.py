@@ -47,15 +47,14 @@ def test_the_number_wraps_at_24_bits() -> None:
     assert frametag.read(rgb) == 5
 
 
-def test_a_tag_survives_noise_at_the_block_edges() -> None:
-    # A codec blurs block edges: only each block's inner half is read.
+def test_only_the_inner_half_of_each_block_is_read() -> None:
+    # A codec smears block edges: at their worst, each edge reads as the opposite of its block.
     rgb = np.full((480, 640, 3), 90, np.uint8)
     frametag.stamp(rgb, 0xA5A5A5)
     edges = np.ones((16, 16), bool)
     edges[4:12, 4:12] = False
-    noise = np.random.default_rng(1).integers(0, 256, (16, 640, 3), np.uint8)
-    top = rgb[:16]
-    top[np.tile(edges, (1, 40))] = noise[np.tile(edges, (1, 40))]
+    mask = np.tile(edges, (1, 40))
+    rgb[:16][mask] = 255 - rgb[:16][mask]
     assert frametag.read(rgb) == 0xA5A5A5
 
 
