@@ -13,12 +13,10 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Page
 
 from app.protocol import frametag
-from app.server.config import Settings
-from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
+from tests.helpers.served_page import served_page
 
 pytestmark = [pytest.mark.browser]
 
@@ -35,16 +33,8 @@ DECODE_ALL = """async ([frames, changes]) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    server: RunningServer = start_in_thread(Settings(environment="development", token=None))
-    try:
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(**launch_options())
-            opened = browser.new_page()
-            opened.goto(server.url + "/")
-            yield opened
-            browser.close()
-    finally:
-        server.stop()
+    with served_page() as opened:
+        yield opened
 
 
 def rgba(width: int, height: int, grey: int = 90) -> np.ndarray:
