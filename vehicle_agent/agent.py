@@ -24,9 +24,10 @@ from aiortc.contrib.media import MediaRelay
 from pydantic import ValidationError
 
 from app.protocol import channels, jsonedge
-from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
 from app.protocol.errors import describe
+from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist

@@ -26,7 +26,7 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Final, Literal, get_args
 
-from app.protocol.constants import Role as Role  # re-exported: tokens.Role
+from app.protocol.rooms import Role as Role  # re-exported: tokens.Role
 
 ROLES: tuple[Role, ...] = get_args(Role)
 # What a token may grant: a role in a room, or the fleet view of every room.

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any, Final
 
 from app.protocol import tokens
-from app.protocol.constants import CloseCode
+from app.protocol.close_codes import CloseCode
 from app.protocol.tokens import Claims, TokenError, TokenRole
 from app.turtlesim.rosapi import ROSAPI_READS
 from app.turtlesim.rosbridge import (

@@ -7,7 +7,7 @@ import json
 from typing import Any
 
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 from app.signaling.hub import MAX_TOKEN_SESSIONS, Action, Close, Hub, Outgoing
 
 SECRET = "hub-expiry-test-secret"

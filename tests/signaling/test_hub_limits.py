@@ -6,7 +6,7 @@ import json
 from typing import Any
 
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 from app.server.config import Settings
 from app.signaling.hub import (
     BYTES_BURST,

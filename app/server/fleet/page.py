@@ -140,5 +140,5 @@ async def fleet_rooms(
 
 @router.get("/fleet", response_class=HTMLResponse)
 async def fleet_page(request: Request) -> HTMLResponse:
-    """The fleet table, refreshed live by ``/static/js/fleet.js``."""
+    """The fleet table, refreshed live by ``/static/js/pages/fleet.js``."""
     return templates.TemplateResponse(request, "fleet.html", {"refresh_ms": 1000})
