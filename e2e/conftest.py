@@ -86,14 +86,19 @@ OpenRole = Callable[..., Page]
 @pytest.fixture
 def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
     """``open_role(role, browser, **query)`` opens a role page in its own browser context;
-    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say).
+    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say);
+    ``token`` goes in the URL's fragment (``#token=...``), as ``autopilot token`` prints it.
 
     At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
     """
     opened: list[OpenedPage] = []
 
     def open_page(
-        role: str, browser: Browser, init_script: str | None = None, **query: str
+        role: str,
+        browser: Browser,
+        init_script: str | None = None,
+        token: str | None = None,
+        **query: str,
     ) -> Page:
         context = browser.new_context(viewport={"width": 1280, "height": 960})
         context.set_default_timeout(60_000)
@@ -111,7 +116,8 @@ def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator
         page.on("worker", lambda worker: worker.on("console", keep))
         page.on("pageerror", lambda error: entry.console.append(f"pageerror: {error}"))
         opened.append(entry)
-        page.goto(f"{server.url}/{role}?{urlencode(query)}")
+        fragment = "" if token is None else f"#token={token}"
+        page.goto(f"{server.url}/{role}?{urlencode(query)}{fragment}")
         return page
 
     yield open_page
