@@ -2,7 +2,8 @@
 
 A token is ``<payload>.<signature>``, both base64url without padding: the payload is the compact
 JSON ``{"room": R, "role": ROLE, "exp": UNIX_SECONDS, "iat": UNIX_SECONDS, "gid": GRANT}`` and the
-signature is HMAC-SHA256 of the encoded payload under the server's secret. ``iat`` (when it was
+signature is HMAC-SHA256 of the encoded payload under the server's secret, accepted in that one
+spelling only. ``iat`` (when it was
 issued) gives the token's lifetime, which :func:`renewal` keeps; ``gid`` names the grant a
 renewed token continues (absent from a grant's first token, whose signature names it), so that
 what is counted per token -- its sessions in a room -- is counted per grant, renewals included.
@@ -22,6 +23,7 @@ import hashlib
 import hmac
 import json
 import math
+import re
 from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Final, Literal, get_args
@@ -41,6 +43,9 @@ DEFAULT_TTL_S = 12 * 3600
 MIN_SECRET_CHARS = 16
 # Tokens travel in URL fragments and JSON frames; anything longer than this is not one of ours.
 MAX_TOKEN_CHARS = 1024
+# An HMAC-SHA256 (32 bytes) in base64url without padding: 43 characters, the last of which has
+# two unused low bits, always zero as the encoder writes them.
+_CANONICAL_SIGNATURE = re.compile(r"[A-Za-z0-9_-]{42}[AEIMQUYcgkosw048]")
 
 Reason = Literal["malformed", "bad signature", "expired", "wrong room", "wrong role"]
 
@@ -139,12 +144,12 @@ def verify(
     if not isinstance(token, str) or len(token) > MAX_TOKEN_CHARS or token.count(".") != 1:
         raise TokenError("malformed", "expected <payload>.<signature>")
     body, signature = token.split(".")
-    try:
-        given = _b64decode(signature)
-    except ValueError as exc:
-        raise TokenError("malformed", "signature is not base64url") from exc
-    # Checked before the payload is even parsed: nothing unsigned reaches json.loads.
-    if not hmac.compare_digest(given, _mac(secret, body)):
+    if not _CANONICAL_SIGNATURE.fullmatch(signature):
+        raise TokenError("malformed", "signature is not 43 characters of unpadded base64url")
+    # The signature's one spelling, compared as text: a padded, standard-alphabet or otherwise
+    # re-encoded spelling of the same bytes is another token, and refused. Checked before the
+    # payload is even parsed: nothing unsigned reaches json.loads.
+    if not hmac.compare_digest(signature, _b64encode(_mac(secret, body))):
         raise TokenError("bad signature", "not signed with this server's secret")
     claims = _claims(body, signature)
     if claims.exp <= now:

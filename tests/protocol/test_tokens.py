@@ -108,3 +108,43 @@ def test_a_token_minted_before_renewals_is_accepted_but_not_renewed_by_the_serve
     assert claims.iat is None and claims.grant == legacy.split(".")[1]
     with pytest.raises(ValueError, match="predates renewals"):
         tokens.renewal(SECRET, claims, now=NOW)
+
+
+_ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_"
+
+
+def _re_encodings(signature: str) -> list[str]:
+    """Other spellings of the same signature bytes: padded, standard base64's alphabet, and the
+    last character's unused low bits set (a 32-byte MAC leaves 2 of its 258 bits unused)."""
+    raw = base64.urlsafe_b64decode(signature + "=")
+    last = _ALPHABET.index(signature[-1])
+    return [
+        signature + "=",
+        base64.b64encode(raw).decode(),  # '+' and '/' for '-' and '_', and padded
+        base64.b64encode(raw).decode().rstrip("="),
+        signature[:-1] + _ALPHABET[last | 1],
+        signature[:-1] + _ALPHABET[last | 2],
+    ]
+
+
+def test_a_signature_is_accepted_in_its_one_canonical_encoding_only() -> None:
+    # Issue 37.13: padded and standard-base64 spellings of a valid signature were accepted.
+    now = NOW
+    token = tokens.sign(SECRET, "lab", "client", now=now)
+    # One whose signature has a character standard base64 spells differently.
+    while not {"-", "_"} & set(token.split(".")[1]):
+        now += 1
+        token = tokens.sign(SECRET, "lab", "client", now=now)
+    body, signature = token.split(".")
+    assert tokens.verify(SECRET, token, now=now).role == "client"
+    raw = base64.urlsafe_b64decode(signature + "=")
+    others = [other for other in _re_encodings(signature) if other != signature]
+    assert len(set(others)) == 5
+    for other in others:
+        unpadded = other.rstrip("=")
+        # The same bytes, as a lenient decoder reads them ...
+        assert base64.urlsafe_b64decode(unpadded + "=" * (-len(unpadded) % 4)) == raw
+        # ... but not the token's spelling.
+        with pytest.raises(TokenError) as refused:
+            tokens.verify(SECRET, f"{body}.{other}", now=now)
+        assert refused.value.reason in ("malformed", "bad signature"), other

@@ -189,7 +189,8 @@ def test_bearer_header_and_state_reads() -> None:
     assert state_refusal(None, None, NOW) is None
     assert state_refusal(SECRET, _token("client", room="any"), NOW) is None
     assert "Bearer" in (state_refusal(SECRET, None, NOW) or "")
-    assert "bad signature" in (state_refusal(SECRET, "e30.AAAA", NOW) or "")
+    assert "bad signature" in (state_refusal(SECRET, "e30." + "A" * 43, NOW) or "")
+    assert "malformed" in (state_refusal(SECRET, "e30.AAAA", NOW) or "")
 
 
 @pytest.mark.parametrize("op", [["publish"], {"op": "publish"}, 7, None, True])
