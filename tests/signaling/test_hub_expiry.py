@@ -9,17 +9,11 @@ from typing import Any
 from app.protocol import tokens
 from app.protocol.rooms import Role
 from app.signaling.hub import MAX_TOKEN_SESSIONS, Action, Close, Hub, Outgoing
+from tests.helpers.clock import Clock
 
 SECRET = "hub-expiry-test-secret"
 LIFETIME_S = 60
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 1_800_000_000.0
-
-    def __call__(self) -> float:
-        return self.now
+NOW = 1_800_000_000.0
 
 
 def to(conn: str, actions: list[Action]) -> list[dict[str, Any]]:
@@ -41,7 +35,7 @@ def token(clock: Clock, role: Role, ttl_s: float = LIFETIME_S, room: str = "lab"
 
 
 def test_a_session_ends_when_its_token_expires() -> None:
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(secret=SECRET, clock=clock)
     relay, reply = login(hub, "r", "relay", token(clock, "relay"))
     assert reply["renewIn"] == 0.75 * LIFETIME_S  # renew with a quarter of the time to spare
@@ -63,7 +57,7 @@ def test_a_session_ends_when_its_token_expires() -> None:
 
 
 def test_a_frame_after_expiry_ends_the_session_and_goes_nowhere() -> None:
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(secret=SECRET, clock=clock)
     relay, _ = login(hub, "r", "relay", token(clock, "relay", 3600))
     vehicle, _ = login(hub, "v", "vehicle", token(clock, "vehicle"))
@@ -74,7 +68,7 @@ def test_a_frame_after_expiry_ends_the_session_and_goes_nowhere() -> None:
 
 
 def test_renew_gives_a_fresh_token_of_the_same_grant_and_the_session_lives_on() -> None:
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(secret=SECRET, clock=clock)
     first = token(clock, "client")
     grant = tokens.verify(SECRET, first, now=clock.now).grant
@@ -93,7 +87,7 @@ def test_renew_gives_a_fresh_token_of_the_same_grant_and_the_session_lives_on() 
 
 
 def test_a_token_brought_to_renew_must_be_for_the_room_and_role() -> None:
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(secret=SECRET, clock=clock)
     relay, _ = login(hub, "r", "relay", token(clock, "relay"))
     for wrong in (token(clock, "relay", room="elsewhere"), token(clock, "client"), "garbage"):
@@ -108,7 +102,7 @@ def test_a_token_brought_to_renew_must_be_for_the_room_and_role() -> None:
 
 def test_renewed_tokens_count_as_the_grant_they_continue() -> None:
     # Otherwise each renewal would be a new token, and one grant could take every place.
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(secret=SECRET, clock=clock)
     client, _ = login(hub, "c0", "client", token(clock, "client"))
     (renewed,) = to(client, hub.receive(client, '{"type": "renew"}'))
@@ -119,7 +113,7 @@ def test_renewed_tokens_count_as_the_grant_they_continue() -> None:
 
 
 def test_without_a_secret_there_is_nothing_to_renew_or_expire() -> None:
-    clock = Clock()
+    clock = Clock(NOW)
     hub = Hub(clock=clock)
     conn = hub.connect()
     (reply,) = to(conn, hub.receive(conn, '{"type": "login", "name": "c", "role": "client"}'))

@@ -20,14 +20,7 @@ from app.signaling.hub import (
     Hub,
     Outgoing,
 )
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
+from tests.helpers.clock import Clock
 
 
 def to(conn: str, actions: list[Action]) -> list[dict[str, Any]]:
