@@ -15,6 +15,7 @@ from aiortc import RTCIceServer
 
 from app.arguments import add_vehicle_profile, non_negative_number, positive_number
 from app.metrics import add_metrics_arguments
+from app.protocol import tokens
 from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
@@ -28,9 +29,6 @@ from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
-
-# Read when --token is not given, so the token stays out of the process list.
-TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -121,8 +119,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--token",
-        default=os.environ.get(TOKEN_ENV),
-        help=f"vehicle token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
+        # Read from the environment by default, so the token stays out of the process list.
+        default=os.environ.get(tokens.ACCESS_TOKEN_ENV),
+        help=f"vehicle token for the room, from `autopilot token` "
+        f"(default: ${tokens.ACCESS_TOKEN_ENV})",
     )
     parser.add_argument(
         "--ca-file",

@@ -15,10 +15,10 @@ from typing import Any
 import pytest
 from playwright.sync_api import Page, sync_playwright
 
+from app.chromium import launch_options
 from app.protocol import channels
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
 from tests.protocol.samples import SAMPLES
 
 pytestmark = [pytest.mark.browser]

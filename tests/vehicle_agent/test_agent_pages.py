@@ -19,8 +19,8 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
+from app.relay.service import RelayService
 from app.server.serve import RunningServer
-from app.tools.relay_service import RelayService
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import pixel_to_terrain
