@@ -6,16 +6,19 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import os
 import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
-from app.arguments import add_vehicle_profile, non_negative_number, positive_number
+from app.arguments import (
+    add_token_option,
+    add_vehicle_profile,
+    non_negative_number,
+    positive_number,
+)
 from app.metrics import add_metrics_arguments
-from app.protocol import tokens
 from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
 from app.protocol.ros import AUTO, ROS_SETTINGS
 from app.supervise import on_stop_signals
@@ -117,13 +120,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--events", type=Path, metavar="PATH", help="append a JSON-lines event log here"
     )
-    parser.add_argument(
-        "--token",
-        # Read from the environment by default, so the token stays out of the process list.
-        default=os.environ.get(tokens.ACCESS_TOKEN_ENV),
-        help=f"vehicle token for the room, from `autopilot token` "
-        f"(default: ${tokens.ACCESS_TOKEN_ENV})",
-    )
+    add_token_option(parser, "vehicle")
     parser.add_argument(
         "--ca-file",
         type=Path,

@@ -10,7 +10,7 @@ import logging
 import os
 from pathlib import Path
 
-from app.arguments import add_relay_profile, positive_integer
+from app.arguments import add_relay_profile, add_token_option, positive_integer
 from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments
 from app.protocol import tokens
@@ -27,13 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", default="default", help="room to join (default: default)")
     parser.add_argument("--name", default="relay", help="peer name (default: relay)")
     add_relay_profile(parser, "relay profile")
-    parser.add_argument(
-        "--token",
-        # Read from the environment by default, so the token stays out of the process list.
-        default=os.environ.get(tokens.ACCESS_TOKEN_ENV),
-        help=f"relay token for the room, from `autopilot token` "
-        f"(default: ${tokens.ACCESS_TOKEN_ENV})",
-    )
+    add_token_option(parser, "relay")
     parser.add_argument(
         "--ca-file", type=Path, metavar="PEM", help="trust this CA for an https:// server"
     )

@@ -1,8 +1,9 @@
 """The relay's snapshot → goal loop (snapshot-loop.js) driven with frames, with no WebRTC.
 
 Headless Chromium on the parity page, which has the relay's analyzer; the test imports the loop
-module there, feeds it synthetic RGBA frames (a face pasted at a known place, a frame tag in the
-top row, or nothing at all) on an injected clock, and checks the goals it hands the sender.
+module there, feeds it synthetic RGBA frames (faces pasted at known places, a frame tag in the
+top row, or nothing at all) on an injected clock, and checks the goals it hands the sender and
+what the target lock, held in the analyzer's worker, becomes.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/config.js');
+  await window.analyzer.unlock(); // another test's lock
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;
@@ -40,7 +41,7 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
   const emitted = { goal: [], detections: [] };
   const loop = new SnapshotLoop({
     analyzer: window.analyzer, profile, op: window.analyzer.defaultOp,
-    sendGoal: (goal) => { sent.push(goal); return true; }, lockRule: PROTOCOL.lock,
+    sendGoal: (goal) => { sent.push(goal); return true; },
     clock: () => now, wallClock: () => 1.7e12 + now,
   });
   for (const type of Object.keys(emitted)) {
@@ -67,19 +68,25 @@ def page() -> Iterator[Page]:
         yield opened
 
 
-def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
-    """Base64 RGBA of a grey frame with the face (top-left corner ``face_at``) and a tag."""
+def faces(at: list[tuple[int, int, int]], tag: int) -> str:
+    """Base64 RGBA of a grey frame with a face of side ``size`` at each ``(x, y, size)`` (its
+    top-left corner) and a frame tag."""
     frame = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
-    placed = None
-    if face_at is not None:
-        x, y = face_at
-        frame[y : y + FACE_SIZE, x : x + FACE_SIZE] = cv2.resize(
-            face_crop(), (FACE_SIZE, FACE_SIZE), interpolation=cv2.INTER_AREA
+    for x, y, size in at:
+        frame[y : y + size, x : x + size] = cv2.resize(
+            face_crop(), (size, size), interpolation=cv2.INTER_AREA
         )
-        placed = Placed(x, y, FACE_SIZE, FACE_SIZE)
     draw_frame_tag(frame, tag)
     rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
-    return base64.b64encode(rgba.tobytes()).decode(), placed
+    return base64.b64encode(rgba.tobytes()).decode()
+
+
+def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
+    """Base64 RGBA of a grey frame with the face (top-left corner ``face_at``) and a tag."""
+    if face_at is None:
+        return faces([], tag), None
+    x, y = face_at
+    return faces([(x, y, FACE_SIZE)], tag), Placed(x, y, FACE_SIZE, FACE_SIZE)
 
 
 def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page) -> None:
@@ -124,3 +131,78 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
     assert second is None  # one snapshot in flight at a time: the other frame is skipped
     assert got["afterStop"] is None
     assert (got["snapshots"], got["goalsSent"]) == (len(layout) + 1, 4)
+
+
+# Runs a script on the loop at the loop's injected clock: [kind, t (s), ...] with kind `frame`
+# (base64 RGBA), `click` (x, y) or `unlock`. Returns an outcome per step and the lock messages.
+LOCK_DRIVE = """async ({ steps, profile }) => {
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  await window.analyzer.unlock(); // another test's lock
+  let now = 0;
+  const loop = new SnapshotLoop({
+    analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
+    sendGoal: () => true, clock: () => now,
+  });
+  const locks = [];
+  loop.addEventListener('lock', (event) => locks.push(event.detail));
+  loop.start();
+  const outcomes = [];
+  for (const [kind, t, ...args] of steps) {
+    now = t * 1000;
+    if (kind === 'frame') {
+      const data = Uint8ClampedArray.from(atob(args[0]), (c) => c.charCodeAt(0));
+      const outcome = await loop.frame({ width: %d, height: %d, data });
+      outcomes.push({ goal: outcome.goal, locked: outcome.detections.locked });
+    } else if (kind === 'click') {
+      outcomes.push(await loop.lockAt(args[0], args[1]));
+    } else {
+      outcomes.push(await loop.unlock('released by the test'));
+    }
+  }
+  return { outcomes, locks, last: loop.lockMessage() };
+}""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
+
+
+def test_the_lock_follows_its_face_searches_the_frame_for_it_and_lets_go(page: Page) -> None:
+    rule = page.evaluate("async () => (await import('/static/js/config.js')).PROTOCOL.lock")
+    large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
+    both, moved, alone = (
+        faces([large, small], 1),
+        faces([large, small_elsewhere], 2),
+        faces([large], 3),
+    )
+    # The small face's new place is farther from its old one than the lock reaches without
+    # searching the whole frame.
+    assert abs(small[1] - small_elsewhere[1]) > rule["reach"] * small[2]
+    searched = 0.1 + rule["searchAfterS"] + 0.02
+    released = searched + 0.05 + rule["releaseAfterS"] + 0.02
+    steps: list[list[Any]] = [
+        ["frame", 0.05, both],
+        ["click", 0.07, small[0] + small[2] / 2, small[1] + small[2] / 2],
+        ["frame", 0.1, both],
+        ["frame", 0.15, moved],  # out of reach: lost, no goal
+        ["frame", searched, alone],  # not seen for longer than searchAfterS: searching
+        ["frame", searched + 0.05, moved],  # found in the whole frame
+        ["frame", released, alone],  # not seen for longer than releaseAfterS: released
+        ["frame", released + 0.05, alone],
+    ]
+    got: dict[str, Any] = page.evaluate(LOCK_DRIVE, {"steps": steps, "profile": DEFAULT_PROFILE})
+    outcomes = got["outcomes"]
+
+    def on(outcome: dict[str, Any], face: tuple[int, int, int]) -> bool:
+        goal = outcome["goal"]
+        x, y, size = face
+        return goal is not None and x < goal["x"] < x + size and y < goal["y"] < y + size
+
+    assert on(outcomes[0], large)  # the largest face, while nothing is locked
+    assert outcomes[1] is True
+    assert on(outcomes[2], small) and outcomes[2]["locked"] is not None
+    assert outcomes[3]["goal"] is None and outcomes[3]["locked"] is None
+    assert outcomes[4]["goal"] is None
+    assert on(outcomes[5], small_elsewhere)
+    assert outcomes[6]["goal"] is None  # this snapshot looked for the small face
+    assert on(outcomes[7], large)  # released: the largest face again
+    states = [message["state"] for message in got["locks"]]
+    assert states == ["locked", "lost", "searching", "locked", "none"], got["locks"]
+    assert "not seen" in got["locks"][-1]["reason"]
+    assert got["last"]["state"] == "none"

@@ -1,6 +1,7 @@
 // Target lock: follow the object a person clicked, not the largest one (DESIGN §10).
 //
-// The relay owns the lock. A click (a point in frame pixels) locks the box that contains it; on
+// The relay's vision worker owns the lock (worker/vision-worker.js): it asks, chooses and
+// updates on each snapshot. A click (a point in frame pixels) locks the box that contains it; on
 // each later snapshot the box that continues its track is chosen among those found (the
 // tracker's window first, window.js step): the one that overlaps it most, else the one whose
 // centre is nearest within reach, of a similar size either way. Not seen for searchAfterS, it is
