@@ -66,6 +66,14 @@ def test_an_answer_to_an_older_lock_is_not_news() -> None:
     assert target.state == "none"
 
 
+def test_a_clicked_small_face_stays_the_target_beside_a_larger_one() -> None:
+    events = [event for event, _ in lock_sequences.TWO_FACES]
+    outcomes = lock_sequences.run(events, RULE)
+    got = lock_sequences.decisions(events, outcomes)
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.TWO_FACES, got, strict=True)):
+        assert have == want, (i, event)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     events, owners = lock_sequences.script(seed)
