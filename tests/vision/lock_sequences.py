@@ -30,7 +30,8 @@ Event = list[Any]
 # is clicked; its track is kept while the large face stays, grows, passes right over it, and
 # while a third face a little larger than it (of a similar size) is in the picture; a snapshot
 # that misses it chooses nothing, not the large face; a move with no overlap is followed to the
-# nearest centre within reach; after Unlock the large face is the target again.
+# nearest centre within reach; after Unlock the large face is the target again; a click on a box
+# inside a larger one locks the inner one.
 TWO_FACES: list[tuple[Event, list[Any]]] = [
     (["snapshot", 0.0, [[100, 100, 130, 130], [440, 200, 76, 76]]], [[100, 100, 130, 130], "none"]),
     (["click", 0.01, [478.0, 238.0]], [True, "locked"]),
@@ -59,6 +60,12 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
     (
         ["snapshot", 0.35, [[546, 223, 60, 60], [100, 100, 130, 130]]],
         [[100, 100, 130, 130], "none"],
+    ),
+    (["snapshot", 0.4, [[100, 100, 130, 130], [140, 120, 48, 48]]], [[100, 100, 130, 130], "none"]),
+    (["click", 0.41, [164.0, 144.0]], [True, "locked"]),
+    (
+        ["snapshot", 0.45, [[101, 100, 130, 130], [142, 121, 48, 48]]],
+        [[142, 121, 48, 48], "locked"],
     ),
 ]
 
