@@ -25,6 +25,7 @@ from app.vision.reference import detect
 from app.vision.spec import load_spec
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import FACES
+from vehicle_agent.video import draw_frame_tag
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -187,3 +188,27 @@ def test_a_window_search_converts_only_its_part_and_finds_what_python_finds(page
     assert np.array_equal(window.crop(analysed, rects[1]), read)
     assert 0 < windowed["converted"] < WIDTH * HEIGHT / 2, windowed["converted"]
     assert not np.array_equal(analysed, rgba)
+
+
+@pytest.mark.parametrize(("width", "height"), [(WIDTH, HEIGHT), (640, 240)])
+def test_a_frame_tag_is_read_back_from_the_i420_frame_a_window_searched(
+    page: Page, width: int, height: int
+) -> None:
+    # The relay names each goal's frame by its tag, read from the frame it analysed. A window
+    # search far below the top converts only its part of a BT.601 frame, and the tag's rows on
+    # their own: after a frame whose tag holds the opposite bits, the tag read must be this
+    # frame's. (A wide frame too: its tag's blocks are taller than a twelfth of its height.)
+    first, second = 0x5A3C0F, 0x5A3C0F ^ 0xFFFFFF
+    frames = []
+    for tag in (first, second):
+        frame = np.asarray(cv2.resize(face_scene(), (width, height)), np.uint8)
+        draw_frame_tag(frame, tag)
+        frames.append(frame)
+    around = [width // 2 - 40, height - 100, 80, 80]
+    calls = [
+        [i420_payload(frames[0]), "face", {}],
+        [i420_payload(frames[1]), "face", {"around": around}],
+    ]
+    whole, windowed = page.evaluate(IN_TURN, [calls, BT601_LIMITED])
+    assert whole["converted"] >= width * height and windowed["converted"] < width * height / 2
+    assert [whole["frame"], windowed["frame"]] == [first, second]
