@@ -18,7 +18,7 @@ from urllib.parse import parse_qs, urlsplit
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.browser import browser_protocol
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from app.vision import lock
 from app.vision.window import Box
@@ -27,7 +27,7 @@ from tests.vision import lock_sequences
 
 pytestmark = [pytest.mark.browser]
 
-PAGE_RULE = browser_protocol()["lock"]
+PAGE_RULE = to_json(page_protocol().lock)
 
 
 def page_rule(rule: dict[str, float]) -> lock.LockRule:
@@ -62,7 +62,7 @@ RUN_JS = """([events, rule]) => {
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "lock") as opened:
+    with module_page(server, browser, "core/lock") as opened:
         yield opened
 
 
@@ -76,9 +76,7 @@ def test_the_rule_reaches_the_page_from_app_protocol(
     try:
         with relay.expect_worker() as started:
             relay.goto(server.url + "/relay")
-        in_page = relay.evaluate(
-            "async () => (await import('/static/js/protocol.js')).PROTOCOL.lock"
-        )
+        in_page = relay.evaluate("async () => (await import('/static/js/config.js')).PROTOCOL.lock")
         query = parse_qs(urlsplit(started.value.url).query)
         in_worker = json.loads(query["protocol"][0])["lock"]
     finally:

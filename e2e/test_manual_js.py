@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import page_constants
+from app.protocol.control import control_config
+from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.manual_sequences import SEQUENCES, run
@@ -18,7 +19,7 @@ from vehicle_agent.control import PROFILES
 
 pytestmark = [pytest.mark.browser]
 
-CONSTANTS = page_constants()
+CONSTANTS = to_json(control_config())
 
 RUN_JS = """([events, profile, deadmanS]) => {
   const now = [0];
@@ -44,7 +45,7 @@ def rounded(value: Any) -> Any:
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "manual") as opened:
+    with module_page(server, browser, "core/manual") as opened:
         yield opened
 
 
@@ -63,7 +64,7 @@ VEHICLE_PAGE_DEAD_MAN = """async (times) => {
   const html = await (await fetch('/vehicle')).text();
   const page = new DOMParser().parseFromString(html, 'text/html');
   const config = JSON.parse(page.getElementById('config').textContent);
-  const { ControlLaw } = await import('/static/js/control.js');
+  const { ControlLaw } = await import('/static/js/core/control.js');
   const profile = new ControlLaw(config.control).profiles[config.profile];
   const now = [1.0];
   const drive = new manual.ManualDrive(profile, config.control.deadmanS, () => now[0]);

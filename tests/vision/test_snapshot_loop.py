@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page
 
-from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL, DEFAULT_PROFILE
+from app.protocol import channels, frametag
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.relay_profiles import DEFAULT_PROFILE
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
-from vehicle_agent.video import draw_frame_tag
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -31,8 +31,8 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # Feeds the frames in order (a null entry stops the loop), then two at once to see the second
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
-  const { SnapshotLoop } = await import('/static/js/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/protocol.js');
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const { PROTOCOL } = await import('/static/js/config.js');
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;
@@ -77,7 +77,7 @@ def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None
             face_crop(), (FACE_SIZE, FACE_SIZE), interpolation=cv2.INTER_AREA
         )
         placed = Placed(x, y, FACE_SIZE, FACE_SIZE)
-    draw_frame_tag(frame, tag)
+    frametag.stamp(frame, tag)
     rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
     return base64.b64encode(rgba.tobytes()).decode(), placed
 
@@ -131,8 +131,8 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 # goal's [x, y] (or null) and the lock's state, or whether the click locked; and the states the
 # loop announced.
 LOCK_STEPS = """async ({ steps, profile }) => {
-  const { SnapshotLoop } = await import('/static/js/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/protocol.js');
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const { PROTOCOL } = await import('/static/js/config.js');
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   await window.analyzer.resetTracking();
