@@ -127,14 +127,13 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 
 
 # Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
-# t seconds: "frame" analyses a frame, "click" locks at a frame point. Returns, for each, the
-# goal's [x, y] (or null) and the lock's state, or whether the click locked; and the states the
-# loop announced.
-LOCK_STEPS = """async ({ steps, profile }) => {
+# t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
+# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; and the
+# states the loop announced.
+LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
   const { PROTOCOL } = await import('/static/js/config.js');
-  const rgba = (b64) => ({ width: %d, height: %d,
-    data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
+  const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
   await window.analyzer.resetTracking();
   let now = 0;
   const loop = new SnapshotLoop({
@@ -151,7 +150,7 @@ LOCK_STEPS = """async ({ steps, profile }) => {
       outcomes.push(loop.lockAt(arg[0], arg[1]));
       continue;
     }
-    const outcome = await loop.frame(rgba(arg));
+    const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
     outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
   }
   loop.stop();
@@ -168,14 +167,16 @@ def test_a_locked_face_that_jumped_is_found_by_the_whole_frame_search(page: Page
     (here, placed_here), (there, placed_there) = scene((40, 100), 1), scene((400, 220), 2)
     assert placed_here is not None and placed_there is not None
     steps = [
-        ["frame", 0.05, here],
+        ["frame", 0.05, 0],
         ["click", 0.06, list(placed_here.centre)],
-        ["frame", 0.1, here],
-        ["frame", 0.6, there],
-        ["frame", 1.2, there],
-        ["frame", 1.25, there],
+        ["frame", 0.1, 0],
+        ["frame", 0.6, 1],
+        ["frame", 1.2, 1],
+        ["frame", 1.25, 1],
     ]
-    got: dict[str, Any] = page.evaluate(LOCK_STEPS, {"steps": steps, "profile": DEFAULT_PROFILE})
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": [here, there], "steps": steps, "profile": DEFAULT_PROFILE}
+    )
     outcomes = got["outcomes"]
 
     def on(goal: list[float] | None, placed: Placed) -> bool:
