@@ -13,7 +13,8 @@ import argparse
 import math
 import os
 
-from app.protocol import constants, control, tokens
+from app.protocol import control, relay_profiles, tokens
+from app.protocol.rooms import Role
 
 
 def _number(text: str) -> float:
@@ -74,16 +75,16 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
 
 
 def add_relay_profile(parser: argparse.ArgumentParser, purpose: str) -> None:
-    """``--profile``: one of the relay profiles (:data:`app.protocol.constants.PROFILES`)."""
+    """``--profile``: one of the relay profiles (:data:`app.protocol.relay_profiles.PROFILES`)."""
     parser.add_argument(
         "--profile",
-        choices=constants.PROFILES,
-        default=constants.DEFAULT_PROFILE,
-        help=f"{purpose} (default: {constants.DEFAULT_PROFILE})",
+        choices=relay_profiles.PROFILES,
+        default=relay_profiles.DEFAULT_PROFILE,
+        help=f"{purpose} (default: {relay_profiles.DEFAULT_PROFILE})",
     )
 
 
-def add_token_option(parser: argparse.ArgumentParser, role: constants.Role) -> None:
+def add_token_option(parser: argparse.ArgumentParser, role: Role) -> None:
     """``--token``: a token for ``role`` in the room, from ``autopilot token``; by default read
     from the environment, so that it stays out of the process list."""
     parser.add_argument(

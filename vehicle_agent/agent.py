@@ -21,8 +21,9 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels, jsonedge
-from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.rooms import DEFAULT_ROOM
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
 from vehicle_agent.events import EventLog

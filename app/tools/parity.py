@@ -35,7 +35,7 @@ from playwright.sync_api import Page, sync_playwright
 
 from app.arguments import add_relay_profile
 from app.chromium import launch_options
-from app.protocol.constants import Profile
+from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.vision.reference import Detection, detect

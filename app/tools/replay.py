@@ -30,7 +30,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from app.arguments import add_relay_profile
-from app.protocol.constants import Profile
+from app.protocol.relay_profiles import Profile
 from app.tools.parity import open_harness
 from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
 

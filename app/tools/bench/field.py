@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from app.protocol.constants import VIDEO_SIZE
+from app.protocol.video import VIDEO_SIZE
 from app.tools.bench.stats import (
     PoseSample,
     TruthSample,

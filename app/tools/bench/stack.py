@@ -25,9 +25,9 @@ from playwright.async_api import Browser, ConsoleMessage, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
-from app.protocol.constants import VIDEO_FPS, VIDEO_SIZE
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.tools.bench.cpu import tree_cpu_s
 from app.tools.bench.results import MemorySample, ProfileRun
 from app.tools.bench.stats import (
