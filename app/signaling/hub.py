@@ -48,9 +48,8 @@ log = logging.getLogger(__name__)
 ConnId = str
 
 # Places in a room, by role: each role has its own, so clients never take the relay's or the
-# vehicle's. One relay; a second vehicle place lets a restarted vehicle (under a new name) in
-# before its predecessor's socket is known to be gone.
-ROOM_PLACES: Final[Mapping[Role, int]] = {"vehicle": 2, "relay": 1, "client": 29}
+# vehicle's. One relay and one vehicle (a second of either is refused by name, see _login).
+ROOM_PLACES: Final[Mapping[Role, int]] = {"vehicle": 1, "relay": 1, "client": 30}
 # Peers per room. Also bounds each roster update, which every join and leave sends to everyone
 # in the room (N messages of N entries).
 MAX_ROOM_PEERS: Final = sum(ROOM_PLACES.values())
@@ -343,11 +342,16 @@ class Hub:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
             )
-        relay = _relay_of(room)
-        if login.role == "relay" and relay is not None:
-            return self._refuse_login(
-                connection, f"room {login.room!r} already has a relay ({relay.name!r})"
-            )
+        # One relay and one vehicle per room: the relay pilots one vehicle and forwards one
+        # video. A second of either is told at the door which one the room has, rather than
+        # admitted to take the first one's place at the relay.
+        if login.role in ("relay", "vehicle"):
+            holder = _one_of(room, login.role)
+            if holder is not None:
+                return self._refuse_login(
+                    connection,
+                    f"room {login.room!r} already has a {login.role} ({holder.name!r})",
+                )
         grant = None if claims is None else claims.grant
         if (no_place := _no_place(room, login, grant)) is not None:
             return self._refuse_login(connection, no_place, why="caps")
@@ -541,8 +545,12 @@ def _no_place(room: dict[str, _Peer], login: Login, grant: str | None) -> str | 
     return None
 
 
+def _one_of(room: dict[str, _Peer], role: Role) -> _Peer | None:
+    return next((peer for peer in room.values() if peer.role == role), None)
+
+
 def _relay_of(room: dict[str, _Peer]) -> _Peer | None:
-    return next((peer for peer in room.values() if peer.role == "relay"), None)
+    return _one_of(room, "relay")
 
 
 def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:

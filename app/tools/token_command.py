@@ -23,7 +23,6 @@ from app.protocol.urls import ServerUrlError, page_url, reachable_host, server_b
 
 log = logging.getLogger(__name__)
 
-SECRET_ENV = "AUTOPILOT_SECRET"
 MAKE_SECRET = (
     "export AUTOPILOT_SECRET=$(python3 -c 'import secrets; print(secrets.token_urlsafe(32))')"
 )
@@ -72,11 +71,11 @@ def run(args: argparse.Namespace) -> int:
     elif args.room is None:
         log.error("--room is required for a %s token", args.role)
         return 1
-    secret = os.environ.get(SECRET_ENV, "")
+    secret = os.environ.get(tokens.SECRET_ENV, "")
     if not secret:
         log.error(
             "cannot mint a token: %s is not set (the server's signing secret); make one with: %s",
-            SECRET_ENV,
+            tokens.SECRET_ENV,
             MAKE_SECRET,
         )
         return 1

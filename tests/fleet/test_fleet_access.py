@@ -23,9 +23,9 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
 from app.protocol import tokens
+from app.relay.pool import RelayPool
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.relay_pool import RelayPool
 from tests.fleet.conftest import ServeProcess
 from tests.server.test_signaling_ws import Peer
 

@@ -7,13 +7,16 @@ import pytest
 
 from app.protocol.control import DEADMAN_S
 from tests.helpers.agent import Vehicle
-from vehicle_agent.control import PROFILES
+from vehicle_agent.control import PROFILES, ZERO_TWIST, Twist
 from vehicle_agent.manual import ManualDrive
 
 from .manual_sequences import SEQUENCES, run
 
 DEFAULT = PROFILES["default"]
 FULL = [DEFAULT.manual_linear, 0.0]
+# The dead-man's contract (docs/contracts.md), written as the number it is: a test that read it
+# from app.protocol.control would move with the constant it is there to hold.
+DEADMAN_CONTRACT_S = 0.3
 
 
 def twists(name: str) -> list[list[float] | None]:
@@ -40,6 +43,21 @@ def test_the_dead_man_stops_the_turtle_once_after_the_last_command() -> None:
     assert answers[1][3] == pytest.approx(DEADMAN_S)
     assert answers[2][3] == pytest.approx(0.01)
     assert answers[3][3] is None
+
+
+def test_the_dead_man_fires_0_3_s_after_the_last_command_and_not_before() -> None:
+    now = [1.0]
+    drive = ManualDrive(DEFAULT, clock=lambda: now[0])
+    drive.set_mode("manual", "ann")
+    assert drive.drive(1, 1.0, 0.0) == Twist(DEFAULT.manual_linear, 0.0)
+    assert drive.until_deadman() == pytest.approx(DEADMAN_CONTRACT_S)
+    for t in (1.1, 1.25, 1.29):  # still moving: a held key resends within this
+        now[0] = t
+        assert drive.tick() is None, t
+    now[0] = 1.0 + DEADMAN_CONTRACT_S
+    assert drive.tick() == ZERO_TWIST
+    now[0] = 1.31
+    assert drive.tick() is None and drive.until_deadman() is None  # one zero Twist only
 
 
 def test_old_commands_are_dropped_and_shares_clamped_to_the_profile_speeds() -> None:
