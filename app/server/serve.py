@@ -152,11 +152,12 @@ class _QuietInvalidUtf8(logging.Filter):
         return True
 
 
-# The kernel's send buffer of each WebSocket connection (Linux gives twice this). Left to itself
-# Linux grows it to 4 MiB, so a peer that never reads takes megabytes before the writer ever waits:
-# until then the server goes on making and sending it messages at full speed, and only then does
-# its outbox fill. With a small buffer a peer that does not read is seen as one at once.
-SEND_BUFFER_BYTES: Final = 64 * 1024
+# What each WebSocket connection may hold unsent below the app: the kernel's send buffer (Linux
+# gives twice this) and asyncio's write buffer above it. Left to itself Linux grows the first to
+# 4 MiB, so a peer that never reads took megabytes before the writer ever waited: until then the
+# server went on making and sending it messages, and only then did its outbox fill. With small
+# buffers a peer that does not read is seen as one within a few dozen KB.
+SEND_BUFFER_BYTES: Final = 16 * 1024
 
 
 class _SansIOWebSocket(WebSocketsSansIOProtocol):
@@ -167,10 +168,12 @@ class _SansIOWebSocket(WebSocketsSansIOProtocol):
     RFC 6455 allows."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        """Bound the kernel's send buffer of the connection (:data:`SEND_BUFFER_BYTES`)."""
+        """Bound what the connection holds unsent (:data:`SEND_BUFFER_BYTES`)."""
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        if isinstance(transport, asyncio.WriteTransport):
+            transport.set_write_buffer_limits(high=SEND_BUFFER_BYTES)
         super().connection_made(transport)
 
     def send_receive_event_to_app(self) -> None:

@@ -283,8 +283,9 @@ async def test_the_tick_holds_its_rate_while_63_sessions_never_read_16_subscript
     """Issue 37.8: 63 read-only sessions x 16 pose subscriptions that never read dropped the
     simulator from 62.5 ticks/s to 26.5. The ticks are counted over equal stretches of time
     before those sessions, with them and after them: the failure is a starvation by half or
-    worse, the bound is half of the slower stretch without them (the machine's own load slows
-    every count alike)."""
+    worse, for as long as they stay; the bound is half of the slower stretch without them. The
+    machine is shared: a stretch with them is counted again (three at most) when another
+    process took the cores meanwhile, which a starvation they cause would outlast."""
     url = rosbridge_url(server)
     async with connect(url) as ws:
         await ws.send(json.dumps({"op": "set_level", "level": "none"}))
@@ -315,8 +316,12 @@ async def test_the_tick_holds_its_rate_while_63_sessions_never_read_16_subscript
         before = await ticks_in(2.0)
         readers = [await asyncio.to_thread(stuck) for _ in range(63)]
         try:
-            await asyncio.sleep(1.0)  # every socket that does not read is full by now
-            beside_them = await ticks_in(2.0)
+            # Each session is sent what fills its socket, at most 125 publications a second:
+            # a few seconds, and then nothing more while it does not read.
+            await asyncio.sleep(3.0)
+            beside_them = [await ticks_in(2.0)]
+            while len(beside_them) < 3 and max(beside_them) <= before / 2:
+                beside_them.append(await ticks_in(2.0))
             assert (await http.get(f"{server.url}/healthz")).status_code == 200
         finally:
             for client in readers:
@@ -324,4 +329,4 @@ async def test_the_tick_holds_its_rate_while_63_sessions_never_read_16_subscript
         await asyncio.sleep(0.5)
         after = await ticks_in(2.0)
     alone = min(before, after)
-    assert beside_them > alone / 2, f"{beside_them} ticks in 2 s beside them, {alone} alone"
+    assert max(beside_them) > alone / 2, f"{beside_them} ticks in 2 s beside them, {alone} alone"
