@@ -25,8 +25,8 @@ ROOM = "renewing"
 # Long enough for a page to load and log in with the token minted just before, short enough
 # that the pages outlive several of them in a test.
 LIFETIME_S = 10.0
-# Each page renews after 3/4 of its token's time: this many renewals outlive 3 lifetimes.
-RENEWALS = 4
+# Each page renews after half of its token's time: this many renewals outlive 3 lifetimes.
+RENEWALS = 6
 
 
 @pytest.fixture

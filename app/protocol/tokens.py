@@ -64,8 +64,9 @@ class TokenError(ValueError):
         self.reason: Reason = reason
 
 
-# A session renews its token once this fraction of the time it has left has passed.
-RENEW_AFTER: Final = 0.75
+# A session renews its token once this fraction of the time it has left has passed: half, as a
+# DHCP client renews its lease, leaves the other half for a late timer and the round trip.
+RENEW_AFTER: Final = 0.5
 
 
 @dataclass(frozen=True)

@@ -281,7 +281,7 @@ async def test_a_renewing_agent_keeps_its_session_and_media_past_several_token_l
     and goals through several lifetimes of its tokens, and goals still drive the turtle."""
     secret = "agent-renewal-test-secret"
     server = start_server(Settings(environment="development", secret=secret))
-    lifetime = 3.0
+    lifetime = 6.0  # long enough for the turtle to connect on a loaded machine
     first = tokens.sign(secret, "default", "vehicle", now=time.time(), ttl_s=lifetime)
     turtle = RosbridgeTurtle(rosbridge_url(server), token=first)
     video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5))
