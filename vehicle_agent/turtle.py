@@ -253,6 +253,8 @@ class RosbridgeTurtle:
         self.headers = {"Authorization": f"Bearer {token}"}
         if self._ros is not None:
             self._ros.send_on_ready(roslibpy.Message({"op": "auth", "token": token}))
+            # A reconnection (roslibpy's own, after a drop) shakes hands with the fresh one.
+            self._ros.factory.headers = dict(self.headers)
 
     async def close(self) -> None:
         """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""
