@@ -21,6 +21,7 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels, jsonedge
+from app.protocol import events as ev
 from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
 from app.protocol.control import with_standoff
 from app.supervise import Backoff
@@ -311,7 +312,7 @@ class Agent:
         self.goal_gate.reset()
         self._last_goal_at = None
         self.manual.reset_link()
-        self.events.emit("link", state="offer", relay=link.relay)
+        self.events.emit(ev.LinkChanged(state="offer", relay=link.relay, t=time.monotonic()))
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
 
@@ -319,11 +320,13 @@ class Agent:
         candidates = link.local_candidate_types()
         log.info("link to %s up (local candidates: %s)", link.relay, ", ".join(candidates))
         self.events.emit(
-            "link",
-            state="up",
-            relay=link.relay,
-            local_candidates=candidates,
-            selected=link.selected_candidate_type(),
+            ev.LinkChanged(
+                state="up",
+                relay=link.relay,
+                local_candidates=tuple(candidates),
+                selected=link.selected_candidate_type(),
+                t=time.monotonic(),
+            )
         )
 
     def _check_connected(self, link: RelayLink) -> None:
@@ -350,7 +353,9 @@ class Agent:
         if link is None:
             return
         log.info("link to %s down: %s", link.relay, reason)
-        self.events.emit("link", state="down", relay=link.relay, reason=reason)
+        self.events.emit(
+            ev.LinkChanged(state="down", relay=link.relay, reason=reason, t=time.monotonic())
+        )
         await link.close()
 
     # --- data channel ----------------------------------------------------------------------
@@ -388,22 +393,27 @@ class Agent:
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
         if self.manual.manual:
             self.goals_ignored += 1
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why="manual")
+            self.events.emit(
+                ev.GoalDropped(seq=goal.seq, frame=goal.frame, why="manual", t=time.monotonic())
+            )
             return
-        verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
+        now = time.monotonic()
+        verdict = self.goal_gate.admit(goal.seq, goal.t, now)
         if verdict != "fresh":
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
+            self.events.emit(ev.GoalDropped(seq=goal.seq, frame=goal.frame, why=verdict, t=now))
             return
-        self._last_goal_at = time.monotonic()
+        self._last_goal_at = now
         self.events.emit(
-            "goal",
-            seq=goal.seq,
-            op=goal.op,
-            frame=goal.frame,
-            x=goal.x,
-            y=goal.y,
-            w=goal.w,
-            h=goal.h,
+            ev.GoalApplied(
+                seq=goal.seq,
+                op=goal.op,
+                frame=goal.frame,
+                x=goal.x,
+                y=goal.y,
+                w=goal.w,
+                h=goal.h,
+                t=now,
+            )
         )
         self._publish(
             self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
@@ -426,13 +436,19 @@ class Agent:
             f" by {message.operator}" if message.operator else "",
             message.reason or relay,
         )
-        self.events.emit("mode", mode=message.mode, operator=message.operator)
+        self.events.emit(
+            ev.ModeChanged(mode=message.mode, operator=message.operator, t=time.monotonic())
+        )
         self._publish(changed)
 
     def _on_drive(self, relay: str, message: channels.Drive) -> None:
         twist = self.manual.drive(message.seq, message.linear, message.angular)
         moving = twist is not None and not twist.is_zero
-        self.events.emit("drive", seq=message.seq, applied=twist is not None, moving=moving)
+        self.events.emit(
+            ev.DriveReceived(
+                seq=message.seq, applied=twist is not None, moving=moving, t=time.monotonic()
+            )
+        )
         self._publish(twist)
 
     def _halt(self) -> None:
@@ -454,10 +470,12 @@ class Agent:
         except TurtleError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
-            self.events.emit("spawn", ok=False, reason=str(exc))
+            self.events.emit(ev.SpawnStep(ok=False, reason=str(exc), t=time.monotonic()))
             return
         log.info("spawn step: turtle turned to θ = %.4f rad", SPAWN_THETA)
-        self.events.emit("spawn", ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA)
+        self.events.emit(
+            ev.SpawnStep(ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA, t=time.monotonic())
+        )
 
     def _on_pose(self, pose: Pose) -> None:
         self.pose = pose
@@ -478,7 +496,7 @@ class Agent:
                         x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
                     )
                 )
-            self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
+            self.events.emit(ev.PoseReport(x=pose.x, y=pose.y, theta=pose.theta, sent=sent, t=now))
 
     async def _tick(self) -> None:
         while True:
@@ -492,11 +510,13 @@ class Agent:
             return
         self.turtle.publish(twist)
         self.events.emit(
-            "twist",
-            seq=twist.seq,
-            frame=twist.frame,
-            linear=twist.linear_x,
-            angular=twist.angular_z,
+            ev.TwistSent(
+                seq=twist.seq,
+                frame=twist.frame,
+                linear=twist.linear_x,
+                angular=twist.angular_z,
+                t=time.monotonic(),
+            )
         )
         if twist.is_zero and twist.seq is None:
             log.info("turtle stopped")

@@ -9,11 +9,12 @@ from typing import Any
 import pytest
 
 from app.cli import main
+from app.protocol.events import GoalApplied
 from app.tools.replay import AGREE_FRACTION, Recording, compare
 
 
-def _goal(frame: int, x: float, op: str = "face") -> dict[str, Any]:
-    return {"seq": frame, "op": op, "frame": frame, "x": x, "y": 240.0, "w": 640, "h": 480}
+def _goal(frame: int, x: float, op: str = "face") -> GoalApplied:
+    return GoalApplied(seq=frame, op=op, frame=frame, x=x, y=240.0, w=640, h=480, t=frame / 30)
 
 
 def test_goals_are_compared_on_recorded_frames_and_agree_within_the_tolerance() -> None:

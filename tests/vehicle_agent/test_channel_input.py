@@ -8,6 +8,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from app.protocol.events import GoalApplied
 from tests.helpers.agent import H, Vehicle, W
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, angular_command
 
@@ -49,7 +50,7 @@ def test_hostile_goals_get_an_error_and_never_drive_the_turtle(vehicle: Vehicle,
     assert vehicle.twists() == []
     # The handler still works: a good goal is taken.
     assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None
-    assert [e["x"] for e in vehicle.events if e["ev"] == "goal"] == [10]
+    assert [e.x for e in vehicle.events if isinstance(e, GoalApplied)] == [10]
     vehicle.turtle.sim.step()
     pose = vehicle.turtle.sim.pose("turtle1")
     assert all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta))

@@ -81,16 +81,16 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     vehicle = Vehicle("default")
     agent = vehicle.agent
     assert agent.handle_channel_message(GOAL % 1, "relay") is None
-    assert vehicle.twists()[-1]["angular"] != 0  # the autopilot steers
+    assert vehicle.twists()[-1].angular != 0  # the autopilot steers
     take = '{"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over by ann"}'
     assert agent.handle_channel_message(take, "relay") is None
-    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     before = len(vehicle.twists())
     assert agent.handle_channel_message(GOAL % 2, "relay") is None
     assert len(vehicle.twists()) == before and agent.goals_ignored == 1
     drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
     assert agent.handle_channel_message(drive, "relay") is None
-    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
     # Hostile drive commands are refused with a reason and never move the turtle.
     for bad in (
         '{"type": "drive", "seq": 2, "linear": 2, "angular": 0}',
@@ -100,9 +100,9 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     ):
         reply = agent.handle_channel_message(bad, "relay")
         assert reply is not None and reply.type == "error" and reply.reason, bad
-    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
     back = '{"type": "mode", "mode": "auto"}'
     assert agent.handle_channel_message(back, "relay") is None
-    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     assert agent.handle_channel_message(GOAL % 3, "relay") is None
-    assert vehicle.twists()[-1]["angular"] != 0  # goals steer again
+    assert vehicle.twists()[-1].angular != 0  # goals steer again
