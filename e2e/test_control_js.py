@@ -139,12 +139,10 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
            }""",
         [profile, events],
     )
-    now = 0.0
-    controller = control.Controller(control.PROFILES[profile], clock=lambda: now)
+    controller = control.Controller(control.PROFILES[profile])
     expected: list[list[float | int | None] | None] = []
     untils: list[float | None] = []
     for kind, t, arg in events:
-        now = t
         if kind == "goal":
             assert arg is not None
             twist = controller.goal(
@@ -155,17 +153,18 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
                     int(arg["h"]),
                     int(arg["seq"]),
                     int(arg["frame"]),
-                )
+                ),
+                t,
             )
         elif kind == "pose":
             assert arg is not None
-            twist = controller.pose(control.Pose(**arg))
+            twist = controller.pose(control.Pose(**arg), t)
         elif kind == "tick":
-            twist = controller.tick()
+            twist = controller.tick(t)
         else:
             twist = controller.stop()
         expected.append(None if twist is None else [twist.linear_x, twist.angular_z, twist.seq])
-        untils.append(controller.until_timeout())
+        untils.append(controller.until_timeout(t))
     published = [e for e in expected if e is not None]
     assert any(e[1] != 0 for e in published), "the script never drove the turtle"
     assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"

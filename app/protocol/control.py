@@ -28,6 +28,9 @@ Law = Literal["rotate", "follow"]
 # live operator never trips it, and a lost or stuck client stops the vehicle within 0.3 s.
 DEADMAN_S = 0.3
 DRIVE_REPEAT_S = 0.1
+# A vehicle's pilot looks at its clock this often (goal timeout, the clock-driven profile's
+# period, the dead-man), and sooner when a stop falls due before.
+TICK_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -130,6 +133,7 @@ __all__ = [
     "DRIVE_REPEAT_S",
     "PROFILES",
     "TERRAIN_CENTRE",
+    "TICK_S",
     "WORLD_SIZE",
     "Profile",
     "page_constants",
@@ -173,5 +177,6 @@ def page_constants(profiles: dict[str, Profile] | None = None) -> dict[str, Any]
         "spawnTheta": SPAWN_THETA,
         "deadmanS": DEADMAN_S,
         "driveRepeatS": DRIVE_REPEAT_S,
+        "tickS": TICK_S,
         "profiles": {name: profile_constants(p) for name, p in chosen.items()},
     }

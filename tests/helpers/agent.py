@@ -25,7 +25,7 @@ class Vehicle:
             AgentConfig(server="http://127.0.0.1:9", profile=profile), video, self.turtle, log
         )
         # The turtle's pose, as its first pose update would give it.
-        self.agent.controller.pose(Pose(5.5, 5.5, 0.0))
+        self.agent.pilot.pose(Pose(5.5, 5.5, 0.0), 0.0)
 
     def twists(self) -> list[TwistSent]:
         return [e for e in self.events if isinstance(e, TwistSent)]

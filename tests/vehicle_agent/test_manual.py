@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.protocol.control import DEADMAN_S
+from app.protocol.events import GoalDropped
 from tests.helpers.agent import Vehicle
 from vehicle_agent.control import PROFILES
 from vehicle_agent.manual import ManualDrive
@@ -37,7 +37,8 @@ def test_the_dead_man_stops_the_turtle_once_after_the_last_command() -> None:
         [0.0, 0.0],
         None,
     ]
-    assert answers[1][3] == pytest.approx(DEADMAN_S)
+    # Stopped 0.3 s after the last command, not later.
+    assert answers[1][3] == pytest.approx(0.3)
     assert answers[2][3] == pytest.approx(0.01)
     assert answers[3][3] is None
 
@@ -67,11 +68,11 @@ def test_a_mode_change_stops_and_a_new_operator_starts_afresh() -> None:
 
 
 def test_a_new_link_is_back_in_auto() -> None:
-    drive = ManualDrive(DEFAULT, clock=lambda: 0.0)
+    drive = ManualDrive(DEFAULT, 0.3)
     drive.set_mode("manual", "ann")
     drive.reset_link()
     assert not drive.manual and drive.operator is None
-    assert drive.drive(1, 1.0, 0.0) is None
+    assert drive.drive(1, 1.0, 0.0, 0.0) is None
 
 
 GOAL = '{"type": "goal", "seq": %d, "op": "face", "x": 10, "y": 100, "w": 320, "h": 240, "t": 0}'
@@ -87,7 +88,10 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     before = len(vehicle.twists())
     assert agent.handle_channel_message(GOAL % 2, "relay") is None
-    assert len(vehicle.twists()) == before and agent.goals_ignored == 1
+    assert len(vehicle.twists()) == before
+    assert vehicle.events[-1] == GoalDropped(
+        seq=2, frame=None, why="manual", t=vehicle.events[-1].t
+    )
     drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
     assert agent.handle_channel_message(drive, "relay") is None
     assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
