@@ -110,12 +110,13 @@ def module_page(
     server: RunningServer, browser: Browser, module: str, name: str | None = None
 ) -> Iterator[Page]:
     """A page of the server with ``/static/js/<module>.js`` imported as ``window.<name>``
-    (default: the module's name), to run a page module's pure functions against their Python
-    twins."""
+    (default: the module's file name, e.g. ``manual`` for ``core/manual``), to run a page
+    module's pure functions against their Python twins."""
     opened = browser.new_page()
     opened.goto(server.url + "/")
     url = f"/static/js/{module}.js"
-    opened.evaluate(f"async () => {{ window[{name or module!r}] = await import({url!r}); }}")
+    global_name = name or module.rsplit("/", 1)[-1]
+    opened.evaluate(f"async () => {{ window[{global_name!r}] = await import({url!r}); }}")
     try:
         yield opened
     finally:

@@ -35,7 +35,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
     opened.goto(server.url + "/")
     opened.evaluate(
         """async (constants) => {
-             window.control = await import('/static/js/control.js');
+             window.control = await import('/static/js/core/control.js');
              window.law = new control.ControlLaw(constants);
            }""",
         page_constants(),

@@ -54,7 +54,7 @@ def report(t_ms: float, received: int, lost: int, frames: int, local: str, remot
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "link-health") as opened:
+    with module_page(server, browser, "net/link-health") as opened:
         yield opened
 
 

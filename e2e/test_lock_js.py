@@ -52,7 +52,7 @@ RUN_JS = """([events, rule]) => {
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "lock") as opened:
+    with module_page(server, browser, "core/lock") as opened:
         yield opened
 
 

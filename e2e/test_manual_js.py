@@ -44,7 +44,7 @@ def rounded(value: Any) -> Any:
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "manual") as opened:
+    with module_page(server, browser, "core/manual") as opened:
         yield opened
 
 

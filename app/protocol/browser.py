@@ -1,6 +1,6 @@
 """What the pages know of the protocol, as one JSON-ready dict rendered from the Python source.
 
-The server embeds it in every page's config (``config.protocol``); ``app/static/js/protocol.js``
+The server embeds it in every page's config (``config.protocol``); ``app/static/js/config.js``
 reads it there, so no JS module types a profile name, a channel label, a world size or the frame
 tag layout again, and ``schema.js`` validates data-channel messages against the schemas of
 :mod:`app.protocol.channels`.
@@ -55,7 +55,7 @@ def browser_protocol() -> dict[str, Any]:
             "markerBlocks": c.TAG_MARKER_BLOCKS,
             "bits": c.TAG_BITS,
         },
-        # The target lock's rule (app/vision/lock.py, app/static/js/lock.js).
+        # The target lock's rule (app/vision/lock.py, app/static/js/core/lock.js).
         "lock": {
             "searchAfterS": c.LOCK_SEARCH_AFTER_S,
             "releaseAfterS": c.LOCK_RELEASE_AFTER_S,

@@ -71,8 +71,8 @@ TAG_BLOCKS_PER_WIDTH: Final = 40
 TAG_MARKER_BLOCKS: Final = 2
 TAG_BITS: Final = 24
 
-# Target lock (DESIGN §10 "Which target", app/vision/lock.py and app/static/js/lock.js): a locked
-# target not seen for LOCK_SEARCH_AFTER_S is searched for in the whole frame; not seen for
+# Target lock (DESIGN §10 "Which target", app/vision/lock.py and app/static/js/core/lock.js): a
+# locked target not seen for LOCK_SEARCH_AFTER_S is searched for in the whole frame; not seen for
 # LOCK_RELEASE_AFTER_S, the lock is released (back to the largest). A box continues the track
 # only if neither side is more than LOCK_MAX_SCALE times the locked box's, and, unless searching
 # the whole frame, its centre is within LOCK_REACH of the locked box's sides from its centre.

@@ -54,7 +54,7 @@ Box = tuple[int, int, int, int]
 # it once per image. Bounded, for a long batch of images.
 _REFERENCES: dict[tuple[str, str, Box | None], Detection] = {}
 _REFERENCES_KEPT = 512
-# Which OpenCV.js the analyzer loads (app/static/js/vision-worker.js).
+# Which OpenCV.js the analyzer loads (app/static/js/worker/vision-worker.js).
 OpenCvBuild = Literal["auto", "simd", "official"]
 OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
 

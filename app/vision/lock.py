@@ -7,8 +7,8 @@ nearest within reach, of a similar size either way. Not seen for ``search_after_
 searched for in the whole frame (any similar box, nearest first); not seen for
 ``release_after_s``, the lock is released and the largest box is the target again.
 
-This module is the Python side of ``app/static/js/lock.js``; both take the same decisions from the
-same doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
+This module is the Python side of ``app/static/js/core/lock.js``; both take the same decisions from
+the same doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
 """
 
 from __future__ import annotations

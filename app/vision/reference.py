@@ -1,4 +1,4 @@
-"""The Python reference pipeline: the same OpenCV calls as ``app/static/js/operations/``.
+"""The Python reference pipeline: the same OpenCV calls as ``app/static/js/worker/operations/``.
 
 Parity checks run it on the exact pixels the relay's worker saw and compare the boxes.
 """

@@ -6,9 +6,9 @@ only for sizes near the target's own, so the cascade runs over a fraction of the
 the scales. The whole frame is scanned again every ``full_scan_every`` snapshots, and at once,
 on the same snapshot, when the window finds nothing.
 
-This module is the Python side of ``app/static/js/window.js``; both compute the same window from
-the same doubles and take the same decisions, so ``autopilot parity`` can compare the windowed
-path box for box. Pure numpy/OpenCV, no I/O.
+This module is the Python side of ``app/static/js/core/tracking-window.js``; both compute the same
+window from the same doubles and take the same decisions, so ``autopilot parity`` can compare the
+windowed path box for box. Pure numpy/OpenCV, no I/O.
 """
 
 from __future__ import annotations

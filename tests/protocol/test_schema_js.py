@@ -26,9 +26,9 @@ pytestmark = [pytest.mark.browser]
 # A stand-in RTCDataChannel (an EventTarget with label, readyState and send) served by the real
 # serveChannel; a handler per accepted type records what got through, send() the error replies.
 RECEIVE_ALL = """async (samples) => {
-  const { serveChannel } = await import('/static/js/peer.js');
-  const { SCHEMAS } = await import('/static/js/protocol.js');
-  const { acceptedTypes } = await import('/static/js/schema.js');
+  const { serveChannel } = await import('/static/js/net/peer.js');
+  const { SCHEMAS } = await import('/static/js/config.js');
+  const { acceptedTypes } = await import('/static/js/core/schema.js');
   const quiet = { info() {}, warn() {}, error() {} };
   return samples.map(({ label, role, text }) => {
     const channel = new EventTarget();
@@ -87,7 +87,7 @@ def test_schema_js_refuses_a_keyword_it_does_not_know(page: Page) -> None:
     # waved through by a validator that skips what it does not understand.
     error = page.evaluate(
         """async () => {
-             const { validate } = await import('/static/js/schema.js');
+             const { validate } = await import('/static/js/core/schema.js');
              try { validate({ type: 'string', pattern: '^a' }, 'b'); return null; }
              catch (err) { return err.message; }
            }"""

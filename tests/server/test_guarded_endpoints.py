@@ -162,7 +162,7 @@ class _Scripts(HTMLParser):
 
 
 @pytest.mark.parametrize(
-    "path", ["/", "/vehicle", "/relay", "/client", "/parity", "/static/js/room.js", "/healthz"]
+    "path", ["/", "/vehicle", "/relay", "/client", "/parity", "/static/js/net/room.js", "/healthz"]
 )
 def test_every_response_carries_the_security_headers(server: RunningServer, path: str) -> None:
     response = httpx.get(server.url + path, timeout=10)

@@ -66,7 +66,7 @@ async def test_pick_types_follows_the_python_rule(
     await context_page.goto(f"{server.url}/healthz")
     picked: dict[str, Any] = await context_page.evaluate(
         """async ([table, setting, pose, twist]) => {
-          const { pickTypes } = await import('/static/js/rosflavour.js');
+          const { pickTypes } = await import('/static/js/core/rosflavour.js');
           return pickTypes(table, setting, pose, twist);
         }""",
         [page_config(), setting, pose, twist],

@@ -31,8 +31,8 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # Feeds the frames in order (a null entry stops the loop), then two at once to see the second
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
-  const { SnapshotLoop } = await import('/static/js/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/protocol.js');
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const { PROTOCOL } = await import('/static/js/config.js');
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;

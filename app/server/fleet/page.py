@@ -129,5 +129,5 @@ async def fleet_rooms(request: Request) -> list[RoomRow]:
 
 @router.get("/fleet", response_class=HTMLResponse)
 async def fleet_page(request: Request) -> HTMLResponse:
-    """The fleet table, refreshed live by ``/static/js/fleet.js``."""
+    """The fleet table, refreshed live by ``/static/js/pages/fleet.js``."""
     return templates.TemplateResponse(request, "fleet.html", {"refresh_ms": 1000})

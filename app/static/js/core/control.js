@@ -38,7 +38,9 @@ export class ControlLaw {
     this.minTargetDistanceM = constants.minTargetDistanceM;
     this.spawnTheta = constants.spawnTheta;
     this.profiles = Object.freeze(
-      Object.fromEntries(Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)])),
+      Object.fromEntries(
+        Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)]),
+      ),
     );
     Object.freeze(this);
   }
@@ -48,7 +50,7 @@ export class ControlLaw {
     return { x: (x * this.terrainCentre) / (w / 2), y: ((h - y) * this.terrainCentre) / (h / 2) };
   }
 
-  /** Signed turn in (−π, π] that makes the turtle at `pose` face `goal`; null when undefined. */
+  /** Signed turn in (−π, π] that makes the turtle at `pose` face `goal`; null if undefined. */
   steeringError(goal, pose) {
     const target = this.pixelToTerrain(goal.x, goal.y, goal.w, goal.h);
     return this.#headingError(target.x, target.y, pose);
@@ -75,7 +77,8 @@ export class ControlLaw {
       [pose.x, sign * Math.cos(pose.theta)],
       [pose.y, sign * Math.sin(pose.theta)],
     ]) {
-      if (component > 1e-12) clearance = Math.min(clearance, (this.worldSize - position) / component);
+      if (component > 1e-12)
+        clearance = Math.min(clearance, (this.worldSize - position) / component);
       else if (component < -1e-12) clearance = Math.min(clearance, -position / component);
     }
     return Math.max(0, clearance);
@@ -94,11 +97,18 @@ export class ControlLaw {
     if (error === null) return { linear: 0, angular: 0 };
     const angular = this.angularCommand(error, profile);
     const distance = Math.hypot(x - pose.x, y - pose.y);
-    let linear = clamp(profile.linearGain * (distance - profile.standoffM), -profile.maxLinear, profile.maxLinear);
+    let linear = clamp(
+      profile.linearGain * (distance - profile.standoffM),
+      -profile.maxLinear,
+      profile.maxLinear,
+    );
     // Only the part of the heading that points at the target is worth driving along.
     linear *= Math.max(0, Math.cos(error));
     // Slower with less clearance ahead (behind, when backing off); zero at the wall margin.
-    const allowed = Math.max(0, profile.wallGain * (this.wallClearance(pose, linear >= 0) - margin));
+    const allowed = Math.max(
+      0,
+      profile.wallGain * (this.wallClearance(pose, linear >= 0) - margin),
+    );
     return { linear: clamp(linear, -allowed, allowed), angular };
   }
 
@@ -186,7 +196,8 @@ export class Controller {
   }
 
   #checkTimeout() {
-    if (this.#goal !== null && this.clock() - this.#goalAt >= this.profile.goalTimeoutS) return this.stop();
+    if (this.#goal !== null && this.clock() - this.#goalAt >= this.profile.goalTimeoutS)
+      return this.stop();
     return null;
   }
 
@@ -205,10 +216,12 @@ export class Controller {
       if (last !== null && now - last < profile.periodS) return null;
       // The clock-driven profile keeps a fixed cadence (like the thesis's setInterval) instead
       // of drifting by the tick granularity; after a pause it starts a new grid.
-      this.#lastPublish = last !== null && now - last < 2 * profile.periodS ? last + profile.periodS : now;
+      this.#lastPublish =
+        last !== null && now - last < 2 * profile.periodS ? last + profile.periodS : now;
     }
     this.#unanswered = false;
-    if (this.#lost(now)) return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
+    if (this.#lost(now))
+      return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
     const { linear, angular } = this.law.command(goal, pose, profile);
     if (angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
     return { linear, angular, seq: goal.seq ?? null, frame: goal.frame ?? null };

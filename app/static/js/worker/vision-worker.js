@@ -2,7 +2,8 @@
 // script (importScripts), while operation modules are ES modules loaded with import().
 //
 // Protocol (vision.js is the only other side):
-//   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'} | {type: 'failed', error}
+//   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'}
+//                   | {type: 'failed', error}
 //   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, lock}
 //                   {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
@@ -12,27 +13,31 @@
 // (scripts/build-opencv-js). `?opencv=simd|official` chooses; by default SIMD where the browser
 // validates a module that uses a v128 instruction (wasm-feature-detect's probe), else official.
 const SIMD_PROBE = new Uint8Array([
-  0, 97, 115, 109, 1, 0, 0, 0, 1, 5, 1, 96, 0, 1, 123, 3, 2, 1, 0, 10, 10, 1, 8, 0, 65, 0, 253, 15, 253, 98, 11,
+  0, 97, 115, 109, 1, 0, 0, 0, 1, 5, 1, 96, 0, 1, 123, 3, 2, 1, 0, 10, 10, 1, 8, 0, 65, 0, 253, 15,
+  253, 98, 11,
 ]);
 const OPENCV_BUILDS = { simd: '/static/opencv-simd.js', official: '/static/opencv.js' };
 const OPENCV_BUILD = (() => {
   const asked = new URLSearchParams(self.location.search).get('opencv');
-  const wanted = asked in OPENCV_BUILDS ? asked : WebAssembly.validate(SIMD_PROBE) ? 'simd' : 'official';
+  const wanted =
+    asked in OPENCV_BUILDS ? asked : WebAssembly.validate(SIMD_PROBE) ? 'simd' : 'official';
   if (wanted === 'simd') {
     try {
       importScripts(OPENCV_BUILDS.simd);
       return 'simd';
     } catch (error) {
       // A server without the SIMD file (or a browser refusing it) still gets a working relay.
-      console.warn(`the SIMD build of OpenCV.js did not load (${error.message}); using the official one`);
+      console.warn(
+        `the SIMD build of OpenCV.js did not load (${error.message}); using the official one`,
+      );
     }
   }
   importScripts(OPENCV_BUILDS.official);
   return 'official';
 })();
 
-// From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits}, defaultProfile,
-// lock: the target lock's rule}.
+// From app/protocol through vision.js: {frameTag: {blocksPerWidth, markerBlocks, bits},
+// defaultProfile, lock: the target lock's rule}.
 const PROTOCOL = JSON.parse(new URLSearchParams(self.location.search).get('protocol'));
 
 /** Everything the worker holds, in one place. */
@@ -93,8 +98,8 @@ async function init() {
     session.cv.FS_createDataFile('/', name, bytes, true, false, false);
     session.files.push(name);
   }
-  session.window = await import('./window.js');
-  session.lock = await import('./lock.js');
+  session.window = await import('../core/tracking-window.js');
+  session.lock = await import('../core/lock.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
       session.modules.set(op.module, await import(`./operations/${op.module}`));
@@ -363,7 +368,9 @@ async function analyze({
   const { boxes, region = null } = found;
   const locked = lock === null ? null : choose(boxes);
   let { target } = found;
-  if (lock !== null) target = locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
+  if (lock !== null)
+    target =
+      locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (decodeFrameTag).
   ensurePixels(frame, { x: 0, y: 0, width, height: tagBlockSize(width) });

@@ -5,10 +5,30 @@
 // so a model that starts using a keyword this file does not know fails loudly, not silently.
 
 const KNOWN = new Set([
-  '$defs', '$ref', 'additionalProperties', 'anyOf', 'const', 'default', 'description',
-  'discriminator', 'enum', 'exclusiveMaximum', 'exclusiveMinimum', 'items', 'maxItems',
-  'maxLength', 'maximum', 'minItems', 'minLength', 'minimum', 'oneOf', 'prefixItems',
-  'properties', 'required', 'title', 'type',
+  '$defs',
+  '$ref',
+  'additionalProperties',
+  'anyOf',
+  'const',
+  'default',
+  'description',
+  'discriminator',
+  'enum',
+  'exclusiveMaximum',
+  'exclusiveMinimum',
+  'items',
+  'maxItems',
+  'maxLength',
+  'maximum',
+  'minItems',
+  'minLength',
+  'minimum',
+  'oneOf',
+  'prefixItems',
+  'properties',
+  'required',
+  'title',
+  'type',
 ]);
 
 const TYPE_CHECKS = {
@@ -22,8 +42,13 @@ const TYPE_CHECKS = {
 };
 
 const TYPE_WORDS = {
-  null: 'null', boolean: 'a boolean', integer: 'an integer', number: 'a finite number',
-  string: 'a string', array: 'an array', object: 'an object',
+  null: 'null',
+  boolean: 'a boolean',
+  integer: 'an integer',
+  number: 'a finite number',
+  string: 'a string',
+  array: 'an array',
+  object: 'an object',
 };
 
 /**
@@ -69,7 +94,12 @@ function check(node, value, path, root, problems) {
     const { propertyName, mapping } = node.discriminator;
     const tag = TYPE_CHECKS.object(value) ? value[propertyName] : undefined;
     if (!Object.hasOwn(mapping, tag)) {
-      add(`must be one of ${Object.keys(mapping).map((k) => JSON.stringify(k)).join(', ')}`, [...path, propertyName]);
+      add(
+        `must be one of ${Object.keys(mapping)
+          .map((k) => JSON.stringify(k))
+          .join(', ')}`,
+        [...path, propertyName],
+      );
       return;
     }
     check(resolve(mapping[tag], root), value, path, root, problems);
@@ -115,13 +145,17 @@ function checkNumber(node, value, add) {
 function checkString(node, value, add) {
   // pydantic counts characters (code points), not UTF-16 units.
   const length = [...value].length;
-  if (node.minLength !== undefined && length < node.minLength) add(`must have at least ${node.minLength} characters`);
-  if (node.maxLength !== undefined && length > node.maxLength) add(`must have at most ${node.maxLength} characters`);
+  if (node.minLength !== undefined && length < node.minLength)
+    add(`must have at least ${node.minLength} characters`);
+  if (node.maxLength !== undefined && length > node.maxLength)
+    add(`must have at most ${node.maxLength} characters`);
 }
 
 function checkArray(node, value, path, root, problems, add) {
-  if (node.minItems !== undefined && value.length < node.minItems) add(`must have at least ${node.minItems} items`);
-  if (node.maxItems !== undefined && value.length > node.maxItems) add(`must have at most ${node.maxItems} items`);
+  if (node.minItems !== undefined && value.length < node.minItems)
+    add(`must have at least ${node.minItems} items`);
+  if (node.maxItems !== undefined && value.length > node.maxItems)
+    add(`must have at most ${node.maxItems} items`);
   const prefix = node.prefixItems ?? [];
   value.forEach((item, i) => {
     const itemSchema = i < prefix.length ? prefix[i] : node.items;
@@ -162,9 +196,16 @@ function checkBranches(branches, exactlyOne, value, path, root, problems) {
     problems.push({ path, message: 'matches more than one allowed form', kind: 'value' });
     return;
   }
-  const typeFits = results.filter((found) => !found.some((p) => p.kind === 'type' && p.path === path));
+  const typeFits = results.filter(
+    (found) => !found.some((p) => p.kind === 'type' && p.path === path),
+  );
   if (typeFits.length === 1) problems.push(...typeFits[0]);
-  else problems.push({ path, message: `must be ${branches.map(describeBranch).join(' or ')}`, kind: 'type' });
+  else
+    problems.push({
+      path,
+      message: `must be ${branches.map(describeBranch).join(' or ')}`,
+      kind: 'type',
+    });
 }
 
 function describeBranch(branch) {

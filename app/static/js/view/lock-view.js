@@ -49,7 +49,13 @@ export class LockPanel {
     stage.addEventListener('click', (event) => {
       const shown = frame();
       if (shown === null) return;
-      const point = framePoint(stage.getBoundingClientRect(), event.clientX, event.clientY, shown.w, shown.h);
+      const point = framePoint(
+        stage.getBoundingClientRect(),
+        event.clientX,
+        event.clientY,
+        shown.w,
+        shown.h,
+      );
       if (point !== null) this.#ask({ type: 'lock', x: point.x, y: point.y });
     });
     unlockButton.addEventListener('click', () => this.#ask({ type: 'unlock' }));
@@ -68,6 +74,10 @@ export class LockPanel {
       this.log.error(`cannot ${msg.type}: no relay connection`);
       return;
     }
-    this.log.info(msg.type === 'lock' ? `asked to lock at (${Math.round(msg.x)}, ${Math.round(msg.y)})` : 'asked to unlock');
+    this.log.info(
+      msg.type === 'lock'
+        ? `asked to lock at (${Math.round(msg.x)}, ${Math.round(msg.y)})`
+        : 'asked to unlock',
+    );
   }
 }

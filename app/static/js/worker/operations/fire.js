@@ -25,8 +25,16 @@ export function create(cv, spec) {
 
   function morph(op, iterations) {
     if (iterations === 0) return;
-    cv.morphologyEx(mask, mask, op, kernel, anchor, iterations, cv.BORDER_CONSTANT,
-      cv.morphologyDefaultBorderValue());
+    cv.morphologyEx(
+      mask,
+      mask,
+      op,
+      kernel,
+      anchor,
+      iterations,
+      cv.BORDER_CONSTANT,
+      cv.morphologyDefaultBorderValue(),
+    );
   }
 
   return {

@@ -1,9 +1,9 @@
 // One page's membership of a signaling room: Connect / Join Room / Leave Room, the roster of
 // the other peers, and the unattended mode (?auto=1) that joins by itself and rejoins after
 // the server goes away.
-import { PROTOCOL } from './protocol.js';
+import { PROTOCOL } from '../config.js';
 import { LoginRefused, Signaling } from './signaling.js';
-import { button, byTestId } from './ui.js';
+import { button, byTestId } from '../view/ui.js';
 
 const RETRY_MIN_MS = 500;
 const RETRY_MAX_MS = 5000;
@@ -32,7 +32,10 @@ export class RoomSession extends EventTarget {
     // token); cleared by a successful join.
     this.problem = null;
     if (config.tokenInQuery) {
-      this.#setProblem('the token is in the query (?token=…): put it after # instead (…#token=…), where it never leaves the browser');
+      this.#setProblem(
+        'the token is in the query (?token=…): put it after # instead (…#token=…), ' +
+          'where it never leaves the browser',
+      );
     }
     this.signaling.addEventListener('message', (event) => this.#onMessage(event.detail));
     this.signaling.addEventListener('close', (event) => this.#onClose(event.detail));
@@ -67,14 +70,18 @@ export class RoomSession extends EventTarget {
     try {
       reply = await this.signaling.login({ name, role: this.role, room, token: this.config.token });
     } catch (err) {
-      if (err instanceof LoginRefused) this.#setProblem(`login refused: ${err.message}`, { log: false });
+      if (err instanceof LoginRefused)
+        this.#setProblem(`login refused: ${err.message}`, { log: false });
       throw err;
     }
     this.problem = null;
     this.name = name;
     this.room = reply.room || room;
     // ICE for this login (TURN credentials minted for it); every new connection uses it.
-    this.ice = { iceServers: reply.iceServers || [], iceTransportPolicy: reply.iceTransportPolicy || 'all' };
+    this.ice = {
+      iceServers: reply.iceServers || [],
+      iceTransportPolicy: reply.iceTransportPolicy || 'all',
+    };
     this.log.info(`joined room ${this.room} as ${this.role} ${name}`);
     // Roster first, so that listeners of the `joined` phase already see who is there.
     this.#setRoster(reply.peers || []);
@@ -122,7 +129,9 @@ export class RoomSession extends EventTarget {
     const leave = button('leave');
     const run = (action) => action().catch((err) => this.log.error(err.message));
     connect.addEventListener('click', () => run(() => this.connect()));
-    join.addEventListener('click', () => run(() => this.join(this.#chosenName(), this.#chosenRoom())));
+    join.addEventListener('click', () =>
+      run(() => this.join(this.#chosenName(), this.#chosenRoom())),
+    );
     leave.addEventListener('click', () => this.leave());
     const update = () => {
       connect.disabled = this.phase !== 'disconnected';
@@ -136,7 +145,8 @@ export class RoomSession extends EventTarget {
   /** A one-line description of where this page stands, for the state line. */
   describe({ withRoster = true } = {}) {
     if (this.phase === 'joined') {
-      const others = this.roster.map((peer) => `${peer.role} ${peer.name}`).join(', ') || 'nobody else yet';
+      const others =
+        this.roster.map((peer) => `${peer.role} ${peer.name}`).join(', ') || 'nobody else yet';
       return `joined room ${this.room} as ${this.name}${withRoster ? ` · with ${others}` : ''}`;
     }
     const where = this.phase === 'connected' ? 'connected, not in a room' : this.phase;
@@ -188,7 +198,8 @@ export class RoomSession extends EventTarget {
     const others = this.roster;
     this.roster = [];
     this.#setPhase('disconnected');
-    for (const peer of others) this.dispatchEvent(new CustomEvent('peerleft', { detail: peer.name }));
+    for (const peer of others)
+      this.dispatchEvent(new CustomEvent('peerleft', { detail: peer.name }));
     this.dispatchEvent(new CustomEvent('roster', { detail: [] }));
   }
 

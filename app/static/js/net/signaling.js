@@ -27,7 +27,9 @@ export class Signaling extends EventTarget {
       ws.addEventListener('close', (event) => {
         if (!opened) reject(new Error(`cannot reach the signaling server at ${url}`));
         if (this.#ws === ws) this.#ws = null;
-        this.dispatchEvent(new CustomEvent('close', { detail: { code: event.code, reason: event.reason } }));
+        this.dispatchEvent(
+          new CustomEvent('close', { detail: { code: event.code, reason: event.reason } }),
+        );
       });
       ws.addEventListener('message', (event) => this.#receive(event.data));
     });
@@ -83,7 +85,9 @@ export class Signaling extends EventTarget {
       return;
     }
     if (msg === null || typeof msg !== 'object' || typeof msg.type !== 'string') {
-      this.dispatchEvent(new CustomEvent('protocolerror', { detail: 'server sent a message without a type' }));
+      this.dispatchEvent(
+        new CustomEvent('protocolerror', { detail: 'server sent a message without a type' }),
+      );
       return;
     }
     this.dispatchEvent(new CustomEvent('message', { detail: msg }));

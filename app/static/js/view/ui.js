@@ -1,18 +1,4 @@
-// Small DOM helpers shared by the role pages: configuration, the log, text fields, the overlay.
-
-/**
- * The page's configuration, embedded by the server as JSON in <script id="config">, plus the
- * token from the URL fragment (`#token=…`): a fragment never leaves the browser, so the token
- * stays out of every request line and access log.
- */
-export function readConfig() {
-  const config = JSON.parse(document.getElementById('config').textContent);
-  config.token = new URLSearchParams(location.hash.slice(1)).get('token');
-  // A token in the query has already gone to the server (and its access log): not used, but
-  // recognised, so that the page can say where it belongs.
-  config.tokenInQuery = config.token === null && new URLSearchParams(location.search).has('token');
-  return config;
-}
+// Small DOM helpers shared by the role pages: the log, text fields, the overlay.
 
 /** The element with `data-testid=id` (throws if the template lacks it: a bug, not bad input). */
 export function byTestId(id) {
@@ -60,7 +46,9 @@ export class Log {
 
   #add(level, text) {
     const stamp = new Date().toISOString().slice(11, 23);
-    (level === 'info' ? console.info : level === 'warn' ? console.warn : console.error)(`[${stamp}] ${text}`);
+    (level === 'info' ? console.info : level === 'warn' ? console.warn : console.error)(
+      `[${stamp}] ${text}`,
+    );
     const item = document.createElement('li');
     item.className = level;
     const time = document.createElement('time');
@@ -73,7 +61,7 @@ export class Log {
 
 /** Format a number of milliseconds or a rate for the figures. */
 export function fmt(value, digits = 1) {
-  return value === null || value === undefined || Number.isNaN(value) ? '–' : value.toFixed(digits);
+  return value == null || Number.isNaN(value) ? '–' : value.toFixed(digits);
 }
 
 // The role pages redraw their figures at most this often: a person reads a few changes a
@@ -101,9 +89,9 @@ export function throttle(periodMs, fn) {
 }
 
 /**
- * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on the canvas laid
- * over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas covers the <video>, whose
- * picture is letterboxed (object-fit: contain).
+ * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on
+ * the canvas laid over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas
+ * covers the <video>, whose picture is letterboxed (object-fit: contain).
  */
 export function drawDetections(canvas, detections) {
   const rect = canvas.getBoundingClientRect();

@@ -9,14 +9,14 @@
 //
 // The Python side is app/vision/lock.py: the same decisions from the same doubles, checked on
 // the same sequences (e2e/test_lock_js.py). Pure, no DOM; times in seconds, given.
-import { largest } from './window.js';
+import { largest } from './tracking-window.js';
 
 /** Whether pixel (x, y) is inside box [x, y, w, h], edges included. */
 export function contains([bx, by, bw, bh], x, y) {
   return bx <= x && x <= bx + bw && by <= y && y <= by + bh;
 }
 
-/** The box clicked at (x, y): the smallest of those containing it (first of equal areas), or null. */
+/** The box clicked at (x, y): the smallest containing it (first of equal areas), or null. */
 export function pick(x, y, boxes) {
   let best = null;
   for (const b of boxes) {
@@ -79,7 +79,9 @@ export function associate(locked, boxes, anywhere, rule) {
  * enough to look in the whole frame).
  */
 export class TargetLock {
-  /** @param {{searchAfterS: number, releaseAfterS: number, maxScale: number, reach: number}} rule */
+  /**
+   * @param {{searchAfterS: number, releaseAfterS: number, maxScale: number, reach: number}} rule
+   */
   constructor(rule) {
     this.rule = rule;
     this.box = null; // the locked target's box when last seen
@@ -112,10 +114,15 @@ export class TargetLock {
   /** What the next snapshot follows, {box, anywhere, epoch}, or null for the default choice. */
   query(now) {
     if (this.box === null) return null;
-    return { box: this.box, anywhere: now - this.seenAt > this.rule.searchAfterS, epoch: this.epoch };
+    return {
+      box: this.box,
+      anywhere: now - this.seenAt > this.rule.searchAfterS,
+      epoch: this.epoch,
+    };
   }
 
-  /** The outcome of the snapshot asked with `query`: the box chosen or null; the new state if it changed. */
+  /** The outcome of the snapshot asked with `query`: the box chosen or null; the new state, if
+   * it changed. */
   update(query, chosen, now) {
     if (query === null || query.epoch !== this.epoch) return null;
     const before = this.state;
@@ -134,7 +141,8 @@ export class TargetLock {
   }
 }
 
-/** The rule that picks the target among a snapshot's boxes: the locked one's track, or the largest. */
+/** The rule that picks the target among a snapshot's boxes: the locked one's track, or the
+ * largest. */
 export function chooser(lock, rule) {
   if (lock === null) return largest;
   return (boxes) => associate(lock.box, boxes, lock.anywhere, rule);

@@ -1,5 +1,5 @@
 // The fleet page: polls /fleet/rooms and redraws one row per room.
-import { byTestId, fmt, show } from './ui.js';
+import { byTestId, fmt, show } from '../view/ui.js';
 
 const table = byTestId('fleet-table');
 const rows = byTestId('fleet-rows');
@@ -54,12 +54,14 @@ function render(rooms) {
 async function refresh() {
   try {
     const response = await fetch('/fleet/rooms', { cache: 'no-store', headers: HEADERS });
-    if (response.status === 401) throw new Error('a client token is needed: open /fleet#token=<token>');
+    if (response.status === 401)
+      throw new Error('a client token is needed: open /fleet#token=<token>');
     if (!response.ok) throw new Error(`HTTP ${response.status}`);
     status.rooms = await response.json();
     status.refreshes += 1;
     render(status.rooms);
-    show('fleet-state', `${status.rooms.length} room${status.rooms.length === 1 ? '' : 's'} · updated ${new Date().toLocaleTimeString()}`);
+    const rooms = `${status.rooms.length} room${status.rooms.length === 1 ? '' : 's'}`;
+    show('fleet-state', `${rooms} · updated ${new Date().toLocaleTimeString()}`);
   } catch (err) {
     show('fleet-state', `cannot load the rooms: ${err.message}`);
   } finally {

@@ -5,7 +5,7 @@
 // The signaling server lets only vehicles and clients send `offer` and only the relay send
 // `answer` (DESIGN §2), so the relay is the polite side and never offers: it forwards video by
 // replacing the track of the client's recvonly transceiver, which needs no renegotiation.
-import { acceptedTypes, describeProblems, validate } from './schema.js';
+import { acceptedTypes, describeProblems, validate } from '../core/schema.js';
 
 /**
  * Events: `track` (detail: RTCTrackEvent), `datachannel` (detail: RTCDataChannel),
@@ -21,9 +21,10 @@ export class Peer extends EventTarget {
    * @param {string} options.remote name of the remote peer (signaling `to`)
    * @param {boolean} options.polite the polite side yields on offer collisions
    * @param {boolean} options.mayOffer false on the relay: the server refuses its offers
-   * @param {{iceServers: RTCIceServer[], iceTransportPolicy: string}} options.ice from the login reply
+   * @param {{iceServers: RTCIceServer[], iceTransportPolicy: string}} options.ice from the login
+   *   reply
    * @param {(msg: object) => void} options.send sends a signaling message
-   * @param {import('./ui.js').Log} options.log
+   * @param {import('../view/ui.js').Log} options.log
    * @param {(pc: RTCPeerConnection) => Promise<void>} [options.beforeAnswer] runs between
    *   applying a remote offer and creating the answer (the relay sets its send tracks there)
    */
@@ -35,13 +36,18 @@ export class Peer extends EventTarget {
     this.send = send;
     this.log = log;
     this.beforeAnswer = beforeAnswer;
-    this.pc = new RTCPeerConnection({ iceServers: ice.iceServers, iceTransportPolicy: ice.iceTransportPolicy });
+    this.pc = new RTCPeerConnection({
+      iceServers: ice.iceServers,
+      iceTransportPolicy: ice.iceTransportPolicy,
+    });
     this.pc.addEventListener('icecandidate', ({ candidate }) => {
       // The end-of-candidates null is not needed by the other side and not worth a message.
       if (candidate) this.#signal({ type: 'candidate', to: remote, candidate: candidate.toJSON() });
     });
     this.pc.addEventListener('negotiationneeded', () => this.#offer());
-    this.pc.addEventListener('track', (event) => this.dispatchEvent(new CustomEvent('track', { detail: event })));
+    this.pc.addEventListener('track', (event) =>
+      this.dispatchEvent(new CustomEvent('track', { detail: event })),
+    );
     this.pc.addEventListener('datachannel', ({ channel }) =>
       this.dispatchEvent(new CustomEvent('datachannel', { detail: channel })),
     );
@@ -153,7 +159,10 @@ export function serveChannel(channel, handlers, log, schema) {
   const missing = accepted.filter((type) => !handled.includes(type));
   const extra = handled.filter((type) => !accepted.includes(type));
   if (missing.length || extra.length) {
-    throw new Error(`${channel.label}: handlers do not match the protocol (missing ${missing}; not in it ${extra})`);
+    throw new Error(
+      `${channel.label}: handlers do not match the protocol ` +
+        `(missing ${missing}; not in it ${extra})`,
+    );
   }
   const refuse = (reason, ref) => {
     log.warn(`${channel.label}: ${reason}`);
@@ -167,7 +176,12 @@ export function serveChannel(channel, handlers, log, schema) {
       refuse(`malformed JSON: ${String(event.data).slice(0, 60)}`, null);
       return;
     }
-    if (msg === null || typeof msg !== 'object' || Array.isArray(msg) || typeof msg.type !== 'string') {
+    if (
+      msg === null ||
+      typeof msg !== 'object' ||
+      Array.isArray(msg) ||
+      typeof msg.type !== 'string'
+    ) {
       refuse('expected a JSON object with a string field "type"', null);
       return;
     }
@@ -181,7 +195,8 @@ export function serveChannel(channel, handlers, log, schema) {
       return;
     }
     if (msg.type === 'error') {
-      log.error(`${channel.label}: the other side says: ${msg.reason}${msg.ref ? ` (about ${msg.ref})` : ''}`);
+      const about = msg.ref ? ` (about ${msg.ref})` : '';
+      log.error(`${channel.label}: the other side says: ${msg.reason}${about}`);
       return;
     }
     try {
@@ -211,7 +226,8 @@ export class RelayLink extends EventTarget {
     this.peer = null;
     room.addEventListener('roster', () => this.sync());
     room.addEventListener('peerleft', (event) => {
-      if (this.peer !== null && event.detail === this.peer.remote) this.#drop(`relay ${event.detail} left`);
+      if (this.peer !== null && event.detail === this.peer.remote)
+        this.#drop(`relay ${event.detail} left`);
     });
     room.addEventListener('signal', (event) => this.#onSignal(event.detail));
   }
@@ -236,8 +252,10 @@ export class RelayLink extends EventTarget {
   #syncOnce() {
     const relay = this.room.relay;
     const current = this.peer;
-    if (current !== null && relay !== undefined && current.remote === relay.name && !current.closed) return;
-    if (current !== null) this.#drop(relay === undefined ? 'no relay in the room' : 'relay changed');
+    if (current !== null && relay !== undefined && current.remote === relay.name && !current.closed)
+      return;
+    if (current !== null)
+      this.#drop(relay === undefined ? 'no relay in the room' : 'relay changed');
     if (relay === undefined) return;
     this.log.info(`connecting to relay ${relay.name}`);
     const peer = new Peer({
@@ -271,10 +289,14 @@ export class RelayLink extends EventTarget {
   #onSignal(msg) {
     if (!['offer', 'answer', 'candidate'].includes(msg.type)) return;
     if (this.peer === null || msg.from !== this.peer.remote) {
-      this.log.warn(`ignored ${msg.type} from ${msg.from}: not the relay this page is connected to`);
+      this.log.warn(
+        `ignored ${msg.type} from ${msg.from}: not the relay this page is connected to`,
+      );
       return;
     }
-    this.peer.handle(msg).catch((err) => this.log.error(`negotiation with ${msg.from} failed: ${err.message}`));
+    this.peer
+      .handle(msg)
+      .catch((err) => this.log.error(`negotiation with ${msg.from} failed: ${err.message}`));
   }
 }
 

@@ -45,7 +45,7 @@ const isZero = (command) => command.linear === 0 && command.angular === 0;
  * Turns keys and gamepads into drive commands while `enabled` (this client holds the wheel).
  * `send({linear, angular})` carries one to the relay.
  */
-export class Wheel {
+export class DriveInput {
   #held = new Set();
   #last = ZERO;
   #timer = null;

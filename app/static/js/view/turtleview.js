@@ -84,7 +84,8 @@ export class TurtleView {
       ctx.arc(px(this.#target.x), py(this.#target.y), 6, 0, 2 * Math.PI);
       ctx.fill();
     }
-    if (this.#pose !== null) drawTurtle(ctx, px(this.#pose.x), py(this.#pose.y), this.#pose.theta, scale);
+    if (this.#pose !== null)
+      drawTurtle(ctx, px(this.#pose.x), py(this.#pose.y), this.#pose.theta, scale);
   }
 }
 
@@ -97,7 +98,12 @@ function drawTurtle(ctx, x, y, theta, scale) {
   ctx.fillStyle = '#7fb069';
   ctx.strokeStyle = '#2d4a22';
   ctx.lineWidth = 1.5;
-  for (const [lx, ly] of [[0.35, 0.42], [0.35, -0.42], [-0.35, 0.42], [-0.35, -0.42]]) {
+  for (const [lx, ly] of [
+    [0.35, 0.42],
+    [0.35, -0.42],
+    [-0.35, 0.42],
+    [-0.35, -0.42],
+  ]) {
     ctx.beginPath();
     ctx.ellipse(lx * s, ly * s, 0.16 * s, 0.1 * s, 0, 0, 2 * Math.PI);
     ctx.fill();

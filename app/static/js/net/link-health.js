@@ -54,7 +54,9 @@ export function warnings(name, figures, limits) {
   const found = [];
   if (figures === null) return found;
   if (figures.lossPct !== null && figures.lossPct > limits.maxLossPct) {
-    found.push(`${name}: ${figures.lossPct.toFixed(1)} % packet loss (over ${limits.maxLossPct} %)`);
+    found.push(
+      `${name}: ${figures.lossPct.toFixed(1)} % packet loss (over ${limits.maxLossPct} %)`,
+    );
   }
   if (figures.rttMs !== null && figures.rttMs > limits.maxRttMs) {
     found.push(`${name}: round trip ${Math.round(figures.rttMs)} ms (over ${limits.maxRttMs} ms)`);

@@ -2,11 +2,11 @@
 // The relay page and the parity page both use it, so parity checks the code path live frames
 // take. Interface: docs/contracts.md, "The analyzer".
 
-import { PROTOCOL } from './protocol.js';
+import { PROTOCOL } from '../config.js';
 
 // The worker has no page config: what it needs of the protocol rides in its URL, and so does
 // the page's `?opencv=simd|official` (which OpenCV.js build; default: SIMD where supported).
-const WORKER_URL = `/static/js/vision-worker.js?${new URLSearchParams({
+const WORKER_URL = `/static/js/worker/vision-worker.js?${new URLSearchParams({
   protocol: JSON.stringify({
     frameTag: PROTOCOL.frameTag,
     defaultProfile: PROTOCOL.defaultProfile,
@@ -84,11 +84,20 @@ export async function createAnalyzer() {
     analyze(
       source,
       opId,
-      { profile = PROTOCOL.defaultProfile, returnPixels = false, track = false, around = null, lock = null } = {},
+      {
+        profile = PROTOCOL.defaultProfile,
+        returnPixels = false,
+        track = false,
+        around = null,
+        lock = null,
+      } = {},
     ) {
       const transfer = source.data ? [] : [source];
       const asked = lock === null ? null : { box: lock.box, anywhere: lock.anywhere };
-      return call({ type: 'analyze', source, opId, profile, returnPixels, track, around, lock: asked }, transfer);
+      return call(
+        { type: 'analyze', source, opId, profile, returnPixels, track, around, lock: asked },
+        transfer,
+      );
     },
 
     /** Forget every tracked target: the next tracked snapshot scans the whole frame. */

@@ -26,8 +26,10 @@ export class GoalGate {
    */
   admit(seq, sentMs, nowS) {
     const offset = nowS - sentMs / 1000;
-    while (this.offsets.length && this.offsets[0][0] < nowS - this.rule.windowS) this.offsets.shift();
-    while (this.offsets.length && this.offsets[this.offsets.length - 1][1] >= offset) this.offsets.pop();
+    while (this.offsets.length && this.offsets[0][0] < nowS - this.rule.windowS)
+      this.offsets.shift();
+    while (this.offsets.length && this.offsets[this.offsets.length - 1][1] >= offset)
+      this.offsets.pop();
     this.offsets.push([nowS, offset]);
     if (this.lastSeq !== null && seq <= this.lastSeq) return 'old';
     if (offset - this.offsets[0][1] > this.rule.maxAgeS) return 'stale';

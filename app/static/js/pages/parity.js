@@ -1,8 +1,8 @@
 // The parity harness page, driven by `autopilot parity` through window.runImage (and by the
 // windowed-path tests and the bench through window.runPixels and window.analyzer; the
 // analyzer tests also use its window.toBase64 and window.fromBase64).
-import { createAnalyzer } from './vision.js';
-import { largest } from './window.js';
+import { createAnalyzer } from '../worker/vision.js';
+import { largest } from '../core/tracking-window.js';
 
 const state = document.getElementById('state');
 
@@ -91,7 +91,11 @@ async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = '
  */
 async function runPixels(base64, width, height, opId, options) {
   const data = new Uint8ClampedArray(fromBase64(base64).buffer);
-  const { boxes, target, scan, region } = await window.analyzer.analyze({ width, height, data }, opId, options);
+  const { boxes, target, scan, region } = await window.analyzer.analyze(
+    { width, height, data },
+    opId,
+    options,
+  );
   return { boxes, target, scan, region };
 }
 
@@ -102,7 +106,8 @@ createAnalyzer().then(
     window.runPixels = runPixels;
     window.toBase64 = toBase64;
     window.fromBase64 = fromBase64;
-    state.textContent = `ready (OpenCV.js ${analyzer.build}): ${analyzer.ops.map((op) => op.id).join(', ')}`;
+    const ops = analyzer.ops.map((op) => op.id).join(', ');
+    state.textContent = `ready (OpenCV.js ${analyzer.build}): ${ops}`;
     document.body.dataset.opencv = analyzer.build;
     document.body.dataset.ready = 'true';
   },

@@ -12,9 +12,10 @@ import { RelayStats } from './relay-stats.js';
 /**
  * Events (CustomEvent detail):
  *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?}) once sent
- *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms, goalsPerS,
- *                 locked: the locked target's box or null})
- *   `lock`        the lockState message ({type: 'lockState', state, box, reason}) when the lock changed
+ *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms,
+ *                 goalsPerS, locked: the locked target's box or null})
+ *   `lock`        the lockState message ({type: 'lockState', state, box, reason}) when the lock
+ *                 changed
  *   `failure`     an analysis error's message, once until a snapshot succeeds again
  */
 export class SnapshotLoop extends EventTarget {
@@ -34,7 +35,14 @@ export class SnapshotLoop extends EventTarget {
    * @param {object} options.lockRule the target lock's rule (PROTOCOL.lock)
    */
   constructor({
-    analyzer, profile, op, sendGoal, lockRule, track = false, clock = () => performance.now(), wallClock = () => Date.now(),
+    analyzer,
+    profile,
+    op,
+    sendGoal,
+    lockRule,
+    track = false,
+    clock = () => performance.now(),
+    wallClock = () => Date.now(),
   }) {
     super();
     this.analyzer = analyzer;
@@ -126,12 +134,19 @@ export class SnapshotLoop extends EventTarget {
   async #analyze(source) {
     const started = this.clock();
     const lock = this.lock.query(started / 1000);
-    const result = await this.analyzer.analyze(source, this.op, { profile: this.profile, track: this.track, lock });
+    const result = await this.analyzer.analyze(source, this.op, {
+      profile: this.profile,
+      track: this.track,
+      lock,
+    });
     if (!this.running) return null;
     if (result.scan === 'full') this.lastFullScanBoxes = result.boxes;
     const changed = this.lock.update(lock, result.locked ?? null, started / 1000);
     if (changed === 'none') {
-      this.#emit('lock', this.lockMessage(`not seen for more than ${this.lock.rule.releaseAfterS} s`));
+      this.#emit(
+        'lock',
+        this.lockMessage(`not seen for more than ${this.lock.rule.releaseAfterS} s`),
+      );
     } else if (changed !== null) {
       this.#emit('lock', this.lockMessage());
     }

@@ -3,15 +3,23 @@
 // show to the snapshot loop (snapshot-loop.js), whose goals go to the vehicle on the
 // `autopilot` channel and whose detections go to the clients on `control`. This module is the
 // page: connections, control messages, scheduling the frames and the DOM.
-import { LinkMeter } from './link-health.js';
-import { BadMessage, Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
-import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
-import { RoomSession } from './room.js';
-import { SnapshotLoop } from './snapshot-loop.js';
-import { byTestId, drawDetections, FIGURES_PERIOD_MS, fmt, Log, readConfig, show, throttle } from './ui.js';
-import { createAnalyzer } from './vision.js';
+import { LinkMeter } from '../net/link-health.js';
+import { BadMessage, Peer, preferLowLatency, sendJson, serveChannel } from '../net/peer.js';
+import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
+import { RoomSession } from '../net/room.js';
+import { SnapshotLoop } from '../core/snapshot-loop.js';
+import {
+  byTestId,
+  drawDetections,
+  FIGURES_PERIOD_MS,
+  fmt,
+  Log,
+  show,
+  throttle,
+} from '../view/ui.js';
+import { createAnalyzer } from '../worker/vision.js';
 
-const config = readConfig();
+const config = CONFIG;
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const video = byTestId('video');
@@ -76,7 +84,8 @@ window.autopilotStatus = status;
  * The bench's one other entry point (status stays plain data, cloneable by tests): resolves to
  * {wasmHeapBytes}, the analyzer's OpenCV WASM heap size (analyzer.memory()), or null.
  */
-window.autopilotMemory = () => (session.analyzer === null ? Promise.resolve(null) : session.analyzer.memory());
+window.autopilotMemory = () =>
+  session.analyzer === null ? Promise.resolve(null) : session.analyzer.memory();
 
 /** Everything else this page holds, in one place. */
 const session = {
@@ -96,25 +105,28 @@ const slowAnalyzer = setTimeout(
   () => log.warn(`OpenCV.js is still loading after ${ANALYZER_SLOW_MS / 1000} s`),
   ANALYZER_SLOW_MS,
 );
-const analyzerReady = createAnalyzer().finally(() => clearTimeout(slowAnalyzer)).then(
-  (created) => {
-    session.analyzer = created;
-    session.loop = createLoop(created);
-    if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
-    status.analyzerReady = true;
-    status.opencvBuild = created.build;
-    status.op = created.defaultOp;
-    show('operation', status.op);
-    log.info(`OpenCV.js (${created.build} build) ready: operations ${created.ops.map((op) => op.id).join(', ')}`);
-    broadcastState();
-    return created;
-  },
-  (err) => {
-    log.error(`OpenCV.js analyzer could not start: ${err.message}`);
-    show('operation', 'unavailable');
-    return null;
-  },
-);
+const analyzerReady = createAnalyzer()
+  .finally(() => clearTimeout(slowAnalyzer))
+  .then(
+    (created) => {
+      session.analyzer = created;
+      session.loop = createLoop(created);
+      if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
+      status.analyzerReady = true;
+      status.opencvBuild = created.build;
+      status.op = created.defaultOp;
+      show('operation', status.op);
+      const ops = created.ops.map((op) => op.id).join(', ');
+      log.info(`OpenCV.js (${created.build} build) ready: operations ${ops}`);
+      broadcastState();
+      return created;
+    },
+    (err) => {
+      log.error(`OpenCV.js analyzer could not start: ${err.message}`);
+      show('operation', 'unavailable');
+      return null;
+    },
+  );
 
 // ---------------------------------------------------------------- connections
 
@@ -141,13 +153,20 @@ function createPeer(name, role) {
     beforeAnswer: role === 'client' ? (pc) => sendVideoOn(pc) : undefined,
   });
   // The vehicle's link is measured here, where its video is received (link health).
-  const entry = { peer, role, channel: null, stateChannel: null, meter: role === 'vehicle' ? new LinkMeter(peer.pc) : null };
+  const entry = {
+    peer,
+    role,
+    channel: null,
+    stateChannel: null,
+    meter: role === 'vehicle' ? new LinkMeter(peer.pc) : null,
+  };
   peer.addEventListener('track', (event) => {
     if (role === 'vehicle' && event.detail.track.kind === 'video') onVehicleTrack(event.detail);
   });
   peer.addEventListener('datachannel', (event) => onDataChannel(entry, event.detail));
   peer.addEventListener('state', (event) => {
-    if (event.detail === 'failed' && session.peers.get(name) === entry) closePeer(name, 'connection failed');
+    if (event.detail === 'failed' && session.peers.get(name) === entry)
+      closePeer(name, 'connection failed');
     updatePeers();
   });
   session.peers.set(name, entry);
@@ -170,7 +189,9 @@ function closePeer(name, reason) {
     session.vehicleTrack = null;
     video.srcObject = null;
     for (const client of clientEntries()) {
-      sendVideoOn(client.peer.pc).catch((err) => log.error(`could not stop forwarding video: ${err.message}`));
+      sendVideoOn(client.peer.pc).catch((err) =>
+        log.error(`could not stop forwarding video: ${err.message}`),
+      );
     }
     status.vehicle = null;
     broadcastState();
@@ -190,7 +211,9 @@ async function onOffer(msg) {
     await entry.peer.handle(msg);
   } catch (err) {
     // A peer that reloaded offers a new DTLS identity to our old connection: start afresh.
-    log.warn(`offer from ${msg.from} does not fit the old connection (${err.message}); starting a new one`);
+    log.warn(
+      `offer from ${msg.from} does not fit the old connection (${err.message}); starting a new one`,
+    );
     closePeer(msg.from, 'replaced');
     entry = createPeer(msg.from, role);
     await entry.peer.handle(msg);
@@ -204,11 +227,13 @@ function onPeerSignal(msg) {
     else await session.peers.get(msg.from)?.peer.handle(msg);
   };
   const previous = session.signalQueues.get(msg.from) ?? Promise.resolve();
-  const next = previous.then(run).catch((err) => log.error(`negotiation with ${msg.from} failed: ${err.message}`));
+  const next = previous
+    .then(run)
+    .catch((err) => log.error(`negotiation with ${msg.from} failed: ${err.message}`));
   session.signalQueues.set(msg.from, next);
 }
 
-/** Send the vehicle's video (or nothing yet) on every video transceiver of a client's connection. */
+/** Send the vehicle's video (or nothing yet) on every video transceiver of a client's link. */
 async function sendVideoOn(pc) {
   for (const transceiver of pc.getTransceivers()) {
     if (transceiver.stopped || transceiver.receiver.track.kind !== 'video') continue;
@@ -241,7 +266,9 @@ function onVehicleTrack({ track, receiver }) {
   session.vehicleTrack = track;
   status.vehicleTracks += 1;
   // A new video starts with a full scan, not a window where the old one last saw its target.
-  session.analyzer?.resetTracking().catch((err) => log.error(`could not reset tracking: ${err.message}`));
+  session.analyzer
+    ?.resetTracking()
+    .catch((err) => log.error(`could not reset tracking: ${err.message}`));
   if (status.piloting && session.timer === null) {
     stopLoop();
     startLoop();
@@ -249,7 +276,9 @@ function onVehicleTrack({ track, receiver }) {
   if (PREVIEW) video.srcObject = new MediaStream([track]);
   log.info('vehicle video arrived; forwarding it to the clients');
   for (const client of clientEntries()) {
-    sendVideoOn(client.peer.pc).catch((err) => log.error(`could not forward video: ${err.message}`));
+    sendVideoOn(client.peer.pc).catch((err) =>
+      log.error(`could not forward video: ${err.message}`),
+    );
   }
 }
 
@@ -257,7 +286,12 @@ function onDataChannel(entry, channel) {
   const name = entry.peer.remote;
   if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilotState) {
     // Goals go out and pose comes in here: unordered, never retransmitted, latest wins.
-    serveChannel(channel, { pose: (msg) => onPose(msg) }, log, SCHEMAS[CHANNELS.autopilotState].relay);
+    serveChannel(
+      channel,
+      { pose: (msg) => onPose(msg) },
+      log,
+      SCHEMAS[CHANNELS.autopilotState].relay,
+    );
     channel.addEventListener('open', () => {
       entry.stateChannel = channel;
     });
@@ -401,7 +435,11 @@ function takeOver(from) {
 
 function handBack(from) {
   if (status.operator !== from) {
-    throw new BadMessage(status.operator === null ? 'nobody holds the wheel' : `${status.operator} holds the wheel, not ${from}`);
+    throw new BadMessage(
+      status.operator === null
+        ? 'nobody holds the wheel'
+        : `${status.operator} holds the wheel, not ${from}`,
+    );
   }
   setOperator(null, `handed back by ${from}`);
 }
@@ -409,12 +447,17 @@ function handBack(from) {
 /** The operator's drive command, renumbered for the vehicle (latest wins on the lossy channel). */
 function forwardDrive(msg, from) {
   if (status.operator !== from) {
-    throw new BadMessage(status.operator === null ? 'take over before driving' : `${status.operator} is driving, not ${from}`);
+    throw new BadMessage(
+      status.operator === null
+        ? 'take over before driving'
+        : `${status.operator} is driving, not ${from}`,
+    );
   }
   const vehicle = vehicleEntry();
   session.driveSeq += 1;
   const drive = { type: 'drive', seq: session.driveSeq, linear: msg.linear, angular: msg.angular };
-  if (!sendJson(vehicle?.stateChannel ?? vehicle?.channel, drive)) throw new BadMessage('no vehicle connected');
+  if (!sendJson(vehicle?.stateChannel ?? vehicle?.channel, drive))
+    throw new BadMessage('no vehicle connected');
   status.drivesForwarded += 1;
 }
 
@@ -423,7 +466,8 @@ function forwardDrive(msg, from) {
 /** A client clicked frame pixel (x, y): lock on the box there, or release (lock.js). */
 function lockAt(msg, from) {
   if (session.loop === null) throw new BadMessage('operations are still loading; try again');
-  if (session.loop.lockAt(msg.x, msg.y)) log.info(`locked on the target at (${fmt(msg.x, 0)}, ${fmt(msg.y, 0)}) for ${from}`);
+  if (session.loop.lockAt(msg.x, msg.y))
+    log.info(`locked on the target at (${fmt(msg.x, 0)}, ${fmt(msg.y, 0)}) for ${from}`);
 }
 
 function unlock(reason) {
@@ -556,10 +600,10 @@ function snapshot(frame = null) {
 
 function updatePeers() {
   status.clients = clientEntries().map((entry) => entry.peer.remote);
-  const lines = [...session.peers.entries()].map(
-    ([name, entry]) =>
-      `${entry.role} ${name} (${entry.peer.pc.connectionState}${entry.channel ? ', channel open' : ''})`,
-  );
+  const lines = [...session.peers.entries()].map(([name, entry]) => {
+    const open = entry.channel ? ', channel open' : '';
+    return `${entry.role} ${name} (${entry.peer.pc.connectionState}${open})`;
+  });
   show('peers', lines.join('; ') || 'none');
 }
 

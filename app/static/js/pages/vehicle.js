@@ -1,20 +1,20 @@
 // The vehicle page: camera to the relay, goals from the lossy `autopilot-state` data channel
 // (latest wins) turned into Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to
 // the relay on the same channel; `stop` on the reliable `autopilot` channel.
-import { ControlLaw, Controller } from './control.js';
-import { GoalGate } from './freshness.js';
-import { ManualDrive } from './manual.js';
-import { RelayLink, sendJson, serveChannel } from './peer.js';
-import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
-import { RoomSession } from './room.js';
-import { pickTypes } from './rosflavour.js';
-import { byTestId, fmt, Log, readConfig, show } from './ui.js';
+import { ControlLaw, Controller } from '../core/control.js';
+import { GoalGate } from '../core/freshness.js';
+import { ManualDrive } from '../core/manual.js';
+import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
+import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
+import { RoomSession } from '../net/room.js';
+import { pickTypes } from '../core/rosflavour.js';
+import { byTestId, fmt, Log, show } from '../view/ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
 const TICK_MS = 50;
 const ROS_RETRY_MS = 2000;
 
-const config = readConfig();
+const config = CONFIG;
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
@@ -97,7 +97,9 @@ class Turtle {
     this.types = types;
     status.rosFlavour = types.flavour;
     status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
-    const from = types.fromRobot ? 'as its rosapi reports' : `from ros=${this.setting}: rosapi did not say`;
+    const from = types.fromRobot
+      ? 'as its rosapi reports'
+      : `from ros=${this.setting}: rosapi did not say`;
     log.info(`ROS ${types.flavour} types (${types.pose}, ${types.twist}) ${from}`);
     show('ros-state', `connected (ROS ${types.flavour})`);
     this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: types.twist });
@@ -118,7 +120,10 @@ class Turtle {
 
   publish(twist) {
     if (this.cmdVel === null) return false;
-    this.cmdVel.publish({ linear: { x: twist.linear, y: 0, z: 0 }, angular: { x: 0, y: 0, z: twist.angular } });
+    this.cmdVel.publish({
+      linear: { x: twist.linear, y: 0, z: 0 },
+      angular: { x: 0, y: 0, z: twist.angular },
+    });
     return true;
   }
 
@@ -147,7 +152,10 @@ class Turtle {
 }
 
 const turtle = new Turtle(
-  config.rosbridge, config.ros, config.rosTypes, config.rosbridgeAuth ? config.token : null,
+  config.rosbridge,
+  config.ros,
+  config.rosTypes,
+  config.rosbridgeAuth ? config.token : null,
 );
 /** Everything else this page holds, in one place. */
 const session = {
@@ -170,8 +178,10 @@ function publish(twist, why) {
   status.twistsPublished += 1;
   status.lastTwist = { ...twist, t: Date.now() };
   const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
-  show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${twist.seq !== null ? ` (goal ${twist.seq})` : ''}`);
-  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null) log.info(`zero Twist: ${why}`);
+  const goal = twist.seq !== null ? ` (goal ${twist.seq})` : '';
+  show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${goal}`);
+  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null)
+    log.info(`zero Twist: ${why}`);
 }
 
 function halt(reason) {
@@ -218,7 +228,8 @@ turtle.onPose = (pose) => {
   const now = performance.now();
   if (now - session.lastPoseSent < POSE_FORWARD_MS) return;
   const goalAgeMs = session.lastGoalAt === null ? null : now - session.lastGoalAt;
-  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs })) session.lastPoseSent = now;
+  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs }))
+    session.lastPoseSent = now;
 };
 
 function tick() {
@@ -236,7 +247,15 @@ function onGoal(msg) {
     return;
   }
   // Validated against the goal schema by serveChannel before it gets here.
-  const goal = { x: msg.x, y: msg.y, w: msg.w, h: msg.h, seq: msg.seq, frame: msg.frame ?? null, op: msg.op };
+  const goal = {
+    x: msg.x,
+    y: msg.y,
+    w: msg.w,
+    h: msg.h,
+    seq: msg.seq,
+    frame: msg.frame ?? null,
+    op: msg.op,
+  };
   const verdict = goalGate.admit(msg.seq, msg.t, performance.now() / 1000);
   if (verdict !== 'fresh') {
     status.goalsDropped[verdict] += 1;
@@ -256,7 +275,12 @@ function setupPeer(peer, stream) {
   // (maintain-framerate) kept fewer and 'detail' fewest (`autopilot bench --field`, video rows).
   if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
   const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
-  const handlers = { goal: onGoal, stop: () => publish(controller.stop(), 'relay says stop'), mode: onMode, drive: onDrive };
+  const handlers = {
+    goal: onGoal,
+    stop: () => publish(controller.stop(), 'relay says stop'),
+    mode: onMode,
+    drive: onDrive,
+  };
   serveChannel(dc, handlers, log, SCHEMAS.autopilot.vehicle);
   // A new link: the relay's seq starts again, and a new relay knows of no operator.
   goalGate.reset();
@@ -264,7 +288,12 @@ function setupPeer(peer, stream) {
   publish(setMode('auto', null, 'a new relay link'), 'a new relay link');
   manual.resetLink();
   const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);
-  serveChannel(state, { goal: onGoal, drive: onDrive }, log, SCHEMAS[CHANNELS.autopilotState].vehicle);
+  serveChannel(
+    state,
+    { goal: onGoal, drive: onDrive },
+    log,
+    SCHEMAS[CHANNELS.autopilotState].vehicle,
+  );
   state.addEventListener('open', () => {
     session.stateChannel = state;
   });
@@ -291,7 +320,12 @@ function showState() {
   if (room.phase === 'joined') {
     const relay = room.relay;
     if (relay === undefined) parts.push('waiting for a relay');
-    else parts.push(status.relayChannelOpen ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
+    else
+      parts.push(
+        status.relayChannelOpen
+          ? `relay ${relay.name} connected`
+          : `connecting to relay ${relay.name}`,
+      );
   }
   show('state', parts.join(' · '));
 }

@@ -23,7 +23,10 @@ export class SampleRing {
 
   toArray() {
     const start = (this.next - this.count + this.values.length) % this.values.length;
-    return Array.from({ length: this.count }, (_, i) => this.values[(start + i) % this.values.length]);
+    return Array.from(
+      { length: this.count },
+      (_, i) => this.values[(start + i) % this.values.length],
+    );
   }
 }
 
@@ -59,7 +62,8 @@ export class RelayStats {
 
   /** Goals per second over the window ending at clock time `now` (ms). */
   goalsPerS(now) {
-    while (this.goalTimes.length && now - this.goalTimes[0] > this.rateWindowMs) this.goalTimes.shift();
+    while (this.goalTimes.length && now - this.goalTimes[0] > this.rateWindowMs)
+      this.goalTimes.shift();
     return this.goalTimes.length / (this.rateWindowMs / 1000);
   }
 }

@@ -1,18 +1,27 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
 // lists the relay's operations, sets one, starts and stops piloting.
-import { ControlLaw } from './control.js';
-import { LinkMeter, warnings } from './link-health.js';
-import { LockPanel } from './lock-view.js';
-import { preferLowLatency, RelayLink, sendJson, serveChannel } from './peer.js';
-import { CHANNELS, PROTOCOL, SCHEMAS } from './protocol.js';
-import { RoomSession } from './room.js';
-import { TurtleView } from './turtleview.js';
-import { button, byTestId, drawDetections, FIGURES_PERIOD_MS, fmt, Log, readConfig, show, throttle } from './ui.js';
-import { Wheel } from './wheel.js';
+import { ControlLaw } from '../core/control.js';
+import { LinkMeter, warnings } from '../net/link-health.js';
+import { LockPanel } from '../view/lock-view.js';
+import { preferLowLatency, RelayLink, sendJson, serveChannel } from '../net/peer.js';
+import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
+import { RoomSession } from '../net/room.js';
+import { TurtleView } from '../view/turtleview.js';
+import {
+  button,
+  byTestId,
+  drawDetections,
+  FIGURES_PERIOD_MS,
+  fmt,
+  Log,
+  show,
+  throttle,
+} from '../view/ui.js';
+import { DriveInput } from '../view/drive-input.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
 
-const config = readConfig();
+const config = CONFIG;
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const video = byTestId('video');
@@ -47,7 +56,7 @@ const status = {
   lock: null, // the relay's last lockState: {state, box, reason}
   mode: null, // the relay's last mode: {mode: 'auto'|'manual', operator, reason}
   get drivesSent() {
-    return wheel.sent;
+    return driveInput.sent;
   },
 };
 window.autopilotStatus = status;
@@ -72,7 +81,7 @@ const session = {
   driveSeq: 0,
 };
 // Keys and gamepads drive while this client holds the wheel (manual override).
-const wheel = new Wheel({
+const driveInput = new DriveInput({
   repeatS: config.control.driveRepeatS,
   send: (command) => {
     session.driveSeq += 1;
@@ -110,7 +119,8 @@ function onState(msg) {
       log.error(err.message);
     }
   }
-  if (previous?.op !== status.relay.op && status.relay.op) log.info(`operation is now ${status.relay.op}`);
+  if (previous?.op !== status.relay.op && status.relay.op)
+    log.info(`operation is now ${status.relay.op}`);
   if (previous !== null && previous.piloting !== status.relay.piloting) {
     log.info(status.relay.piloting ? 'piloting started' : 'piloting stopped');
   }
@@ -166,20 +176,30 @@ function showHealth() {
     ...warnings('vehicle → relay', health.vehicleToRelay, limits),
     ...warnings('relay → client', health.relayToClient, limits),
   ];
-  for (const [id, figures] of [['health-vehicle', health.vehicleToRelay], ['health-client', health.relayToClient]]) {
+  for (const [id, figures] of [
+    ['health-vehicle', health.vehicleToRelay],
+    ['health-client', health.relayToClient],
+  ]) {
     const cells = byTestId(id).querySelectorAll('td');
-    const video = figures?.width ? `${fmt(figures.fps, 1)} fps, ${figures.width}×${figures.height}` : '–';
+    const frames = figures?.width
+      ? `${fmt(figures.fps, 1)} fps, ${figures.width}×${figures.height}`
+      : '–';
     const values = [
       figures?.rttMs == null ? '–' : `${fmt(figures.rttMs, 0)} ms`,
       figures?.lossPct == null ? '–' : `${fmt(figures.lossPct, 1)} %`,
-      video,
+      frames,
       figures?.candidate ?? '–',
     ];
     values.forEach((text, i) => {
       cells[i].textContent = text;
     });
   }
-  show('goal-age', health.goalAgeMs === null ? 'no goal applied at the vehicle yet' : `last goal applied at the vehicle ${fmt(health.goalAgeMs, 0)} ms ago`);
+  show(
+    'goal-age',
+    health.goalAgeMs === null
+      ? 'no goal applied at the vehicle yet'
+      : `last goal applied at the vehicle ${fmt(health.goalAgeMs, 0)} ms ago`,
+  );
   show('health-warnings', health.warnings.join(' · '));
 }
 
@@ -204,10 +224,14 @@ function onMode(msg) {
   const previous = status.mode;
   status.mode = { mode: msg.mode, operator: msg.operator ?? null, reason: msg.reason ?? null };
   const mine = msg.mode === 'manual' && msg.operator === room.name;
-  wheel.setEnabled(mine);
+  driveInput.setEnabled(mine);
   show('mode', modeText());
-  if (previous !== null && (previous.mode !== msg.mode || previous.operator !== status.mode.operator)) {
-    log.info(`${msg.mode === 'manual' ? `${msg.operator} has the wheel` : 'the autopilot steers'}${msg.reason ? ` (${msg.reason})` : ''}`);
+  if (
+    previous !== null &&
+    (previous.mode !== msg.mode || previous.operator !== status.mode.operator)
+  ) {
+    const who = msg.mode === 'manual' ? `${msg.operator} has the wheel` : 'the autopilot steers';
+    log.info(`${who}${msg.reason ? ` (${msg.reason})` : ''}`);
   }
   updateControls();
 }
@@ -245,7 +269,15 @@ function setupPeer(peer) {
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
-  const handlers = { ops: onOps, state: onState, detections: onDetections, pose: onPose, lockState: onLockState, mode: onMode, health: onHealth };
+  const handlers = {
+    ops: onOps,
+    state: onState,
+    detections: onDetections,
+    pose: onPose,
+    lockState: onLockState,
+    mode: onMode,
+    health: onHealth,
+  };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
     session.control = dc;
@@ -268,7 +300,8 @@ function setupPeer(peer) {
 /** start/stop go through signaling as in the thesis, or on the control channel without it. */
 function askRelay(type) {
   if (room.phase === 'joined' && room.relay !== undefined) room.send({ type });
-  else if (!sendJson(session.control, { type })) throw new Error(`cannot send ${type}: no relay connection`);
+  else if (!sendJson(session.control, { type }))
+    throw new Error(`cannot send ${type}: no relay connection`);
   log.info(`asked the relay to ${type === 'start' ? 'start' : 'stop'} piloting`);
 }
 
@@ -276,7 +309,7 @@ function askRelay(type) {
 
 function forgetMode() {
   status.mode = null;
-  wheel.setEnabled(false);
+  driveInput.setEnabled(false);
   show('mode', modeText());
 }
 
@@ -294,7 +327,8 @@ function updateControls() {
   button('stop').disabled = !reachable || !piloting;
   const mode = status.mode;
   button('take-over').disabled = !reachable || mode === null || mode.mode === 'manual';
-  button('hand-back').disabled = !reachable || mode?.mode !== 'manual' || mode.operator !== room.name;
+  button('hand-back').disabled =
+    !reachable || mode?.mode !== 'manual' || mode.operator !== room.name;
 }
 
 function showState() {
@@ -302,7 +336,12 @@ function showState() {
   if (room.phase === 'joined') {
     const relay = room.relay;
     if (relay === undefined) parts.push('waiting for a relay');
-    else parts.push(session.control !== null ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`);
+    else
+      parts.push(
+        session.control !== null
+          ? `relay ${relay.name} connected`
+          : `connecting to relay ${relay.name}`,
+      );
   }
   if (status.relay !== null && session.control !== null) {
     parts.push(status.relay.vehicle ? `vehicle ${status.relay.vehicle}` : 'no vehicle yet');
@@ -331,9 +370,13 @@ for (const type of ['start', 'stop']) {
 }
 
 // The relay answers with `mode` (to every client), or with an error naming who drives.
-for (const [action, msg] of [['take-over', { type: 'takeOver' }], ['hand-back', { type: 'handBack' }]]) {
+for (const [action, msg] of [
+  ['take-over', { type: 'takeOver' }],
+  ['hand-back', { type: 'handBack' }],
+]) {
   button(action).addEventListener('click', () => {
-    if (!sendJson(session.control, msg)) log.error(`cannot ${button(action).textContent}: no relay connection`);
+    if (!sendJson(session.control, msg))
+      log.error(`cannot ${button(action).textContent}: no relay connection`);
   });
 }
 

@@ -34,7 +34,7 @@ export function searchRegion(around, factor, width, height, margin) {
  */
 export function searchSizes(around, factor, ratio, minSize, maxSize) {
   const shortest = Math.floor(Math.min(around[2], around[3]) / factor / ratio);
-  const longest = Math.ceil(Math.max(around[2], around[3]) / factor * ratio);
+  const longest = Math.ceil((Math.max(around[2], around[3]) / factor) * ratio);
   const min = [Math.max(minSize[0], shortest), Math.max(minSize[1], shortest)];
   if (maxSize[0] === 0 || maxSize[1] === 0) return { min, max: [longest, longest] };
   return { min, max: [Math.min(maxSize[0], longest), Math.min(maxSize[1], longest)] };
@@ -65,11 +65,11 @@ function gcd(a, b) {
 function onGrid(start, end, frame, reduced) {
   const common = gcd(frame, reduced);
   const period = reduced / common;
-  const step = frame / common;
+  const stride = frame / common;
   if ((period & (period - 1)) !== 0) return null;
   const lo = Math.floor(start / period) * period;
   const hi = Math.min(reduced, Math.ceil(end / period) * period);
-  return { lo, hi, from: (lo / period) * step, to: (hi / period) * step };
+  return { lo, hi, from: (lo / period) * stride, to: (hi / period) * stride };
 }
 
 /** The largest box, the first of equal areas (the one whose centre is the target). */
@@ -92,7 +92,7 @@ export class Tracker {
     return this.last;
   }
 
-  /** Remember the target box a snapshot's search chose (null: none) and how ('full' or 'window'). */
+  /** The target box a snapshot's search chose (null: none), and how ('full' or 'window'). */
   record(box, scan) {
     this.last = box;
     this.windowed = scan === 'window' ? this.windowed + 1 : 0;

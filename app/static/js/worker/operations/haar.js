@@ -7,7 +7,7 @@
 // is searched, for sizes near the box's own, and its boxes are moved back by the window's origin
 // before scaling; where the reduction's grid allows it, only the window's part of the frame is
 // converted and reduced (the same pixels for a fraction of the work: sourceRect).
-import { searchRegion, searchSizes, sourceRect } from '../window.js';
+import { searchRegion, searchSizes, sourceRect } from '../../core/tracking-window.js';
 
 /** Size of the detection image, or null when the frame is used as it is (see _reduction). */
 export function reduction(width, height, detectWidth) {
@@ -66,7 +66,7 @@ export function createCascadeOperation(cv, spec, files) {
   });
   const gray = new cv.Mat();
   const small = new cv.Mat();
-  const rects = new cv.RectVector();
+  const found = new cv.RectVector();
   const minSize = new cv.Size(p.minSize[0], p.minSize[1]);
   const maxSize = new cv.Size(p.maxSize[0], p.maxSize[1]);
 
@@ -149,9 +149,9 @@ export function createCascadeOperation(cv, spec, files) {
       const oy = region?.y ?? 0;
       try {
         for (const c of classifiers) {
-          c.detectMultiScale(searched, rects, p.scaleFactor, p.minNeighbors, 0, sizeMin, sizeMax);
-          for (let i = 0; i < rects.size(); i += 1) {
-            const r = rects.get(i);
+          c.detectMultiScale(searched, found, p.scaleFactor, p.minNeighbors, 0, sizeMin, sizeMax);
+          for (let i = 0; i < found.size(); i += 1) {
+            const r = found.get(i);
             boxes.push(scaleBox([r.x + ox, r.y + oy, r.width, r.height], factor));
           }
         }
@@ -173,7 +173,7 @@ export function createCascadeOperation(cv, spec, files) {
       for (const c of classifiers) c.delete();
       gray.delete();
       small.delete();
-      rects.delete();
+      found.delete();
     },
   };
 }
