@@ -57,7 +57,7 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
                error: e,
                default: e === null ? null : law.angularCommand(e, law.profiles.default),
                thesis: e === null ? null : law.angularCommand(e, law.profiles.thesis),
-               follow: law.command(goal, pose, law.profiles.follow),
+               follow: law.follow(goal, pose, law.profiles.follow),
                ahead: law.wallClearance(pose, true),
                behind: law.wallClearance(pose, false),
              };
@@ -127,13 +127,11 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
 
     js = page.evaluate(
         """([profile, events]) => {
-             let now = 0;
-             const c = new control.Controller(law, law.profiles[profile], () => now);
+             const c = new control.Controller(law, law.profiles[profile]);
              return events.map(([kind, t, arg]) => {
-               now = t;
-               const twist = kind === 'goal' ? c.goal(arg) : kind === 'pose' ? c.pose(arg)
-                 : kind === 'tick' ? c.tick() : c.stop();
-               const until = c.untilTimeout();
+               const twist = kind === 'goal' ? c.goal(arg, t) : kind === 'pose' ? c.pose(arg, t)
+                 : kind === 'tick' ? c.tick(t) : c.stop();
+               const until = c.untilTimeout(t);
                return [twist === null ? null : [twist.linear, twist.angular, twist.seq], until];
              });
            }""",

@@ -21,16 +21,14 @@ pytestmark = [pytest.mark.browser]
 CONSTANTS = page_constants()
 
 RUN_JS = """([events, profile, deadmanS]) => {
-  const now = [0];
-  const drive = new manual.ManualDrive(profile, deadmanS, () => now[0]);
+  const drive = new manual.ManualDrive(profile, deadmanS);
   return events.map(([kind, t, args]) => {
-    now[0] = t;
     let twist;
     if (kind === 'mode') twist = drive.setMode(args[0], args[1]);
-    else if (kind === 'drive') twist = drive.drive(...args);
-    else twist = drive.tick();
+    else if (kind === 'drive') twist = drive.drive(...args, t);
+    else twist = drive.tick(t);
     const answer = twist === null ? null : [twist.linear, twist.angular];
-    return [answer, drive.manual, drive.operator, drive.untilDeadman()];
+    return [answer, drive.manual, drive.operator, drive.untilDeadman(t)];
   });
 }"""
 

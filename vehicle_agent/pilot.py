@@ -69,6 +69,11 @@ class Pilot:
         """Who holds the wheel, in manual mode."""
         return self.manual.operator
 
+    @property
+    def active(self) -> bool:
+        """True while goals steer the turtle (between the first goal and a stop)."""
+        return self.controller.active
+
     def goal_age(self, now: float) -> float | None:
         """Seconds since the last goal applied on this link, None before the first."""
         return None if self._last_goal_at is None else now - self._last_goal_at
