@@ -3,9 +3,8 @@
 The default-profile stack runs on the same browser and server as it is ("plain") and with the
 agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80),
 in ``ROUNDS`` alternating pairs (plain, recording, plain, recording), each run half of the
-seconds asked for: this machine's speed drifts by tens of percent within the hour, and one run
-after the other put all of the drift into the difference (+3 % and +10 % on two runs of the
-same code). Per mode: the agent process's cores over the measured windows (its CPU time from
+seconds asked for: a machine's speed drifts within the hour, and one run after the other would
+put all of the drift into the difference. Per mode: the agent process's cores over the measured windows (its CPU time from
 /proc / the window, averaged over the rounds), and the vehicle's share of the latency (goal
 received → its Twist) and the whole glass-to-command, from the agent's own event log. Targets:
 at most 5 % more agent CPU, and no change in glass-to-command beyond the run-to-run noise (the
