@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from app.protocol import constants, control
+from app.protocol import control, relay_profiles
 
 
 def _number(text: str) -> float:
@@ -73,10 +73,10 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
 
 
 def add_relay_profile(parser: argparse.ArgumentParser, purpose: str) -> None:
-    """``--profile``: one of the relay profiles (:data:`app.protocol.constants.PROFILES`)."""
+    """``--profile``: one of the relay profiles (:data:`app.protocol.relay_profiles.PROFILES`)."""
     parser.add_argument(
         "--profile",
-        choices=constants.PROFILES,
-        default=constants.DEFAULT_PROFILE,
-        help=f"{purpose} (default: {constants.DEFAULT_PROFILE})",
+        choices=relay_profiles.PROFILES,
+        default=relay_profiles.DEFAULT_PROFILE,
+        help=f"{purpose} (default: {relay_profiles.DEFAULT_PROFILE})",
     )

@@ -1,6 +1,6 @@
 """The browser vehicle's control law (control.js) agrees with the Python agent's (control.py).
 
-control.js gets its numbers the way the vehicle page does, from ``page_constants()``, and is
+control.js gets its numbers the way the vehicle page does, from ``control_config()``, and is
 compared with the Python law on a grid of goals and poses and on scripted sessions.
 """
 
@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import page_constants
+from app.protocol.control import control_config
+from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from vehicle_agent import control
 
@@ -38,7 +39,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
              window.control = await import('/static/js/core/control.js');
              window.law = new control.ControlLaw(constants);
            }""",
-        page_constants(),
+        to_json(control_config()),
     )
     yield opened
     opened.close()

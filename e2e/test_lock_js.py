@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.browser import browser_protocol
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from app.vision import lock
 from app.vision.window import Box
@@ -23,7 +23,7 @@ from tests.vision import lock_sequences
 
 pytestmark = [pytest.mark.browser]
 
-PAGE_RULE = browser_protocol()["lock"]
+PAGE_RULE = to_json(page_protocol().lock)
 RULE = lock.LockRule(
     search_after_s=PAGE_RULE["searchAfterS"],
     release_after_s=PAGE_RULE["releaseAfterS"],

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import page_constants
+from app.protocol.control import control_config
+from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.manual_sequences import SEQUENCES, run
@@ -18,7 +19,7 @@ from vehicle_agent.control import PROFILES
 
 pytestmark = [pytest.mark.browser]
 
-CONSTANTS = page_constants()
+CONSTANTS = to_json(control_config())
 
 RUN_JS = """([events, profile, deadmanS]) => {
   const drive = new manual.ManualDrive(profile, deadmanS);

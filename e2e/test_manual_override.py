@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page, expect
 
-from app.protocol.constants import CLIENT_FORWARD_SCALE_DOWN
+from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, open_room
 from e2e.helpers import heading_error, status, turtle_state, wait_until

@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.browser import browser_protocol
-from app.protocol.control import PROFILES, page_constants
+from app.protocol.control import PROFILES, control_config
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal, run
@@ -71,8 +71,9 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
 
 
 def run_js(page: Page, steps: list[Any], profile: str) -> Any:
-    freshness = browser_protocol()["goalFreshness"]
-    return page.evaluate(RUN_JS, [steps, page_constants(), freshness, profile])
+    constants = to_json(control_config())
+    freshness = to_json(page_protocol().goal_freshness)
+    return page.evaluate(RUN_JS, [steps, constants, freshness, profile])
 
 
 @pytest.mark.parametrize("profile", sorted(PROFILES))

@@ -26,8 +26,9 @@ from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels, jsonedge
 from app.protocol import events as ev
-from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.rooms import DEFAULT_ROOM
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog

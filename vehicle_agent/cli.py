@@ -15,8 +15,9 @@ from aiortc import RTCIceServer
 
 from app.arguments import add_vehicle_profile, non_negative_number, positive_number
 from app.metrics import add_metrics_arguments
-from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
+from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import on_stop_signals
 from vehicle_agent import recorder
 from vehicle_agent.agent import Agent, AgentConfig

@@ -26,12 +26,13 @@ from aiortc import (
 from aiortc.sdp import candidate_from_sdp
 
 from app.protocol.channels import (
+    AUTOPILOT_CHANNEL,
+    AUTOPILOT_STATE_CHANNEL,
     STATE_CHANNEL_MAX_RETRANSMITS,
     STATE_CHANNEL_ORDERED,
     ChannelMessage,
     dump,
 )
-from app.protocol.constants import AUTOPILOT_CHANNEL, AUTOPILOT_STATE_CHANNEL
 from app.protocol.signaling import IceTransportPolicy
 
 log = logging.getLogger(__name__)

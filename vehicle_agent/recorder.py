@@ -55,8 +55,8 @@ from mcap.writer import CompressionType, Writer
 
 from app import recording
 from app.arguments import positive_number
+from app.protocol import frametag
 from app.protocol.events import AnyEvent, GoalApplied, RecorderTotals
-from vehicle_agent.video import read_frame_tag, tag_block_size
 
 log = logging.getLogger(__name__)
 
@@ -208,14 +208,14 @@ class _Held:
 def frame_tag(frame: av.VideoFrame) -> int | None:
     """``frame``'s tag, read from its top rows only (the luma or packed RGB plane as it is, no
     conversion of the whole frame): cheap enough for every frame of the camera."""
-    rows = tag_block_size(frame.width)
+    rows = frametag.block_size(frame.width)
     channels = _FIRST_PLANE_CHANNELS.get(frame.format.name)
     if channels is None:
-        return read_frame_tag(np.asarray(frame.to_ndarray(format="gray"), np.uint8))
+        return frametag.read(np.asarray(frame.to_ndarray(format="gray"), np.uint8))
     plane = frame.planes[0]
     top = np.frombuffer(memoryview(plane), np.uint8, count=rows * plane.line_size)
     pixels = top.reshape(rows, plane.line_size)[:, : frame.width * channels]
-    return read_frame_tag(pixels.reshape(rows, frame.width, channels))
+    return frametag.read(pixels.reshape(rows, frame.width, channels))
 
 
 class FlightRecorder:

@@ -13,8 +13,8 @@ from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 
-from app.protocol.constants import Role
 from app.protocol.errors import describe
+from app.protocol.rooms import Role
 from app.protocol.signaling import IceServer, IceTransportPolicy, Leave, Login, LoginReply
 from app.protocol.urls import ServerUrlError, untrusted_hint, ws_endpoint
 

@@ -1,8 +1,8 @@
 """Video sources for the agent, as aiortc ``MediaStreamTrack`` subclasses.
 
 * :class:`SyntheticVideo` -- a generated scene in which a real face photo moves along a known
-  path; each frame carries its number as the frame tag of docs/contracts.md, so the relay can
-  read it back and echo it in its goals (latency measurement), and
+  path; each frame carries its number as the frame tag (:mod:`app.protocol.frametag`), so the
+  relay can read it back and echo it in its goals (latency measurement), and
   :meth:`SyntheticVideo.face_centre` tells tests and benchmarks where the face truly is.
 * :class:`FileVideo` -- anything PyAV opens (``.y4m``, ``.mp4``, ...), looped forever.
 * a V4L2 device (``/dev/videoN``) through aiortc's ``MediaPlayer``.
@@ -31,14 +31,9 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
-from app.protocol.constants import (
-    TAG_BITS,
-    TAG_BLOCKS_PER_WIDTH,
-    TAG_MARKER_BLOCKS,
-    VIDEO_FPS,
-    VIDEO_SIZE,
-)
+from app.protocol import frametag
 from app.protocol.events import FrameSent
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -50,11 +45,6 @@ TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 
 Image = npt.NDArray[np.uint8]
 
-# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
-# blocks first, then the bits.
-TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
-
-
 # The --video values of the generated scenes: the moving face (SyntheticVideo) and the
 # target-lock scene (TwoFaceVideo).
 SYNTHETIC = "synthetic"
@@ -63,40 +53,6 @@ TWO_FACES = "two-faces"
 
 class VideoSourceError(RuntimeError):
     """A video source could not be opened; the message names the source and the problem."""
-
-
-# --- frame tag -----------------------------------------------------------------------------
-
-
-def tag_block_size(width: int) -> int:
-    """Side of one tag block in pixels for a frame ``width`` pixels wide."""
-    return width // TAG_BLOCKS_PER_WIDTH
-
-
-def draw_frame_tag(rgb: Image, frame: int) -> None:
-    """Write ``frame`` (mod 2**24) into the top row of ``rgb`` in place."""
-    b = tag_block_size(rgb.shape[1])
-    values = [255, 0] + [255 if (frame >> (TAG_BITS - 1 - i)) & 1 else 0 for i in range(TAG_BITS)]
-    for i, value in enumerate(values):
-        rgb[0:b, i * b : (i + 1) * b] = value
-
-
-def read_frame_tag(rgb: Image) -> int | None:
-    """The frame number written by :func:`draw_frame_tag`, or None when there is no tag."""
-    b = tag_block_size(rgb.shape[1])
-    if b < 2:
-        return None
-    blocks = TAG_FIRST_BIT_BLOCK + TAG_BITS
-    lo, hi = b // 4, b // 4 + max(1, b // 2)
-    # The inner square of every block at once (rows, block, columns, channel): the mean of each.
-    inner = rgb[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
-    bits = inner.mean(axis=(0, 2, 3)) >= 128
-    if not bits[0] or bits[1]:
-        return None
-    value = 0
-    for bit in bits[TAG_FIRST_BIT_BLOCK:]:
-        value = (value << 1) | int(bit)
-    return value
 
 
 # --- synthetic scene ---------------------------------------------------------------------
@@ -378,7 +334,7 @@ class SyntheticVideo(PacedVideoTrack):
         flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
-        if width < 2 * TAG_BLOCKS_PER_WIDTH or height < 48:
+        if width < 2 * frametag.LAYOUT.blocks_per_width or height < 48:
             raise VideoSourceError(
                 f"synthetic video needs at least 80x48 pixels, not {width}x{height}"
             )
@@ -411,7 +367,7 @@ class SyntheticVideo(PacedVideoTrack):
         if flame is not None:
             draw_flame(img, flame[0], flame[1], frame)
         self._paste(img, self._sprite, self.face_centre(frame))
-        draw_frame_tag(img, frame)
+        frametag.stamp(img, frame)
         return img
 
     def _paste(self, img: Image, sprite: _FaceSprite, centre: tuple[float, float]) -> None:
@@ -467,7 +423,7 @@ class TwoFaceVideo(SyntheticVideo):
         """Frame number ``frame``: the scene with both faces, and the tag on top."""
         img = super().render(frame)
         self._paste(img, self._small, self.small_centre(frame))
-        draw_frame_tag(img, frame)
+        frametag.stamp(img, frame)
         return img
 
 

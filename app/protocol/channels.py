@@ -23,13 +23,14 @@ from typing import Annotated, Any, Final, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
-from app.protocol.constants import (
-    AUTOPILOT_CHANNEL,
-    AUTOPILOT_STATE_CHANNEL,
-    CONTROL_CHANNEL,
-    Role,
-)
 from app.protocol.errors import describe
+from app.protocol.rooms import Role
+
+# The labels of the data channels: the vehicle opens ``autopilot`` (reliable) and
+# ``autopilot-state`` (lossy, goals and pose) to the relay, the client opens ``control`` to it.
+AUTOPILOT_CHANNEL: Final = "autopilot"
+AUTOPILOT_STATE_CHANNEL: Final = "autopilot-state"
+CONTROL_CHANNEL: Final = "control"
 
 # RTCDataChannelInit of the state channel (aiortc takes the same two keyword arguments).
 STATE_CHANNEL_ORDERED: Final = False
@@ -154,7 +155,7 @@ class Detections(_Message):
     locked: Box | None = None
 
 
-# Of the relay's target lock (app/vision/lock.py): none: the largest box is the target; locked:
+# Of the relay's target lock (app/protocol/lock.py): none: the largest box is the target; locked:
 # seen on the last snapshot; lost: not seen, looked for near where it was; searching: lost long
 # enough to be looked for in the whole frame.
 LockState = Literal["none", "locked", "lost", "searching"]
@@ -242,7 +243,7 @@ class LinkFigures(_Message):
 
 
 class Health(_Message):
-    """relay→client, once a HEALTH_PERIOD_S: the vehicle→relay link as the relay measures it."""
+    """relay→client, once a link-health period: the vehicle→relay link as the relay measures it."""
 
     type: Literal["health"] = "health"
     link: LinkFigures

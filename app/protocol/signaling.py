@@ -21,8 +21,8 @@ from pydantic import (
 )
 
 from app.protocol import jsonedge
-from app.protocol.constants import DEFAULT_ROOM, Role
 from app.protocol.errors import describe
+from app.protocol.rooms import DEFAULT_ROOM, Role
 
 # Names and rooms show up in logs and on pages; keep them short, non-empty, and free of control
 # characters and line separators (a name must never start a forged log line).

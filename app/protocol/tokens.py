@@ -18,7 +18,7 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Literal, get_args
 
-from app.protocol.constants import Role as Role  # re-exported: tokens.Role
+from app.protocol.rooms import Role as Role  # re-exported: tokens.Role
 
 ROLES: tuple[Role, ...] = get_args(Role)
 

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from app.protocol import tokens
-from app.protocol.constants import CloseCode, Role
+from app.protocol.close_codes import CloseCode
+from app.protocol.rooms import Role
 from app.protocol.tokens import Claims, TokenError
 
 # Ops that only read the simulator; everything else (publish, advertise, services) changes it.

@@ -18,7 +18,7 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 
-from app.protocol.constants import CloseCode
+from app.protocol.close_codes import CloseCode
 from app.protocol.jsonedge import oversize
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.server.access import RosbridgeGate, bearer_token, state_refusal

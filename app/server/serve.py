@@ -18,7 +18,7 @@ from websockets.protocol import State
 
 from app.arguments import port
 from app.metrics import add_metrics_arguments, serve_metrics
-from app.protocol.constants import ROLES
+from app.protocol.rooms import ROLES
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls

@@ -31,7 +31,7 @@ from fastapi import WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketDisconnected
 
 from app.protocol import jsonedge
-from app.protocol.constants import CloseCode
+from app.protocol.close_codes import CloseCode
 from app.server.config import Settings
 from app.signaling.hub import Refusal
 

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any, Final, Literal, Protocol, assert_never
 
 from app.protocol import tokens
-from app.protocol.constants import CloseCode, Role
+from app.protocol.close_codes import CloseCode
 from app.protocol.jsonedge import oversize
+from app.protocol.rooms import Role
 from app.protocol.signaling import (
     INCOMING_TYPES,
     Answer,

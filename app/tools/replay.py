@@ -29,8 +29,8 @@ from typing import Any
 from mcap.exceptions import McapError
 
 from app.arguments import add_relay_profile
-from app.protocol.constants import Profile
 from app.protocol.events import GoalApplied
+from app.protocol.relay_profiles import Profile
 from app.recording import IMAGE_TOPIC, events, messages, summary
 from app.tools.parity import open_harness
 

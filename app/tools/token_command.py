@@ -19,7 +19,7 @@ from pydantic import ValidationError
 
 from app.arguments import positive_number
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 from app.protocol.urls import ServerUrlError, page_url, reachable_host, server_base
 
 log = logging.getLogger(__name__)

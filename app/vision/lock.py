@@ -1,14 +1,7 @@
-"""Target lock: follow the object a person clicked, not the largest one (DESIGN §10).
+"""Target lock in Python: the rule of :mod:`app.protocol.lock` (written there, with its numbers).
 
-The relay owns the lock. A click (a point in frame pixels) locks the box that contains it; on
-each later snapshot the box that continues its track is chosen among those found (the tracker's
-window first, ``window.step``): the one that overlaps it most, else the one whose centre is
-nearest within reach, of a similar size either way. Not seen for ``search_after_s``, it is
-searched for in the whole frame (any similar box, nearest first); not seen for
-``release_after_s``, the lock is released and the largest box is the target again.
-
-This module is the Python side of ``app/static/js/core/lock.js``; both take the same decisions from
-the same doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
+The Python twin of the relay page's ``js/core/lock.js``: both take the same decisions from the same
+doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, time given.
 """
 
 from __future__ import annotations
@@ -17,19 +10,9 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from app.protocol import constants as c
 from app.protocol.channels import LockState
+from app.protocol.lock import LockRule
 from app.vision.window import Box, Choose, largest
-
-
-@dataclass(frozen=True)
-class LockRule:
-    """The numbers of the rule (``app.protocol.constants``, pages get them as ``PROTOCOL.lock``)."""
-
-    search_after_s: float = c.LOCK_SEARCH_AFTER_S
-    release_after_s: float = c.LOCK_RELEASE_AFTER_S
-    max_scale: float = c.LOCK_MAX_SCALE
-    reach: float = c.LOCK_REACH
 
 
 def contains(box: Box, x: float, y: float) -> bool:

@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from cv2.typing import MatLike
 
-from app.protocol.constants import PROFILES, Profile
+from app.protocol.relay_profiles import PROFILES, Profile
 from app.vision import window
 from app.vision.spec import (
     CASCADE_DIR,

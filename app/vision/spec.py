@@ -25,8 +25,8 @@ from pydantic import (
 )
 from pydantic.alias_generators import to_camel
 
-from app.protocol.constants import PROFILES, Profile
 from app.protocol.errors import describe
+from app.protocol.relay_profiles import PROFILES, Profile
 from app.resources import OPERATION_MODULES_DIR
 
 

@@ -10,7 +10,7 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 
 from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
 from app.protocol.signaling import INCOMING_TYPES
 from app.resources import STATIC_DIR
 

@@ -13,12 +13,10 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Page
 
 from app.protocol import channels
-from app.server.config import Settings
-from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
+from tests.helpers.served_page import served_page
 from tests.protocol.samples import SAMPLES
 
 pytestmark = [pytest.mark.browser]
@@ -49,16 +47,8 @@ RECEIVE_ALL = """async (samples) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    server: RunningServer = start_in_thread(Settings(environment="development", token=None))
-    try:
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(**launch_options())
-            opened = browser.new_page()
-            opened.goto(server.url + "/")
-            yield opened
-            browser.close()
-    finally:
-        server.stop()
+    with served_page() as opened:
+        yield opened
 
 
 def test_browser_and_python_agree_on_every_sample(page: Page) -> None:

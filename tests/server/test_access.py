@@ -7,7 +7,7 @@ import json
 import pytest
 
 from app.protocol import tokens
-from app.protocol.constants import CloseCode
+from app.protocol.close_codes import CloseCode
 from app.server.access import (
     Decision,
     RosbridgeGate,

@@ -18,8 +18,8 @@ from aiortc.mediastreams import MediaStreamError, MediaStreamTrack
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
-from app.protocol.constants import AUTOPILOT_CHANNEL
-from vehicle_agent.video import read_frame_tag
+from app.protocol import frametag
+from app.protocol.channels import AUTOPILOT_CHANNEL
 
 log = logging.getLogger(__name__)
 
@@ -95,7 +95,7 @@ class PyRelay:
         with contextlib.suppress(MediaStreamError):
             while True:
                 frame = await track.recv()
-                tag = read_frame_tag(frame.to_ndarray(format="rgb24"))
+                tag = frametag.read(frame.to_ndarray(format="rgb24"))
                 if tag is not None:
                     self.tags.append(tag)
                     self._notify()

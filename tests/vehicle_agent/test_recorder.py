@@ -19,12 +19,13 @@ from mcap.reader import make_reader
 
 from app import recording
 from app.protocol import events as ev
+from app.protocol import frametag
 from app.recording import EVENT_CHANNELS, IMAGE_SCHEMA, IMAGE_TOPIC
 from vehicle_agent import cli as agent_cli
 from vehicle_agent import recorder
 from vehicle_agent.events import EventLog
 from vehicle_agent.recorder import FlightRecorder, RecordSettings
-from vehicle_agent.video import SyntheticVideo, read_frame_tag
+from vehicle_agent.video import SyntheticVideo
 
 FPS = 30.0
 RECORD_FPS = 10.0
@@ -145,7 +146,7 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
         # The tag survives the JPEG: the image is the frame its "frame" field names, in its
         # own colours (channels in the wrong order would be far off the camera's frame).
         rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), np.uint8)
-        assert read_frame_tag(rgb) == image["frame"]
+        assert frametag.read(rgb) == image["frame"]
         camera = camera_video.render(image["frame"]).astype(np.int16)
         assert np.abs(rgb.astype(np.int16) - camera).mean() < 4
         tags.append(image["frame"])

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
+from app.protocol import frametag
 from app.protocol.events import FrameSent
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
@@ -21,9 +22,7 @@ from vehicle_agent.video import (
     SweepPath,
     SyntheticVideo,
     VideoSourceError,
-    draw_frame_tag,
     open_source,
-    read_frame_tag,
 )
 
 CASCADE = cv2.CascadeClassifier(
@@ -37,25 +36,12 @@ def detect_faces(rgb: np.ndarray) -> list[tuple[int, int, int, int]]:
     return [tuple(int(v) for v in f) for f in found]
 
 
-@pytest.mark.parametrize("frame", [0, 1, 2, 255, 4096, 123_456, 2**24 - 1])
-@pytest.mark.parametrize("width", [320, 640, 1280])
-def test_frame_tag_round_trip(frame: int, width: int) -> None:
-    rgb = np.full((width * 3 // 4, width, 3), 90, np.uint8)
-    draw_frame_tag(rgb, frame)
-    assert read_frame_tag(rgb) == frame
-
-
-def test_untagged_frame_reads_as_none() -> None:
-    assert read_frame_tag(np.full((480, 640, 3), 200, np.uint8)) is None
-    assert read_frame_tag(np.zeros((480, 640, 3), np.uint8)) is None
-
-
 def test_synthetic_face_is_found_by_the_cascade_where_the_source_says() -> None:
     video = SyntheticVideo(640, 480, fps=15)
     try:
         for frame in (0, 60, 75, 90, 150, 170):  # left hold, glide, right hold, glide back
             rgb = video.render(frame)
-            assert read_frame_tag(rgb) == frame
+            assert frametag.read(rgb) == frame
             faces = detect_faces(rgb)
             assert len(faces) == 1, f"frame {frame}: {faces}"
             x, y, w, h = faces[0]
@@ -163,7 +149,7 @@ async def test_synthetic_track_paces_tags_and_reports_frames() -> None:
         frames = [await video.recv() for _ in range(10)]
     finally:
         video.stop()
-    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    tags = [frametag.read(f.to_ndarray(format="rgb24")) for f in frames]
     assert tags == list(range(10))
     assert [f.pts for f in frames] == [round(i * 90_000 / 50) for i in range(10)]
     assert frames[0].time_base == fractions.Fraction(1, 90_000)
@@ -200,7 +186,7 @@ async def test_file_source_loops(tmp_path: Path, suffix: str, codec: str) -> Non
         frames = [await track.recv() for _ in range(12)]
     finally:
         track.stop()
-    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    tags = [frametag.read(f.to_ndarray(format="rgb24")) for f in frames]
     assert tags == [0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 0, 1]
 
 

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page
 
-from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL, DEFAULT_PROFILE
+from app.protocol import channels, frametag
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.relay_profiles import DEFAULT_PROFILE
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
-from vehicle_agent.video import draw_frame_tag
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -77,7 +77,7 @@ def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None
             face_crop(), (FACE_SIZE, FACE_SIZE), interpolation=cv2.INTER_AREA
         )
         placed = Placed(x, y, FACE_SIZE, FACE_SIZE)
-    draw_frame_tag(frame, tag)
+    frametag.stamp(frame, tag)
     rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
     return base64.b64encode(rgba.tobytes()).decode(), placed
 

@@ -41,7 +41,7 @@ from typing import Any
 import redis.asyncio as aioredis
 from redis.asyncio.client import Pipeline, PubSub
 
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 from app.protocol.signaling import IceServer, IceTransportPolicy, Login, ParseError, parse
 from app.server.config import Settings
 from app.server.fleet import keys

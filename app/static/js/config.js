@@ -1,7 +1,8 @@
 // The page's configuration, embedded by the server as JSON in <script id="config">
-// (app/server/pages.py) and parsed here once. `CONFIG.protocol` holds the protocol's constants and
-// data-channel schemas, rendered from app/protocol (app/protocol/browser.py): modules import them
-// from here and never type a profile name, channel label, world size or tag layout again.
+// (app/server/pages.py, its shape app/protocol/page.py) and parsed here once. `CONFIG.protocol`
+// holds the protocol's constants and data-channel schemas, `CONFIG.control` the control law's
+// numbers and the world's size: modules import them from here and never type a profile name,
+// channel label, world size or tag layout again.
 
 function readConfig() {
   const element = document.getElementById('config');
@@ -25,11 +26,11 @@ function readConfig() {
 export const CONFIG = readConfig();
 /**
  * {roles, defaultRoom, profiles: {relay, vehicle}, defaultProfile,
- *  relayProfiles: {name: {snapshotPeriodMs}}, channels: {autopilot, control},
- *  world: {size, terrainCentre}, frameTag: {blocksPerWidth, markerBlocks, bits},
- *  lock: {searchAfterS, releaseAfterS, maxScale, reach}, schemas: {label: {role: JSON Schema}}}
+ *  relayProfiles: {name: {snapshotPeriodMs}}, channels: {autopilot, autopilotState, control},
+ *  stateChannelOptions, goalFreshness, video: {width, height}, clientForwardScaleDown,
+ *  frameTag: {blocksPerWidth, markerBlocks, bits}, lock: {searchAfterS, releaseAfterS, maxScale,
+ *  reach}, health: {periodS, maxLossPct, maxRttMs}, schemas: {label: {role: JSON Schema}}}
  */
 export const PROTOCOL = CONFIG.protocol;
 export const CHANNELS = PROTOCOL.channels;
-export const WORLD = PROTOCOL.world;
 export const SCHEMAS = PROTOCOL.schemas;

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from app.arguments import positive_number
-from app.protocol.constants import VIDEO_FPS
 from app.protocol.control import PROFILES
+from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
 from app.tools.bench import report
 from app.tools.bench.field import ORDER as FIELD_CONDITIONS

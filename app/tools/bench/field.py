@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from app.protocol.constants import VIDEO_SIZE
 from app.protocol.events import (
     AnyEvent,
     FrameSent,
@@ -31,6 +30,7 @@ from app.protocol.events import (
     TwistSent,
     of_kind,
 )
+from app.protocol.video import VIDEO_SIZE
 from app.tools.bench.stats import (
     PoseSample,
     TruthSample,

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from playwright.async_api import Browser
 
-from app.protocol.constants import PROFILES, Profile
+from app.protocol.relay_profiles import PROFILES, Profile
 from app.server.config import Settings
 from app.vision import window
 from app.vision.reference import detect

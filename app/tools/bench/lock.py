@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.protocol.constants import VIDEO_SIZE
+from app.protocol.video import VIDEO_SIZE
 from app.tools.bench.results import ProfileRun, Target
 from app.tools.bench.stack import StackError, StackOptions, run_profile, wait_for
 from vehicle_agent.video import TWO_FACES, TwoFaceVideo

@@ -4,11 +4,12 @@ The default-profile stack runs on the same browser and server as it is ("plain")
 agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80),
 in ``ROUNDS`` alternating pairs (plain, recording, plain, recording), each run half of the
 seconds asked for: a machine's speed drifts within the hour, and one run after the other would
-put all of the drift into the difference. Per mode: the agent process's cores over the measured windows (its CPU time from
-/proc / the window, averaged over the rounds), and the vehicle's share of the latency (goal
-received → its Twist) and the whole glass-to-command, from the agent's own event log. Targets:
-at most 5 % more agent CPU, and no change in glass-to-command beyond the run-to-run noise (the
-report shows both modes' p50 and p95 side by side, and each round's increase).
+put all of the drift into the difference. Per mode: the agent process's cores over the measured
+windows (its CPU time from /proc / the window, averaged over the rounds), and the vehicle's share
+of the latency (goal received → its Twist) and the whole glass-to-command, from the agent's own
+event log. Targets: at most 5 % more agent CPU, and no change in glass-to-command beyond the
+run-to-run noise (the report shows both modes' p50 and p95 side by side, and each round's
+increase).
 
 The difference stays as noisy as the machine, so the recording runs also read the recorder's
 own CPU time from the agent's event log (its ``recorder`` event, written when it stops): the

@@ -24,10 +24,10 @@ from playwright.async_api import Browser, ConsoleMessage, Page
 from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
-from app.protocol.constants import VIDEO_FPS, VIDEO_SIZE
 from app.protocol.control import PROFILES
 from app.protocol.events import FrameSent, GoalApplied, PoseReport, TwistSent
 from app.protocol.urls import page_url
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.recording import read_event_log
 from app.tools.bench.cpu import tree_cpu_s
 from app.tools.bench.results import MemorySample, ProfileRun

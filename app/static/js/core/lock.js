@@ -1,13 +1,8 @@
-// Target lock: follow the object a person clicked, not the largest one (DESIGN §10).
+// Target lock: follow the object a person clicked, not the largest one. The rule and its
+// numbers are written once, in app/protocol/lock.py; they reach the page as
+// `config.protocol.lock` ({searchAfterS, releaseAfterS, maxScale, reach}), passed in here.
 //
-// The relay owns the lock. A click (a point in frame pixels) locks the box that contains it; on
-// each later snapshot the box that continues its track is chosen among those found (the
-// tracker's window first, window.js step): the one that overlaps it most, else the one whose
-// centre is nearest within reach, of a similar size either way. Not seen for searchAfterS, it is
-// searched for in the whole frame; not seen for releaseAfterS, the lock is released and the
-// largest box is the target again. The rule's numbers come from app/protocol (PROTOCOL.lock).
-//
-// The Python side is app/vision/lock.py: the same decisions from the same doubles, checked on
+// The Python twin is app/vision/lock.py: the same decisions from the same doubles, checked on
 // the same sequences (e2e/test_lock_js.py). Pure, no DOM; times in seconds, given.
 import { largest } from './tracking-window.js';
 

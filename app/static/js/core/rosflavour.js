@@ -17,6 +17,6 @@ export function pickTypes(rosTypes, setting, poseReported, twistReported) {
     fromRobot: reported !== undefined,
     pose: table.pose,
     twist: twistReported || table.twist,
-    teleport: table.teleport_absolute,
+    teleport: table.teleportAbsolute,
   };
 }

@@ -147,7 +147,7 @@ export function sendJson(channel, msg) {
 /**
  * Dispatch a data channel's JSON messages through `handlers` (one per `type`), each message
  * first validated against `schema`: what this side accepts on this channel, generated from
- * app/protocol/channels.py (`SCHEMAS[label][role]` of protocol.js). Malformed JSON, a type the
+ * app/protocol/channels.py (`SCHEMAS[label][role]` of config.js). Malformed JSON, a type the
  * schema does not accept, a field that breaks it or a handler's BadMessage is logged and
  * answered with `{"type":"error","reason","ref"}` naming the field, never thrown; an `error`
  * from the other side is logged. The handlers must cover exactly the schema's types (but

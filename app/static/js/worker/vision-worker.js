@@ -9,9 +9,10 @@
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
 'use strict';
 
-// Two builds of OpenCV.js 4.12: the official one (npm) and ours with WebAssembly SIMD
-// (scripts/build-opencv-js). `?opencv=simd|official` chooses; by default SIMD where the browser
-// validates a module that uses a v128 instruction (wasm-feature-detect's probe), else official.
+// Two builds of OpenCV.js of the OpenCV pyproject.toml pins: the official one (npm) and ours with
+// WebAssembly SIMD (scripts/build-opencv-js). `?opencv=simd|official` chooses; by default SIMD
+// where the browser validates a module that uses a v128 instruction (wasm-feature-detect's
+// probe), else official.
 const SIMD_PROBE = new Uint8Array([
   0, 97, 115, 109, 1, 0, 0, 0, 1, 5, 1, 96, 0, 1, 123, 3, 2, 1, 0, 10, 10, 1, 8, 0, 65, 0, 253, 15,
   253, 98, 11,
@@ -50,6 +51,7 @@ const session = {
   instances: new Map(),
   window: null, // the imported window.js (detect, then track)
   lock: null, // the imported lock.js (target lock)
+  frameTag: null, // the imported frame-tag.js (the frame number stamped into its pixels)
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
   ctx: null,
@@ -100,6 +102,7 @@ async function init() {
   }
   session.window = await import('../core/tracking-window.js');
   session.lock = await import('../core/lock.js');
+  session.frameTag = await import('../core/frame-tag.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
       session.modules.set(op.module, await import(`./operations/${op.module}`));
@@ -282,39 +285,6 @@ function copyPlanesPart(src, width, height, dst, { x, y, w, h }) {
   }
 }
 
-/** The side of a frame tag's square blocks on a frame `width` pixels wide (its top rows). */
-function tagBlockSize(width) {
-  return Math.floor(width / PROTOCOL.frameTag.blocksPerWidth);
-}
-
-/**
- * The frame number the synthetic video writes into the top row of blocks (docs/contracts.md,
- * "Frame tag"), or null when the marker blocks do not read white, black.
- */
-function decodeFrameTag(width, height, data) {
-  const { markerBlocks, bits } = PROTOCOL.frameTag;
-  const b = tagBlockSize(width);
-  if (b < 2 || height < b) return null;
-  const lo = Math.floor(b / 4);
-  const hi = lo + Math.max(1, Math.floor(b / 2));
-  const bit = (i) => {
-    let sum = 0;
-    let n = 0;
-    for (let y = lo; y < hi; y += 1) {
-      for (let x = i * b + lo; x < i * b + hi; x += 1) {
-        const k = (y * width + x) * 4;
-        sum += 0.299 * data[k] + 0.587 * data[k + 1] + 0.114 * data[k + 2];
-        n += 1;
-      }
-    }
-    return sum / n >= 128 ? 1 : 0;
-  };
-  if (bit(0) !== 1 || bit(1) !== 0) return null;
-  let value = 0;
-  for (let i = markerBlocks; i < markerBlocks + bits; i += 1) value = value * 2 + bit(i);
-  return value;
-}
-
 /** Words for an error; OpenCV's C++ exceptions reach JS as bare pointers. */
 function describe(error) {
   if (typeof error === 'number' && session.cv?.exceptionFromPtr) {
@@ -372,8 +342,9 @@ async function analyze({
     target =
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
   const { cols: width, rows: height } = frame;
-  // The tag's blocks are the top row's (decodeFrameTag).
-  ensurePixels(frame, { x: 0, y: 0, width, height: tagBlockSize(width) });
+  // The tag's blocks are the top row's (frame-tag.js).
+  const { decodeFrameTag, tagBlockSize } = session.frameTag;
+  ensurePixels(frame, { x: 0, y: 0, width, height: tagBlockSize(PROTOCOL.frameTag, width) });
   const done = performance.now();
   const result = {
     op: opId,
@@ -383,7 +354,7 @@ async function analyze({
     h: height,
     ms: done - detectStarted,
     workMs: done - started,
-    frame: decodeFrameTag(width, height, frame.data),
+    frame: decodeFrameTag(PROTOCOL.frameTag, width, height, frame.data),
     converted: session.converted,
     scan,
     region,
