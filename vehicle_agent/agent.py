@@ -28,12 +28,13 @@ from app.protocol import channels, jsonedge
 from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.events import PilotEvent
 from app.protocol.rooms import DEFAULT_ROOM
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
-from vehicle_agent.pilot import Pilot, PilotEvent
+from vehicle_agent.pilot import Pilot
 from vehicle_agent.signaling import SignalingClient, SignalingError
 from vehicle_agent.turtle import Turtle, TurtleError
 

@@ -28,13 +28,12 @@ from app.protocol.events import (
     GoalApplied,
     GoalDropped,
     ModeChanged,
+    PilotEvent,
     TwistSent,
 )
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 from vehicle_agent.manual import ManualDrive
-
-PilotEvent = GoalApplied | GoalDropped | ModeChanged | DriveReceived | TwistSent
 
 
 class Pilot:

@@ -3,7 +3,7 @@
 An event log line is ``{"ev": kind, <the fields>, "t": seconds}`` (:func:`record`); ``t`` is the
 recording process's clock, given by whoever made the event (the agent's ``time.monotonic()``,
 comparable across processes of one machine; the vehicle page's ``performance.now() / 1000``).
-The pilot's kinds (:data:`PILOT_EVENTS`: goal, goal_dropped, mode, drive, twist) are made by the
+The pilot's kinds (:data:`PilotEvent`: goal, goal_dropped, mode, drive, twist) are made by the
 pilot core of each vehicle (``vehicle_agent/pilot.py`` and its twin
 ``app/static/js/core/pilot.js``), so both vehicles record the same records.
 
@@ -180,14 +180,8 @@ AnyEvent = (
     | RecorderTotals
 )
 KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
-# What a vehicle's pilot core makes, in both languages.
-PILOT_EVENTS: tuple[type[Event], ...] = (
-    GoalApplied,
-    GoalDropped,
-    ModeChanged,
-    DriveReceived,
-    TwistSent,
-)
+# What a vehicle's pilot makes, in both languages (vehicle_agent/pilot.py, core/pilot.js).
+PilotEvent = GoalApplied | GoalDropped | ModeChanged | DriveReceived | TwistSent
 
 
 E = TypeVar("E", bound=Event)
@@ -202,7 +196,7 @@ def of_kind(events: Iterable[Event], kind: type[E]) -> list[E]:
     return [event for event in events if isinstance(event, kind)]
 
 
-def field_names(cls: type[Event]) -> list[str]:
+def _field_names(cls: type[Event]) -> list[str]:
     """The kind's field names, ``t`` last (the order of a log line)."""
     names = [f.name for f in dataclasses.fields(cls) if f.name != "t"]
     return [*names, "t"]
@@ -210,7 +204,7 @@ def field_names(cls: type[Event]) -> list[str]:
 
 def record(event: Event) -> dict[str, Any]:
     """``event`` as a log line's object: ``ev``, its fields, ``t``."""
-    return {"ev": event.kind, **{name: getattr(event, name) for name in field_names(type(event))}}
+    return {"ev": event.kind, **{name: getattr(event, name) for name in _field_names(type(event))}}
 
 
 def from_json(line: str | bytes) -> AnyEvent:
