@@ -1,15 +1,19 @@
-"""The relay's target lock (lock.js) agrees with the Python rule (app/vision/lock.py).
+"""The relay's target lock (lock.js) follows the rule and agrees with the Python one
+(app/vision/lock.py).
 
-lock.js gets its numbers the way the relay page does, from ``PROTOCOL.lock``, and runs the same
-scripted snapshot sequences (tests/vision/lock_sequences.py) and the same grid of boxes.
+The relay page and its vision worker read the rule app/protocol defines; lock.js takes the
+decisions written out in tests/vision/lock_sequences.py (``TWO_FACES``), and those of lock.py on
+the same scripted snapshot sequences and the same grid of boxes.
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import random
 from collections.abc import Iterator
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import pytest
 from playwright.sync_api import Browser, Page
@@ -24,12 +28,18 @@ from tests.vision import lock_sequences
 pytestmark = [pytest.mark.browser]
 
 PAGE_RULE = to_json(page_protocol().lock)
-RULE = lock.LockRule(
-    search_after_s=PAGE_RULE["searchAfterS"],
-    release_after_s=PAGE_RULE["releaseAfterS"],
-    max_scale=PAGE_RULE["maxScale"],
-    reach=PAGE_RULE["reach"],
-)
+
+
+def page_rule(rule: dict[str, float]) -> lock.LockRule:
+    return lock.LockRule(
+        search_after_s=rule["searchAfterS"],
+        release_after_s=rule["releaseAfterS"],
+        max_scale=rule["maxScale"],
+        reach=rule["reach"],
+    )
+
+
+RULE = page_rule(PAGE_RULE)
 
 # The page's side of lock_sequences.run, event for event.
 RUN_JS = """([events, rule]) => {
@@ -56,8 +66,31 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
         yield opened
 
 
-def test_the_rule_reaches_the_page_from_app_protocol() -> None:
-    assert lock.LockRule() == RULE
+def test_the_rule_reaches_the_page_from_app_protocol(
+    server: RunningServer, browser: Browser
+) -> None:
+    # The relay page's modules (its snapshot loop) and its vision worker (which chooses the
+    # locked box) hold the rule app/protocol defines, each read as it reads it: the page's from
+    # its embedded config, the worker's from the query string the page started it with.
+    relay = browser.new_page()
+    try:
+        with relay.expect_worker() as started:
+            relay.goto(server.url + "/relay")
+        in_page = relay.evaluate("async () => (await import('/static/js/config.js')).PROTOCOL.lock")
+        query = parse_qs(urlsplit(started.value.url).query)
+        in_worker = json.loads(query["protocol"][0])["lock"]
+    finally:
+        relay.close()
+    assert page_rule(in_page) == lock.LockRule()
+    assert page_rule(in_worker) == lock.LockRule()
+
+
+def test_a_clicked_small_face_stays_the_target_beside_a_larger_one(page: Page) -> None:
+    # The rule itself, as written out in lock_sequences.TWO_FACES (not lock.py's answers).
+    events = [event for event, _ in lock_sequences.TWO_FACES]
+    got = lock_sequences.decisions(events, page.evaluate(RUN_JS, [events, PAGE_RULE]))
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.TWO_FACES, got, strict=True)):
+        assert have == want, (i, event)
 
 
 def test_scripted_sequences_take_the_same_decisions(page: Page) -> None:

@@ -54,3 +54,31 @@ def test_scripted_sequences_take_the_same_decisions(page: Page, profile: str) ->
         expected: Any = run(events, PROFILES[profile])
         got = page.evaluate(RUN_JS, [events, constants, CONSTANTS["deadmanS"]])
         assert rounded(got) == rounded(expected), name
+
+
+# The vehicle page's dead-man as vehicle.js builds it: its profile and `deadmanS` from the
+# config the server embeds in /vehicle, with the times given. The last command comes at 1 s.
+VEHICLE_PAGE_DEAD_MAN = """async (times) => {
+  const html = await (await fetch('/vehicle')).text();
+  const page = new DOMParser().parseFromString(html, 'text/html');
+  const config = JSON.parse(page.getElementById('config').textContent);
+  const { ControlLaw } = await import('/static/js/core/control.js');
+  const profile = new ControlLaw(config.control).profiles[config.profile];
+  const drive = new manual.ManualDrive(profile, config.control.deadmanS);
+  drive.setMode('manual', 'ann');
+  const moving = drive.drive(1, 1, 0, 1.0);
+  const left = drive.untilDeadman(1.0);
+  const ticks = times.map((t) => {
+    const twist = drive.tick(t);
+    return twist === null ? null : [twist.linear, twist.angular];
+  });
+  return { moving: [moving.linear, moving.angular], left, ticks };
+}"""
+
+
+def test_the_vehicle_page_stops_0_3_s_after_the_last_drive_command(page: Page) -> None:
+    # The contract (docs/contracts.md) as a number: 0.3 s, not the constant the page is given.
+    got = page.evaluate(VEHICLE_PAGE_DEAD_MAN, [1.1, 1.25, 1.29, 1.0 + 0.3, 1.31])
+    assert got["moving"] == [PROFILES["default"].manual_linear, 0]
+    assert got["left"] == pytest.approx(0.3)
+    assert got["ticks"] == [None, None, None, [0, 0], None]

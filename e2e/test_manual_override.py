@@ -33,6 +33,30 @@ navigator.getGamepads = () => [window.stubPad];
 # Left shoulder held (the enable button) and the left stick pushed left, or all let go.
 PAD_LEFT = "() => { stubPad.buttons[4].pressed = true; stubPad.axes[0] = -1; }"
 PAD_RELEASED = "() => { stubPad.buttons[4].pressed = false; stubPad.axes[0] = 0; }"
+# On the vehicle page, on its own clock: when it last applied a drive command, and when the zero
+# Twist that followed was published (its status object's fields, watched as the page sets them).
+WATCH_THE_DEAD_MAN = """() => {
+  const status = window.autopilotStatus;
+  const seen = (window.deadMan = { lastDrive: null, stopped: null });
+  let drives = status.drivesApplied;
+  let twist = status.lastTwist;
+  Object.defineProperty(status, 'drivesApplied', {
+    get: () => drives,
+    set: (value) => {
+      drives = value;
+      seen.lastDrive = performance.now();
+      seen.stopped = null;
+    },
+  });
+  Object.defineProperty(status, 'lastTwist', {
+    get: () => twist,
+    set: (value) => {
+      twist = value;
+      const zero = value.linear === 0 && value.angular === 0;
+      if (zero && seen.stopped === null) seen.stopped = performance.now();
+    },
+  });
+}"""
 
 
 def theta(server: RunningServer) -> float:
@@ -137,13 +161,19 @@ def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     )
 
     # Bob holds the stick, then his page goes silent (paused: no more commands, no release):
-    # the vehicle's dead-man stops the turtle, with bob still holding the wheel.
+    # the vehicle's dead-man stops the turtle 0.3 s after the last command it applied (the
+    # contract, docs/contracts.md; 0.05 s for the page's timer, 0.01 s for the command being
+    # counted a moment before it is watched), with bob still at the wheel.
+    vehicle.evaluate(WATCH_THE_DEAD_MAN)
     bob.evaluate(PAD_LEFT)
     wait_until(lambda: not stopped(vehicle), 10, "bob's gamepad turning the turtle")
     cdp = bob.context.new_cdp_session(bob)
     cdp.send("Debugger.enable")
     cdp.send("Debugger.pause")  # the page's script stops at its next step: the repeat timer's
     wait_until(lambda: stopped(vehicle), 5, "the dead-man's zero Twist")
+    dead_man = vehicle.evaluate("() => window.deadMan")
+    stopped_after = (dead_man["stopped"] - dead_man["lastDrive"]) / 1000
+    assert 0.3 - 0.01 <= stopped_after <= 0.3 + 0.05, dead_man
     assert status(vehicle)["mode"] == "manual"
     held = theta(server)
     time.sleep(1.0)

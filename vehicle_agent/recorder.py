@@ -23,9 +23,9 @@ the rate holds either way.
 
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
 drains the queue once a second, JPEG-encodes and writes. A full queue drops the item
-(counted, logged once) rather than slow the loop. Log times are one clock (``time.time_ns()``),
-taken when the event happened. Files roll over by size and age, and only the newest
-``max_files`` are kept, so a day's run cannot fill the disk unnoticed.
+(counted, logged once) rather than slow the loop. Log times are one clock (``time.time_ns()``,
+or the recorder's ``clock``), taken when the event happened. Files roll over by size and age, and
+only the newest ``max_files`` are kept, so a day's run cannot fill the disk unnoticed.
 
 The recorder counts its own CPU time, the loop's share and the writer thread's
 (:meth:`FlightRecorder.totals`), so that what it costs the agent is measured directly, not only
@@ -42,6 +42,7 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -221,9 +222,12 @@ def frame_tag(frame: av.VideoFrame) -> int | None:
 class FlightRecorder:
     """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
 
-    def __init__(self, settings: RecordSettings) -> None:
+    def __init__(self, settings: RecordSettings, clock: Callable[[], int] = time.time_ns) -> None:
+        """``clock``: wall-clock nanoseconds, the recording's one clock (log times, image
+        timestamps, file names and ages)."""
         settings.folder.mkdir(parents=True, exist_ok=True)
         self.settings = settings
+        self._clock = clock
         self.files: list[Path] = []
         self.images = 0
         self.messages = 0
@@ -278,7 +282,7 @@ class FlightRecorder:
             log.info("recording the camera stopped: %s", exc or type(exc).__name__)
 
     def _hold(self, frame: av.VideoFrame) -> None:
-        now = time.time_ns()
+        now = self._clock()
         self._frames += 1
         holding_from = self._due_ns - self._lead_ns
         # Frames no search can take any more: kept or older than the last image kept (images go
@@ -297,7 +301,7 @@ class FlightRecorder:
             self._keep_image(self._held[-1], now)
 
     def _image_for_goal(self, goal: GoalApplied) -> None:
-        now = time.time_ns()
+        now = self._clock()
         if now < self._due_ns or goal.frame is None:
             return
         for held in reversed(self._held):
@@ -325,7 +329,7 @@ class FlightRecorder:
                 log.warning("flight recorder falling behind: dropping what it cannot write")
             self.dropped += 1
             return
-        self._queue.append((kind, time.time_ns() if log_ns is None else log_ns, payload))
+        self._queue.append((kind, self._clock() if log_ns is None else log_ns, payload))
 
     async def close(self) -> None:
         """Write what is queued, finish the file and stop the writer thread."""

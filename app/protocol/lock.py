@@ -12,8 +12,9 @@ first); not seen for ``release_after_s``, the lock is released and the largest b
 again. Switching the operation releases the lock.
 
 Python applies the rule in :mod:`app.vision.lock`, the relay page in ``js/core/lock.js``, which gets
-these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py checks the
-rule, e2e/test_lock_js.py that the two agree on the same sequences.
+these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py and
+e2e/test_lock_js.py check each against the rule (``TWO_FACES`` in tests/vision/lock_sequences.py),
+and that the two agree on the same sequences.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from app.protocol.events import AnyEvent, TwistSent
+from app.protocol.events import AnyEvent, DriveReceived, TwistSent
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.waiting import eventually
@@ -154,6 +154,43 @@ async def test_goal_timeout_stops_the_turtle(server: RunningServer) -> None:
         settled = run.heading_deg()
         await asyncio.sleep(0.5)
         assert run.heading_deg() == pytest.approx(settled, abs=0.01)
+
+
+async def test_the_dead_man_stops_the_turtle_0_3_s_after_the_last_drive_command(
+    server: RunningServer,
+) -> None:
+    # The operator takes the wheel and holds a key (its command resent every 0.1 s, as the
+    # client does), then falls silent. The contract is 0.3 s from the last command to the zero
+    # Twist (docs/contracts.md), written here as a number; measured on the agent's own event
+    # stamps, so the link's delay is not in it, only the agent's timer (0.05 s to spare).
+    async with running_agent(server.url) as run, relay_in(server) as relay:
+        await connected(relay)
+        relay.send({"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over"})
+        for seq in range(1, 6):
+            relay.send({"type": "drive", "seq": seq, "linear": 0, "angular": 1})
+            await asyncio.sleep(0.1)
+        await eventually(lambda: len(drives(run)) == 5, timeout=5, what="five drive commands")
+        last = drives(run)[-1].t
+        await eventually(lambda: stops_after(run, last) != [], timeout=5, what="the dead-man")
+        # Held, the key kept the turtle moving: no zero Twist between its commands.
+        assert stops_after(run, drives(run)[0].t) == stops_after(run, last)
+        # The drive event is stamped with the time the dead-man counts from.
+        assert 0.3 <= stops_after(run, last)[0].t - last <= 0.3 + 0.05
+        settled = run.heading_deg()
+        await asyncio.sleep(0.3)
+        assert run.heading_deg() == pytest.approx(settled, abs=0.01)
+
+
+def drives(run: Running) -> list[DriveReceived]:
+    """The drive commands the agent applied."""
+    return [e for e in run.events if isinstance(e, DriveReceived) and e.applied]
+
+
+def stops_after(run: Running, t: float) -> list[TwistSent]:
+    """The zero Twists published after ``t`` (monotonic seconds)."""
+    return [
+        e for e in run.twists() if e.t > t and e.seq is None and e.linear == 0 and e.angular == 0
+    ]
 
 
 async def test_malformed_channel_messages_get_an_error_and_are_dropped(

@@ -1,19 +1,24 @@
-"""The manual override at the vehicle: the mode, drive commands and the dead-man, on an injected
-clock (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and ``drive``."""
+"""The manual override at the vehicle: the mode, drive commands and the dead-man, with the time
+given by the test (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and
+``drive``."""
 
 from __future__ import annotations
 
 import pytest
 
+from app.protocol.control import DEADMAN_S
 from app.protocol.events import GoalDropped
 from tests.helpers.agent import Vehicle
-from vehicle_agent.control import PROFILES
+from vehicle_agent.control import PROFILES, ZERO_TWIST, Twist
 from vehicle_agent.manual import ManualDrive
 
 from .manual_sequences import SEQUENCES, run
 
 DEFAULT = PROFILES["default"]
 FULL = [DEFAULT.manual_linear, 0.0]
+# The dead-man's contract (docs/contracts.md), written as the number it is: a test that read it
+# from app.protocol.control would move with the constant it is there to hold.
+DEADMAN_CONTRACT_S = 0.3
 
 
 def twists(name: str) -> list[list[float] | None]:
@@ -37,10 +42,22 @@ def test_the_dead_man_stops_the_turtle_once_after_the_last_command() -> None:
         [0.0, 0.0],
         None,
     ]
-    # Stopped 0.3 s after the last command, not later.
-    assert answers[1][3] == pytest.approx(0.3)
+    assert answers[1][3] == pytest.approx(DEADMAN_CONTRACT_S)
     assert answers[2][3] == pytest.approx(0.01)
     assert answers[3][3] is None
+
+
+def test_the_dead_man_fires_0_3_s_after_the_last_command_and_not_before() -> None:
+    # Built as the agent's pilot builds it, with the protocol's dead-man time.
+    drive = ManualDrive(DEFAULT, DEADMAN_S)
+    drive.set_mode("manual", "ann")
+    assert drive.drive(1, 1.0, 0.0, 1.0) == Twist(DEFAULT.manual_linear, 0.0)
+    assert drive.until_deadman(1.0) == pytest.approx(DEADMAN_CONTRACT_S)
+    for t in (1.1, 1.25, 1.29):  # still moving: a held key resends within this
+        assert drive.tick(t) is None, t
+    assert drive.tick(1.0 + DEADMAN_CONTRACT_S) == ZERO_TWIST
+    # One zero Twist only.
+    assert drive.tick(1.31) is None and drive.until_deadman(1.31) is None
 
 
 def test_old_commands_are_dropped_and_shares_clamped_to_the_profile_speeds() -> None:

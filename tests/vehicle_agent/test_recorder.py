@@ -9,6 +9,8 @@ import argparse
 import asyncio
 import base64
 import json
+import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +23,10 @@ from app import recording
 from app.protocol import events as ev
 from app.protocol import frametag
 from app.recording import EVENT_CHANNELS, IMAGE_SCHEMA, IMAGE_TOPIC
+from tests.helpers.agent import Vehicle
 from vehicle_agent import cli as agent_cli
 from vehicle_agent import recorder
+from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.recorder import FlightRecorder, RecordSettings
 from vehicle_agent.video import SyntheticVideo
@@ -85,11 +89,30 @@ async def _record(settings: RecordSettings, seconds: float) -> FlightRecorder:
     return recorder
 
 
+@dataclass
+class Recorded:
+    """A recording of :func:`_record` and the wall clock (ns) when it started and ended."""
+
+    recorder: FlightRecorder
+    folder: Path
+    started_ns: int
+    ended_ns: int
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """One recording of 1.5 s, read by the tests that only read it."""
+    folder = tmp_path_factory.mktemp("recorded")
+    started_ns = time.time_ns()
+    recorder = asyncio.run(_record(RecordSettings(folder, room="lab", fps=RECORD_FPS), 1.5))
+    return Recorded(recorder, folder, started_ns, time.time_ns())
+
+
 def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
-    tmp_path: Path,
+    recorded: Recorded,
 ) -> None:
-    recorder = asyncio.run(_record(RecordSettings(tmp_path, room="lab", fps=RECORD_FPS), 1.5))
-    files = sorted(tmp_path.glob("autopilot-lab-*.mcap"))
+    recorder = recorded.recorder
+    files = sorted(recorded.folder.glob("autopilot-lab-*.mcap"))
     assert files == recorder.files and len(files) == 1
     channels, messages = _read(files[0])
 
@@ -154,6 +177,87 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     assert min(b - a for a, b in zip(tags, tags[1:], strict=False)) >= 2, tags
     stamps = [t for topic, t, _ in messages if topic == IMAGE_TOPIC]
     assert (stamps[-1] - stamps[0]) / (len(stamps) - 1) >= 0.095e9, stamps
+
+
+def test_images_are_stamped_in_seconds_on_the_clock_of_the_events(recorded: Recorded) -> None:
+    # An image's header stamp (seconds and nanoseconds, as foxglove.CompressedImage has it) is
+    # its log time, the wall clock when its frame arrived: inside the recording's run, beside
+    # the events logged in it (and so beside the pose the turtle had then).
+    _, messages = _read(recorded.recorder.files[0])
+    images = [(log_time, fields) for topic, log_time, fields in messages if topic == IMAGE_TOPIC]
+    assert images
+    for log_time, fields in images:
+        stamp = fields["timestamp"]
+        assert 0 <= stamp["nsec"] < 1_000_000_000
+        assert stamp["sec"] * 1_000_000_000 + stamp["nsec"] == log_time
+        assert recorded.started_ns <= log_time <= recorded.ended_ns
+    events = [log_time for topic, log_time, _ in messages if topic != IMAGE_TOPIC]
+    assert all(recorded.started_ns <= t <= recorded.ended_ns for t in events)
+    # The events were logged at the start, the images over the 1.5 s that followed.
+    assert 0 <= images[0][0] - min(events) < 1_000_000_000
+
+
+# Each recording's log times (seconds from its start) by file: with the default limit (an hour,
+# --record-max-minutes 60) and with 1.5 minutes.
+ROLL_OVER = [
+    ({}, [[0.0, 60.0, 3599.9], [3600.0, 7199.0], [7200.0]]),
+    ({"max_minutes": 1.5}, [[0.0, 60.0, 89.9], [90.0, 179.0], [180.0]]),
+]
+
+
+@pytest.mark.parametrize(("limits", "files_s"), ROLL_OVER)
+def test_a_file_rolls_over_at_its_age_and_not_before(
+    tmp_path: Path, limits: dict[str, float], files_s: list[list[float]]
+) -> None:
+    # On an injected clock: what is logged a moment before a file reaches its age limit goes in
+    # it, and what comes at the limit starts the next file.
+    start_ns = 1_800_000_000 * 1_000_000_000
+    now = [start_ns]
+    recorder = FlightRecorder(RecordSettings(tmp_path, room="lab", **limits), clock=lambda: now[0])
+    events = EventLog()
+    events.listeners.append(recorder.on_event)
+    for offset_s in (t for file in files_s for t in file):
+        now[0] = start_ns + round(offset_s * 1e9)
+        events.emit(ev.ModeChanged(mode="manual", operator="ann", t=offset_s))
+    asyncio.run(recorder.close())
+    logged = [
+        [(log_time - start_ns) / 1e9 for _, log_time, _ in _read(path)[1]]
+        for path in recorder.files
+    ]
+    assert logged == files_s
+
+
+async def test_the_agents_drive_commands_are_recorded(tmp_path: Path) -> None:
+    # The agent's own events reach the recorder: an operator takes the wheel and drives; each
+    # drive command is on /autopilot/drive, applied or not, moving or not.
+    vehicle = Vehicle("default")
+    recorder = FlightRecorder(RecordSettings(tmp_path, room="lab"))
+    vehicle.agent.events.listeners.append(recorder.on_event)
+    for text in (
+        '{"type": "mode", "mode": "manual", "operator": "ann"}',
+        '{"type": "drive", "seq": 1, "linear": 1, "angular": 0}',
+        '{"type": "drive", "seq": 1, "linear": 1, "angular": 0}',  # again: not the newest
+        '{"type": "drive", "seq": 2, "linear": 0, "angular": 0}',  # let go: applied, stops
+    ):
+        assert vehicle.agent.handle_channel_message(text, "relay") is None
+    await recorder.close()
+    _, messages = _read(recorder.files[0])
+    by_topic: dict[str, list[Any]] = {}
+    for topic, _, fields in messages:
+        # Without the time the agent stamped it with, which the test cannot know.
+        by_topic.setdefault(topic, []).append({k: v for k, v in fields.items() if k != "t"})
+    assert by_topic[EVENT_CHANNELS[ev.DriveReceived].topic] == [
+        {"seq": 1, "applied": True, "moving": True},
+        {"seq": 1, "applied": False, "moving": False},
+        {"seq": 2, "applied": True, "moving": False},
+    ]
+    assert by_topic[EVENT_CHANNELS[ev.ModeChanged].topic] == [{"mode": "manual", "operator": "ann"}]
+    manual = PROFILES["default"].manual_linear
+    assert [(t["linear"], t["angular"]) for t in by_topic[EVENT_CHANNELS[ev.TwistSent].topic]] == [
+        (0.0, 0.0),  # taking over stops first
+        (manual, 0.0),
+        (0.0, 0.0),
+    ]
 
 
 async def _record_with_goals(settings: RecordSettings, seconds: float) -> FlightRecorder:

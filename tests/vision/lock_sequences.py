@@ -24,6 +24,60 @@ CLICKS_AT = (0.5, 12.5, 17.0)  # on the small track (never missed on these snaps
 Event = list[Any]
 
 
+# The rule itself on two faces, written out rather than computed by either side (lock.py and
+# lock.js are each checked against it): each event and what must come of it -- for a snapshot
+# the box chosen and the state, for a click [locked, state], for unlock [state]. The small face
+# is clicked; its track is kept while the large face stays, grows, passes right over it, and
+# while a third face a little larger than it (of a similar size) is in the picture; a snapshot
+# that misses it chooses nothing, not the large face; a move with no overlap is followed to the
+# nearest centre within reach; after Unlock the large face is the target again; a click on a box
+# inside a larger one locks the inner one.
+TWO_FACES: list[tuple[Event, list[Any]]] = [
+    (["snapshot", 0.0, [[100, 100, 130, 130], [440, 200, 76, 76]]], [[100, 100, 130, 130], "none"]),
+    (["click", 0.01, [478.0, 238.0]], [True, "locked"]),
+    (
+        ["snapshot", 0.05, [[104, 102, 132, 132], [446, 204, 78, 78]]],
+        [[446, 204, 78, 78], "locked"],
+    ),
+    (
+        ["snapshot", 0.1, [[90, 96, 170, 170], [250, 330, 98, 98], [450, 206, 76, 76]]],
+        [[450, 206, 76, 76], "locked"],
+    ),
+    (
+        ["snapshot", 0.15, [[400, 170, 130, 130], [456, 210, 76, 76]]],
+        [[456, 210, 76, 76], "locked"],
+    ),
+    (["snapshot", 0.2, [[380, 170, 130, 130]]], [None, "lost"]),
+    (
+        ["snapshot", 0.25, [[250, 330, 98, 98], [380, 170, 130, 130], [470, 215, 76, 76]]],
+        [[470, 215, 76, 76], "locked"],
+    ),
+    (
+        ["snapshot", 0.3, [[250, 330, 98, 98], [546, 223, 60, 60], [100, 100, 130, 130]]],
+        [[546, 223, 60, 60], "locked"],
+    ),
+    (["unlock", 0.31, None], ["none"]),
+    (
+        ["snapshot", 0.35, [[546, 223, 60, 60], [100, 100, 130, 130]]],
+        [[100, 100, 130, 130], "none"],
+    ),
+    (["snapshot", 0.4, [[100, 100, 130, 130], [140, 120, 48, 48]]], [[100, 100, 130, 130], "none"]),
+    (["click", 0.41, [164.0, 144.0]], [True, "locked"]),
+    (
+        ["snapshot", 0.45, [[101, 100, 130, 130], [142, 121, 48, 48]]],
+        [[142, 121, 48, 48], "locked"],
+    ),
+]
+
+
+def decisions(events: list[Event], outcomes: list[list[Any]]) -> list[list[Any]]:
+    """What TWO_FACES states of each outcome of :func:`run` (or of lock.js's run)."""
+    return [
+        [o[2], o[3]] if kind == "snapshot" else o
+        for (kind, _, _), o in zip(events, outcomes, strict=True)
+    ]
+
+
 def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
     """The events, and for each snapshot which track each of its boxes came from."""
     rng = random.Random(seed)

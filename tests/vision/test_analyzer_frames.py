@@ -225,6 +225,27 @@ def test_the_tag_of_a_bt601_frame_reads_back_when_only_a_window_is_converted(pag
     assert windowed["frame"] == 0xABCDEF
 
 
+def test_the_tag_of_a_wide_bt601_frame_reads_back_when_only_a_window_is_converted(
+    page: Page,
+) -> None:
+    # A frame wider than 4:3: its tag's blocks (16 rows high, from its width) reach below a
+    # fortieth of its height, and a window far below them converts none of their rows. The
+    # frame before holds the opposite bits, so any row left unconverted reads as its.
+    width, height = 640, 240
+    scene = np.asarray(cv2.resize(face_scene(), (width, height)), np.uint8)
+    before, tagged = scene.copy(), scene.copy()
+    frametag.stamp(before, 0x5A3C0F)
+    frametag.stamp(tagged, 0x5A3C0F ^ 0xFFFFFF)
+    calls = [
+        [i420_payload(before), "face", {}],
+        [i420_payload(tagged), "face", {"around": [280, 140, 80, 80]}],
+    ]
+    first, windowed = page.evaluate(IN_TURN, [calls, BT601_LIMITED])
+    assert first["frame"] == 0x5A3C0F
+    assert 0 < windowed["converted"] < width * height / 2, windowed["converted"]
+    assert windowed["frame"] == 0x5A3C0F ^ 0xFFFFFF
+
+
 def test_the_tag_of_a_full_range_i420_frame_reads_back(page: Page) -> None:
     # Chromium converts such a frame whole: its tag reads back from every block.
     frames = [flame_scene((40 + 90 * i, 200, 80, 70)) for i in range(3)]

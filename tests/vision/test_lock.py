@@ -1,7 +1,8 @@
 """The target lock's rule (app/vision/lock.py), sans I/O: clicks, association, lost and found.
 
 The last test runs it the relay's way on the two-face scene, with the Python reference
-detection and the tracker's window: the smaller face, once clicked, stays the target.
+detection and the tracker's window: the smaller face, once clicked, stays the target, and the
+window follows it.
 """
 
 from __future__ import annotations
@@ -66,6 +67,14 @@ def test_an_answer_to_an_older_lock_is_not_news() -> None:
     assert target.state == "none"
 
 
+def test_a_clicked_small_face_stays_the_target_beside_a_larger_one() -> None:
+    events = [event for event, _ in lock_sequences.TWO_FACES]
+    outcomes = lock_sequences.run(events, RULE)
+    got = lock_sequences.decisions(events, outcomes)
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.TWO_FACES, got, strict=True)):
+        assert have == want, (i, event)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     events, owners = lock_sequences.script(seed)
@@ -108,7 +117,12 @@ def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
         assert chosen is not None
         truth = video.small_centre(i) if i > 0 else video.face_centre(i)
         assert lock.contains(chosen, *truth), (i, chosen, truth)
+        if scan == "window":  # around the small face: the large one was not even searched
+            assert found.boxes == [chosen], (i, found.boxes)
         if i == 0:  # the default choice was the large face: click the small one
             assert target.lock(*video.small_centre(0), found.boxes, t)
             tracker.reset()
-    assert scans.count("window") > len(scans) // 2, scans
+    # From the click on, the window followed the small face on every snapshot but the tracker's
+    # periodic full scans: it never lost it to a full scan.
+    cadence = ["full"] + ["window"] * (op.params.full_scan_every - 1)
+    assert scans == ["full", *(cadence * 2)[: len(scans) - 1]], scans

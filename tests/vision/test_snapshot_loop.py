@@ -124,3 +124,72 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
     assert second is None  # one snapshot in flight at a time: the other frame is skipped
     assert got["afterStop"] is None
     assert (got["snapshots"], got["goalsSent"]) == (len(layout) + 1, 4)
+
+
+# Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
+# t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
+# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; and the
+# states the loop announced.
+LOCK_STEPS = """async ({ frames, steps, profile }) => {
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const { PROTOCOL } = await import('/static/js/config.js');
+  const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
+  await window.analyzer.resetTracking();
+  let now = 0;
+  const loop = new SnapshotLoop({
+    analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
+    sendGoal: () => true, lockRule: PROTOCOL.lock, clock: () => now,
+  });
+  const announced = [];
+  loop.addEventListener('lock', (event) => announced.push(event.detail.state));
+  loop.start();
+  const outcomes = [];
+  for (const [kind, t, arg] of steps) {
+    now = t * 1000;
+    if (kind === 'click') {
+      outcomes.push(loop.lockAt(arg[0], arg[1]));
+      continue;
+    }
+    const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
+    outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
+  }
+  loop.stop();
+  return { outcomes, announced };
+}""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
+
+
+def test_a_locked_face_that_jumped_is_found_by_the_whole_frame_search(page: Page) -> None:
+    # The face is clicked, then shows up far from where it was (beyond the lock's reach: a
+    # person who walked behind something and out the other side). Near it is looked for first,
+    # so the far face is not taken for it; once it has been unseen for the search time (1 s,
+    # app/protocol), the whole frame is searched and the far face is the locked target again,
+    # long before the lock would be released (3 s).
+    (here, placed_here), (there, placed_there) = scene((40, 100), 1), scene((400, 220), 2)
+    assert placed_here is not None and placed_there is not None
+    steps = [
+        ["frame", 0.05, 0],
+        ["click", 0.06, list(placed_here.centre)],
+        ["frame", 0.1, 0],
+        ["frame", 0.6, 1],
+        ["frame", 1.2, 1],
+        ["frame", 1.25, 1],
+    ]
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": [here, there], "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    outcomes = got["outcomes"]
+
+    def on(goal: list[float] | None, placed: Placed) -> bool:
+        cx, cy = placed.centre
+        return (
+            goal is not None
+            and abs(goal[0] - cx) < FACE_SIZE / 4
+            and abs(goal[1] - cy) < FACE_SIZE / 4
+        )
+
+    assert on(outcomes[0][0], placed_here) and outcomes[1] is True
+    assert on(outcomes[2][0], placed_here) and outcomes[2][1] == "locked"
+    assert outcomes[3] == [None, "lost"]  # 0.5 s unseen: the far face is not its track yet
+    assert on(outcomes[4][0], placed_there) and outcomes[4][1] == "locked"
+    assert on(outcomes[5][0], placed_there) and outcomes[5][1] == "locked"
+    assert got["announced"] == ["locked", "lost", "locked"]
