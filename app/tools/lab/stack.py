@@ -19,9 +19,9 @@ from typing import IO, Any
 from playwright.sync_api import Browser, Page, Playwright
 from playwright.sync_api import Error as PlaywrightError
 
+from app.chromium import chromium_path, launch_options
 from app.protocol.events import AnyEvent, E, PoseReport, of_kind
 from app.recording import read_event_log
-from app.tools.browser import chromium_path, launch_options
 from app.tools.lab.lab import CLOUD, Lab
 from app.tools.lab.netns import LabError
 
