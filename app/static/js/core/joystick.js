@@ -7,10 +7,10 @@
 /** An axis nearer the centre than this reads 0: a resting finger or stick wobbles. */
 export const STICK_DEADZONE = 0.1;
 /**
- * The pad's commands move in steps of this: a finger resting on glass jitters by a pixel or
- * two, and every change of command is sent at once.
+ * The pad's commands move in steps of 1/STICK_STEPS: a finger resting on glass jitters by a
+ * pixel or two, and every change of command is sent at once.
  */
-export const STICK_STEP = 0.05;
+export const STICK_STEPS = 20;
 
 /** One stick axis as a command axis: 0 within the dead zone, held to [−1, 1] beyond. */
 export function stickAxis(value) {
@@ -24,7 +24,7 @@ export function stickAxis(value) {
  * it each axis stays at its limit, as a key's ±1 does.
  */
 export function dragCommand(dx, dy, radius) {
-  const axis = (offset) => stickAxis(Math.round(offset / radius / STICK_STEP) * STICK_STEP);
+  const axis = (offset) => stickAxis(Math.round((offset / radius) * STICK_STEPS) / STICK_STEPS);
   return { linear: axis(-dy), angular: axis(-dx) };
 }
 
