@@ -10,10 +10,10 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from playwright.sync_api import Browser, CDPSession, Page
+from playwright.sync_api import Browser, Page
 
 from app.server.serve import RunningServer
-from e2e.helpers import module_page
+from e2e.helpers import Touches, module_page
 
 pytestmark = [pytest.mark.browser]
 
@@ -143,36 +143,6 @@ PAD_JS = """async () => {
   });
   pad.show();
 }"""
-
-
-class Touches:
-    """Fingers on the touch screen, through Chromium's input pipeline (CDP), as a phone's are."""
-
-    def __init__(self, page: Page) -> None:
-        self.cdp: CDPSession = page.context.new_cdp_session(page)
-        self.down: dict[int, tuple[float, float]] = {}
-
-    def _send(self, kind: str, points: dict[int, tuple[float, float]]) -> None:
-        touch_points = [{"x": x, "y": y, "id": finger} for finger, (x, y) in points.items()]
-        self.cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": touch_points})
-
-    def press(self, finger: int, x: float, y: float) -> None:
-        self.down[finger] = (x, y)
-        self._send("touchStart", self.down)
-
-    def move(self, finger: int, x: float, y: float, steps: int = 5) -> None:
-        x0, y0 = self.down[finger]
-        for step in range(1, steps + 1):
-            self.down[finger] = (x0 + (x - x0) * step / steps, y0 + (y - y0) * step / steps)
-            self._send("touchMove", self.down)
-
-    def lift(self, finger: int) -> None:
-        self._send("touchEnd", {finger: self.down.pop(finger)})
-
-    def cancel(self) -> None:
-        """The browser cancels every touch (as when a call comes in)."""
-        self.down.clear()
-        self._send("touchCancel", {})
 
 
 @pytest.fixture
