@@ -16,7 +16,7 @@ from app.protocol.control import PROFILES, control_config
 from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
-from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal, run
+from tests.vehicle_agent.pilot_sequences import SEQUENCE_PROFILES, SEQUENCES, goal, run
 
 pytestmark = [pytest.mark.browser]
 
@@ -71,7 +71,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
 
 
 def run_js(page: Page, steps: list[Any], profile: str) -> Any:
-    constants = to_json(control_config())
+    constants = to_json(control_config(SEQUENCE_PROFILES))
     freshness = to_json(page_protocol().goal_freshness)
     return page.evaluate(RUN_JS, [steps, constants, freshness, profile])
 
@@ -101,3 +101,21 @@ def test_goals_while_manual_are_dropped_why_manual_and_never_steer(page: Page) -
         {"ev": "goal_dropped", "seq": 1, "frame": 101, "why": "manual", "t": 0.2}
     ]
     assert not any(r["ev"] == "twist" for answer in answers[2:] for r in answer[0])
+
+
+def test_the_onboard_law_turns_to_a_face_and_searches_where_it_left(page: Page) -> None:
+    # The rule, not only the agreement: a face right of centre turns the robot clockwise
+    # (negative), and once it is gone the search turns right, then runs out and stops.
+    steps = [
+        ("pose", 0.0, [1.0, 3.0, 0.0]),
+        goal(1, 0.05, x=560.0, y=240.0, box_h=60.0),
+        *[("pose", round(0.05 + 0.1 * k, 2), [1.0, 3.0, 0.0]) for k in range(1, 80)],
+    ]
+    answers = run_js(page, steps, "onboard")
+    records = [r for answer in answers for r in answer[0]]
+    first = next(r for r in records if r["ev"] == "twist")
+    assert first["angular"] < 0 and first["seq"] == 1
+    searches = [r for r in records if r["ev"] in ("search", "search_ended")]
+    assert [r["ev"] for r in searches] == ["search", "search_ended"]
+    assert searches[0]["side"] == "right" and searches[1]["why"] == "timed_out"
+    assert records[-1]["ev"] == "twist" and (records[-1]["linear"], records[-1]["angular"]) == (0, 0)

@@ -8,7 +8,11 @@ twins: the manual gate (:class:`~vehicle_agent.manual.ManualDrive`: while an ope
 wheel, goals are dropped with ``why="manual"`` and drive commands steer, until the dead-man),
 then the freshness gate (:class:`~vehicle_agent.freshness.GoalGate`: latest wins, stale goals
 dropped), then the controller (:class:`~vehicle_agent.control.Controller`, with the control law
-its profile names). A lost link, a mode change and a stop command halt the turtle.
+its profile names). A lost link, a mode change and a stop command halt the turtle. The searching
+profiles record when a search for a lost target starts
+(:class:`~app.protocol.events.SearchStarted`, and which way it turns) and how it ends
+(:class:`~app.protocol.events.SearchEnded`: the target found, the search's time run out and the
+vehicle stopped, or piloting stopped).
 
 The adapters only move bytes: ``vehicle_agent/agent.py`` (aiortc, rosbridge or the in-process
 simulator, the event log) and the browser vehicle page (``app/static/js/pages/vehicle.js``)
@@ -29,6 +33,9 @@ from app.protocol.events import (
     GoalDropped,
     ModeChanged,
     PilotEvent,
+    SearchEnd,
+    SearchEnded,
+    SearchStarted,
     TwistSent,
 )
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
@@ -87,6 +94,7 @@ class Pilot:
         if verdict != "fresh":
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why=verdict, t=now)]
         self._last_goal_at = now
+        searching = self.controller.search_since
         applied = GoalApplied(
             seq=goal.seq,
             op=goal.op,
@@ -97,12 +105,24 @@ class Pilot:
             h=goal.h,
             t=now,
         )
-        target = Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame)
-        return [applied, *_sent(self.controller.goal(target, now), now)]
+        target = Goal(
+            goal.x,
+            goal.y,
+            goal.w,
+            goal.h,
+            goal.seq,
+            goal.frame,
+            box_h=goal.boxH,
+            target_height_m=goal.targetHeightM,
+        )
+        twist = self.controller.goal(target, now)
+        return [applied, *self._searched(searching, "found", now), *_sent(twist, now)]
 
     def stop(self, now: float) -> list[PilotEvent]:
         """The relay stopped piloting: the autopilot's turtle stops."""
-        return _sent(self.controller.stop(), now)
+        searching = self.controller.search_since
+        twist = self.controller.stop()
+        return [*self._searched(searching, "stopped", now), *_sent(twist, now)]
 
     def mode_change(self, mode: Mode, operator: str | None, now: float) -> list[PilotEvent]:
         """The relay's mode. Whichever way it changes, the turtle stops first: the autopilot's
@@ -110,9 +130,10 @@ class Pilot:
         stopped = self.manual.set_mode(mode, operator)
         if stopped is None:
             return []
+        searching = self.controller.search_since
         self.controller.stop()
         changed = ModeChanged(mode=mode, operator=self.manual.operator, t=now)
-        return [changed, *_sent(stopped, now)]
+        return [changed, *self._searched(searching, "stopped", now), *_sent(stopped, now)]
 
     def drive(self, seq: int, linear: float, angular: float, now: float) -> list[PilotEvent]:
         """An operator's drive command: it steers in manual mode when it is the newest."""
@@ -124,13 +145,18 @@ class Pilot:
     # --- what the vehicle itself sees --------------------------------------------------------
 
     def pose(self, pose: Pose, now: float) -> list[PilotEvent]:
-        """The turtle's pose: closed-loop profiles answer it."""
-        return _sent(self.controller.pose(pose, now), now)
+        """The turtle's pose: closed-loop profiles answer it (a search starts on it)."""
+        searching = self.controller.search_since
+        twist = self.controller.pose(pose, now)
+        return [*self._searched(searching, "timed_out", now), *_sent(twist, now)]
 
     def tick(self, now: float) -> list[PilotEvent]:
         """The clock: the goal timeout, the clock-driven profile's period, the dead-man."""
+        searching = self.controller.search_since
+        twist = self.controller.tick(now)
         return [
-            *_sent(self.controller.tick(now), now),
+            *self._searched(searching, "timed_out", now),
+            *_sent(twist, now),
             *_sent(self.manual.tick(now), now),
         ]
 
@@ -154,10 +180,20 @@ class Pilot:
     def halt(self, now: float) -> list[PilotEvent]:
         """Stop at once, autopilot or operator: the link that carried the commands is gone (or
         the vehicle is stopping). Back in auto mode."""
-        stopped = self.controller.stop()
-        if not self.manual.manual:
-            return _sent(stopped, now)
-        return self.mode_change("auto", None, now)
+        if self.manual.manual:
+            return self.mode_change("auto", None, now)
+        return self.stop(now)
+
+    def _searched(self, before: float | None, end: SearchEnd, now: float) -> list[PilotEvent]:
+        """The record of a search that started or ended since the controller's search began at
+        ``before`` (None: none was under way); ``end`` says how one that ended did."""
+        since = self.controller.search_since
+        if before is None and since is not None:
+            side = "left" if self.controller.last_side > 0 else "right"
+            return [SearchStarted(side=side, t=now)]
+        if before is not None and since is None:
+            return [SearchEnded(why=end, after_s=now - before, t=now)]
+        return []
 
 
 def _sent(twist: Twist | None, now: float) -> list[PilotEvent]:

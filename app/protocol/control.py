@@ -22,7 +22,7 @@ MIN_TARGET_DISTANCE_M = 0.05
 # The spawn step of the thesis's vehicle (section 5.7.6): turtle1 first turns to face "up".
 SPAWN_THETA = math.pi / 2
 
-Law = Literal["rotate", "follow"]
+Law = Literal["rotate", "follow", "onboard"]
 
 # The operator's console (manual override). A vehicle that was moving on a drive command and has
 # had none for DEADMAN_S stops; a held key or stick resends its command every DRIVE_REPEAT_S, so a
@@ -43,7 +43,9 @@ class Profile:
     """
 
     name: str
-    # "rotate": turn in place to face the target; "follow": also drive to a standoff from it.
+    # "rotate": turn in place to face the target; "follow": also drive to a standoff from it;
+    # "onboard": the camera turns with the vehicle, so steer the target's bearing to zero and
+    # its range (from its box's height) to the standoff.
     law: Law
     # Minimum time between two Twists computed on pose updates (or on the clock, see on_pose).
     period_s: float
@@ -70,9 +72,16 @@ class Profile:
     wall_margin_m: float = 0.0
     # Speed allowed per metre of clearance beyond the margin (1/s): the vehicle slows near walls.
     wall_gain: float = 0.0
-    # No goal for this long: the target counts as lost and the vehicle turns in place to search.
+    # No goal for this long: the target counts as lost and the vehicle turns in place to search,
+    # toward the side it was last seen on, until the goal timeout stops it.
     search_after_s: float = math.inf
     search_angular: float = 0.0
+    # --- onboard only ------------------------------------------------------------------------
+    # The camera's horizontal field of view (rad): the robot's (0: no camera described).
+    hfov: float = 0.0
+    # The bearing (rad) at which the forward speed has fallen to zero: the vehicle drives while
+    # it faces the target and turns first when it does not.
+    slow_bearing: float = math.inf
     # --- manual override ---------------------------------------------------------------------
     # An operator's full key or stick deflection (a drive command of 1) is this speed.
     manual_linear: float = 1.5
@@ -127,6 +136,25 @@ PROFILES: dict[str, Profile] = {
         search_after_s=1.0,
         search_angular=1.0,
     ),
+    # A camera carried by the vehicle (a robot's own): steer the target's bearing to zero and
+    # hold a standoff from it, its range read from its box's height. A target lost for a moment
+    # is searched for toward the side it left by, a turn and a half at most, then the vehicle
+    # stops.
+    "onboard": replace(
+        _DEFAULT,
+        name="onboard",
+        law="onboard",
+        gain=4.0,
+        max_angular=2.5,
+        deadband=0.02,
+        linear_gain=1.0,
+        max_linear=0.8,
+        standoff_m=1.2,
+        slow_bearing=0.45,
+        search_after_s=0.3,
+        search_angular=1.6,
+        goal_timeout_s=0.3 + 3 * math.pi / 1.6,
+    ),
 }
 __all__ = [
     "DEADMAN_S",
@@ -139,6 +167,7 @@ __all__ = [
     "ControlConfig",
     "Profile",
     "control_config",
+    "with_camera",
     "with_standoff",
 ]
 
@@ -150,6 +179,16 @@ def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
     if not math.isfinite(standoff_m) or standoff_m < 0:
         raise ValueError(f"standoff must be a finite distance >= 0 m, not {standoff_m}")
     return replace(profile, standoff_m=standoff_m)
+
+
+def with_camera(profile: Profile, hfov_deg: float | None) -> Profile:
+    """``profile`` seeing through a camera ``hfov_deg`` degrees across (None: no camera), as the
+    onboard law needs to turn a pixel into a bearing."""
+    if hfov_deg is None:
+        return replace(profile, hfov=0.0)
+    if not math.isfinite(hfov_deg) or not 0 < hfov_deg < 180:
+        raise ValueError(f"a camera's field of view is between 0 and 180 degrees, not {hfov_deg}")
+    return replace(profile, hfov=math.radians(hfov_deg))
 
 
 @dataclass(frozen=True)

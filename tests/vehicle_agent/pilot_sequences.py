@@ -13,7 +13,7 @@ from typing import Any
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, Profile, with_camera
 from vehicle_agent.control import Pose
 from vehicle_agent.pilot import Pilot
 
@@ -23,10 +23,24 @@ Step = tuple[str, float, list[Any]]
 RELAY_CLOCK_MS = 5_000_000.0
 
 
-def goal(seq: int, t: float, x: float = 100.0, y: float = 120.0, late_s: float = 0.0) -> Step:
+# The camera the onboard profile sees through in the sequences: the simulated diffdrive robot's
+# field of view, and a face's real height as the operations spec declares it.
+CAMERA_HFOV_DEG = 60.0
+FACE_HEIGHT_M = 0.24
+
+
+def goal(
+    seq: int,
+    t: float,
+    x: float = 100.0,
+    y: float = 120.0,
+    late_s: float = 0.0,
+    box_h: float | None = None,
+) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
-    ``late_s`` earlier (it waited that much longer on the way)."""
-    message = {
+    ``late_s`` earlier (it waited that much longer on the way); with a face's box ``box_h``
+    pixels high when given."""
+    message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
         "op": "face",
@@ -37,6 +51,8 @@ def goal(seq: int, t: float, x: float = 100.0, y: float = 120.0, late_s: float =
         "t": RELAY_CLOCK_MS + (t - late_s) * 1000,
         "frame": 100 + seq,
     }
+    if box_h is not None:
+        message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
     return ("goal", t, [message])
 
 
@@ -46,6 +62,17 @@ CENTRE_POSE: Step = ("pose", 0.0, [TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0])
 def at(step: Step, t: float) -> Step:
     """``step`` at another time."""
     return (step[0], t, step[2])
+
+
+def odom(t: float, theta: float, x: float = 1.0, y: float = 3.0) -> Step:
+    """A robot's odometry pose at ``t`` (its room's metres)."""
+    return ("pose", t, [x, y, theta])
+
+
+def poses(start: float, end: float, every: float, theta: float = 0.0) -> list[Step]:
+    """Odometry every ``every`` s from ``start`` to ``end``, the robot not turning."""
+    count = round((end - start) / every)
+    return [odom(round(start + k * every, 6), theta) for k in range(count + 1)]
 
 
 SEQUENCES: dict[str, list[Step]] = {
@@ -126,13 +153,55 @@ SEQUENCES: dict[str, list[Step]] = {
         *[("tick", round(0.1 + 0.05 * k, 2), []) for k in range(1, 60)],
         at(CENTRE_POSE, 3.1),
     ],
+    # A face with its box (the onboard law's range): right of centre and far, then turned to,
+    # then centred at the standoff, then too close.
+    "a face's box: turn to it, drive to the standoff, back off": [
+        odom(0.0, 0.0),
+        goal(1, 0.1, x=480.0, y=240.0, box_h=40.0),
+        odom(0.13, -0.1),
+        odom(0.16, -0.2),
+        goal(2, 0.2, x=321.0, y=240.0, box_h=40.0),
+        odom(0.26, -0.2),
+        goal(3, 0.3, x=320.0, y=240.0, box_h=111.0),
+        goal(4, 0.4, x=330.0, y=250.0, box_h=200.0),
+        goal(5, 0.5, x=40.0, y=250.0, box_h=60.0),
+        ("tick", 0.55, []),
+    ],
+    # The face leaves by the left: a search turns left, and finds it again.
+    "a face lost on the left is searched for and found": [
+        odom(0.0, 0.0),
+        goal(1, 0.12, x=60.0, y=200.0, box_h=80.0),
+        *poses(0.15, 1.23, 0.06, theta=0.3),
+        ("tick", 1.21, []),
+        goal(2, 1.25, x=500.0, y=200.0, box_h=80.0),
+        odom(1.3, 0.3),
+    ],
+    # The face leaves by the right and stays away: the search turns right until its time runs
+    # out, then the vehicle stops.
+    "a face lost on the right: the search runs out and stops": [
+        odom(0.0, 0.0),
+        goal(1, 0.11, x=600.0, y=200.0, box_h=80.0),
+        *poses(0.2, 8.0, 0.2, theta=-0.5),
+        *[("tick", 8.0 + 0.5 * k, []) for k in range(1, 5)],
+        goal(2, 10.5, x=620.0, y=200.0, box_h=80.0),
+        ("stop", 10.6, []),
+    ],
 }
+
+
+def fitted(profile: Profile) -> Profile:
+    """``profile`` seeing through the sequences' camera (only the onboard law looks)."""
+    return with_camera(profile, CAMERA_HFOV_DEG)
+
+
+# The profiles as the sequences run them, on both sides (the page gets them in its config).
+SEQUENCE_PROFILES: dict[str, Profile] = {name: fitted(p) for name, p in PROFILES.items()}
 
 
 def pilot(profile: str) -> Pilot:
     """The pilot each sequence runs against, built as the agent builds it: the profile's, with
     the protocol's dead-man, tick and freshness rule (the page gets them through its config)."""
-    return Pilot(PROFILES[profile])
+    return Pilot(SEQUENCE_PROFILES[profile])
 
 
 def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEvent]:

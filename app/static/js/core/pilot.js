@@ -11,6 +11,9 @@
 // why 'manual' and drive commands steer, until the dead-man), then the freshness gate
 // (core/freshness.js: latest wins, stale goals dropped), then the controller (core/control.js,
 // with the control law the profile names). A lost link, a mode change and a stop halt the turtle.
+// The searching profiles record when a search for a lost target starts (`search`, and the side
+// it turns to) and how it ends (`search_ended`: found, timed_out when its time ran out and the
+// vehicle stopped, or stopped when piloting did).
 import { Controller } from './control.js';
 import { GoalGate } from './freshness.js';
 import { ManualDrive } from './manual.js';
@@ -78,14 +81,28 @@ export class Pilot {
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: verdict, t: now }];
     }
     this.#lastGoalAt = now;
+    const searching = this.controller.searchSince;
     const { seq, op, x, y, w, h } = goal;
     const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
-    return [applied, ...twistSent(this.controller.goal({ x, y, w, h, seq, frame }, now), now)];
+    const target = {
+      x,
+      y,
+      w,
+      h,
+      seq,
+      frame,
+      boxH: goal.boxH ?? null,
+      targetHeightM: goal.targetHeightM ?? null,
+    };
+    const twist = this.controller.goal(target, now);
+    return [applied, ...this.#searched(searching, 'found', now), ...twistSent(twist, now)];
   }
 
   /** The relay stopped piloting: the autopilot's turtle stops. */
   stop(now) {
-    return twistSent(this.controller.stop(), now);
+    const searching = this.controller.searchSince;
+    const twist = this.controller.stop();
+    return [...this.#searched(searching, 'stopped', now), ...twistSent(twist, now)];
   }
 
   /**
@@ -95,9 +112,10 @@ export class Pilot {
   modeChange(mode, operator, now) {
     const stopped = this.manual.setMode(mode, operator);
     if (stopped === null) return [];
+    const searching = this.controller.searchSince;
     this.controller.stop();
     const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
-    return [changed, ...twistSent(stopped, now)];
+    return [changed, ...this.#searched(searching, 'stopped', now), ...twistSent(stopped, now)];
   }
 
   /** An operator's drive command: it steers in manual mode when it is the newest. */
@@ -108,14 +126,22 @@ export class Pilot {
     return [received, ...twistSent(twist, now)];
   }
 
-  /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it. */
+  /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it (a search starts on it). */
   pose(pose, now) {
-    return twistSent(this.controller.pose(pose, now), now);
+    const searching = this.controller.searchSince;
+    const twist = this.controller.pose(pose, now);
+    return [...this.#searched(searching, 'timed_out', now), ...twistSent(twist, now)];
   }
 
   /** The clock: the goal timeout, the clock-driven profile's period, the dead-man. */
   tick(now) {
-    return [...twistSent(this.controller.tick(now), now), ...twistSent(this.manual.tick(now), now)];
+    const searching = this.controller.searchSince;
+    const twist = this.controller.tick(now);
+    return [
+      ...this.#searched(searching, 'timed_out', now),
+      ...twistSent(twist, now),
+      ...twistSent(this.manual.tick(now), now),
+    ];
   }
 
   /**
@@ -144,8 +170,22 @@ export class Pilot {
    * page is leaving). Back in auto mode.
    */
   halt(now) {
-    const stopped = this.controller.stop();
-    if (!this.manual.manual) return twistSent(stopped, now);
-    return this.modeChange('auto', null, now);
+    if (this.manual.manual) return this.modeChange('auto', null, now);
+    return this.stop(now);
+  }
+
+  /**
+   * The record of a search that started or ended since the controller's search began at
+   * `before` (null: none was under way); `end` says how one that ended did.
+   */
+  #searched(before, end, now) {
+    const since = this.controller.searchSince;
+    if (before === null && since !== null) {
+      return [{ ev: 'search', side: this.controller.lastSide > 0 ? 'left' : 'right', t: now }];
+    }
+    if (before !== null && since === null) {
+      return [{ ev: 'search_ended', why: end, after_s: now - before, t: now }];
+    }
+    return [];
   }
 }
