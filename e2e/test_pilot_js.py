@@ -21,7 +21,7 @@ from tests.vehicle_agent.pilot_sequences import SEQUENCE_PROFILES, SEQUENCES, go
 pytestmark = [pytest.mark.browser]
 
 # The pilot as pages/vehicle.js builds it, fed one sequence: each step's records, next tick,
-# mode and operator.
+# mode, operator and search status.
 RUN_JS = """([steps, constants, freshness, profile]) => {
   const law = new control.ControlLaw(constants);
   const driven = new pilot.Pilot(law, law.profiles[profile], {
@@ -44,7 +44,7 @@ RUN_JS = """([steps, constants, freshness, profile]) => {
   };
   return steps.map(([kind, t, args]) => {
     const records = feed(kind, t, args);
-    return [records, driven.nextTick(t), driven.mode, driven.operator];
+    return [records, driven.nextTick(t), driven.mode, driven.operator, driven.search];
   });
 }"""
 
@@ -118,4 +118,5 @@ def test_the_onboard_law_turns_to_a_face_and_searches_where_it_left(page: Page) 
     searches = [r for r in records if r["ev"] in ("search", "search_ended")]
     assert [r["ev"] for r in searches] == ["search", "search_ended"]
     assert searches[0]["side"] == "right" and searches[1]["why"] == "timed_out"
-    assert records[-1]["ev"] == "twist" and (records[-1]["linear"], records[-1]["angular"]) == (0, 0)
+    last = records[-1]
+    assert last["ev"] == "twist" and (last["linear"], last["angular"]) == (0, 0)

@@ -482,7 +482,12 @@ class Agent:
                 age = None if age_s is None else age_s * 1000
                 sent = link.send_state(
                     channels.Pose(
-                        x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
+                        x=pose.x,
+                        y=pose.y,
+                        theta=pose.theta,
+                        t=time.time() * 1000,
+                        goalAgeMs=age,
+                        search=self.pilot.search,
                     )
                 )
             self.events.emit(ev.PoseReport(x=pose.x, y=pose.y, theta=pose.theta, sent=sent, t=now))
@@ -500,4 +505,8 @@ class Agent:
                 self.turtle.publish(twist)
                 if twist.is_zero and twist.seq is None:
                     log.info("turtle stopped")
+            elif isinstance(event, ev.SearchStarted):
+                log.info("target lost: searching to the %s", event.side)
+            elif isinstance(event, ev.SearchEnded):
+                log.info("search ended after %.1f s: %s", event.after_s, event.why)
             self.events.emit(event)

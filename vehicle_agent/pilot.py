@@ -25,7 +25,7 @@ feed their pilot and act on its answers. The page's pilot is this module's twin,
 from __future__ import annotations
 
 from app.protocol import channels
-from app.protocol.channels import Mode
+from app.protocol.channels import Mode, SearchStatus
 from app.protocol.control import DEADMAN_S, TICK_S
 from app.protocol.events import (
     DriveReceived,
@@ -36,6 +36,7 @@ from app.protocol.events import (
     SearchEnd,
     SearchEnded,
     SearchStarted,
+    Side,
     TwistSent,
 )
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
@@ -64,6 +65,8 @@ class Pilot:
         self.gate = GoalGate() if freshness is None else GoalGate(freshness)
         # When the last goal was applied on this link (its age rides the pose: link health).
         self._last_goal_at: float | None = None
+        # A search ran out and stopped the vehicle, and nothing has steered it since.
+        self._search_timed_out = False
 
     @property
     def mode(self) -> Mode:
@@ -80,6 +83,18 @@ class Pilot:
         """True while goals steer the turtle (between the first goal and a stop)."""
         return self.controller.active
 
+    @property
+    def search(self) -> SearchStatus | None:
+        """How the search for a lost target stands, as the vehicle's pose tells the client:
+        the side it turns to, ``timed_out`` once it ran out and stopped the vehicle (until a
+        goal, a stop or a mode change), None when there is none."""
+        if self.controller.search_since is not None:
+            return self._search_side()
+        return "timed_out" if self._search_timed_out else None
+
+    def _search_side(self) -> Side:
+        return "left" if self.controller.last_side > 0 else "right"
+
     def goal_age(self, now: float) -> float | None:
         """Seconds since the last goal applied on this link, None before the first."""
         return None if self._last_goal_at is None else now - self._last_goal_at
@@ -94,6 +109,7 @@ class Pilot:
         if verdict != "fresh":
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why=verdict, t=now)]
         self._last_goal_at = now
+        self._search_timed_out = False
         searching = self.controller.search_since
         applied = GoalApplied(
             seq=goal.seq,
@@ -122,6 +138,7 @@ class Pilot:
         """The relay stopped piloting: the autopilot's turtle stops."""
         searching = self.controller.search_since
         twist = self.controller.stop()
+        self._search_timed_out = False
         return [*self._searched(searching, "stopped", now), *_sent(twist, now)]
 
     def mode_change(self, mode: Mode, operator: str | None, now: float) -> list[PilotEvent]:
@@ -132,6 +149,7 @@ class Pilot:
             return []
         searching = self.controller.search_since
         self.controller.stop()
+        self._search_timed_out = False
         changed = ModeChanged(mode=mode, operator=self.manual.operator, t=now)
         return [changed, *self._searched(searching, "stopped", now), *_sent(stopped, now)]
 
@@ -189,9 +207,9 @@ class Pilot:
         ``before`` (None: none was under way); ``end`` says how one that ended did."""
         since = self.controller.search_since
         if before is None and since is not None:
-            side = "left" if self.controller.last_side > 0 else "right"
-            return [SearchStarted(side=side, t=now)]
+            return [SearchStarted(side=self._search_side(), t=now)]
         if before is not None and since is None:
+            self._search_timed_out = end == "timed_out"
             return [SearchEnded(why=end, after_s=now - before, t=now)]
         return []
 

@@ -81,8 +81,15 @@ class Goal(_Message):
     targetHeightM: Height | None = None  # noqa: N815 -- the wire name
 
 
+# What a vehicle's search for a lost target is doing (the onboard and follow profiles): turning
+# toward the side the target was last seen on, or ``timed_out``: it ran out and the vehicle
+# stopped, and waits for the target (until a goal, a stop or a mode change).
+SearchStatus = Literal["left", "right", "timed_out"]
+
+
 class Pose(_Message):
-    """vehicle→relay, and relay→client as forwarded: the turtle's pose in terrain metres."""
+    """vehicle→relay, and relay→client as forwarded: the turtle's pose in terrain metres, and
+    how its search for a lost target stands (None: not searching)."""
 
     type: Literal["pose"] = "pose"
     x: Finite
@@ -91,6 +98,7 @@ class Pose(_Message):
     t: Finite | None = None
     # Milliseconds since the vehicle last applied a goal (None: none on this link yet).
     goalAgeMs: NonNegative | None = None  # noqa: N815 -- the wire name
+    search: SearchStatus | None = None
 
 
 class Stop(_Message):

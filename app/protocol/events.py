@@ -211,7 +211,13 @@ AnyEvent = (
 KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
 # What a vehicle's pilot makes, in both languages (vehicle_agent/pilot.py, core/pilot.js).
 PilotEvent = (
-    GoalApplied | GoalDropped | ModeChanged | DriveReceived | TwistSent | SearchStarted | SearchEnded
+    GoalApplied
+    | GoalDropped
+    | ModeChanged
+    | DriveReceived
+    | TwistSent
+    | SearchStarted
+    | SearchEnded
 )
 
 

@@ -228,10 +228,10 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
 
 def run(steps: list[Step], profile: str) -> list[Any]:
     """Each step's answer: its records (log-line objects), the seconds to the next tick, the
-    mode and the operator."""
+    mode, the operator and the search status the pose tells the client."""
     driven = pilot(profile)
     out: list[Any] = []
     for kind, t, args in steps:
         records = [ev.record(event) for event in feed(driven, kind, t, args)]
-        out.append([records, driven.next_tick(t), driven.mode, driven.operator])
+        out.append([records, driven.next_tick(t), driven.mode, driven.operator, driven.search])
     return out

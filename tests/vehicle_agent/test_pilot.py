@@ -182,10 +182,12 @@ def test_the_shared_sequences_give_records_the_event_log_reads_back(
 ) -> None:
     answers = pilot_sequences.run(SEQUENCES[name], profile)
     assert len(answers) == len(SEQUENCES[name])
-    for records, next_tick, mode, _ in answers:
+    for records, next_tick, mode, _, search in answers:
         for record in records:
             assert ev.record(ev.from_json(json.dumps(record))) == record
         assert 0 <= next_tick <= 0.05 and mode in ("auto", "manual")
+        # What the pose tells the client is a value the wire accepts.
+        channels.Pose(x=1.0, y=2.0, theta=0.0, search=search)
 
 
 # --- the onboard law: a camera the vehicle carries --------------------------------------------
@@ -337,24 +339,32 @@ def test_a_search_stops_after_its_bound_and_says_so() -> None:
     last = _twists(answers)[-1]
     assert (last.linear, last.angular, last.t) == (0.0, 0.0, ended[0].t)
     assert not pilot.active and not _twists(pilot.tick(12.0))
+    # The client hears of it until something steers the robot again.
+    assert pilot.search == "timed_out"
+    _command(pilot, face(2, 12.5, x=320.0), 12.5)
+    assert pilot.search is None
 
 
 def test_a_face_found_again_ends_the_search() -> None:
     pilot = onboard()
     _command(pilot, face(1, 0.0, x=40.0, range_m=2.0), 0.0)
+    assert pilot.search is None
     search = pilot.pose(ODOM, 0.5)
-    assert ev.of_kind(search, ev.SearchStarted)
+    assert ev.of_kind(search, ev.SearchStarted) and pilot.search == "left"
     found = pilot.goal(face(2, 1.5, x=300.0, range_m=2.0), 1.5)
     assert ev.of_kind(found, ev.SearchEnded) == [ev.SearchEnded(why="found", after_s=1.0, t=1.5)]
     assert _twists(found)[-1].seq == 2  # the face steers again
+    assert pilot.search is None
 
 
 def test_stopping_piloting_during_a_search_ends_it() -> None:
     pilot = onboard()
     _command(pilot, face(1, 0.0, x=40.0), 0.0)
     pilot.pose(ODOM, 0.5)
+    assert pilot.search == "left"
     stopped = pilot.stop(0.7)
     assert ev.of_kind(stopped, ev.SearchEnded)[0].why == "stopped" and _stops(stopped)
+    assert pilot.search is None
 
 
 def test_a_robot_that_turned_past_a_face_lost_on_the_right_still_searches_right() -> None:
@@ -366,5 +376,5 @@ def test_a_robot_that_turned_past_a_face_lost_on_the_right_still_searches_right(
     for k in range(1, 20):
         answers += pilot.pose(Pose(1.0, 3.0, -0.6), 0.03 * k)
     started = ev.of_kind(answers, ev.SearchStarted)
-    assert [s.side for s in started] == ["right"]
+    assert [s.side for s in started] == ["right"] and pilot.search == "right"
     assert _twists(answers)[-1].angular < 0

@@ -34,6 +34,7 @@ function twistSent(twist, now) {
 
 export class Pilot {
   #lastGoalAt = null; // when the last goal was applied on this link (link health)
+  #searchTimedOut = false; // a search ran out and stopped the vehicle; nothing steered it since
 
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
@@ -66,6 +67,17 @@ export class Pilot {
     return this.controller.active;
   }
 
+  /**
+   * How the search for a lost target stands, as the vehicle's pose tells the client: the side
+   * it turns to ('left', 'right'), 'timed_out' once it ran out and stopped the vehicle (until a
+   * goal, a stop or a mode change), null when there is none.
+   */
+  get search() {
+    if (this.controller.searchSince !== null)
+      return this.controller.lastSide > 0 ? 'left' : 'right';
+    return this.#searchTimedOut ? 'timed_out' : null;
+  }
+
   /** Seconds since the last goal applied on this link, null before the first. */
   goalAge(now) {
     return this.#lastGoalAt === null ? null : now - this.#lastGoalAt;
@@ -81,6 +93,7 @@ export class Pilot {
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: verdict, t: now }];
     }
     this.#lastGoalAt = now;
+    this.#searchTimedOut = false;
     const searching = this.controller.searchSince;
     const { seq, op, x, y, w, h } = goal;
     const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
@@ -102,6 +115,7 @@ export class Pilot {
   stop(now) {
     const searching = this.controller.searchSince;
     const twist = this.controller.stop();
+    this.#searchTimedOut = false;
     return [...this.#searched(searching, 'stopped', now), ...twistSent(twist, now)];
   }
 
@@ -114,6 +128,7 @@ export class Pilot {
     if (stopped === null) return [];
     const searching = this.controller.searchSince;
     this.controller.stop();
+    this.#searchTimedOut = false;
     const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
     return [changed, ...this.#searched(searching, 'stopped', now), ...twistSent(stopped, now)];
   }
@@ -184,6 +199,7 @@ export class Pilot {
       return [{ ev: 'search', side: this.controller.lastSide > 0 ? 'left' : 'right', t: now }];
     }
     if (before !== null && since === null) {
+      this.#searchTimedOut = end === 'timed_out';
       return [{ ev: 'search_ended', why: end, after_s: now - before, t: now }];
     }
     return [];

@@ -42,11 +42,16 @@ export function sortBoxes(boxes) {
   return boxes.sort((a, b) => a[0] - b[0] || a[1] - b[1] || a[2] - b[2] || a[3] - b[3]);
 }
 
-/** Centre of the largest box (first of equal areas), or null. */
-export function centreOfLargest(boxes) {
+/** The largest box (first of equal areas), or null. */
+export function largestBox(boxes) {
   let best = null;
   for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
-  return best === null ? null : { x: best[0] + best[2] / 2, y: best[1] + best[3] / 2 };
+  return best;
+}
+
+/** The centre {x, y} of box [x, y, w, h], or null for none. */
+export function centreOf(box) {
+  return box === null ? null : { x: box[0] + box[2] / 2, y: box[1] + box[3] / 2 };
 }
 
 /**
@@ -123,9 +128,9 @@ export function createCascadeOperation(cv, spec, files) {
 
   return {
     /**
-     * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point or null, and the window
-     * searched (detection-image pixels) or null. `around`: a full-frame box whose window alone
-     * is searched, or null for the whole frame.
+     * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point and its box (the
+     * largest) or null, and the window searched (detection-image pixels) or null. `around`: a
+     * full-frame box whose window alone is searched, or null for the whole frame.
      */
     detect(rgba, around = null) {
       let region = null;
@@ -138,7 +143,7 @@ export function createCascadeOperation(cv, spec, files) {
       } else {
         const plan = windowPlan(rgba.cols, rgba.rows, around);
         ({ factor, region } = plan);
-        if (region === null) return { boxes: [], target: null, region };
+        if (region === null) return { boxes: [], target: null, targetBox: null, region };
         const sizes = searchSizes(around, factor, p.windowSizeRatio, p.minSize, p.maxSize);
         sizeMin = new cv.Size(...sizes.min);
         sizeMax = new cv.Size(...sizes.max);
@@ -160,7 +165,8 @@ export function createCascadeOperation(cv, spec, files) {
       }
       sortBoxes(boxes);
       const searchedBox = region && [region.x, region.y, region.width, region.height];
-      return { boxes, target: centreOfLargest(boxes), region: searchedBox };
+      const largest = largestBox(boxes);
+      return { boxes, target: centreOf(largest), targetBox: largest, region: searchedBox };
     },
     /**
      * The part {x, y, width, height} of a width×height frame that detect(frame, around) reads,
