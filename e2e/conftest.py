@@ -1,6 +1,6 @@
 """Fixtures for the end-to-end tests: the server, headless Chromium, a fake camera video.
 
-Pages run in Debian's Chromium through Playwright (``app.tools.browser``), one browser per module
+Pages run in Debian's Chromium through Playwright (``app.chromium``), one browser per module
 whose fake camera (a per-browser flag) shows the face on the left; a scene with another camera
 launches its own browser for the vehicle. Every page's screenshot and console are kept under
 ``artifacts/<test>/`` whether the test passes or fails.
@@ -17,9 +17,9 @@ from urllib.parse import urlencode
 import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect, sync_playwright
 
+from app.chromium import launch_options
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
 from e2e.helpers import FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]

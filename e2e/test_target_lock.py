@@ -11,8 +11,8 @@ import cv2
 import pytest
 from playwright.sync_api import Browser, Page, Playwright, expect
 
+from app.chromium import launch_options
 from app.tools.bench.lock import click_position
-from app.tools.browser import launch_options
 from app.vision.lock import contains
 from app.vision.window import Box
 from e2e.conftest import OpenRole, open_room

@@ -6,14 +6,18 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import os
 import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
-from app.arguments import add_vehicle_profile, non_negative_number, positive_number
+from app.arguments import (
+    add_token_option,
+    add_vehicle_profile,
+    non_negative_number,
+    positive_number,
+)
 from app.metrics import add_metrics_arguments
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
@@ -29,9 +33,6 @@ from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
-
-# Read when --token is not given, so the token stays out of the process list.
-TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -120,11 +121,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--events", type=Path, metavar="PATH", help="append a JSON-lines event log here"
     )
-    parser.add_argument(
-        "--token",
-        default=os.environ.get(TOKEN_ENV),
-        help=f"vehicle token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
-    )
+    add_token_option(parser, "vehicle")
     parser.add_argument(
         "--ca-file",
         type=Path,

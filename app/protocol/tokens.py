@@ -22,6 +22,12 @@ from app.protocol.rooms import Role as Role  # re-exported: tokens.Role
 
 ROLES: tuple[Role, ...] = get_args(Role)
 
+# The environment variables that carry them: the server's signing secret, and the token a
+# headless peer (the relay service, the vehicle agent) logs in with -- from the environment
+# rather than the command line, where ``ps`` shows it.
+SECRET_ENV = "AUTOPILOT_SECRET"
+ACCESS_TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
+
 DEFAULT_TTL_S = 12 * 3600
 # A secret shorter than this is refused: HMAC is only as strong as the key an attacker must guess.
 MIN_SECRET_CHARS = 16

@@ -283,11 +283,16 @@ class Hub:
             return self._refuse_login(
                 connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)", why="caps"
             )
-        relay = _relay_of(room)
-        if login.role == "relay" and relay is not None:
-            return self._refuse_login(
-                connection, f"room {login.room!r} already has a relay ({relay.name!r})"
-            )
+        # One relay and one vehicle per room: the relay pilots one vehicle and forwards one
+        # video. A second of either is told at the door which one the room has, rather than
+        # admitted to take the first one's place at the relay.
+        if login.role in ("relay", "vehicle"):
+            holder = _one_of(room, login.role)
+            if holder is not None:
+                return self._refuse_login(
+                    connection,
+                    f"room {login.room!r} already has a {login.role} ({holder.name!r})",
+                )
         others = list(room.values())
         peer = _Peer(connection.id, login.name, login.role, login.room)
         self._rooms.setdefault(login.room, room)[peer.name] = peer
@@ -415,8 +420,12 @@ class Hub:
         return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login", why)]
 
 
+def _one_of(room: dict[str, _Peer], role: Role) -> _Peer | None:
+    return next((peer for peer in room.values() if peer.role == role), None)
+
+
 def _relay_of(room: dict[str, _Peer]) -> _Peer | None:
-    return next((peer for peer in room.values() if peer.role == "relay"), None)
+    return _one_of(room, "relay")
 
 
 def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:

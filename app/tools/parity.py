@@ -34,10 +34,10 @@ import numpy as np
 from playwright.sync_api import Page, sync_playwright
 
 from app.arguments import add_relay_profile
+from app.chromium import launch_options
 from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
-from app.tools.browser import launch_options
 from app.vision.reference import Detection, detect
 from app.vision.spec import CascadeOperation, ColourOperation, Spec, load_spec
 

@@ -24,7 +24,6 @@ from app.protocol.urls import ServerUrlError, page_url, reachable_host, server_b
 
 log = logging.getLogger(__name__)
 
-SECRET_ENV = "AUTOPILOT_SECRET"
 MAKE_SECRET = (
     "export AUTOPILOT_SECRET=$(python3 -c 'import secrets; print(secrets.token_urlsafe(32))')"
 )
@@ -55,11 +54,11 @@ def token_url(server: str, room: str, role: Role, token: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Print the token and URL as JSON on the last line; 1 with a reason on bad input."""
-    secret = os.environ.get(SECRET_ENV, "")
+    secret = os.environ.get(tokens.SECRET_ENV, "")
     if not secret:
         log.error(
             "cannot mint a token: %s is not set (the server's signing secret); make one with: %s",
-            SECRET_ENV,
+            tokens.SECRET_ENV,
             MAKE_SECRET,
         )
         return 1

@@ -19,9 +19,9 @@ import httpx
 from websockets.asyncio.client import connect
 
 from app.protocol import tokens
+from app.relay.pool import RelayPool
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.relay_pool import RelayPool
 from tests.fleet.conftest import ServeProcess
 from tests.fleet.test_fleet_signaling import _until_roster
 from tests.server.test_signaling_ws import Peer

@@ -20,10 +20,10 @@ import pytest
 import redis.asyncio as aioredis
 from playwright.async_api import async_playwright
 
+from app.chromium import launch_options
+from app.relay.pool import RelayPool, room_members, start_pool_process
 from app.server.fleet import keys
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
-from app.tools.relay_pool import RelayPool, room_members, start_pool_process
 from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_agent_pages import H, W, page_until
 from vehicle_agent.agent import Agent, AgentConfig

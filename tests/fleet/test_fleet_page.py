@@ -12,10 +12,10 @@ import pytest
 from playwright.async_api import Browser, Page, async_playwright
 from websockets.asyncio.client import connect
 
+from app.chromium import launch_options
 from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
 from tests.server.test_signaling_ws import Peer, joined
 
 pytestmark = [pytest.mark.browser]

@@ -7,9 +7,9 @@ from contextlib import contextmanager
 
 from playwright.sync_api import Page, sync_playwright
 
+from app.chromium import launch_options
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
 
 
 @contextmanager

@@ -24,13 +24,11 @@ CHANNEL_SENDS = [
     # askRelay(type) sends start/stop on `control` when signaling is down.
     ("pages/client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
     ("pages/client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive"}),
-    (
-        "pages/relay.js",
-        CONTROL_CHANNEL,
-        "client",
-        {"state", "ops", "error", "pose", "mode", "health"},
-    ),
-    ("pages/relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop", "mode", "drive"}),
+    ("pages/relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "health"}),
+    ("pages/relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop"}),
+    # The operator seat's mode changes go to the vehicle and the clients, its drives to the vehicle.
+    ("core/relay-seats.js", CONTROL_CHANNEL, "client", {"mode"}),
+    ("core/relay-seats.js", AUTOPILOT_CHANNEL, "vehicle", {"mode", "drive"}),
     ("core/snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
     ("core/snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),
     ("view/lock-view.js", CONTROL_CHANNEL, "relay", {"lock", "unlock"}),

@@ -27,8 +27,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import sync_playwright
 
-from app.tools import relay_service
-from app.tools.browser import launch_options
+from app.chromium import launch_options
+from app.relay import cli as relay_cli
 from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
 from vehicle_agent import cli as agent_cli
@@ -211,7 +211,7 @@ def test_demo_profile_drives_the_vehicle_and_paces_the_relay(
     assert vehicle.argv[vehicle.argv.index("--profile") + 1] == profile
     # Both command lines are ones the relay and the agent accept.
     for child, add_arguments in (
-        (relay, relay_service.add_arguments),
+        (relay, relay_cli.add_arguments),
         (vehicle, agent_cli.add_arguments),
     ):
         parser = argparse.ArgumentParser()

@@ -19,12 +19,13 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
+from app.relay.service import RelayService
 from app.server.serve import RunningServer
-from app.tools.relay_service import RelayService
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import pixel_to_terrain
 from vehicle_agent.events import Event, EventLog
+from vehicle_agent.signaling import LoginRefused
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -327,3 +328,55 @@ async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame
         # The fire operation keeps pointing at the flame, never back at the face.
         await asyncio.sleep(1.0)
         assert goal_near(flame)
+
+
+async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted(
+    server: RunningServer, module_browser: Browser
+) -> None:
+    """Issue 37: another vehicle joins the room, tries the relay and leaves; the relay keeps
+    piloting the vehicle it had, on that vehicle's own video, and goals keep arriving."""
+    async with scene(server, module_browser) as s:
+        await s.start_piloting()
+        await eventually(lambda: s.goals() > 5, 90, "goals at the first vehicle")
+        face_x = s.path.x * W
+
+        def goals_on_the_first_face() -> bool:
+            goal = next(e for e in reversed(s.events) if e["ev"] == "goal")
+            return bool(abs(goal["x"] - face_x) < 0.1 * W)
+
+        assert goals_on_the_first_face()
+        # The second vehicle's scene has its face on the other side.
+        second_events: list[Event] = []
+        second_log = EventLog()
+        second_log.listeners.append(second_events.append)
+        second = Agent(
+            AgentConfig(server=server.url, name="vehicle-2"),
+            SyntheticVideo(W, H, fps=15, path=FixedPath(0.8, 0.42)),
+            SimTurtle(),
+            second_log,
+        )
+        second_task = asyncio.create_task(second.run())
+        loop = asyncio.get_running_loop()
+        given = loop.time() + 10
+
+        def linked() -> bool:
+            return any(e["ev"] == "link" and e["state"] == "up" for e in second_events)
+
+        # Its chance in the room: refused at the door, or linked to the relay, or 10 s trying.
+        await eventually(
+            lambda: second_task.done() or linked() or loop.time() > given,
+            20,
+            "the second vehicle to be refused, linked or given 10 s",
+        )
+        goals = s.goals()
+        await eventually(lambda: s.goals() > goals + 5, 30, "goals while the second one is in")
+        assert goals_on_the_first_face(), "the relay analyses the second vehicle's video"
+        second_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, LoginRefused):
+            await second_task
+
+        goals = s.goals()
+        await eventually(lambda: s.goals() > goals + 10, 30, "goals after the second one left")
+        assert goals_on_the_first_face()
+        assert s.relay.page is not None
+        assert await s.relay.page.evaluate("() => window.autopilotStatus.vehicle") == "vehicle"

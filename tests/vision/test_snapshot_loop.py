@@ -1,8 +1,9 @@
 """The relay's snapshot → goal loop (snapshot-loop.js) driven with frames, with no WebRTC.
 
 Headless Chromium on the parity page, which has the relay's analyzer; the test imports the loop
-module there, feeds it synthetic RGBA frames (a face pasted at a known place, a frame tag in the
-top row, or nothing at all) on an injected clock, and checks the goals it hands the sender.
+module there, feeds it synthetic RGBA frames (faces pasted at known places, a frame tag in the
+top row, or nothing at all) on an injected clock, and checks the goals it hands the sender and
+what the target lock, held in the analyzer's worker, becomes.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/config.js');
+  await window.analyzer.unlock(); // another test's lock
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;
@@ -40,7 +41,7 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
   const emitted = { goal: [], detections: [] };
   const loop = new SnapshotLoop({
     analyzer: window.analyzer, profile, op: window.analyzer.defaultOp,
-    sendGoal: (goal) => { sent.push(goal); return true; }, lockRule: PROTOCOL.lock,
+    sendGoal: (goal) => { sent.push(goal); return true; },
     clock: () => now, wallClock: () => 1.7e12 + now,
   });
   for (const type of Object.keys(emitted)) {
@@ -67,19 +68,25 @@ def page() -> Iterator[Page]:
         yield opened
 
 
-def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
-    """Base64 RGBA of a grey frame with the face (top-left corner ``face_at``) and a tag."""
+def faces(at: list[tuple[int, int, int]], tag: int) -> str:
+    """Base64 RGBA of a grey frame with a face of side ``size`` at each ``(x, y, size)`` (its
+    top-left corner) and a frame tag."""
     frame = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
-    placed = None
-    if face_at is not None:
-        x, y = face_at
-        frame[y : y + FACE_SIZE, x : x + FACE_SIZE] = cv2.resize(
-            face_crop(), (FACE_SIZE, FACE_SIZE), interpolation=cv2.INTER_AREA
+    for x, y, size in at:
+        frame[y : y + size, x : x + size] = cv2.resize(
+            face_crop(), (size, size), interpolation=cv2.INTER_AREA
         )
-        placed = Placed(x, y, FACE_SIZE, FACE_SIZE)
     frametag.stamp(frame, tag)
     rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
-    return base64.b64encode(rgba.tobytes()).decode(), placed
+    return base64.b64encode(rgba.tobytes()).decode()
+
+
+def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
+    """Base64 RGBA of a grey frame with the face (top-left corner ``face_at``) and a tag."""
+    if face_at is None:
+        return faces([], tag), None
+    x, y = face_at
+    return faces([(x, y, FACE_SIZE)], tag), Placed(x, y, FACE_SIZE, FACE_SIZE)
 
 
 def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page) -> None:
@@ -129,32 +136,33 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 # Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
 # t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
 # each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; and the
-# states the loop announced.
+# lock messages the loop announced (the lock is the analyzer's worker's: another test's goes
+# first).
 LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/config.js');
   const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
+  await window.analyzer.unlock();
   await window.analyzer.resetTracking();
   let now = 0;
   const loop = new SnapshotLoop({
     analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
-    sendGoal: () => true, lockRule: PROTOCOL.lock, clock: () => now,
+    sendGoal: () => true, clock: () => now,
   });
-  const announced = [];
-  loop.addEventListener('lock', (event) => announced.push(event.detail.state));
+  const messages = [];
+  loop.addEventListener('lock', (event) => messages.push(event.detail));
   loop.start();
   const outcomes = [];
   for (const [kind, t, arg] of steps) {
     now = t * 1000;
     if (kind === 'click') {
-      outcomes.push(loop.lockAt(arg[0], arg[1]));
+      outcomes.push(await loop.lockAt(arg[0], arg[1]));
       continue;
     }
     const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
     outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
   }
   loop.stop();
-  return { outcomes, announced };
+  return { outcomes, announced: messages.map((m) => m.state), messages };
 }""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
 
 
@@ -193,3 +201,42 @@ def test_a_locked_face_that_jumped_is_found_by_the_whole_frame_search(page: Page
     assert on(outcomes[4][0], placed_there) and outcomes[4][1] == "locked"
     assert on(outcomes[5][0], placed_there) and outcomes[5][1] == "locked"
     assert got["announced"] == ["locked", "lost", "locked"]
+
+
+def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(page: Page) -> None:
+    # Two faces: the larger is the target until the smaller one is clicked. The smaller face
+    # then leaves (lost, and searched for in the whole frame after 1 s), comes back elsewhere
+    # (found again), and leaves for longer than the release time (3 s): the lock lets go and
+    # the larger face is the target again. The lock is decided in the analyzer's worker.
+    large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
+    frames = [faces([large, small], 1), faces([large, small_elsewhere], 2), faces([large], 3)]
+    small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
+    steps = [
+        ["frame", 0.05, 0],
+        ["click", 0.07, small_centre],
+        ["frame", 0.1, 0],
+        ["frame", 0.15, 2],  # gone: lost
+        ["frame", 1.2, 2],  # unseen for over 1 s: searching the whole frame
+        ["frame", 1.25, 1],  # back, out of the lock's reach: found by the whole-frame search
+        ["frame", 4.3, 2],  # unseen for over 3 s: released (this snapshot still looked)
+        ["frame", 4.35, 2],
+    ]
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    outcomes = got["outcomes"]
+
+    def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
+        x, y, size = face
+        return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
+
+    assert on(outcomes[0][0], large) and outcomes[0][1] == "none"
+    assert outcomes[1] is True
+    assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
+    assert outcomes[3] == [None, "lost"]
+    assert outcomes[4] == [None, "searching"]
+    assert on(outcomes[5][0], small_elsewhere) and outcomes[5][1] == "locked"
+    assert outcomes[6] == [None, "none"]
+    assert on(outcomes[7][0], large)
+    assert got["announced"] == ["locked", "lost", "searching", "locked", "none"]
+    assert "not seen for more than 3 s" in got["messages"][-1]["reason"]

@@ -267,7 +267,7 @@ async def bench_instance_failover(redis_url: str, logdir: Path, rooms: int) -> f
 
 async def bench_pool_takeover(redis_url: str, logdir: Path) -> float:
     """Seconds from SIGKILL of the serving pool until another pool's relay joined the room."""
-    from app.tools.relay_pool import start_pool_process
+    from app.relay.pool import start_pool_process
 
     with serve_instance(redis_url, logdir) as (url, _):
         async with contextlib.AsyncExitStack() as stack:
@@ -300,9 +300,9 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
     import redis.asyncio as aioredis
     from playwright.async_api import async_playwright
 
+    from app.chromium import launch_options
+    from app.relay.pool import start_pool_process
     from app.server.fleet import keys
-    from app.tools.browser import launch_options
-    from app.tools.relay_pool import start_pool_process
 
     steps: list[dict[str, Any]] = []
     children: list[subprocess.Popen[bytes]] = []

@@ -20,7 +20,7 @@ from typing import IO, Any
 from playwright.sync_api import Browser, Page, Playwright
 from playwright.sync_api import Error as PlaywrightError
 
-from app.tools.browser import chromium_path, launch_options
+from app.chromium import chromium_path, launch_options
 from app.tools.lab.lab import CLOUD, Lab
 from app.tools.lab.netns import LabError
 

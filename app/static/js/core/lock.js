@@ -2,6 +2,9 @@
 // numbers are written once, in app/protocol/lock.py; they reach the page as
 // `config.protocol.lock` ({searchAfterS, releaseAfterS, maxScale, reach}), passed in here.
 //
+// The relay's vision worker owns the lock (worker/vision-worker.js): it asks, chooses and
+// updates on each snapshot.
+//
 // The Python twin is app/vision/lock.py: the same decisions from the same doubles, checked on
 // the same sequences (e2e/test_lock_js.py). Pure, no DOM; times in seconds, given.
 import { largest } from './tracking-window.js';

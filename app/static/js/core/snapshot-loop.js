@@ -2,11 +2,11 @@
 // ImageBitmap or raw RGBA) by whoever owns the video, it analyses one at a time with the
 // current operation and emits what the relay sends on: a `goal` for the vehicle when the
 // operation found a target, and `detections` (with the statistics riding along) for the
-// clients. The relay page schedules the frames; a test can feed synthetic ones. It also holds
-// the target lock (lock.js): while a target is locked, the goal is that target's, not the
-// largest box's.
+// clients. The relay page schedules the frames; a test can feed synthetic ones. The target lock
+// (lock.js) is the analyzer's: each snapshot follows it at the loop's time, and while a target is
+// locked the goal is that target's, not the largest box's. The loop passes clicks and releases
+// on and tells the clients what the lock became.
 
-import { pick, TargetLock } from './lock.js';
 import { RelayStats } from './relay-stats.js';
 
 /**
@@ -24,7 +24,8 @@ export class SnapshotLoop extends EventTarget {
 
   /**
    * @param {object} options
-   * @param {{analyze: Function}} options.analyzer from vision.js createAnalyzer()
+   * @param {{analyze: Function, lockAt: Function, unlock: Function}} options.analyzer from
+   *   vision.js createAnalyzer()
    * @param {string} options.profile relay profile, passed to the analyzer
    * @param {string} options.op the operation to run (change it with `op` at any time)
    * @param {boolean} [options.track] detect, then track: the analyzer searches a window around
@@ -32,14 +33,12 @@ export class SnapshotLoop extends EventTarget {
    * @param {(goal: object) => boolean} options.sendGoal sends a goal; false when it could not
    * @param {() => number} [options.clock] ms, for delays and rates (performance.now)
    * @param {() => number} [options.wallClock] ms since the epoch, the goal's `t` (Date.now)
-   * @param {object} options.lockRule the target lock's rule (PROTOCOL.lock)
    */
   constructor({
     analyzer,
     profile,
     op,
     sendGoal,
-    lockRule,
     track = false,
     clock = () => performance.now(),
     wallClock = () => Date.now(),
@@ -56,29 +55,25 @@ export class SnapshotLoop extends EventTarget {
     this.running = false;
     this.lastGoal = null;
     this.lastDetections = null;
-    this.lock = new TargetLock(lockRule);
-    // Between full scans the tracker searches a window around the target, so the last
-    // snapshot's boxes may lack the one a person clicks: the last full scan's has it.
-    this.lastFullScanBoxes = [];
+    // The lock as the analyzer last told it: {state, box}.
+    this.lock = { state: 'none', box: null };
   }
 
   /**
    * A click at frame pixel (x, y): lock on the target whose box on the last snapshot (or else
-   * the last full scan) contains it, or release the lock when it hit none. True when locked.
+   * the last full scan) contains it, or release the lock when it hit none. Resolves to whether
+   * it locked.
    */
-  lockAt(x, y) {
-    const latest = this.lastDetections?.boxes ?? [];
-    const boxes = pick(x, y, latest) !== null ? latest : this.lastFullScanBoxes;
-    const locked = this.lock.lock(x, y, boxes, this.clock() / 1000);
-    this.#lockChanged(locked ? null : 'the click was on no detection box');
-    return locked;
+  async lockAt(x, y) {
+    const answer = await this.analyzer.lockAt(x, y, this.clock() / 1000);
+    this.#lockIs(answer, answer.reason);
+    return answer.locked;
   }
 
   /** Release the lock, if there is one, saying why. */
-  unlock(reason) {
-    if (this.lock.state === 'none') return;
-    this.lock.release();
-    this.#lockChanged(reason);
+  async unlock(reason) {
+    const answer = await this.analyzer.unlock();
+    if (answer.released) this.#lockIs(answer, reason);
   }
 
   /** The lockState message for the lock as it stands. */
@@ -86,9 +81,8 @@ export class SnapshotLoop extends EventTarget {
     return { type: 'lockState', state: this.lock.state, box: this.lock.box, reason };
   }
 
-  #lockChanged(reason) {
-    // The tracker's window may hold the other target: the next snapshot scans the whole frame.
-    this.analyzer.resetTracking().catch((err) => this.#emit('failure', err.message));
+  #lockIs({ state, box }, reason) {
+    this.lock = { state, box };
     this.#emit('lock', this.lockMessage(reason));
   }
 
@@ -133,23 +127,17 @@ export class SnapshotLoop extends EventTarget {
 
   async #analyze(source) {
     const started = this.clock();
-    const lock = this.lock.query(started / 1000);
     const result = await this.analyzer.analyze(source, this.op, {
       profile: this.profile,
       track: this.track,
-      lock,
+      at: started / 1000,
     });
+    // The lock followed this snapshot (its box moves with the target) whether or not piloting
+    // goes on; the clients hear of it when its state changed.
+    const { state, box, changed, reason } = result.lock;
+    this.lock = { state, box };
+    if (changed !== null) this.#emit('lock', this.lockMessage(reason));
     if (!this.running) return null;
-    if (result.scan === 'full') this.lastFullScanBoxes = result.boxes;
-    const changed = this.lock.update(lock, result.locked ?? null, started / 1000);
-    if (changed === 'none') {
-      this.#emit(
-        'lock',
-        this.lockMessage(`not seen for more than ${this.lock.rule.releaseAfterS} s`),
-      );
-    } else if (changed !== null) {
-      this.#emit('lock', this.lockMessage());
-    }
     let goal = null;
     if (result.target) {
       goal = {

@@ -4,9 +4,14 @@
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'}
 //                   | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, lock}
-//                   {type: 'memory', id} | {type: 'reset', id}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, at}
+//                   | {type: 'lock', id, x, y, at} | {type: 'unlock', id}
+//                   | {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
+//
+// The worker owns the relay's target lock (core/lock.js): each of the relay's snapshots asks it
+// what to follow, chooses and updates it in one step, as app/vision/lock.py's rule is applied;
+// the page only asks for a lock or a release and hears the lock's state back.
 'use strict';
 
 // Two builds of OpenCV.js of the OpenCV pyproject.toml pins: the official one (npm) and ours with
@@ -51,6 +56,11 @@ const session = {
   instances: new Map(),
   window: null, // the imported window.js (detect, then track)
   lock: null, // the imported lock.js (target lock)
+  target: null, // the relay's TargetLock (lock.js), followed by the snapshots analysed `at` a time
+  lastBoxes: [], // the boxes of the last such snapshot, where a click is looked up
+  // Between full scans the tracker searches a window around the target, so the last snapshot's
+  // boxes may lack the one a person clicks: the last full scan's has it.
+  lastFullScanBoxes: [],
   frameTag: null, // the imported frame-tag.js (the frame number stamped into its pixels)
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
@@ -102,6 +112,7 @@ async function init() {
   }
   session.window = await import('../core/tracking-window.js');
   session.lock = await import('../core/lock.js');
+  session.target = new session.lock.TargetLock(PROTOCOL.lock);
   session.frameTag = await import('../core/frame-tag.js');
   for (const op of session.spec.operations) {
     if (!session.modules.has(op.module)) {
@@ -320,7 +331,7 @@ async function analyze({
   returnPixels = false,
   track = false,
   around = null,
-  lock = null,
+  at = null,
 }) {
   const started = performance.now();
   let instance;
@@ -332,15 +343,18 @@ async function analyze({
   }
   const frame = await readPixels(source);
   const detectStarted = performance.now();
+  // From here to the lock's update nothing waits, so no click or release comes in between.
+  const query = at === null ? null : session.target.query(at);
   // Locked (lock.js): the target is the centre of the box that continues the locked track.
-  const choose = session.lock.chooser(lock, PROTOCOL.lock);
+  const choose = session.lock.chooser(query, PROTOCOL.lock);
   const { found, scan } = detectIn(instance, frame, track, around, choose);
   const { boxes, region = null } = found;
-  const locked = lock === null ? null : choose(boxes);
+  const locked = query === null ? null : choose(boxes);
   let { target } = found;
-  if (lock !== null)
+  if (query !== null)
     target =
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
+  const lock = at === null ? null : followed(query, locked, boxes, scan, at);
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (frame-tag.js).
   const { decodeFrameTag, tagBlockSize } = session.frameTag;
@@ -359,9 +373,54 @@ async function analyze({
     scan,
     region,
     locked,
+    lock,
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
+}
+
+/**
+ * The relay's snapshot at `at` (s) chose `locked` (null: not found) for the lock's `query`:
+ * update the lock and keep the boxes a click is looked up in. Returns {state, box, changed: the
+ * new state or null, reason: why it changed, or null}.
+ */
+function followed(query, locked, boxes, scan, at) {
+  session.lastBoxes = boxes;
+  if (scan === 'full') session.lastFullScanBoxes = boxes;
+  const { target } = session;
+  const changed = target.update(query, locked, at);
+  const reason =
+    changed === 'none' ? `not seen for more than ${PROTOCOL.lock.releaseAfterS} s` : null;
+  return { state: target.state, box: target.box, changed, reason };
+}
+
+/**
+ * A click at (x, y) at time `at` (s): lock on the box there on the last snapshot (or else the
+ * last full scan), or release when it hit none. Returns {locked, state, box, reason}.
+ */
+function lockAt({ x, y, at }) {
+  const { target, lastBoxes, lastFullScanBoxes } = session;
+  const boxes = session.lock.pick(x, y, lastBoxes) !== null ? lastBoxes : lastFullScanBoxes;
+  const locked = target.lock(x, y, boxes, at);
+  forgetTargets();
+  const reason = locked ? null : 'the click was on no detection box';
+  return { locked, state: target.state, box: target.box, reason };
+}
+
+/** Release the lock, if there is one. Returns {released, state, box}. */
+function unlock() {
+  const { target } = session;
+  const released = target.state !== 'none';
+  if (released) {
+    target.release();
+    forgetTargets();
+  }
+  return { released, state: target.state, box: target.box };
+}
+
+/** The trackers' windows may hold another target than the lock's now: scan whole frames. */
+function forgetTargets() {
+  for (const instance of session.instances.values()) instance.tracker.reset();
 }
 
 async function handle(message) {
@@ -384,8 +443,14 @@ async function handle(message) {
       });
       break;
     case 'reset':
-      for (const instance of session.instances.values()) instance.tracker.reset();
+      forgetTargets();
       self.postMessage({ type: 'result', id: message.id, result: {} });
+      break;
+    case 'lock':
+      self.postMessage({ type: 'result', id: message.id, result: lockAt(message) });
+      break;
+    case 'unlock':
+      self.postMessage({ type: 'result', id: message.id, result: unlock() });
       break;
     case 'close':
       for (const instance of session.instances.values()) instance.op.delete();

@@ -17,7 +17,8 @@ const WORKER_URL = `/static/js/worker/vision-worker.js?${new URLSearchParams({
 
 /**
  * Start the worker and wait until OpenCV.js, the cascades and every operation module are loaded.
- * Resolves to {ops, defaultOp, build, analyze(source, opId, options), memory(), close()}.
+ * Resolves to {ops, defaultOp, build, analyze(source, opId, options), lockAt(x, y, at), unlock(),
+ * resetTracking(), memory(), close()}.
  */
 export async function createAnalyzer() {
   const worker = new Worker(WORKER_URL);
@@ -74,11 +75,13 @@ export async function createAnalyzer() {
      * analysed: of a BT.601 VideoFrame searched in a window, only the parts read hold this
      * frame, the rest an earlier one); track: detect, then track (window.js) across the calls
      * that set it, per operation and profile; around: a full-frame box [x, y, w, h] whose
-     * window alone is searched (parity); lock: {box, anywhere} from a lock.js TargetLock query,
-     * to follow that target instead of the largest. Resolves to {op, boxes, target, w, h, ms,
-     * workMs, frame, scan: 'full' | 'window', region: the window searched in detection-image
-     * pixels or null, locked: the locked target's box or null, converted: how many of the
-     * frame's pixels were converted into RGBA (fewer than all for a windowed search of a BT.601
+     * window alone is searched (parity); at: the snapshot's time in seconds, for the relay's
+     * snapshots, which follow the worker's target lock (lock.js) instead of the largest box.
+     * Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' | 'window', region:
+     * the window searched in detection-image pixels or null, locked: the locked target's box on
+     * this snapshot or null, lock: with `at`, the lock after this snapshot {state, box, changed:
+     * the new state or null, reason} (else null), converted: how many of the frame's pixels
+     * were converted into RGBA (fewer than all for a windowed search of a BT.601
      * VideoFrame)[, rgba]}.
      */
     analyze(
@@ -89,15 +92,28 @@ export async function createAnalyzer() {
         returnPixels = false,
         track = false,
         around = null,
-        lock = null,
+        at = null,
       } = {},
     ) {
       const transfer = source.data ? [] : [source];
-      const asked = lock === null ? null : { box: lock.box, anywhere: lock.anywhere };
       return call(
-        { type: 'analyze', source, opId, profile, returnPixels, track, around, lock: asked },
+        { type: 'analyze', source, opId, profile, returnPixels, track, around, at },
         transfer,
       );
+    },
+
+    /**
+     * A click at frame pixel (x, y) at time `at` (s, the snapshots' clock): lock on the target
+     * whose box on the last snapshot (or else the last full scan) contains it, or release the
+     * lock when it hit none. Resolves to {locked, state, box, reason}.
+     */
+    lockAt(x, y, at) {
+      return call({ type: 'lock', x, y, at });
+    },
+
+    /** Release the target lock, if there is one. Resolves to {released, state, box}. */
+    unlock() {
+      return call({ type: 'unlock' });
     },
 
     /** Forget every tracked target: the next tracked snapshot scans the whole frame. */

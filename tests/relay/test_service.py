@@ -14,8 +14,8 @@ import time
 import pytest
 from websockets.asyncio.client import connect
 
+from app.relay.service import RelayService
 from app.server.serve import RunningServer
-from app.tools.relay_service import RelayService
 from tests.helpers.processes import browser_processes, cmdline, descendants, wait_all_gone
 from tests.helpers.waiting import eventually
 

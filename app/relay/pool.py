@@ -17,7 +17,6 @@ snapshot) under ``relay_status(room)`` for the ``/fleet`` page.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import json
@@ -36,13 +35,11 @@ import redis.asyncio as aioredis
 from playwright.async_api import Browser, Page, async_playwright
 from playwright.async_api import Error as PlaywrightError
 
+from app.chromium import launch_options
 from app.protocol import tokens
+from app.relay.page import PAGE_LOAD_TIMEOUT_MS, RATE_WINDOW_S, loggable, relay_url
 from app.resources import APP_DIR
 from app.server.fleet import keys
-from app.tools.browser import BrowserNotFound, chromium_path, launch_options
-from app.tools.relay_metrics import RATE_WINDOW_S, run_with_metrics
-from app.tools.relay_service import PAGE_LOAD_TIMEOUT_MS, RelayServiceError, check_server, relay_url
-from app.tools.token_command import SECRET_ENV
 
 log = logging.getLogger(__name__)
 
@@ -222,8 +219,7 @@ class RelayPool:
         try:
             await page.goto(url, timeout=PAGE_LOAD_TIMEOUT_MS)
         except PlaywrightError as exc:
-            address = url.split("#", 1)[0]  # the fragment holds the token: not for the log
-            log.warning("could not load %s: %s", address, exc.message.splitlines()[0])
+            log.warning("could not load %s: %s", loggable(url), exc.message.splitlines()[0])
             served.dead = True
         return served
 
@@ -257,7 +253,8 @@ class RelayPool:
 
     async def _close(self, page: Page) -> None:
         with contextlib.suppress(PlaywrightError):
-            # Unload handlers run: the relay stops the vehicle and leaves the room first.
+            # The page's socket and peer connections close with it: the room sees the relay
+            # leave.
             await page.close(run_before_unload=True)
             await page.context.close()
 
@@ -284,33 +281,3 @@ def start_pool_process(server_url: str, redis_url: str, log: Path) -> subprocess
             stdout=out,
             stderr=subprocess.STDOUT,
         )
-
-
-def run(args: argparse.Namespace) -> int:
-    """``autopilot relay --pool``: serve rooms until SIGINT/SIGTERM."""
-    redis_url = args.redis_url or os.environ.get("AUTOPILOT_REDIS_URL")
-    if not redis_url:
-        log.error("--pool needs Redis: pass --redis-url or set AUTOPILOT_REDIS_URL")
-        return 1
-    secret = os.environ.get(SECRET_ENV) or None
-    try:
-        if secret is not None:
-            tokens.check_secret(secret)
-        check_server(args.server, args.ca_file)
-        chromium_path()
-    except (RelayServiceError, BrowserNotFound, ValueError) as exc:
-        log.error("%s", exc)
-        return 1
-    pool = RelayPool(
-        args.server,
-        redis_url,
-        args.max_rooms,
-        profile=args.profile,
-        name=args.name,
-        secret=secret,
-        token=args.token,
-        ca_file=args.ca_file,
-    )
-    status = run_with_metrics(args, pool.run, pool.pages)
-    log.info("relay pool stopped")
-    return status

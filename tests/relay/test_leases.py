@@ -10,8 +10,8 @@ from collections.abc import AsyncIterator
 import pytest
 import redis.asyncio as aioredis
 
+from app.relay.pool import RelayPool, RoomLeases
 from app.server.fleet import keys
-from app.tools.relay_pool import RelayPool, RoomLeases
 from tests.helpers.waiting import eventually
 
 

@@ -12,9 +12,9 @@ from contextlib import AsyncExitStack
 import pytest
 from websockets.asyncio.client import connect
 
+from app.relay.metrics import RelayMetrics
+from app.relay.pool import RelayPool, room_members
 from app.server.serve import RunningServer
-from app.tools.relay_metrics import RelayMetrics
-from app.tools.relay_pool import RelayPool, room_members
 from tests.helpers.processes import browser_processes
 from tests.helpers.waiting import eventually
 from tests.server.test_signaling_ws import Peer, joined

@@ -22,13 +22,12 @@ from playwright.async_api import Page
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from app.metrics import serve_metrics
+from app.relay.page import RATE_WINDOW_S
 from app.supervise import run_until_stopped
 
 log = logging.getLogger(__name__)
 
 POLL_PERIOD_S: Final = 1.0
-# Goals per second are counted over this window of the page's recent goal times.
-RATE_WINDOW_S: Final = 2.0
 # Seconds from snapshot to goal: the relay profiles aim at 30 to 300 ms per snapshot.
 PROCESSING_BUCKETS: Final = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5, 1.0)
 
