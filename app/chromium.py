@@ -46,7 +46,7 @@ DISABLED_FEATURES = (
     "WebUIOmniboxFullPopup",
 )
 
-# Flags that work headless as root on these machines (DESIGN §8).
+# Flags that work headless as root on these machines (docs/architecture.md, "Pinned facts").
 BASE_FLAGS = [
     "--headless=new",
     "--no-sandbox",

@@ -1,4 +1,4 @@
-"""The control law of DESIGN §5 and its profiles (docs/contracts.md).
+"""The control law and its profiles (docs/architecture.md, "Vehicle control").
 
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks and answers with the
 :class:`Twist` to publish, if any. The browser vehicle page's ``control.js`` is a port of this

@@ -1,4 +1,6 @@
-"""The operator's wheel at the vehicle: mode, drive commands and the dead-man (DESIGN §10).
+"""The operator's wheel at the vehicle: mode, drive commands and the dead-man.
+
+The rules are those of docs/architecture.md, "Who holds the wheel".
 
 Sans-I/O, like :mod:`vehicle_agent.control`: a :class:`ManualDrive` is told the mode the relay
 set, each drive command and the clock, and answers with the :class:`Twist` to publish, if any.

@@ -1,4 +1,5 @@
-"""WebSocket client for the signaling server (DESIGN §2), as a vehicle."""
+"""WebSocket client for the signaling server, as a vehicle (docs/architecture.md, "Signaling
+protocol")."""
 
 from __future__ import annotations
 

@@ -402,9 +402,9 @@ class SyntheticVideo(PacedVideoTrack):
 
 
 class TwoFaceVideo(SyntheticVideo):
-    """The target-lock scene (DESIGN §10): two faces drifting slowly, a large one on the left
-    (the default choice) and one ``small_share`` its size on the right; no flame. The large
-    face is :meth:`face_centre`, the small one :meth:`small_centre`."""
+    """The target-lock scene (docs/architecture.md, "Which target"): two faces drifting slowly,
+    a large one on the left (the default choice) and one ``small_share`` its size on the right;
+    no flame. The large face is :meth:`face_centre`, the small one :meth:`small_centre`."""
 
     def __init__(
         self,

@@ -1,4 +1,4 @@
-"""The data-channel messages of DESIGN §3 (and docs/contracts.md) as pydantic models.
+"""The data-channel messages as pydantic models (docs/architecture.md, "Data-channel messages").
 
 One model per message ``type``; each direction of each channel accepts a tagged union of them
 (:data:`RECEIVERS`). Numbers must be finite: JSON has no NaN or Infinity, and Python's ``json``
@@ -6,13 +6,14 @@ module would otherwise let them through. Models are strict (a string is not a nu
 extra fields, so a newer peer may add one without breaking an older one. The browser validates
 against JSON Schemas generated from these same models (:func:`channel_schemas`).
 
-The vehicle opens two channels to the relay (DESIGN §9 "Lossy links"). ``autopilot`` is reliable
-and ordered: mode commands (``stop``) and error reports, which must arrive. ``autopilot-state`` is
-unordered and never retransmits: goals (relay -> vehicle) and pose (vehicle -> relay) are state,
-only the newest matters, and a lost one is better skipped than waited for (no head-of-line
-blocking on a lossy link). The vehicle applies a goal only if its ``seq`` is newer than every
-goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
-``app/static/js/core/freshness.js``). The client's ``control`` channel is reliable.
+The vehicle opens two channels to the relay (docs/architecture.md, "Lossy links").
+``autopilot`` is reliable and ordered: mode commands (``stop``) and error reports, which must
+arrive. ``autopilot-state`` is unordered and never retransmits: goals (relay -> vehicle) and pose
+(vehicle -> relay) are state, only the newest matters, and a lost one is better skipped than
+waited for (no head-of-line blocking on a lossy link). The vehicle applies a goal only if its
+``seq`` is newer than every goal applied on this link and it is not stale
+(``vehicle_agent/freshness.py``, ``app/static/js/core/freshness.js``). The client's ``control``
+channel is reliable.
 """
 
 from __future__ import annotations
@@ -188,7 +189,8 @@ class LockStatus(_Message):
 
 # Manual override: "auto", the relay's goals steer; "manual", the operator's drive commands do.
 Mode = Literal["auto", "manual"]
-# A drive command's share of the vehicle profile's manual speed (DESIGN §10).
+# A drive command's share of the vehicle profile's manual speed (docs/architecture.md, "Who
+# holds the wheel").
 Axis = Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
 PeerName = Annotated[str, Field(min_length=1, max_length=64)]
 

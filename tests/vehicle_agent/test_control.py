@@ -1,4 +1,4 @@
-"""The control law of DESIGN §5 / docs/contracts.md, with an injected clock."""
+"""The control law (docs/architecture.md, "Vehicle control"), with an injected clock."""
 
 from __future__ import annotations
 

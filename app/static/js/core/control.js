@@ -1,4 +1,4 @@
-// The control law of DESIGN §5 and its profiles (docs/contracts.md): a port of
+// The control law and its profiles (docs/architecture.md, "Vehicle control"): a port of
 // vehicle_agent/control.py so the browser vehicle and the Python agent behave alike. Its numbers
 // (terrain, gains, standoff, wall margin, timeouts, profile names) are not written here: they
 // come from app/protocol/control.py through the page's embedded config (`config.control`).

@@ -1,6 +1,7 @@
-// The operator's wheel at the vehicle: mode, drive commands and the dead-man (DESIGN §10). A
-// port of vehicle_agent/manual.py, checked against it (e2e/test_manual_js.py); its numbers come
-// from app/protocol/control.py through the page's embedded config (`config.control`).
+// The operator's wheel at the vehicle: mode, drive commands and the dead-man (docs/architecture.md,
+// "Who holds the wheel"). A port of vehicle_agent/manual.py, checked against it
+// (e2e/test_manual_js.py); its numbers come from app/protocol/control.py through the page's
+// embedded config (`config.control`).
 import { ZERO_TWIST } from './control.js';
 
 const unit = (value) => Math.max(-1, Math.min(1, value));

@@ -1,6 +1,6 @@
 // Who holds what at the relay, by peer name: the vehicle seat (the one vehicle whose video the
 // relay analyses and forwards, and whose channels get the goals) and the operator seat (the one
-// client driving by hand, docs/contracts.md "Data-channel extras"). A peer's departure frees only
+// client driving by hand, docs/contracts.md "Data-channel details"). A peer's departure frees only
 // the seats that peer held: a second vehicle that came and went must not take the first one's
 // place with it. Pure: names in, decisions out; tested directly (e2e/test_relay_seats_js.py).
 

@@ -1,7 +1,7 @@
-// The operator's console on the client page (manual override, DESIGN §10): drive commands from
-// the keyboard and from a gamepad, sent to the relay, which forwards them to the vehicle. A held
-// key or stick resends its command every `repeatS` (the vehicle's dead-man stops the turtle when
-// they stop coming); letting go sends one zero command at once.
+// The operator's console on the client page (docs/architecture.md, "The data path of a drive
+// command"): drive commands from the keyboard and from a gamepad, sent to the relay, which forwards
+// them to the vehicle. A held key or stick resends its command every `repeatS` (the vehicle's
+// dead-man stops the turtle when they stop coming); letting go sends one zero command at once.
 
 const KEYS = Object.freeze({
   ArrowUp: { linear: 1, angular: 0 },
