@@ -165,8 +165,8 @@ const OPENCV_YUV_MATRICES = ['smpte170m', 'bt470bg'];
 
 /**
  * Whether the frame's I420 planes can be copied as they are and converted by OpenCV, part by
- * part: Chromium's own conversion into RGBA costs ~0.8 ms a 640×480 frame however little of it
- * an operation reads, the planes' copy 0.1 ms (docs/bench/relay-cost.md).
+ * part: Chromium's own conversion into RGBA converts the whole frame however little of it an
+ * operation reads, while the planes' copy is a fraction of that (docs/bench/relay-cost.md).
  */
 function convertsInOpenCv(frame) {
   const { format, colorSpace, visibleRect: r } = frame;
