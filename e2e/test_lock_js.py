@@ -36,6 +36,8 @@ def page_rule(rule: dict[str, float]) -> lock.LockRule:
         release_after_s=rule["releaseAfterS"],
         max_scale=rule["maxScale"],
         reach=rule["reach"],
+        near=rule["near"],
+        click_search=rule["clickSearch"],
     )
 
 

@@ -1,11 +1,14 @@
 """The target lock's rule (app/vision/lock.py), sans I/O: clicks, association, lost and found.
 
-The last test runs it the relay's way on the two-face scene, with the Python reference
+The last tests run it the relay's way on the two-face scene, with the Python reference
 detection and the tracker's window: the smaller face, once clicked, stays the target, and the
-window follows it.
+window follows it; the tiny face the reduced scan cannot find is locked by a click (the
+full-resolution search around it) and followed at full resolution.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import cv2
 import pytest
@@ -22,10 +25,85 @@ SMALL = (440, 200, 76, 76)
 
 def test_a_click_picks_the_smallest_box_under_it() -> None:
     inner = (130, 130, 40, 40)
-    assert lock.pick(150, 150, [LARGE, inner]) == inner
-    assert lock.pick(105, 105, [LARGE, inner]) == LARGE
-    assert lock.pick(470, 230, [LARGE, SMALL]) == SMALL
-    assert lock.pick(10, 10, [LARGE, SMALL]) is None
+    assert lock.pick(150, 150, [LARGE, inner], RULE.near) == inner
+    assert lock.pick(105, 105, [LARGE, inner], RULE.near) == LARGE
+    assert lock.pick(470, 230, [LARGE, SMALL], RULE.near) == SMALL
+    assert lock.pick(10, 10, [LARGE, SMALL], RULE.near) is None
+
+
+def test_a_click_near_a_box_picks_it_within_half_its_size() -> None:
+    # The rule (app/protocol/lock.py): a click outside every box picks the box it is nearest to
+    # in that box's own size, when within half its width to the side and half its height above
+    # or below. LARGE is 130 wide and tall, from 100 to 230: half of it is 65 pixels.
+    assert RULE.near == 0.5
+    assert lock.pick(230 + 65, 165, [LARGE], RULE.near) == LARGE  # on the limit, right
+    assert lock.pick(230 + 66, 165, [LARGE], RULE.near) is None
+    assert lock.pick(165, 100 - 65, [LARGE], RULE.near) == LARGE  # above
+    assert lock.pick(165, 100 - 66, [LARGE], RULE.near) is None
+    assert lock.pick(100 - 65, 230 + 65, [LARGE], RULE.near) == LARGE  # a corner, both at half
+    assert lock.pick(100 - 65, 230 + 66, [LARGE], RULE.near) is None
+    # Each box in its own size: 50 pixels from a 200-pixel box (a quarter) beats 50 pixels
+    # from a 50-pixel one (a whole side), whichever comes first.
+    big, little = (0, 0, 200, 200), (300, 0, 50, 50)
+    assert lock.pick(250, 25, [little, big], RULE.near) == big
+    # 35 pixels left of SMALL (76 wide: 0.46 of it) is near it; 40 pixels (0.53) is not.
+    assert lock.pick(405, 238, [LARGE, SMALL], RULE.near) == SMALL
+    assert lock.pick(400, 238, [LARGE, SMALL], RULE.near) is None
+    # A click inside a box takes it, whatever box it is near.
+    assert lock.pick(228, 238, [SMALL, LARGE], RULE.near) == LARGE
+
+
+def test_the_boxes_a_click_may_lock_are_the_snapshots_and_the_unseen_candidates() -> None:
+    # Between full scans the snapshot found only the tracked face; the last full scan's box of
+    # that face (it moved a little since) is the same face, its other box is another one.
+    tracked, earlier = (104, 102, 132, 132), (100, 100, 130, 130)
+    assert lock.lockable([tracked], [earlier, SMALL]) == [tracked, SMALL]
+    assert lock.lockable([], [earlier, SMALL]) == [earlier, SMALL]
+    assert lock.lockable([tracked, SMALL], []) == [tracked, SMALL]
+
+
+def test_a_click_window_is_a_square_of_three_fifths_of_the_shorter_side_inside_the_frame() -> None:
+    # 0.6 of 480 is 288 pixels, centred on the click, moved inside the 640 x 480 frame.
+    assert RULE.click_search == 0.6
+    share = RULE.click_search
+    assert lock.click_window(320, 240, 640, 480, share) == (176, 96, 288, 288)
+    assert lock.click_window(10, 10, 640, 480, share) == (0, 0, 288, 288)
+    assert lock.click_window(630, 470, 640, 480, share) == (352, 192, 288, 288)
+    assert lock.click_window(700, 10, 640, 480, share) is None
+    assert lock.click_window(10, -1, 640, 480, share) is None
+
+
+def test_a_click_near_no_box_searches_its_window_and_locks_what_is_found_near_it() -> None:
+    windows: list[lock.Box] = []
+
+    def search(found: list[lock.Box]) -> lock.Search:
+        def run(window: lock.Box) -> list[lock.Box]:
+            windows.append(window)
+            return found
+
+        return run
+
+    tiny = (389, 68, 40, 40)
+    target = lock.TargetLock(RULE)
+    # Near a box: picked, no search.
+    assert lock.lock_at(target, 405, 238, [LARGE, SMALL], search([]), 640, 480, 0.0) == "picked"
+    assert target.box == SMALL and not target.fine and windows == []
+    # Near none: the click's window is searched, and the box found at the click is locked.
+    got = lock.lock_at(target, 409, 88, [LARGE, SMALL], search([SMALL, tiny]), 640, 480, 0.1)
+    assert got == "searched" and windows == [(265, 0, 288, 288)]
+    assert target.box == tiny and target.fine and target.state == "locked"
+    query = target.query(0.2)
+    assert query is not None and query.fine
+    # A click on the same target keeps it followed at full resolution; another one does not.
+    assert lock.lock_at(target, 409, 88, [tiny], None, 640, 480, 0.3) == "picked" and target.fine
+    assert lock.lock_at(target, 470, 230, [SMALL], None, 640, 480, 0.4) == "picked"
+    assert not target.fine
+    # The search finds nothing near the click: released. So does a click with no search.
+    assert lock.lock_at(target, 600, 400, [LARGE], search([SMALL]), 640, 480, 0.5) is None
+    assert target.state == "none" and target.box is None
+    target.hold(tiny, 0.6, fine=True)
+    assert lock.lock_at(target, 600, 400, [LARGE], None, 640, 480, 0.7) is None
+    assert target.state == "none" and not target.fine
 
 
 def test_association_prefers_overlap_then_the_nearest_centre_of_a_similar_size() -> None:
@@ -63,7 +141,7 @@ def test_an_answer_to_an_older_lock_is_not_news() -> None:
     asked = target.query(0.0)
     target.release()
     assert target.update(asked, SMALL, 0.1) is None and target.state == "none"
-    assert not target.lock(5, 5, [LARGE, SMALL], now=0.2)  # a click on no box releases
+    assert not target.lock(5, 5, [LARGE, SMALL], now=0.2)  # a click near no box releases
     assert target.state == "none"
 
 
@@ -126,3 +204,54 @@ def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
     # periodic full scans: it never lost it to a full scan.
     cadence = ["full"] + ["window"] * (op.params.full_scan_every - 1)
     assert scans == ["full", *(cadence * 2)[: len(scans) - 1]], scans
+
+
+def test_a_face_too_small_for_the_reduced_scan_is_locked_by_a_click_and_followed() -> None:
+    # The two-face scene's tiny face: the reduced scan (256 pixels wide) never finds it. A click
+    # on it searches around the click at full resolution and locks it; from then on it is
+    # followed at full resolution, through the tracker's periodic full scans too (which cannot
+    # see it), and the goals stay on it.
+    op = spec.load_spec(OPERATIONS_SPEC).op("face")
+    assert isinstance(op, spec.CascadeOperation)
+    video = TwoFaceVideo()
+    tracker = window.Tracker(op.params.full_scan_every)
+    target = lock.TargetLock(RULE)
+    full_scans: list[int] = []  # the snapshots (after the click) that scanned the whole frame
+    for i in range(0, 2 * 34, 2):  # 34 snapshots: one periodic full scan after the click's
+        rgba = cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA)
+        t = i / video.fps
+        query = target.query(t)
+        choose = lock.chooser(query, RULE)
+        fine = query is not None and query.fine
+
+        def detect(
+            box: lock.Box | None, rgba: reference.Rgba = rgba, fine: bool = fine, n: int = i // 2
+        ) -> Any:
+            if box is None:
+                full_scans.append(n)
+            return reference.detect(op, rgba, around=box, full_resolution=fine and box is not None)
+
+        keep = query.box if query is not None and query.fine else None
+        found, scan = window.step(tracker, detect, choose, keep)
+        chosen = choose(found.boxes)
+        target.update(query, chosen, t)
+        tiny = video.tiny_centre(i)
+        if i == 0:
+            assert len(found.boxes) == 2 and not any(lock.contains(b, *tiny) for b in found.boxes)
+            assert lock.pick(*tiny, found.boxes, RULE.near) is None
+
+            def search(region: lock.Box, rgba: reference.Rgba = rgba) -> list[lock.Box]:
+                return reference.search(op, rgba, region).boxes
+
+            how = lock.lock_at(target, *tiny, found.boxes, search, 640, 480, t)
+            assert how == "searched" and target.box is not None and lock.contains(target.box, *tiny)
+            tracker.reset()
+            full_scans.clear()
+            continue
+        assert scan == "window"
+        assert chosen is not None and lock.contains(chosen, *tiny), (i, chosen, tiny)
+        assert target.state == "locked" and target.fine
+    # The first snapshot after the click and the tracker's periodic one (30 snapshots later)
+    # were full scans, which did not find it; the window around where it was found it then, as
+    # the tracker's window did on every snapshot between.
+    assert full_scans == [1, 1 + op.params.full_scan_every]
