@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import ssl
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -66,6 +67,22 @@ def turtle_state(
     response.raise_for_status()
     turtle: dict[str, Any] = next(t for t in response.json()["turtles"] if t["name"] == name)
     return turtle
+
+
+def theta(server: RunningServer) -> float:
+    """The simulated turtle's heading."""
+    return float(turtle_state(server)["theta"])
+
+
+def ccw_from(start: float, now: float) -> float:
+    """How far the turtle turned counter-clockwise from ``start``, in (−π, π]."""
+    return math.remainder(now - start, 2 * math.pi)
+
+
+def stopped(vehicle: Page) -> bool:
+    """The vehicle page's last Twist was zero."""
+    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
+    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
 
 
 def heading_error(theta: float, goal: float) -> float:

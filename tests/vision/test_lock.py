@@ -32,25 +32,13 @@ def test_a_click_picks_the_smallest_box_under_it() -> None:
 
 
 def test_a_click_near_a_box_picks_it_within_half_its_size() -> None:
-    # The rule (app/protocol/lock.py): a click outside every box picks the box it is nearest to
-    # in that box's own size, when within half its width to the side and half its height above
-    # or below. LARGE is 130 wide and tall, from 100 to 230: half of it is 65 pixels.
+    # The rule (app/protocol/lock.py), as lock_sequences writes it out: a click outside every
+    # box picks the box it is nearest to in that box's own size, when within half its width to
+    # the side and half its height above or below.
     assert RULE.near == 0.5
-    assert lock.pick(230 + 65, 165, [LARGE], RULE.near) == LARGE  # on the limit, right
-    assert lock.pick(230 + 66, 165, [LARGE], RULE.near) is None
-    assert lock.pick(165, 100 - 65, [LARGE], RULE.near) == LARGE  # above
-    assert lock.pick(165, 100 - 66, [LARGE], RULE.near) is None
-    assert lock.pick(100 - 65, 230 + 65, [LARGE], RULE.near) == LARGE  # a corner, both at half
-    assert lock.pick(100 - 65, 230 + 66, [LARGE], RULE.near) is None
-    # Each box in its own size: 50 pixels from a 200-pixel box (a quarter) beats 50 pixels
-    # from a 50-pixel one (a whole side), whichever comes first.
-    big, little = (0, 0, 200, 200), (300, 0, 50, 50)
-    assert lock.pick(250, 25, [little, big], RULE.near) == big
-    # 35 pixels left of SMALL (76 wide: 0.46 of it) is near it; 40 pixels (0.53) is not.
-    assert lock.pick(405, 238, [LARGE, SMALL], RULE.near) == SMALL
-    assert lock.pick(400, 238, [LARGE, SMALL], RULE.near) is None
-    # A click inside a box takes it, whatever box it is near.
-    assert lock.pick(228, 238, [SMALL, LARGE], RULE.near) == LARGE
+    for x, y, boxes, want in lock_sequences.NEAR_CLICKS:
+        got = lock.pick(x, y, [tuple(b) for b in boxes], RULE.near)
+        assert got == (None if want is None else tuple(want)), (x, y, boxes)
 
 
 def test_the_boxes_a_click_may_lock_are_the_snapshots_and_the_unseen_candidates() -> None:
@@ -63,14 +51,10 @@ def test_the_boxes_a_click_may_lock_are_the_snapshots_and_the_unseen_candidates(
 
 
 def test_a_click_window_is_a_square_of_three_fifths_of_the_shorter_side_inside_the_frame() -> None:
-    # 0.6 of 480 is 288 pixels, centred on the click, moved inside the 640 x 480 frame.
     assert RULE.click_search == 0.6
-    share = RULE.click_search
-    assert lock.click_window(320, 240, 640, 480, share) == (176, 96, 288, 288)
-    assert lock.click_window(10, 10, 640, 480, share) == (0, 0, 288, 288)
-    assert lock.click_window(630, 470, 640, 480, share) == (352, 192, 288, 288)
-    assert lock.click_window(700, 10, 640, 480, share) is None
-    assert lock.click_window(10, -1, 640, 480, share) is None
+    for x, y, width, height, want in lock_sequences.CLICK_WINDOWS:
+        got = lock.click_window(x, y, width, height, RULE.click_search)
+        assert got == (None if want is None else tuple(want)), (x, y)
 
 
 def test_a_click_near_no_box_searches_its_window_and_locks_what_is_found_near_it() -> None:

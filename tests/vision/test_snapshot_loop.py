@@ -14,14 +14,18 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 import pytest
 from playwright.sync_api import Page
 
 from app.protocol import channels, frametag
 from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
 from app.protocol.relay_profiles import DEFAULT_PROFILE
+from app.resources import OPERATIONS_SPEC
+from app.vision import lock, reference, spec, window
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
+from vehicle_agent.video import TwoFaceVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -240,3 +244,150 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
     assert on(outcomes[7][0], large)
     assert got["announced"] == ["locked", "lost", "searching", "locked", "none"]
     assert "not seen for more than 3 s" in got["messages"][-1]["reason"]
+
+
+# Steps [kind, t, arg] on the relay's loop, as LOCK_STEPS, returning everything a snapshot told:
+# its goal's [x, y], the lock's state, its boxes, the candidates and the locked box; for a click
+# the state and box of the lock message it led to (and, apart, that message's reason).
+CLICK_STEPS = """async ({ frames, steps, profile }) => {
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
+  await window.analyzer.unlock();
+  await window.analyzer.resetTracking();
+  let now = 0;
+  const loop = new SnapshotLoop({
+    analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
+    sendGoal: () => true, clock: () => now,
+  });
+  const messages = [];
+  loop.addEventListener('lock', (event) => messages.push(event.detail));
+  loop.start();
+  const outcomes = [];
+  const reasons = [];
+  for (const [kind, t, arg] of steps) {
+    now = t * 1000;
+    if (kind === 'click') {
+      await loop.lockAt(arg[0], arg[1]);
+      const { state, box, reason } = messages.at(-1);
+      outcomes.push({ state, box });
+      reasons.push(reason);
+      continue;
+    }
+    const { goal, detections: d } = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
+    outcomes.push([goal && [goal.x, goal.y], loop.lock.state, d.boxes, d.candidates, d.locked]);
+  }
+  loop.stop();
+  await window.analyzer.unlock();
+  return { outcomes, reasons };
+}""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
+
+
+def relay_snapshots_in_python(
+    frames: list[npt.NDArray[np.uint8]], steps: list[list[Any]]
+) -> list[Any]:
+    """What CLICK_STEPS returns, from the Python reference and app/vision's lock and window, as
+    the relay's worker composes them (vision-worker.js): the same decisions on the same pixels."""
+    op = spec.load_spec(OPERATIONS_SPEC).op("face")
+    assert isinstance(op, spec.CascadeOperation)
+    tracker = window.Tracker(op.params.full_scan_every)
+    target = lock.TargetLock(lock.LockRule())
+    last: list[lock.Box] = []
+    last_full: list[lock.Box] = []
+    shown = frames[0]
+    outcomes: list[Any] = []
+    for kind, t, arg in steps:
+        if kind == "click":
+            rgba = shown
+
+            def search(region: lock.Box, rgba: npt.NDArray[np.uint8] = rgba) -> list[lock.Box]:
+                return reference.search(op, rgba, region).boxes
+
+            boxes = lock.lockable(last, last_full)
+            lock.lock_at(target, arg[0], arg[1], boxes, search, WIDTH, HEIGHT, t)
+            tracker.reset()
+            box = None if target.box is None else list(target.box)
+            outcomes.append({"state": target.state, "box": box})
+            continue
+        shown = frames[arg]
+        query = target.query(t)
+        choose = lock.chooser(query, target.rule)
+        fine = query is not None and query.fine
+        full: list[list[lock.Box]] = []
+
+        def detect(
+            box: lock.Box | None, rgba: Any = shown, fine: bool = fine, full: list[Any] = full
+        ) -> Any:
+            found = reference.detect(op, rgba, around=box, full_resolution=fine and box is not None)
+            if box is None:
+                full.append(found.boxes)
+            return found
+
+        found, _ = window.step(tracker, detect, choose, query.box if fine and query else None)
+        locked = None if query is None else choose(found.boxes)
+        point = found.target
+        if query is not None:
+            point = (
+                None if locked is None else (locked[0] + locked[2] / 2, locked[1] + locked[3] / 2)
+            )
+        target.update(query, locked, t)
+        last = found.boxes
+        if full:
+            last_full = full[0]
+        outcomes.append(
+            [
+                None if point is None else list(point),
+                target.state,
+                [list(b) for b in last],
+                [list(b) for b in last_full],
+                None if target.state != "locked" else list(target.box or ()),
+            ]
+        )
+    return outcomes
+
+
+def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_python_does(
+    page: Page,
+) -> None:
+    # The two-face scene with its tiny face, as the relay's loop sees it: between full scans the
+    # second face rides along as a candidate; a click near (not in) it locks it; a click on the
+    # tiny face, which no scan of the reduced frame finds, locks it by the full-resolution search
+    # around the click, and the goals follow it through the tracker's periodic full scan. Each
+    # step as the Python reference, lock and window take it on the same pixels.
+    scene = TwoFaceVideo(WIDTH, HEIGHT)
+    indices = [0, 4, 8, 12]
+    rgbas = [cv2.cvtColor(scene.render(i), cv2.COLOR_RGB2RGBA) for i in indices]
+    frames = [base64.b64encode(rgba.tobytes()).decode() for rgba in rgbas]
+    small_x, small_y = scene.small_centre(indices[1])
+    tiny = scene.tiny_centre(indices[3])
+    steps: list[list[Any]] = [["frame", 0.05 * (k + 1), k % 4] for k in range(4)]
+    # Beside the small face's box: its centre plus 0.7 of its side to the right (beyond its
+    # half-width box edge, within half its size past that edge).
+    steps.append(["click", 0.21, [small_x + 0.7 * scene.small_px, small_y]])
+    steps += [["frame", 0.25, 0], ["frame", 0.3, 1]]
+    steps.append(["frame", 0.35, 3])  # a window snapshot, so the click finds no box near
+    steps.append(["click", 0.36, list(tiny)])
+    steps += [["frame", 0.4 + 0.05 * k, (3 - k % 2)] for k in range(33)]
+    answer = page.evaluate(
+        CLICK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    got: list[Any] = answer["outcomes"]
+    want = relay_snapshots_in_python(rgbas, steps)
+    assert got == want
+
+    def on(box: list[int] | None, centre: tuple[float, float]) -> bool:
+        return box is not None and lock.contains((box[0], box[1], box[2], box[3]), *centre)
+
+    first, windowed = got[0], got[1]
+    assert len(first[2]) == 2  # the full scan found both faces
+    assert len(windowed[2]) == 1 and len(windowed[3]) == 2  # the window: one, and two candidates
+    near = got[4]
+    assert near["state"] == "locked" and on(near["box"], (small_x, small_y))
+    assert not lock.contains(tuple(near["box"]), *steps[4][2])  # type: ignore[arg-type]
+    search = got[8]
+    assert search["state"] == "locked" and on(search["box"], tiny)
+    assert answer["reasons"] == [None, "found by a full-resolution search around the click"]
+    followed = got[9:]
+    assert all(
+        o[1] == "locked" and on(o[4], scene.tiny_centre(indices[3 - k % 2]))
+        for k, o in enumerate(followed)
+    )
