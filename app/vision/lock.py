@@ -31,6 +31,11 @@ def gap(box: Box, x: float, y: float) -> float:
     return max(dx / bw, dy / bh)
 
 
+def centre(box: Box) -> tuple[float, float]:
+    """The centre of ``box``."""
+    return box[0] + box[2] / 2, box[1] + box[3] / 2
+
+
 def pick(x: float, y: float, boxes: Sequence[Box], near: float) -> Box | None:
     """The box clicked at (x, y): of the boxes containing it the smallest (the first of equal
     areas), since a small box inside a large one can only be meant by a click on it; else the
@@ -101,12 +106,13 @@ def associate(locked: Box, boxes: Sequence[Box], anywhere: bool, rule: LockRule)
             best, best_overlap = box, iou
     if best is not None:
         return best
-    lx, ly = locked[0] + locked[2] / 2, locked[1] + locked[3] / 2
+    lx, ly = centre(locked)
     reach = rule.reach * max(locked[2], locked[3])
     limit = math.inf if anywhere else reach * reach
     best_d2 = math.inf
     for box in candidates:
-        dx, dy = box[0] + box[2] / 2 - lx, box[1] + box[3] / 2 - ly
+        cx, cy = centre(box)
+        dx, dy = cx - lx, cy - ly
         d2 = dx * dx + dy * dy
         if d2 <= limit and (best is None or d2 < best_d2):
             best, best_d2 = box, d2

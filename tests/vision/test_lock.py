@@ -8,14 +8,13 @@ full-resolution search around it) and followed at full resolution.
 
 from __future__ import annotations
 
-from typing import Any
-
 import cv2
 import pytest
 
 from app.resources import OPERATIONS_SPEC
-from app.vision import lock, reference, spec, window
+from app.vision import lock, spec, window
 from tests.vision import lock_sequences
+from tests.vision.relay_steps import RelaySteps
 from vehicle_agent.video import TwoFaceVideo
 
 RULE = lock.LockRule()
@@ -158,32 +157,29 @@ def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     assert changes.count("none") == 1, changes
 
 
-def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
+def face_op() -> spec.CascadeOperation:
     op = spec.load_spec(OPERATIONS_SPEC).op("face")
     assert isinstance(op, spec.CascadeOperation)
+    return op
+
+
+def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
+    op = face_op()
     video = TwoFaceVideo()
-    tracker = window.Tracker(op.params.full_scan_every)
-    target = lock.TargetLock(RULE)
+    relay = RelaySteps(op, RULE)
     scans: list[window.Scan] = []
     for i in range(0, 72, 2):  # 2.4 s of the scene's drift
-        rgba = cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA)
         t = i / video.fps
-        query = target.query(t)
-        choose = lock.chooser(query, RULE)
-        found, scan = window.step(
-            tracker, lambda box, rgba=rgba: reference.detect(op, rgba, around=box), choose
-        )
-        chosen = choose(found.boxes)
-        target.update(query, chosen, t)
-        scans.append(scan)
+        snap = relay.snapshot(cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA), t)
+        scans.append(snap.scan)
+        chosen = snap.chosen
         assert chosen is not None
         truth = video.small_centre(i) if i > 0 else video.face_centre(i)
         assert lock.contains(chosen, *truth), (i, chosen, truth)
-        if scan == "window":  # around the small face: the large one was not even searched
-            assert found.boxes == [chosen], (i, found.boxes)
+        if snap.scan == "window":  # around the small face: the large one was not even searched
+            assert snap.found.boxes == [chosen], (i, snap.found.boxes)
         if i == 0:  # the default choice was the large face: click the small one
-            assert target.lock(*video.small_centre(0), found.boxes, t)
-            tracker.reset()
+            assert relay.click(*video.small_centre(0), t) == "picked"
     # From the click on, the window followed the small face on every snapshot but the tracker's
     # periodic full scans: it never lost it to a full scan.
     cadence = ["full"] + ["window"] * (op.params.full_scan_every - 1)
@@ -195,46 +191,26 @@ def test_a_face_too_small_for_the_reduced_scan_is_locked_by_a_click_and_followed
     # on it searches around the click at full resolution and locks it; from then on it is
     # followed at full resolution, through the tracker's periodic full scans too (which cannot
     # see it), and the goals stay on it.
-    op = spec.load_spec(OPERATIONS_SPEC).op("face")
-    assert isinstance(op, spec.CascadeOperation)
+    op = face_op()
     video = TwoFaceVideo()
-    tracker = window.Tracker(op.params.full_scan_every)
-    target = lock.TargetLock(RULE)
-    full_scans: list[int] = []  # the snapshots (after the click) that scanned the whole frame
-    for i in range(0, 2 * 34, 2):  # 34 snapshots: one periodic full scan after the click's
-        rgba = cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA)
-        t = i / video.fps
-        query = target.query(t)
-        choose = lock.chooser(query, RULE)
-        fine = query is not None and query.fine
-
-        def detect(
-            box: lock.Box | None, rgba: reference.Rgba = rgba, fine: bool = fine, n: int = i // 2
-        ) -> Any:
-            if box is None:
-                full_scans.append(n)
-            return reference.detect(op, rgba, around=box, full_resolution=fine and box is not None)
-
-        keep = query.box if query is not None and query.fine else None
-        found, scan = window.step(tracker, detect, choose, keep)
-        chosen = choose(found.boxes)
-        target.update(query, chosen, t)
+    relay = RelaySteps(op, RULE)
+    first = relay.snapshot(cv2.cvtColor(video.render(0), cv2.COLOR_RGB2RGBA), 0.0)
+    tiny = video.tiny_centre(0)
+    assert len(first.found.boxes) == 2
+    assert lock.pick(*tiny, first.found.boxes, RULE.near) is None
+    assert relay.click(*tiny, 0.01) == "searched"
+    assert relay.lock.box is not None and lock.contains(relay.lock.box, *tiny)
+    full_scans = []  # the snapshots after the click that scanned the whole frame
+    for n in range(1, 34):  # one periodic full scan after the click's
+        i = 2 * n
+        snap = relay.snapshot(cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA), i / video.fps)
+        if snap.full_scan:
+            full_scans.append(n)
         tiny = video.tiny_centre(i)
-        if i == 0:
-            assert len(found.boxes) == 2 and not any(lock.contains(b, *tiny) for b in found.boxes)
-            assert lock.pick(*tiny, found.boxes, RULE.near) is None
-
-            def search(region: lock.Box, rgba: reference.Rgba = rgba) -> list[lock.Box]:
-                return reference.search(op, rgba, region).boxes
-
-            how = lock.lock_at(target, *tiny, found.boxes, search, 640, 480, t)
-            assert how == "searched" and target.box is not None and lock.contains(target.box, *tiny)
-            tracker.reset()
-            full_scans.clear()
-            continue
-        assert scan == "window"
-        assert chosen is not None and lock.contains(chosen, *tiny), (i, chosen, tiny)
-        assert target.state == "locked" and target.fine
+        assert snap.scan == "window"
+        assert snap.chosen is not None and lock.contains(snap.chosen, *tiny), (i, snap, tiny)
+        assert snap.target is not None and lock.contains(snap.chosen, *snap.target)
+        assert relay.lock.state == "locked" and relay.lock.fine
     # The first snapshot after the click and the tracker's periodic one (30 snapshots later)
     # were full scans, which did not find it; the window around where it was found it then, as
     # the tracker's window did on every snapshot between.

@@ -22,9 +22,10 @@ from app.protocol import channels, frametag
 from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.resources import OPERATIONS_SPEC
-from app.vision import lock, reference, spec, window
+from app.vision import lock, spec
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
+from tests.vision.relay_steps import RelaySteps
 from vehicle_agent.video import TwoFaceVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -139,9 +140,10 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 
 # Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
 # t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
-# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; and the
-# lock messages the loop announced (the lock is the analyzer's worker's: another test's goes
-# first).
+# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; the lock
+# messages the loop announced (the lock is the analyzer's worker's: another test's goes first);
+# and the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
+# and reason of the lock message a click led to.
 LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
   const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
@@ -156,17 +158,23 @@ LOCK_STEPS = """async ({ frames, steps, profile }) => {
   loop.addEventListener('lock', (event) => messages.push(event.detail));
   loop.start();
   const outcomes = [];
+  const details = [];
   for (const [kind, t, arg] of steps) {
     now = t * 1000;
     if (kind === 'click') {
       outcomes.push(await loop.lockAt(arg[0], arg[1]));
+      const { state, box, reason } = messages.at(-1);
+      details.push({ state, box, reason });
       continue;
     }
     const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
     outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
+    const { boxes, candidates, locked } = outcome.detections;
+    details.push([boxes, candidates, locked]);
   }
   loop.stop();
-  return { outcomes, announced: messages.map((m) => m.state), messages };
+  await window.analyzer.unlock();
+  return { outcomes, details, announced: messages.map((m) => m.state), messages };
 }""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
 
 
@@ -246,103 +254,43 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
     assert "not seen for more than 3 s" in got["messages"][-1]["reason"]
 
 
-# Steps [kind, t, arg] on the relay's loop, as LOCK_STEPS, returning everything a snapshot told:
-# its goal's [x, y], the lock's state, its boxes, the candidates and the locked box; for a click
-# the state and box of the lock message it led to (and, apart, that message's reason).
-CLICK_STEPS = """async ({ frames, steps, profile }) => {
-  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
-  const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
-  await window.analyzer.unlock();
-  await window.analyzer.resetTracking();
-  let now = 0;
-  const loop = new SnapshotLoop({
-    analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
-    sendGoal: () => true, clock: () => now,
-  });
-  const messages = [];
-  loop.addEventListener('lock', (event) => messages.push(event.detail));
-  loop.start();
-  const outcomes = [];
-  const reasons = [];
-  for (const [kind, t, arg] of steps) {
-    now = t * 1000;
-    if (kind === 'click') {
-      await loop.lockAt(arg[0], arg[1]);
-      const { state, box, reason } = messages.at(-1);
-      outcomes.push({ state, box });
-      reasons.push(reason);
-      continue;
-    }
-    const { goal, detections: d } = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
-    outcomes.push([goal && [goal.x, goal.y], loop.lock.state, d.boxes, d.candidates, d.locked]);
-  }
-  loop.stop();
-  await window.analyzer.unlock();
-  return { outcomes, reasons };
-}""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
-
-
 def relay_snapshots_in_python(
     frames: list[npt.NDArray[np.uint8]], steps: list[list[Any]]
 ) -> list[Any]:
-    """What CLICK_STEPS returns, from the Python reference and app/vision's lock and window, as
-    the relay's worker composes them (vision-worker.js): the same decisions on the same pixels."""
+    """What LOCK_STEPS tells of each step (``combined``), from the Python reference and
+    app/vision's lock and window as the relay's worker composes them (tests/vision/relay_steps.py):
+    the same decisions on the same pixels."""
     op = spec.load_spec(OPERATIONS_SPEC).op("face")
     assert isinstance(op, spec.CascadeOperation)
-    tracker = window.Tracker(op.params.full_scan_every)
-    target = lock.TargetLock(lock.LockRule())
-    last: list[lock.Box] = []
-    last_full: list[lock.Box] = []
-    shown = frames[0]
+    relay = RelaySteps(op)
     outcomes: list[Any] = []
     for kind, t, arg in steps:
         if kind == "click":
-            rgba = shown
-
-            def search(region: lock.Box, rgba: npt.NDArray[np.uint8] = rgba) -> list[lock.Box]:
-                return reference.search(op, rgba, region).boxes
-
-            boxes = lock.lockable(last, last_full)
-            lock.lock_at(target, arg[0], arg[1], boxes, search, WIDTH, HEIGHT, t)
-            tracker.reset()
-            box = None if target.box is None else list(target.box)
-            outcomes.append({"state": target.state, "box": box})
+            relay.click(arg[0], arg[1], t)
+            box = relay.lock.box
+            outcomes.append({"state": relay.lock.state, "box": None if box is None else list(box)})
             continue
-        shown = frames[arg]
-        query = target.query(t)
-        choose = lock.chooser(query, target.rule)
-        fine = query is not None and query.fine
-        full: list[list[lock.Box]] = []
-
-        def detect(
-            box: lock.Box | None, rgba: Any = shown, fine: bool = fine, full: list[Any] = full
-        ) -> Any:
-            found = reference.detect(op, rgba, around=box, full_resolution=fine and box is not None)
-            if box is None:
-                full.append(found.boxes)
-            return found
-
-        found, _ = window.step(tracker, detect, choose, query.box if fine and query else None)
-        locked = None if query is None else choose(found.boxes)
-        point = found.target
-        if query is not None:
-            point = (
-                None if locked is None else (locked[0] + locked[2] / 2, locked[1] + locked[3] / 2)
-            )
-        target.update(query, locked, t)
-        last = found.boxes
-        if full:
-            last_full = full[0]
+        snap = relay.snapshot(frames[arg], t)
+        locked = relay.lock.box if relay.lock.state == "locked" else None
         outcomes.append(
             [
-                None if point is None else list(point),
-                target.state,
-                [list(b) for b in last],
-                [list(b) for b in last_full],
-                None if target.state != "locked" else list(target.box or ()),
+                None if snap.target is None else list(snap.target),
+                relay.lock.state,
+                [list(b) for b in snap.found.boxes],
+                [list(b) for b in snap.candidates],
+                None if locked is None else list(locked),
             ]
         )
     return outcomes
+
+
+def combined(steps: list[list[Any]], answer: dict[str, Any]) -> list[Any]:
+    """LOCK_STEPS' answer, step by step: a snapshot's [goal, state, boxes, candidates, locked],
+    a click's {state, box}."""
+    return [
+        {"state": d["state"], "box": d["box"]} if kind == "click" else [*o, *d]
+        for (kind, _, _), o, d in zip(steps, answer["outcomes"], answer["details"], strict=True)
+    ]
 
 
 def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_python_does(
@@ -368,9 +316,9 @@ def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_pyt
     steps.append(["click", 0.36, list(tiny)])
     steps += [["frame", 0.4 + 0.05 * k, (3 - k % 2)] for k in range(33)]
     answer = page.evaluate(
-        CLICK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
     )
-    got: list[Any] = answer["outcomes"]
+    got = combined(steps, answer)
     want = relay_snapshots_in_python(rgbas, steps)
     assert got == want
 
@@ -385,7 +333,12 @@ def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_pyt
     assert not lock.contains(tuple(near["box"]), *steps[4][2])  # type: ignore[arg-type]
     search = got[8]
     assert search["state"] == "locked" and on(search["box"], tiny)
-    assert answer["reasons"] == [None, "found by a full-resolution search around the click"]
+    reasons = [
+        d["reason"]
+        for (kind, _, _), d in zip(steps, answer["details"], strict=True)
+        if kind == "click"
+    ]
+    assert reasons == [None, "found by a full-resolution search around the click"]
     followed = got[9:]
     assert all(
         o[1] == "locked" and on(o[4], scene.tiny_centre(indices[3 - k % 2]))
