@@ -19,6 +19,7 @@ import {
   throttle,
 } from '../view/ui.js';
 import { DriveInput } from '../view/drive-input.js';
+import { hasTouch, Joystick } from '../view/joystick.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
 
@@ -98,6 +99,10 @@ const driveInput = new DriveInput({
     sendJson(session.control, { type: 'drive', seq: session.driveSeq, ...command });
   },
 });
+// On a touch screen the on-screen joystick drives too; lifting the finger stops at once.
+const touch = hasTouch();
+const joystick = new Joystick(byTestId('joystick'), (command) => driveInput.setStick(command));
+if (touch) joystick.show();
 
 // ---------------------------------------------------------------- relay messages
 
@@ -252,6 +257,7 @@ function onMode(msg) {
   status.mode = { mode: msg.mode, operator: msg.operator ?? null, reason: msg.reason ?? null };
   const mine = msg.mode === 'manual' && msg.operator === room.name;
   driveInput.setEnabled(mine);
+  joystick.setEnabled(mine);
   show('mode', modeText());
   if (
     previous !== null &&
@@ -267,7 +273,11 @@ function modeText() {
   const mode = status.mode;
   if (mode === null) return 'unknown (no relay)';
   if (mode.mode === 'auto') return 'autopilot steers';
-  if (mode.operator === room.name) return 'you drive: arrow keys (held) or gamepad; Space stops';
+  if (mode.operator === room.name) {
+    return touch
+      ? 'you drive: drag the joystick, lift your finger to stop'
+      : 'you drive: arrow keys (held) or gamepad; Space stops';
+  }
   return `${mode.operator} is driving`;
 }
 
@@ -338,6 +348,7 @@ function askRelay(type) {
 function forgetMode() {
   status.mode = null;
   driveInput.setEnabled(false);
+  joystick.setEnabled(false);
   show('mode', modeText());
 }
 
