@@ -19,7 +19,15 @@ from playwright.sync_api import Browser, Page, expect
 
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, open_room
-from e2e.helpers import ccw_from, heading_error, status, stopped, theta, wait_until
+from e2e.helpers import (
+    ccw_from,
+    heading_error,
+    status,
+    stopped,
+    theta,
+    turtle_state,
+    wait_until,
+)
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
@@ -104,7 +112,9 @@ def test_a_second_client_stops_the_operator_and_nothing_drives_unwatched(
 
     bob.get_by_role("button", name="Stop robot").click()
     wait_until(lambda: stopped(vehicle), 10, "a zero Twist at the vehicle")
-    # Ann still holds the key, and the turtle stands: her wheel went back to the autopilot.
+    # The simulator applies it on its next tick (late on a loaded machine); from then on the
+    # turtle stands, although Ann still holds the key: her wheel went back to the autopilot.
+    wait_until(lambda: turtle_state(server)["angular_velocity"] == 0, 10, "the turtle stopping")
     held = theta(server)
     time.sleep(1.0)
     assert theta(server) == pytest.approx(held, abs=1e-9), "the turtle moved after Stop robot"
