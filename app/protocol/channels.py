@@ -154,6 +154,9 @@ class Detections(_Message):
     goalsPerS: NonNegative  # noqa: N815 -- the wire name
     # The locked target's box, when a lock holds and this snapshot found it.
     locked: Box | None = None
+    # The last full scan's boxes: between full scans ``boxes`` holds only what the tracker's
+    # window found, and these are the other targets a click can lock (app/protocol/lock.py).
+    candidates: list[Box] | None = None
 
 
 # Of the relay's target lock (app/protocol/lock.py): none: the largest box is the target; locked:
@@ -163,8 +166,8 @@ LockState = Literal["none", "locked", "lost", "searching"]
 
 
 class Lock(_Message):
-    """client→relay: lock on the target whose box contains pixel (x, y) of the analysed frame;
-    a point on no box releases the lock."""
+    """client→relay: lock on the target at or near pixel (x, y) of the analysed frame (the rule:
+    app/protocol/lock.py); a point where nothing is found releases the lock."""
 
     type: Literal["lock"] = "lock"
     x: Finite
@@ -229,6 +232,23 @@ class ModeChange(_Message):
     reason: str | None = None
 
 
+class StopRobot(_Message):
+    """client→relay: stop the robot at once, whoever holds the wheel: piloting stops and an
+    operator's wheel goes back to the autopilot (any client may send it)."""
+
+    type: Literal["stopRobot"] = "stopRobot"
+
+
+class RobotStopped(_Message):
+    """relay→clients: the robot was stopped; ``by`` the client who pressed Stop robot, or None
+    when the relay stopped piloting because no client was watching; ``reason`` in words. Sent
+    to every client, and to a client that connects while the stop still stands."""
+
+    type: Literal["robotStopped"] = "robotStopped"
+    by: PeerName | None = None
+    reason: str
+
+
 CandidateType = Literal["host", "srflx", "prflx", "relay"]
 
 
@@ -276,6 +296,8 @@ ChannelMessage = (
     | HandBack
     | Drive
     | ModeChange
+    | StopRobot
+    | RobotStopped
     | Health
     | Error
 )
@@ -298,8 +320,30 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
     },
     AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Drive, Error), "relay": (Pose, Error)},
     CONTROL_CHANNEL: {
-        "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, TakeOver, HandBack, Drive, Error),
-        "client": (Ops, State, Detections, Pose, LockStatus, ModeChange, Health, Error),
+        "relay": (
+            GetOps,
+            SetOp,
+            Start,
+            Stop,
+            StopRobot,
+            Lock,
+            Unlock,
+            TakeOver,
+            HandBack,
+            Drive,
+            Error,
+        ),
+        "client": (
+            Ops,
+            State,
+            Detections,
+            Pose,
+            LockStatus,
+            ModeChange,
+            RobotStopped,
+            Health,
+            Error,
+        ),
     },
 }
 
