@@ -30,7 +30,7 @@ from pydantic import ValidationError
 from app.protocol import channels, jsonedge
 from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
-from app.protocol.control import with_standoff
+from app.protocol.control import with_camera, with_standoff
 from app.protocol.errors import describe
 from app.protocol.events import PilotEvent
 from app.protocol.rooms import DEFAULT_ROOM
@@ -66,6 +66,9 @@ class AgentConfig:
     standoff_m: float | None = None
     # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does.
     spawn_step: bool = True
+    # The horizontal field of view (degrees) of the camera the vehicle carries, which the
+    # onboard law turns pixels into bearings with (None: no camera is carried).
+    camera_hfov_deg: float | None = None
     ice_servers: list[RTCIceServer] = field(default_factory=list)
     # A vehicle token for the room (``autopilot token``), when the server asks for one.
     token: str | None = None
@@ -88,7 +91,7 @@ class Agent:
         profile = PROFILES[config.profile]
         if config.goal_timeout_s is not None:
             profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
-        profile = with_standoff(profile, config.standoff_m)
+        profile = with_camera(with_standoff(profile, config.standoff_m), config.camera_hfov_deg)
         self.config = config
         self.video = video
         self.turtle = turtle
