@@ -31,7 +31,7 @@ RUN_JS = """([steps, constants, freshness, profile]) => {
   });
   const feed = (kind, t, args) => {
     switch (kind) {
-      case 'goal': return driven.goal(args[0], t);
+      case 'goal': return driven.goal(args[0], t, args[1] ?? null);
       case 'stop': return driven.stop(t);
       case 'mode': return driven.modeChange(args[0], args[1], t);
       case 'drive': return driven.drive(args[0], args[1], args[2], t);

@@ -38,6 +38,7 @@ from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
+from vehicle_agent.frame_times import FrameTimes
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.pilot import Pilot
 from vehicle_agent.signaling import SignalingClient, SignalingError
@@ -96,6 +97,9 @@ class Agent:
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
+        # The camera's frame times, so that a goal's bearing is taken at its frame's heading.
+        self.frame_times = FrameTimes()
+        self.events.listeners.append(self.frame_times.on_event)
         self.pilot = Pilot(profile)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
@@ -427,7 +431,8 @@ class Agent:
         return channels.Error(reason=reason, ref=ref)
 
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
-        self._act(self.pilot.goal(goal, time.monotonic()))
+        captured_at = self.frame_times.captured_at(goal.frame)
+        self._act(self.pilot.goal(goal, time.monotonic(), captured_at))
 
     def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)

@@ -19,11 +19,13 @@ counter-clockwise, and the target's box height against its real height is a rang
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from app.protocol.angles import wrap_angle
 from app.protocol.control import (
+    HEADING_MEMORY_S,
     MIN_TARGET_DISTANCE_M,
     PROFILES,
     SPAWN_THETA,
@@ -74,8 +76,8 @@ class Goal:
     """A target pixel of a ``w``×``h`` frame, as sent by the relay; ``box_h`` its box's height
     (pixels) and ``target_height_m`` the real height the box spans, when the relay sent them.
 
-    ``heading`` is the vehicle's heading when the goal arrived (the controller sets it): a
-    bearing is relative to the heading the vehicle had then.
+    ``heading`` is the vehicle's heading when the goal's frame was taken, or else when the goal
+    arrived (the controller sets it): a bearing is relative to the heading the vehicle had then.
     """
 
     x: float
@@ -217,9 +219,10 @@ def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]
     """The onboard law: turn the target's bearing toward zero, and drive to the standoff from
     it as much as the vehicle faces it.
 
-    The bearing is the goal pixel's, less how far the vehicle has turned since the goal arrived
-    (between goals the vehicle's own heading keeps the command current). The range comes from
-    the box's height; without a box or a real height the vehicle only turns.
+    The bearing is the goal pixel's, less how far the vehicle has turned since its frame was
+    taken (or since the goal arrived, when the vehicle does not know when that was): what it
+    turned while the frame was on its way and between goals keeps the command current. The
+    range comes from the box's height; without a box or a real height the vehicle only turns.
     """
     if profile.hfov <= 0:
         return 0.0, 0.0
@@ -274,6 +277,8 @@ class Controller:
         # The side the target was last seen on (+1 left, −1 right): where a search turns first.
         self._last_side = 1.0
         self._pose: Pose | None = None
+        # The headings of the last HEADING_MEMORY_S, oldest first: (time, theta).
+        self._headings: deque[tuple[float, float]] = deque()
         self._last_publish: float | None = None
         # When the search under way began (its first search Twist), None when not searching.
         self._search_since: float | None = None
@@ -297,11 +302,12 @@ class Controller:
         """True while the follow profile has lost its target and turns to find it."""
         return self._goal is not None and self._lost(now)
 
-    def goal(self, goal: Goal, now: float) -> Twist | None:
+    def goal(self, goal: Goal, now: float, captured_at: float | None = None) -> Twist | None:
         """Take a new goal and answer it now when the profile's timing allows; it ends a
-        search."""
-        heading = None if self._pose is None else self._pose.theta
-        self._goal = replace(goal, heading=heading)
+        search. ``captured_at``: when its frame was taken, on ``now``'s clock, if known."""
+        self._goal = replace(
+            goal, heading=self._heading_at(now if captured_at is None else captured_at)
+        )
         self._goal_at = now
         self._unanswered = True
         self._search_since = None
@@ -310,6 +316,9 @@ class Controller:
     def pose(self, pose: Pose, now: float) -> Twist | None:
         """Take a pose update; closed-loop profiles answer with a Twist when one is due."""
         self._pose = pose
+        self._headings.append((now, pose.theta))
+        while self._headings[0][0] < now - HEADING_MEMORY_S:
+            self._headings.popleft()
         timed_out = self._check_timeout(now)
         if timed_out is not None:
             return timed_out
@@ -331,6 +340,18 @@ class Controller:
         self._last_publish = None
         self._search_since = None
         return ZERO_TWIST
+
+    def _heading_at(self, t: float) -> float | None:
+        """The vehicle's heading at ``t``: the last pose's at or before it (the oldest one
+        remembered for an earlier ``t``), None before any pose."""
+        if not self._headings:
+            return None
+        heading = self._headings[0][1]
+        for at, theta in self._headings:
+            if at > t:
+                break
+            heading = theta
+        return heading
 
     def _lost(self, now: float) -> bool:
         return now - self._goal_at > self.profile.search_after_s

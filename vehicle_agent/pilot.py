@@ -101,8 +101,12 @@ class Pilot:
 
     # --- what the relay says ---------------------------------------------------------------
 
-    def goal(self, goal: channels.Goal, now: float) -> list[PilotEvent]:
-        """A goal: dropped while manual, or by the freshness gate; else it steers."""
+    def goal(
+        self, goal: channels.Goal, now: float, captured_at: float | None = None
+    ) -> list[PilotEvent]:
+        """A goal: dropped while manual, or by the freshness gate; else it steers.
+        ``captured_at``: when the frame it was found in was taken, on ``now``'s clock, when the
+        vehicle knows (its own camera's frame tags)."""
         if self.manual.manual:
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why="manual", t=now)]
         verdict = self.gate.admit(goal.seq, goal.t, now)
@@ -131,7 +135,7 @@ class Pilot:
             box_h=goal.boxH,
             target_height_m=goal.targetHeightM,
         )
-        twist = self.controller.goal(target, now)
+        twist = self.controller.goal(target, now, captured_at)
         return [applied, *self._searched(searching, "found", now), *_sent(twist, now)]
 
     def stop(self, now: float) -> list[PilotEvent]:

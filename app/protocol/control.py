@@ -22,6 +22,10 @@ MIN_TARGET_DISTANCE_M = 0.05
 # The spawn step of the thesis's vehicle (section 5.7.6): turtle1 first turns to face "up".
 SPAWN_THETA = math.pi / 2
 
+# How far back a controller remembers the vehicle's heading, to take a goal's bearing from the
+# heading its frame was taken at: longer than a fresh goal takes from its camera to the vehicle.
+HEADING_MEMORY_S = 1.0
+
 Law = Literal["rotate", "follow", "onboard"]
 
 # The operator's console (manual override). A vehicle that was moving on a drive command and has
@@ -158,6 +162,7 @@ PROFILES: dict[str, Profile] = {
 }
 __all__ = [
     "DEADMAN_S",
+    "HEADING_MEMORY_S",
     "DEFAULT_PROFILE",
     "DRIVE_REPEAT_S",
     "PROFILES",
@@ -202,6 +207,7 @@ class ControlConfig:
     deadman_s: float
     drive_repeat_s: float
     tick_s: float
+    heading_memory_s: float
     profiles: dict[str, Profile]
 
 
@@ -215,5 +221,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         deadman_s=DEADMAN_S,
         drive_repeat_s=DRIVE_REPEAT_S,
         tick_s=TICK_S,
+        heading_memory_s=HEADING_MEMORY_S,
         profiles=PROFILES if profiles is None else profiles,
     )

@@ -36,10 +36,12 @@ def goal(
     y: float = 120.0,
     late_s: float = 0.0,
     box_h: float | None = None,
+    captured: float | None = None,
 ) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
     ``late_s`` earlier (it waited that much longer on the way); with a face's box ``box_h``
-    pixels high when given."""
+    pixels high when given, and ``captured``: when the vehicle's camera took its frame, when
+    the vehicle knows."""
     message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
@@ -53,7 +55,7 @@ def goal(
     }
     if box_h is not None:
         message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
-    return ("goal", t, [message])
+    return ("goal", t, [message] if captured is None else [message, captured])
 
 
 CENTRE_POSE: Step = ("pose", 0.0, [TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0])
@@ -167,6 +169,22 @@ SEQUENCES: dict[str, list[Step]] = {
         goal(5, 0.5, x=40.0, y=250.0, box_h=60.0),
         ("tick", 0.55, []),
     ],
+    # Goals whose frames were taken 0.15 s before they arrived, the robot turning meanwhile:
+    # their bearings are taken from the heading it had then, not on arrival.
+    "a face's bearing from the heading its frame was taken at": [
+        odom(0.0, 0.0),
+        odom(0.05, 0.0),
+        odom(0.1, -0.05),
+        odom(0.15, -0.1),
+        goal(1, 0.2, x=480.0, y=240.0, box_h=60.0, captured=0.05),
+        odom(0.21, -0.15),
+        odom(0.25, -0.2),
+        goal(2, 0.3, x=400.0, y=240.0, box_h=60.0, captured=0.16),
+        odom(0.31, -0.25),
+        # Taken before the oldest heading remembered: the oldest one stands in for it.
+        goal(3, 0.4, x=330.0, y=240.0, box_h=60.0, captured=-5.0),
+        goal(4, 0.5, x=330.0, y=240.0, box_h=60.0),
+    ],
     # The face leaves by the left: a search turns left, and finds it again.
     "a face lost on the left is searched for and found": [
         odom(0.0, 0.0),
@@ -208,7 +226,8 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
     """One step's input to ``driven``; its answer."""
     match kind:
         case "goal":
-            return list(driven.goal(channels.Goal.model_validate(args[0]), t))
+            captured = args[1] if len(args) > 1 else None
+            return list(driven.goal(channels.Goal.model_validate(args[0]), t, captured))
         case "stop":
             return list(driven.stop(t))
         case "mode":

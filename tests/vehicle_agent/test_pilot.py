@@ -263,6 +263,28 @@ def test_the_turn_since_the_goal_is_taken_off_its_bearing() -> None:
     assert turned and turned[-1].angular == 0.0
 
 
+def test_the_bearing_is_taken_from_the_heading_the_frame_was_taken_at() -> None:
+    # A face 16.10° to the right in a frame taken at 0.0; by the time its goal arrives (0.15)
+    # the robot has turned 0.2 rad (11.46°) right: 4.64° are left to turn, at 4 (rad/s)/rad.
+    def turned_pilot() -> Pilot:
+        pilot = onboard(Pose(1.0, 3.0, 0.0))
+        pilot.pose(Pose(1.0, 3.0, -0.1), 0.05)
+        pilot.pose(Pose(1.0, 3.0, -0.2), 0.1)
+        return pilot
+
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.0))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 11.46), abs=1e-3)
+    # Taken at 0.07: the heading then was the pose of 0.05's, −0.1 rad (5.73°).
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.07))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 5.73), abs=1e-3)
+    # Not known: the heading on arrival, the whole 16.10° still to turn.
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10), abs=1e-3)
+
+
 def test_the_standoff_is_held_far_drives_near_backs_off() -> None:
     far = _command(onboard(), face(1, 0.0, x=320.0, range_m=3.0), 0.0)
     assert far.linear > 0 and far.angular == 0.0

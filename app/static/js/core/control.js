@@ -48,6 +48,7 @@ export class ControlLaw {
     this.terrainCentre = constants.terrainCentre;
     this.minTargetDistanceM = constants.minTargetDistanceM;
     this.spawnTheta = constants.spawnTheta;
+    this.headingMemoryS = constants.headingMemoryS;
     this.profiles = Object.freeze(
       Object.fromEntries(
         Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)]),
@@ -152,8 +153,9 @@ export class ControlLaw {
   /**
    * The onboard law: turn the target's bearing toward zero, and drive to the standoff from it
    * as much as the vehicle faces it. The bearing is the goal pixel's less how far the vehicle
-   * has turned since the goal arrived (`goal.heading`); the range comes from the box's height,
-   * and without a box or a real height the vehicle only turns.
+   * has turned since its frame was taken, or since it arrived when that is not known
+   * (`goal.heading`); the range comes from the box's height, and without a box or a real height
+   * the vehicle only turns.
    */
   onboard(goal, pose, profile) {
     if (!(profile.hfov > 0)) return { linear: 0, angular: 0 };
@@ -208,11 +210,13 @@ export class Controller {
   #unanswered = false;
   #lastSide = 1;
   #pose = null;
+  #headings = []; // the headings of the last headingMemoryS, oldest first: [time, theta]
   #lastPublish = null;
   #searchSince = null; // when the search under way began (its first Twist), null when none is
 
   constructor(controlLaw, profile, law = null) {
     this.profile = profile;
+    this.headingMemoryS = controlLaw.headingMemoryS;
     this.law = law ?? controlLaw.lawOf(profile);
   }
 
@@ -236,9 +240,12 @@ export class Controller {
     return this.#goal !== null && this.#lost(now);
   }
 
-  /** Take a new goal and answer it now when the profile's timing allows; it ends a search. */
-  goal(goal, now) {
-    this.#goal = { ...goal, heading: this.#pose === null ? null : this.#pose.theta };
+  /**
+   * Take a new goal and answer it now when the profile's timing allows; it ends a search.
+   * `capturedAt`: when its frame was taken, on `now`'s clock, if known.
+   */
+  goal(goal, now, capturedAt = null) {
+    this.#goal = { ...goal, heading: this.#headingAt(capturedAt ?? now) };
     this.#goalAt = now;
     this.#unanswered = true;
     this.#searchSince = null;
@@ -247,11 +254,25 @@ export class Controller {
 
   pose(pose, now) {
     this.#pose = pose;
+    this.#headings.push([now, pose.theta]);
+    while (this.#headings[0][0] < now - this.headingMemoryS) this.#headings.shift();
     return this.#checkTimeout(now) ?? (this.profile.onPose ? this.#due(now) : null);
   }
 
   tick(now) {
     return this.#checkTimeout(now) ?? (this.profile.onPose ? null : this.#due(now));
+  }
+
+  // The heading at `t`: the last pose's at or before it (the oldest remembered for an earlier
+  // `t`), null before any pose.
+  #headingAt(t) {
+    if (this.#headings.length === 0) return null;
+    let heading = this.#headings[0][1];
+    for (const [at, theta] of this.#headings) {
+      if (at > t) break;
+      heading = theta;
+    }
+    return heading;
   }
 
   stop() {

@@ -83,8 +83,11 @@ export class Pilot {
     return this.#lastGoalAt === null ? null : now - this.#lastGoalAt;
   }
 
-  /** A goal (validated against the protocol's Goal model): dropped, or it steers. */
-  goal(goal, now) {
+  /**
+   * A goal (validated against the protocol's Goal model): dropped, or it steers. `capturedAt`:
+   * when the frame it was found in was taken, on `now`'s clock, when the vehicle knows.
+   */
+  goal(goal, now, capturedAt = null) {
     const frame = goal.frame ?? null;
     if (this.manual.manual)
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: 'manual', t: now }];
@@ -107,7 +110,7 @@ export class Pilot {
       boxH: goal.boxH ?? null,
       targetHeightM: goal.targetHeightM ?? null,
     };
-    const twist = this.controller.goal(target, now);
+    const twist = this.controller.goal(target, now, capturedAt);
     return [applied, ...this.#searched(searching, 'found', now), ...twistSent(twist, now)];
   }
 
