@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, Literal, cast, get_args
 
-from app.protocol.angles import wrap_angle
 from app.protocol.ros import AUTO, DEFAULT_FLAVOUR, ROS_FLAVOURS, RosFlavour, RosSetting, spell
 from app.protocol.ros import canonical as canonical_type
 
@@ -444,7 +443,9 @@ def yaw_of(x: float, y: float, z: float, w: float) -> float | None:
     cosine = w * w + x * x - y * y - z * z
     if not (math.isfinite(sine) and math.isfinite(cosine)) or (sine == 0.0 and cosine == 0.0):
         return None
-    return wrap_angle(math.atan2(sine, cosine))
+    yaw = math.atan2(sine, cosine)
+    # atan2 gives [−π, π]; the project's angles are (−π, π] (app/protocol/angles.py).
+    return math.pi if yaw == -math.pi else yaw
 
 
 def pose_of(kind: PoseType, message: Mapping[str, Any]) -> tuple[float, float, float] | None:

@@ -15,7 +15,8 @@ names in rosapi's answers, and only its spellings accepted in ``advertise`` and 
 rosbridge does not). A failed call gets ``service_response`` with ``result: false`` and the
 reason in ``values``; ``status`` messages are sent only after the client's ``set_level``, since
 current rosbridge_suite sends none. rosapi's services are answered by
-:class:`app.turtlesim.rosapi.RosGraph`.
+:class:`app.turtlesim.rosapi.RosGraph`. Besides the turtles' topics, the hub carries topics of
+the types a robot description names between its clients (:mod:`app.turtlesim.hosted`).
 """
 
 from __future__ import annotations
@@ -42,6 +43,9 @@ from pydantic import (
 from app.protocol import jsonedge
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
+from app.turtlesim.hosted import HostedTopic, HostedTopics, HostingError
+from app.turtlesim.messages import Payload as _Payload
+from app.turtlesim.messages import Twist
 from app.turtlesim.rosapi import (
     GLOBAL_SERVICES,
     TURTLE_SERVICES,
@@ -142,26 +146,6 @@ class SetLevel(_Op):
 
 
 # -- message and service payloads ----------------------------------------------------------
-
-
-class _Payload(BaseModel):
-    # Unknown fields are an error, as in rosbridge; numbers must be finite JSON numbers.
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
-
-class Vector3(_Payload):
-    """``geometry_msgs/Vector3``; missing fields default to 0 as rosbridge fills them."""
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-
-
-class Twist(_Payload):
-    """``geometry_msgs/Twist``."""
-
-    linear: Vector3 = Field(default_factory=Vector3)
-    angular: Vector3 = Field(default_factory=Vector3)
 
 
 class SpawnArgs(_Payload):
@@ -332,7 +316,7 @@ class _Subscription:
     """
 
     name: str
-    topic: Topic
+    topic: Topic | HostedTopic
     by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
     queue: deque[Json] = field(default_factory=deque)
     last_sent: float = -math.inf
@@ -425,6 +409,11 @@ class RosbridgeSession:
 
     def close(self) -> None:
         """Forget this client's subscriptions and advertisements."""
+        for name, sub in self._subscriptions.items():
+            self._release(sub.topic, "subscribe", name)
+        for name in self._advertised:
+            if (hosted := self._hub.hosted.find(name)) is not None:
+                self._release(hosted, "advertise", name)
         self._subscriptions.clear()
         self._advertised.clear()
         self._hub.sessions.discard(self)
@@ -439,7 +428,7 @@ class RosbridgeSession:
 
     # -- hub's side ---------------------------------------------------------------------
 
-    def deliver(self, now: float, topic: Topic, msg: Json) -> None:
+    def deliver(self, now: float, topic: Topic | HostedTopic, msg: Json) -> None:
         """Offer a message on ``topic`` to every matching subscription of this session."""
         for sub in self._subscriptions.values():
             if sub.topic == topic:
@@ -449,8 +438,10 @@ class RosbridgeSession:
         """Offer each subscribed turtle's pose: work per tick grows with the subscriptions,
         not with turtles times subscriptions."""
         for sub in self._subscriptions.values():
-            if sub.topic.leaf == "pose" and (msg := pose_of(sub.topic.turtle)) is not None:
-                sub.offer(now, msg, self._outbox)
+            topic = sub.topic
+            if isinstance(topic, Topic) and topic.leaf == "pose":
+                if (msg := pose_of(topic.turtle)) is not None:
+                    sub.offer(now, msg, self._outbox)
 
     def drain(self, now: float) -> None:
         """Release queued messages whose throttle period is over."""
@@ -461,11 +452,11 @@ class RosbridgeSession:
 
     def _advertise(self, message: Json) -> list[Json]:
         msg = _parse(Advertise, message)
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose":
-            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         if msg.topic not in self._advertised and len(self._advertised) >= MAX_ADVERTISEMENTS:
             raise ProtocolError(f"at most {MAX_ADVERTISEMENTS} advertisements per client")
+        topic = self._typed_topic(msg.topic, msg.type, "advertise")
+        if isinstance(topic, Topic) and topic.leaf == "pose":
+            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         self._advertised.add(msg.topic)
         return []
 
@@ -474,10 +465,20 @@ class RosbridgeSession:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
+        if (hosted := self._hub.hosted.find(msg.topic)) is not None:
+            self._release(hosted, "advertise", msg.topic)
         return []
 
     def _publish(self, message: Json) -> list[Json]:
         msg = _parse(Publish, message)
+        hosted = self._hub.hosted.find(msg.topic)
+        if hosted is not None:
+            # Another robot's topic: checked against its type, then to its subscribers.
+            try:
+                self._hub.broadcast(hosted, self._hub.hosted.message(hosted, msg.msg))
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
+            return []
         topic = resolve_topic(msg.topic)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -491,13 +492,17 @@ class RosbridgeSession:
 
     def _subscribe(self, message: Json) -> list[Json]:
         msg = _parse(Subscribe, message)
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose" and topic.turtle not in self._hub.sim.names():
-            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         sub = self._subscriptions.get(msg.topic)
         known = sub is not None and msg.id in sub.by_id
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
+        topic = self._typed_topic(msg.topic, msg.type, "subscribe")
+        if (
+            isinstance(topic, Topic)
+            and topic.leaf == "pose"
+            and topic.turtle not in self._hub.sim.names()
+        ):
+            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         if sub is None:
             sub = self._subscriptions[msg.topic] = _Subscription(msg.topic, topic)
         sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
@@ -514,6 +519,7 @@ class RosbridgeSession:
             del sub.by_id[msg.id]
         if not sub.by_id:
             del self._subscriptions[msg.topic]
+            self._release(sub.topic, "subscribe", msg.topic)
         return []
 
     def _call_service(self, message: Json) -> list[Json]:
@@ -537,22 +543,30 @@ class RosbridgeSession:
 
     # -- helpers ------------------------------------------------------------------------
 
-    def _typed_topic(self, name: str, type_name: str | None) -> Topic:
+    def _typed_topic(self, name: str, type_name: str | None, op: str) -> Topic | HostedTopic:
         try:
             topic = resolve_topic(name)
         except ProtocolError:
             absolute = name if name.startswith("/") else f"/{name}"
-            if absolute in self._hub.graph.topics():
+            hosted = self._hub.hosted
+            if absolute in self._hub.graph.topics() and hosted.find(absolute) is None:
                 raise ProtocolError(
                     f"{name} is on a real robot's graph, but this simulator publishes nothing "
                     "on it and takes nothing from it"
                 ) from None
-            raise
+            try:
+                return hosted.claim(name, type_name, (self, op, name))
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
         types = self._hub.types
         canonical = types.twist if topic.leaf == "cmd_vel" else types.pose
         if type_name is not None and type_name not in spellings(types.flavour, canonical):
             raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
+
+    def _release(self, topic: Topic | HostedTopic, op: str, name: str) -> None:
+        if isinstance(topic, HostedTopic):
+            self._hub.hosted.release(topic, (self, op, name))
 
     def _run_service(self, msg: CallService) -> Json:
         name = msg.service[1:] if msg.service.startswith("/") else msg.service
@@ -585,7 +599,8 @@ class RosbridgeHub:
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.sim = sim
-        self.graph = RosGraph(sim, ros, wall_clock)
+        self.hosted = HostedTopics(ros)
+        self.graph = RosGraph(sim, ros, wall_clock, self.hosted.types)
         self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
         self._now = -math.inf
@@ -613,7 +628,7 @@ class RosbridgeHub:
             session.deliver_poses(now, pose_of)
             session.drain(now)
 
-    def broadcast(self, topic: Topic, msg: Json) -> None:
+    def broadcast(self, topic: Topic | HostedTopic, msg: Json) -> None:
         """A client published ``msg``: every session subscribed to ``topic`` gets it."""
         for session in self.sessions:
             session.deliver(self._now, topic, msg)

@@ -1,0 +1,250 @@
+"""``autopilot vehicle --robot NAME|FILE`` drives the robot a description names, through the
+server's /rosbridge: a roslibpy stand-in plays the robot (its Odometry out, its velocity topic in,
+as a TurtleBot's bringup would), a Python relay takes the wheel, and the commands that reach the
+robot are of the described (or reported) type, on the described topic, within its limits."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import roslibpy
+
+from app.server.serve import RunningServer
+
+from .pyrelay import PyRelay
+
+pytestmark = [pytest.mark.timeout(120)]
+
+WAIT_S = 10.0
+
+ROVER = """
+name = "rover"
+
+[velocity]
+topic = "/rover/base/cmd_vel"
+type = "geometry_msgs/TwistStamped"
+frame_id = "rover_base"
+
+[pose]
+topic = "/rover/odom"
+type = "nav_msgs/Odometry"
+
+[limits]
+max_linear = 0.3
+max_angular = 0.5
+linear_accel = 1.0
+angular_accel = 2.0
+"""
+
+
+class StandIn:
+    """The robot: publishes its odometry at 20 Hz, records what arrives on its velocity topic."""
+
+    def __init__(self, url: str, velocity: tuple[str, str], odom: str, yaw: float) -> None:
+        self.ros = roslibpy.Ros(host=url)
+        self.ros.run(timeout=WAIT_S)
+        self.received: list[tuple[float, dict[str, Any]]] = []
+        self._lock = threading.Lock()
+        self.velocity = roslibpy.Topic(self.ros, *velocity)
+        self.velocity.subscribe(self._command)
+        self.odom = roslibpy.Topic(self.ros, odom, "nav_msgs/msg/Odometry")
+        self.odom.advertise()
+        # A rotation by yaw about z, as a quaternion twice the unit length: the agent must not
+        # assume a normalised one.
+        self.orientation = {
+            "x": 0.0,
+            "y": 0.0,
+            "z": 2 * math.sin(yaw / 2),
+            "w": 2 * math.cos(yaw / 2),
+        }
+        # Both topics are hosted (and so typed in rosapi) once a call made after them returns.
+        topic_type = roslibpy.Service(self.ros, "/rosapi/topic_type", "rosapi/TopicType")
+        reply = topic_type.call(roslibpy.ServiceRequest({"topic": velocity[0]}), timeout=WAIT_S)
+        assert reply["type"] == velocity[1]
+
+    def _command(self, message: dict[str, Any]) -> None:
+        with self._lock:
+            self.received.append((time.monotonic(), message))
+
+    def commands(self) -> list[tuple[float, dict[str, Any]]]:
+        with self._lock:
+            return list(self.received)
+
+    def publish_pose(self) -> None:
+        pose = {"position": {"x": 2.0, "y": -1.0, "z": 0.0}, "orientation": self.orientation}
+        self.odom.publish(roslibpy.Message({"child_frame_id": "base_link", "pose": {"pose": pose}}))
+
+    def close(self) -> None:
+        self.ros.close()
+
+
+@contextlib.asynccontextmanager
+async def stand_in(url: str, velocity: tuple[str, str], odom: str) -> AsyncIterator[StandIn]:
+    robot = await asyncio.to_thread(StandIn, url, velocity, odom, 1.0)
+
+    async def odometry() -> None:
+        while True:
+            robot.publish_pose()
+            await asyncio.sleep(0.05)
+
+    task = asyncio.create_task(odometry())
+    try:
+        yield robot
+    finally:
+        task.cancel()
+        await asyncio.to_thread(robot.close)
+
+
+@contextlib.contextmanager
+def agent(server: RunningServer, robot: str, log: Path) -> Iterator[subprocess.Popen[bytes]]:
+    """``autopilot vehicle --robot ROBOT`` on the server's /rosbridge, logging to ``log``."""
+    rosbridge = server.url.replace("http", "ws", 1) + "/rosbridge"
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "app.cli",
+                "vehicle",
+                "--server",
+                server.url,
+                "--rosbridge",
+                rosbridge,
+                "--robot",
+                robot,
+                "--size",
+                "160x120",
+                "--fps",
+                "5",
+            ],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+        try:
+            yield process
+        finally:
+            process.terminate()
+            process.wait(timeout=20)
+
+
+async def operator_drives(relay: PyRelay, linear: float, angular: float, seconds: float) -> None:
+    """The operator holds the stick for ``seconds`` (a command every 0.1 s, as a page repeats it),
+    then lets go."""
+    relay.send({"type": "mode", "mode": "manual", "operator": "ann"})
+    seq = 0
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        seq += 1
+        relay.send({"type": "drive", "seq": seq, "linear": linear, "angular": angular})
+        await asyncio.sleep(0.1)
+    relay.send({"type": "drive", "seq": seq + 1, "linear": 0.0, "angular": 0.0})
+
+
+def velocities(
+    commands: list[tuple[float, dict[str, Any]]], stamped: bool
+) -> list[tuple[float, float, float]]:
+    """(time received, linear.x, angular.z) of each command, in its type's shape."""
+    out = []
+    for at, message in commands:
+        twist = message["twist"] if stamped else message
+        out.append((at, twist["linear"]["x"], twist["angular"]["z"]))
+    return out
+
+
+async def drive_and_collect(
+    server: RunningServer, robot: str, velocity: tuple[str, str], odom: str, log: Path
+) -> tuple[StandIn, PyRelay]:
+    url = server.url.replace("http", "ws", 1) + "/rosbridge"
+    async with stand_in(url, velocity, odom) as standin:
+        relay = PyRelay(server.ws_url)
+        await relay.start()
+        try:
+            with agent(server, robot, log):
+                await relay.until(
+                    lambda: relay.channel is not None and relay.channel.readyState == "open", 60
+                )
+                # The agent reads the robot's pose from its Odometry and reports it.
+                await relay.until(lambda: any(m["type"] == "pose" for m in relay.messages), 30)
+                await operator_drives(relay, 1.0, -1.0, 1.5)
+                await asyncio.sleep(0.5)
+        finally:
+            await relay.leave()
+        return standin, relay
+
+
+def reported_pose(relay: PyRelay) -> dict[str, Any]:
+    return next(m for m in relay.messages if m["type"] == "pose")
+
+
+async def test_a_burger_gets_twists_on_cmd_vel_within_its_limits(
+    server: RunningServer, tmp_path: Path
+) -> None:
+    log = tmp_path / "agent.log"
+    standin, relay = await drive_and_collect(
+        server, "turtlebot3", ("/cmd_vel", "geometry_msgs/msg/Twist"), "/odom", log
+    )
+    output = log.read_text()
+    pose = reported_pose(relay)
+    # Odometry's position, and the yaw of its (non-unit) quaternion.
+    assert (pose["x"], pose["y"], pose["theta"]) == pytest.approx((2.0, -1.0, 1.0)), output
+    commands = velocities(standin.commands(), stamped=False)
+    assert len(commands) >= 10, output
+    assert all(set(m) == {"linear", "angular"} for _, m in standin.commands())
+    # A Burger: never beyond 0.22 m/s; full stick is its top speed, reached by a ramp.
+    moving = [(at, v, w) for at, v, w in commands if v != 0.0 or w != 0.0]
+    assert max(v for _, v, _ in moving) == pytest.approx(0.22), output
+    assert all(abs(v) <= 0.22 and abs(w) <= 2.84 for _, v, w in commands)
+    assert moving[0][1] <= 2.5 * 0.05 + 1e-9  # the first step from rest
+    assert min(w for _, _, w in moving) == pytest.approx(-2.0)  # the operator's 2 rad/s
+    # Letting go stops it, at once.
+    assert commands[-1][1:] == (0.0, 0.0)
+    # No turtlesim here: the spawn step is not tried.
+    assert "spawn step" not in output
+
+
+async def test_a_robot_file_with_twist_stamped(server: RunningServer, tmp_path: Path) -> None:
+    description = tmp_path / "rover.toml"
+    description.write_text(ROVER, encoding="utf-8")
+    log = tmp_path / "agent.log"
+    velocity = ("/rover/base/cmd_vel", "geometry_msgs/msg/TwistStamped")
+    before = time.time()
+    standin, relay = await drive_and_collect(server, str(description), velocity, "/rover/odom", log)
+    output = log.read_text()
+    assert reported_pose(relay)["theta"] == pytest.approx(1.0), output
+    messages = [m for _, m in standin.commands()]
+    assert messages, output
+    for message in messages:
+        header = message["header"]
+        # ROS 2's time (the server's flavour), the wall clock's, in the file's frame.
+        stamp = header["stamp"]["sec"] + header["stamp"]["nanosec"] / 1e9
+        assert before <= stamp <= time.time() + 1, message
+        assert header["frame_id"] == "rover_base"
+    commands = velocities(standin.commands(), stamped=True)
+    assert max(v for _, v, _ in commands) == pytest.approx(0.3), output
+    assert min(w for _, _, w in commands) == pytest.approx(-0.5), output
+    assert commands[-1][1:] == (0.0, 0.0)
+
+
+async def test_the_type_the_robot_reports_beats_the_description(
+    server: RunningServer, tmp_path: Path
+) -> None:
+    # A Burger whose bringup takes TwistStamped on /cmd_vel (the preset says Twist): rosapi
+    # names the type, and the agent publishes what the robot takes.
+    log = tmp_path / "agent.log"
+    velocity = ("/cmd_vel", "geometry_msgs/msg/TwistStamped")
+    standin, _ = await drive_and_collect(server, "turtlebot3", velocity, "/odom", log)
+    output = log.read_text()
+    messages = [m for _, m in standin.commands()]
+    assert messages and all({"header", "twist"} == set(m) for m in messages), output
+    assert "is a geometry_msgs/TwistStamped on the robot" in output
+    assert max(v for _, v, _ in velocities(standin.commands(), stamped=True)) == pytest.approx(0.22)
