@@ -454,15 +454,22 @@ def pose_of(kind: PoseType, message: Mapping[str, Any]) -> tuple[float, float, f
     them. ``robot.js`` has the twin."""
     try:
         if kind == TURTLESIM_POSE:
-            x, y, theta = (float(message[key]) for key in ("x", "y", "theta"))
+            x, y, theta = (_number(message[key]) for key in ("x", "y", "theta"))
         else:
             pose = message["pose"]["pose"]
-            x, y = float(pose["position"]["x"]), float(pose["position"]["y"])
+            x, y = _number(pose["position"]["x"]), _number(pose["position"]["y"])
             q = pose["orientation"]
-            yaw = yaw_of(float(q["x"]), float(q["y"]), float(q["z"]), float(q["w"]))
+            yaw = yaw_of(*(_number(q[key]) for key in ("x", "y", "z", "w")))
             if yaw is None:
                 return None
             theta = yaw
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError):
         return None
     return x, y, theta
+
+
+def _number(value: object) -> float:
+    """A JSON number as a float; TypeError for anything else (a bool, a string)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"not a number: {value!r}")
+    return float(value)

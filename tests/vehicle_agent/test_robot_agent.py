@@ -7,19 +7,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-import roslibpy
 
 from app.server.serve import RunningServer
+from tests.helpers.standin import POSITION, YAW, StandIn, velocities
 
 from .pyrelay import PyRelay
 
@@ -47,61 +45,12 @@ angular_accel = 2.0
 """
 
 
-class StandIn:
-    """The robot: publishes its odometry at 20 Hz, records what arrives on its velocity topic."""
-
-    def __init__(self, url: str, velocity: tuple[str, str], odom: str, yaw: float) -> None:
-        self.ros = roslibpy.Ros(host=url)
-        self.ros.run(timeout=WAIT_S)
-        self.received: list[tuple[float, dict[str, Any]]] = []
-        self._lock = threading.Lock()
-        self.velocity = roslibpy.Topic(self.ros, *velocity)
-        self.velocity.subscribe(self._command)
-        self.odom = roslibpy.Topic(self.ros, odom, "nav_msgs/msg/Odometry")
-        self.odom.advertise()
-        # A rotation by yaw about z, as a quaternion twice the unit length: the agent must not
-        # assume a normalised one.
-        self.orientation = {
-            "x": 0.0,
-            "y": 0.0,
-            "z": 2 * math.sin(yaw / 2),
-            "w": 2 * math.cos(yaw / 2),
-        }
-        # Both topics are hosted (and so typed in rosapi) once a call made after them returns.
-        topic_type = roslibpy.Service(self.ros, "/rosapi/topic_type", "rosapi/TopicType")
-        reply = topic_type.call(roslibpy.ServiceRequest({"topic": velocity[0]}), timeout=WAIT_S)
-        assert reply["type"] == velocity[1]
-
-    def _command(self, message: dict[str, Any]) -> None:
-        with self._lock:
-            self.received.append((time.monotonic(), message))
-
-    def commands(self) -> list[tuple[float, dict[str, Any]]]:
-        with self._lock:
-            return list(self.received)
-
-    def publish_pose(self) -> None:
-        pose = {"position": {"x": 2.0, "y": -1.0, "z": 0.0}, "orientation": self.orientation}
-        self.odom.publish(roslibpy.Message({"child_frame_id": "base_link", "pose": {"pose": pose}}))
-
-    def close(self) -> None:
-        self.ros.close()
-
-
 @contextlib.asynccontextmanager
 async def stand_in(url: str, velocity: tuple[str, str], odom: str) -> AsyncIterator[StandIn]:
-    robot = await asyncio.to_thread(StandIn, url, velocity, odom, 1.0)
-
-    async def odometry() -> None:
-        while True:
-            robot.publish_pose()
-            await asyncio.sleep(0.05)
-
-    task = asyncio.create_task(odometry())
+    robot = await asyncio.to_thread(StandIn, url, velocity, odom)
     try:
         yield robot
     finally:
-        task.cancel()
         await asyncio.to_thread(robot.close)
 
 
@@ -150,17 +99,6 @@ async def operator_drives(relay: PyRelay, linear: float, angular: float, seconds
     relay.send({"type": "drive", "seq": seq + 1, "linear": 0.0, "angular": 0.0})
 
 
-def velocities(
-    commands: list[tuple[float, dict[str, Any]]], stamped: bool
-) -> list[tuple[float, float, float]]:
-    """(time received, linear.x, angular.z) of each command, in its type's shape."""
-    out = []
-    for at, message in commands:
-        twist = message["twist"] if stamped else message
-        out.append((at, twist["linear"]["x"], twist["angular"]["z"]))
-    return out
-
-
 async def drive_and_collect(
     server: RunningServer, robot: str, velocity: tuple[str, str], odom: str, log: Path
 ) -> tuple[StandIn, PyRelay]:
@@ -196,7 +134,7 @@ async def test_a_burger_gets_twists_on_cmd_vel_within_its_limits(
     output = log.read_text()
     pose = reported_pose(relay)
     # Odometry's position, and the yaw of its (non-unit) quaternion.
-    assert (pose["x"], pose["y"], pose["theta"]) == pytest.approx((2.0, -1.0, 1.0)), output
+    assert (pose["x"], pose["y"], pose["theta"]) == pytest.approx((*POSITION, YAW)), output
     commands = velocities(standin.commands(), stamped=False)
     assert len(commands) >= 10, output
     assert all(set(m) == {"linear", "angular"} for _, m in standin.commands())
@@ -220,7 +158,7 @@ async def test_a_robot_file_with_twist_stamped(server: RunningServer, tmp_path: 
     before = time.time()
     standin, relay = await drive_and_collect(server, str(description), velocity, "/rover/odom", log)
     output = log.read_text()
-    assert reported_pose(relay)["theta"] == pytest.approx(1.0), output
+    assert reported_pose(relay)["theta"] == pytest.approx(YAW), output
     messages = [m for _, m in standin.commands()]
     assert messages, output
     for message in messages:
