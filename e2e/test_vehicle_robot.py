@@ -6,6 +6,7 @@ Burger's limits; its Odometry is the page's pose; the turtle is not touched."""
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -18,20 +19,11 @@ from tests.helpers.standin import POSITION, YAW, StandIn, velocities
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser]
 
-# The operator holds full stick ahead and to the right for 1.5 s (a command every 0.1 s, as a
-# page repeats it), then lets go.
-OPERATOR = """async () => {
-  const relay = window.fakeRelay;
-  relay.channel.send(JSON.stringify({ type: 'mode', mode: 'manual', operator: 'ann' }));
-  let seq = 0;
-  const send = (linear, angular) =>
-    relay.channel.send(JSON.stringify({ type: 'drive', seq: ++seq, linear, angular }));
-  for (let k = 0; k < 15; k += 1) {
-    send(1, -1);
-    await new Promise((resolve) => setTimeout(resolve, 100));
-  }
-  send(0, 0);
-}"""
+# The operator's commands, sent on the fake relay's channel: mode, then drive commands.
+TAKE_OVER = """() => window.fakeRelay.channel.send(
+  JSON.stringify({ type: 'mode', mode: 'manual', operator: 'ann' }))"""
+DRIVE = """([seq, linear, angular]) => window.fakeRelay.channel.send(
+  JSON.stringify({ type: 'drive', seq, linear, angular }))"""
 
 
 @pytest.fixture
@@ -67,16 +59,33 @@ def test_the_vehicle_page_drives_a_burger(
     stamped = velocity_type.endswith("TwistStamped")
     assert status(vehicle)["velocityType"] == velocity_type
 
-    def stopped() -> bool:
+    def last() -> tuple[float, float] | None:
         commands = velocities(burger.commands(), stamped)
-        return bool(commands) and commands[-1][1:] == (0.0, 0.0)
+        return commands[-1][1:] if commands else None
+
+    def at_top() -> bool:
+        return last() == pytest.approx((0.22, -2.0))
+
+    def stopped() -> bool:
+        return last() == (0.0, 0.0)
 
     relay = browser.new_page()
     try:
         relay.goto(server.url + "/")
         relay.evaluate(FAKE_RELAY, {"wsUrl": server.ws_url, "room": room})
         relay.wait_for_function("() => window.fakeRelay.channel !== null", timeout=60_000)
-        relay.evaluate(OPERATOR)
+        # Full stick ahead and to the right, a command every 0.1 s as a page repeats it, until
+        # the Burger gets its top speed and the operator's 2 rad/s turn (however long the ramp
+        # takes on a loaded machine); then the stick is let go.
+        relay.evaluate(TAKE_OVER)
+        seq = 0
+        deadline = time.monotonic() + 30
+        while not at_top():
+            assert time.monotonic() < deadline, velocities(burger.commands(), stamped)[-5:]
+            seq += 1
+            relay.evaluate(DRIVE, [seq, 1.0, -1.0])
+            time.sleep(0.1)
+        relay.evaluate(DRIVE, [seq + 1, 0.0, 0.0])
         wait_until(stopped, 20, "the released stick's stop at the robot")
     finally:
         relay.close()

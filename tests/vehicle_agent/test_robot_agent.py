@@ -86,22 +86,36 @@ def agent(server: RunningServer, robot: str, log: Path) -> Iterator[subprocess.P
             process.wait(timeout=20)
 
 
-async def operator_drives(relay: PyRelay, linear: float, angular: float, seconds: float) -> None:
-    """The operator holds the stick for ``seconds`` (a command every 0.1 s, as a page repeats it),
-    then lets go."""
+async def operator_drives(
+    relay: PyRelay, standin: StandIn, stamped: bool, top: tuple[float, float]
+) -> None:
+    """The operator holds full stick ahead and to the right (a command every 0.1 s, as a page
+    repeats it) until the robot gets ``top`` (its full speed, however long the ramp takes on a
+    loaded machine), then lets go."""
     relay.send({"type": "mode", "mode": "manual", "operator": "ann"})
     seq = 0
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        seq += 1
-        relay.send({"type": "drive", "seq": seq, "linear": linear, "angular": angular})
-        await asyncio.sleep(0.1)
+
+    def at_top() -> bool:
+        commands = velocities(standin.commands(), stamped)
+        return bool(commands) and commands[-1][1:] == pytest.approx(top)
+
+    async with asyncio.timeout(30):
+        while not at_top():
+            seq += 1
+            relay.send({"type": "drive", "seq": seq, "linear": 1.0, "angular": -1.0})
+            await asyncio.sleep(0.1)
     relay.send({"type": "drive", "seq": seq + 1, "linear": 0.0, "angular": 0.0})
 
 
 async def drive_and_collect(
-    server: RunningServer, robot: str, velocity: tuple[str, str], odom: str, log: Path
+    server: RunningServer,
+    robot: str,
+    velocity: tuple[str, str],
+    odom: str,
+    log: Path,
+    top: tuple[float, float],
 ) -> tuple[StandIn, PyRelay]:
+    """Drive ``robot`` by hand to its ``top`` speed and let go; the stand-in and the relay."""
     url = server.url.replace("http", "ws", 1) + "/rosbridge"
     async with stand_in(url, velocity, odom) as standin:
         relay = PyRelay(server.ws_url)
@@ -113,8 +127,13 @@ async def drive_and_collect(
                 )
                 # The agent reads the robot's pose from its Odometry and reports it.
                 await relay.until(lambda: any(m["type"] == "pose" for m in relay.messages), 30)
-                await operator_drives(relay, 1.0, -1.0, 1.5)
-                await asyncio.sleep(0.5)
+                stamped = velocity[1].endswith("TwistStamped")
+                await operator_drives(relay, standin, stamped, top)
+
+                def stopped() -> bool:
+                    return velocities(standin.commands(), stamped)[-1][1:] == (0.0, 0.0)
+
+                await relay.until(stopped, 10)
         finally:
             await relay.leave()
         return standin, relay
@@ -128,8 +147,10 @@ async def test_a_burger_gets_twists_on_cmd_vel_within_its_limits(
     server: RunningServer, tmp_path: Path
 ) -> None:
     log = tmp_path / "agent.log"
+    # Full stick on a Burger: its top speed ahead, the operator's 2 rad/s turn.
+    velocity = ("/cmd_vel", "geometry_msgs/msg/Twist")
     standin, relay = await drive_and_collect(
-        server, "turtlebot3", ("/cmd_vel", "geometry_msgs/msg/Twist"), "/odom", log
+        server, "turtlebot3", velocity, "/odom", log, (0.22, -2.0)
     )
     output = log.read_text()
     pose = reported_pose(relay)
@@ -156,7 +177,9 @@ async def test_a_robot_file_with_twist_stamped(server: RunningServer, tmp_path: 
     log = tmp_path / "agent.log"
     velocity = ("/rover/base/cmd_vel", "geometry_msgs/msg/TwistStamped")
     before = time.time()
-    standin, relay = await drive_and_collect(server, str(description), velocity, "/rover/odom", log)
+    standin, relay = await drive_and_collect(
+        server, str(description), velocity, "/rover/odom", log, (0.3, -0.5)
+    )
     output = log.read_text()
     assert reported_pose(relay)["theta"] == pytest.approx(YAW), output
     messages = [m for _, m in standin.commands()]
@@ -180,7 +203,7 @@ async def test_the_type_the_robot_reports_beats_the_description(
     # names the type, and the agent publishes what the robot takes.
     log = tmp_path / "agent.log"
     velocity = ("/cmd_vel", "geometry_msgs/msg/TwistStamped")
-    standin, _ = await drive_and_collect(server, "turtlebot3", velocity, "/odom", log)
+    standin, _ = await drive_and_collect(server, "turtlebot3", velocity, "/odom", log, (0.22, -2.0))
     output = log.read_text()
     messages = [m for _, m in standin.commands()]
     assert messages and all({"header", "twist"} == set(m) for m in messages), output
