@@ -125,9 +125,8 @@ TURTLESIM: Final = Robot(
 
 PRESETS: Final[dict[str, Robot]] = {
     "turtlesim": TURTLESIM,
-    # The simulator's differential-drive robot with its onboard camera (`autopilot serve
-    # --robot diffdrive`): the simulator renders the camera with this field of view and moves
-    # the robot within these limits.
+    # The differential-drive robot with an onboard camera that the simulator plays: it renders
+    # the camera with this field of view and moves the robot within these limits.
     "diffdrive": Robot(
         name="diffdrive",
         velocity=Velocity("/cmd_vel", TWIST, ""),

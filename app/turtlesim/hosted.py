@@ -9,13 +9,16 @@ besides its turtles' topics it hosts the topics of the message types a robot des
 A topic is hosted from the first ``advertise`` or typed ``subscribe`` that names it with one of
 those types (in the served flavour's spelling) until no client advertises or subscribes to it
 any more; its type is the one it was first given. Every message published on it is checked
-against that type (:mod:`app.turtlesim.messages`) and goes to its subscribers. Any other type,
-or an untyped subscribe to a topic nobody hosts, is refused as an unknown topic.
+against that type (:mod:`app.turtlesim.messages`) and kept, the latest few of each topic with
+a version number, for its subscribers to take (the rosbridge's sessions pull what is newer than
+what they had). Any other type, or an untyped subscribe to a topic nobody hosts, is refused as
+an unknown topic.
 """
 
 from __future__ import annotations
 
 import re
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -25,8 +28,11 @@ from app.protocol.errors import describe
 from app.protocol.ros import RosFlavour, canonical, spell, spellings
 from app.turtlesim.messages import MODELS
 
-# At most this many hosted topics at once (each costs a dict entry and its subscribers' work).
+# At most this many hosted topics at once (each costs a dict entry, its kept messages and its
+# subscribers' work).
 MAX_HOSTED_TOPICS: Final = 64
+
+Versioned = tuple[int, dict[str, Any]]  # a message with its version: newer ones are larger
 
 _NAME_RE = re.compile(r"/[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*\Z")
 
@@ -45,15 +51,21 @@ class HostedTopic:
 @dataclass
 class _Hosting:
     kind: str  # the message type, package/Name
+    kept: deque[Versioned]  # the latest messages published on it, oldest first
     users: set[object] = field(default_factory=set)
 
 
 class HostedTopics:
     """The hosted topics of one rosbridge hub, serving one flavour."""
 
-    def __init__(self, flavour: RosFlavour) -> None:
+    def __init__(self, flavour: RosFlavour, kept: int) -> None:
         self.flavour: RosFlavour = flavour
+        # How many of each topic's latest messages are kept for subscribers that read slowly.
+        self._kept = kept
         self._topics: dict[str, _Hosting] = {}
+        # The version of the last message published on any hosted topic: one count for all, so
+        # that a topic hosted again never gives out a version a subscription has seen.
+        self._version = 0
 
     def types(self) -> dict[str, str]:
         """Every hosted topic and its type as the flavour spells it (for rosapi)."""
@@ -87,9 +99,9 @@ class HostedTopics:
         if not hosting.users:
             del self._topics[topic.name]
 
-    def message(self, topic: HostedTopic, msg: dict[str, Any]) -> dict[str, Any]:
-        """``msg`` checked against ``topic``'s type: what its subscribers get (missing fields
-        filled in); :class:`HostingError` naming the bad fields."""
+    def publish(self, topic: HostedTopic, msg: dict[str, Any]) -> None:
+        """``msg`` published on ``topic``: checked against its type and kept (missing fields
+        filled in) for its subscribers; :class:`HostingError` naming the bad fields."""
         hosting = self._topics.get(topic.name)
         if hosting is None:
             raise HostingError(f"{topic.name} is no longer advertised")
@@ -97,8 +109,19 @@ class HostedTopics:
             model = MODELS[hosting.kind].model_validate(msg, context={"flavour": self.flavour})
         except ValidationError as exc:
             raise HostingError(f"{topic.name} ({hosting.kind}): {describe(exc)}") from None
-        dumped: dict[str, Any] = model.model_dump(exclude_none=True)
-        return dumped
+        self._version += 1
+        hosting.kept.append((self._version, model.model_dump(exclude_none=True)))
+
+    def version(self) -> int:
+        """The current version: a new subscription takes only what is published after it."""
+        return self._version
+
+    def newer(self, topic: HostedTopic, seen: int) -> list[Versioned]:
+        """``topic``'s kept messages newer than version ``seen``, oldest first."""
+        hosting = self._topics.get(topic.name)
+        if hosting is None:
+            return []
+        return [item for item in hosting.kept if item[0] > seen]
 
     def _host(self, absolute: str, type_name: str | None) -> _Hosting:
         hosted = ", ".join(MODELS)
@@ -119,7 +142,7 @@ class HostedTopics:
             raise HostingError(f"{absolute!r} is not a ROS topic name")
         if len(self._topics) >= MAX_HOSTED_TOPICS:
             raise HostingError(f"at most {MAX_HOSTED_TOPICS} hosted topics at once")
-        hosting = self._topics[absolute] = _Hosting(kind)
+        hosting = self._topics[absolute] = _Hosting(kind, deque(maxlen=self._kept))
         return hosting
 
 

@@ -29,7 +29,8 @@ class StandIn:
         self.ros.run(timeout=WAIT_S)
         self._received: list[tuple[float, dict[str, Any]]] = []
         self._lock = threading.Lock()
-        self.velocity = roslibpy.Topic(self.ros, *velocity)
+        # Every command, not only the latest when two come between the rosbridge's sends.
+        self.velocity = roslibpy.Topic(self.ros, *velocity, queue_length=100)
         self.velocity.subscribe(self._command)
         self.odom = roslibpy.Topic(self.ros, odom, "nav_msgs/msg/Odometry")
         self.odom.advertise()

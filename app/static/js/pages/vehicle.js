@@ -79,6 +79,14 @@ class RobotLink {
     this.onPose = () => {};
   }
 
+  /** The page's token was renewed: prove the fresh one to rosbridge, which ends a session whose
+   *  token expires (only where the old one was sent: this server's own /rosbridge). */
+  renew(token) {
+    if (!this.token) return;
+    this.token = token;
+    this.ros?.callOnConnection({ op: 'auth', token });
+  }
+
   connect() {
     const ros = new ROSLIB.Ros({ url: this.url });
     this.ros = ros;
@@ -384,6 +392,7 @@ async function startCamera() {
   }
 }
 
+room.addEventListener('renewed', (event) => robotLink.renew(event.detail));
 room.bindControls();
 room.addEventListener('phase', showState);
 room.addEventListener('roster', showState);
