@@ -14,8 +14,9 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import control_config, with_camera
+from app.protocol.control import control_config, for_robot
 from app.protocol.page import to_json
+from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
 from vehicle_agent import control
 
@@ -28,8 +29,11 @@ POSES = [
     for theta in (-math.pi, -2.0, -math.pi / 2, 0.0, 0.5, math.pi / 2, 3.0, math.pi)
 ] + [(1.0, 9.0, 0.3), (10.5, 0.5, -2.9), (0.3, 5.0, math.pi), (10.9, 10.9, 0.8), (6.0, 2.0, -1.2)]
 PROFILE_NAMES = sorted(control.PROFILES)
-# Every profile seeing through the diffdrive robot's 60° camera (only the onboard law looks).
-PROFILES = {name: with_camera(profile, 60.0) for name, profile in control.PROFILES.items()}
+# The profiles as the pages get them, the onboard one on the diffdrive robot (its 60° camera),
+# and the follow profile as a robot other than a turtlesim gets it: no terrain walls to keep from.
+ROVER_FOLLOW = for_robot(control.PROFILES["follow"], PRESETS["diffdrive"])
+ONBOARD = for_robot(control.PROFILES["onboard"], PRESETS["diffdrive"])
+PROFILES = {**control.PROFILES, "onboard": ONBOARD, "roverFollow": ROVER_FOLLOW}
 
 
 @pytest.fixture
@@ -61,6 +65,7 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
                default: e === null ? null : law.angularCommand(e, law.profiles.default),
                thesis: e === null ? null : law.angularCommand(e, law.profiles.thesis),
                follow: law.follow(goal, pose, law.profiles.follow),
+               roverFollow: law.follow(goal, pose, law.profiles.roverFollow),
                ahead: law.wallClearance(pose, true),
                behind: law.wallClearance(pose, false),
              };
@@ -76,6 +81,10 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
         linear, angular = control.follow_command(tx, ty, pose, control.PROFILES["follow"])
         assert got["follow"]["linear"] == pytest.approx(linear, abs=1e-12), case
         assert got["follow"]["angular"] == pytest.approx(angular, abs=1e-12), case
+        rover = control.follow_command(tx, ty, pose, ROVER_FOLLOW)
+        assert [got["roverFollow"]["linear"], got["roverFollow"]["angular"]] == pytest.approx(
+            list(rover), abs=1e-12
+        ), case
         assert got["ahead"] == pytest.approx(control.wall_clearance(pose, True), abs=1e-12)
         assert got["behind"] == pytest.approx(control.wall_clearance(pose, False), abs=1e-12)
         error = control.steering_error(goal, pose)

@@ -30,9 +30,10 @@ from pydantic import ValidationError
 from app.protocol import channels, jsonedge
 from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
-from app.protocol.control import with_camera, with_standoff
+from app.protocol.control import for_robot, with_standoff
 from app.protocol.errors import describe
 from app.protocol.events import PilotEvent
+from app.protocol.robot import TURTLESIM, Robot
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
@@ -65,11 +66,12 @@ class AgentConfig:
     goal_timeout_s: float | None = None
     # The follow profile's distance from the target (None: the profile's own).
     standoff_m: float | None = None
-    # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does.
+    # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does (a
+    # turtlesim only: no other robot has teleport_absolute).
     spawn_step: bool = True
-    # The horizontal field of view (degrees) of the camera the vehicle carries, which the
-    # onboard law turns pixels into bearings with (None: no camera is carried).
-    camera_hfov_deg: float | None = None
+    # The robot driven: its limits, its camera's field of view (the onboard law's), and whether
+    # it is a turtlesim (``--robot``).
+    robot: Robot = TURTLESIM
     ice_servers: list[RTCIceServer] = field(default_factory=list)
     # A vehicle token for the room (``autopilot token``), when the server asks for one.
     token: str | None = None
@@ -92,7 +94,7 @@ class Agent:
         profile = PROFILES[config.profile]
         if config.goal_timeout_s is not None:
             profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
-        profile = with_camera(with_standoff(profile, config.standoff_m), config.camera_hfov_deg)
+        profile = for_robot(with_standoff(profile, config.standoff_m), config.robot)
         self.config = config
         self.video = video
         self.turtle = turtle
@@ -100,7 +102,7 @@ class Agent:
         # The camera's frame times, so that a goal's bearing is taken at its frame's heading.
         self.frame_times = FrameTimes()
         self.events.listeners.append(self.frame_times.on_event)
-        self.pilot = Pilot(profile)
+        self.pilot = Pilot(profile, limits=config.robot.limits)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
@@ -156,7 +158,7 @@ class Agent:
         ticker = asyncio.create_task(self._tick(), name="control-tick")
         spawn = (
             asyncio.create_task(self._spawn_step(), name="spawn-step")
-            if self.config.spawn_step
+            if self.config.spawn_step and self.config.robot.turtlesim
             else None
         )
         try:

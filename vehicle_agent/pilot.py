@@ -8,8 +8,10 @@ twins: the manual gate (:class:`~vehicle_agent.manual.ManualDrive`: while an ope
 wheel, goals are dropped with ``why="manual"`` and drive commands steer, until the dead-man),
 then the freshness gate (:class:`~vehicle_agent.freshness.GoalGate`: latest wins, stale goals
 dropped), then the controller (:class:`~vehicle_agent.control.Controller`, with the control law
-its profile names). A lost link, a mode change and a stop command halt the turtle. The searching
-profiles record when a search for a lost target starts
+its profile names); every Twist, the operator's too, then passes the robot's limiter
+(:class:`~vehicle_agent.limits.Limiter`: clamped to its top speeds, ramped within its
+accelerations, a stop at once). A lost link, a mode change and a stop command halt the turtle.
+The searching profiles record when a search for a lost target starts
 (:class:`~app.protocol.events.SearchStarted`, and which way it turns) and how it ends
 (:class:`~app.protocol.events.SearchEnded`: the target found, the search's time run out and the
 vehicle stopped, or piloting stopped).
@@ -39,19 +41,26 @@ from app.protocol.events import (
     Side,
     TwistSent,
 )
+from app.protocol.robot import TURTLESIM, Limits
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
 from vehicle_agent.freshness import FreshnessRule, GoalGate
+from vehicle_agent.limits import Limiter
 from vehicle_agent.manual import ManualDrive
 
 
 class Pilot:
     """One vehicle's pilot with one profile; every input answers with the records of what it
-    did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish)."""
+    did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish).
+
+    ``profile`` is the profile as fitted to the robot (:func:`app.protocol.control.for_robot`),
+    ``limits`` the robot's (default: turtlesim's, which nothing the profiles command exceeds).
+    """
 
     def __init__(
         self,
         profile: Profile,
         *,
+        limits: Limits = TURTLESIM.limits,
         deadman_s: float = DEADMAN_S,
         tick_s: float = TICK_S,
         freshness: FreshnessRule | None = None,
@@ -61,6 +70,8 @@ class Pilot:
         self.tick_s = tick_s
         self.controller = Controller(profile, law)
         self.manual = ManualDrive(profile, deadman_s)
+        # Between every command and the robot: its top speeds and accelerations.
+        self.limiter = Limiter(limits, tick_s)
         # Latest-wins on the lossy goal channel; reset for every new link.
         self.gate = GoalGate() if freshness is None else GoalGate(freshness)
         # When the last goal was applied on this link (its age rides the pose: link health).
@@ -136,14 +147,14 @@ class Pilot:
             target_height_m=goal.targetHeightM,
         )
         twist = self.controller.goal(target, now, captured_at)
-        return [applied, *self._searched(searching, "found", now), *_sent(twist, now)]
+        return [applied, *self._searched(searching, "found", now), *self._sent(twist, now)]
 
     def stop(self, now: float) -> list[PilotEvent]:
         """The relay stopped piloting: the autopilot's turtle stops."""
         searching = self.controller.search_since
         twist = self.controller.stop()
         self._search_timed_out = False
-        return [*self._searched(searching, "stopped", now), *_sent(twist, now)]
+        return [*self._searched(searching, "stopped", now), *self._sent(twist, now)]
 
     def mode_change(self, mode: Mode, operator: str | None, now: float) -> list[PilotEvent]:
         """The relay's mode. Whichever way it changes, the turtle stops first: the autopilot's
@@ -155,14 +166,14 @@ class Pilot:
         self.controller.stop()
         self._search_timed_out = False
         changed = ModeChanged(mode=mode, operator=self.manual.operator, t=now)
-        return [changed, *self._searched(searching, "stopped", now), *_sent(stopped, now)]
+        return [changed, *self._searched(searching, "stopped", now), *self._sent(stopped, now)]
 
     def drive(self, seq: int, linear: float, angular: float, now: float) -> list[PilotEvent]:
         """An operator's drive command: it steers in manual mode when it is the newest."""
         twist = self.manual.drive(seq, linear, angular, now)
         moving = twist is not None and not twist.is_zero
         received = DriveReceived(seq=seq, applied=twist is not None, moving=moving, t=now)
-        return [received, *_sent(twist, now)]
+        return [received, *self._sent(twist, now)]
 
     # --- what the vehicle itself sees --------------------------------------------------------
 
@@ -170,17 +181,18 @@ class Pilot:
         """The turtle's pose: closed-loop profiles answer it (a search starts on it)."""
         searching = self.controller.search_since
         twist = self.controller.pose(pose, now)
-        return [*self._searched(searching, "timed_out", now), *_sent(twist, now)]
+        return [*self._searched(searching, "timed_out", now), *self._sent(twist, now)]
 
     def tick(self, now: float) -> list[PilotEvent]:
-        """The clock: the goal timeout, the clock-driven profile's period, the dead-man."""
+        """The clock: the goal timeout, the clock-driven profile's period, the dead-man, and the
+        next step of a ramp under way."""
         searching = self.controller.search_since
-        twist = self.controller.tick(now)
-        return [
-            *self._searched(searching, "timed_out", now),
-            *_sent(twist, now),
-            *_sent(self.manual.tick(now), now),
+        done = [
+            *self._sent(self.controller.tick(now), now),
+            *self._sent(self.manual.tick(now), now),
         ]
+        searched = self._searched(searching, "timed_out", now)
+        return [*searched, *(done or _record(self.limiter.tick(now), now))]
 
     def next_tick(self, now: float) -> float:
         """Seconds from ``now`` until :meth:`tick` is due: every ``tick_s``, and at once when
@@ -217,8 +229,12 @@ class Pilot:
             return [SearchEnded(why=end, after_s=now - before, t=now)]
         return []
 
+    def _sent(self, twist: Twist | None, now: float) -> list[PilotEvent]:
+        """The record of publishing ``twist`` (None: nothing to publish) within the limits."""
+        return [] if twist is None else _record(self.limiter.command(twist, now), now)
 
-def _sent(twist: Twist | None, now: float) -> list[PilotEvent]:
+
+def _record(twist: Twist | None, now: float) -> list[PilotEvent]:
     if twist is None:
         return []
     return [

@@ -14,6 +14,7 @@ from typing import Literal
 
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.protocol.relay_profiles import Profile as RelayProfile
+from app.protocol.robot import Robot
 from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
@@ -76,6 +77,9 @@ class Profile:
     wall_margin_m: float = 0.0
     # Speed allowed per metre of clearance beyond the margin (1/s): the vehicle slows near walls.
     wall_gain: float = 0.0
+    # Whether the walls are known: turtlesim's terrain has them; any other robot's surroundings
+    # are not the terrain, so the follow law neither aims inside it nor slows near its walls.
+    walls: bool = True
     # No goal for this long: the target counts as lost and the vehicle turns in place to search,
     # toward the side it was last seen on, until the goal timeout stops it.
     search_after_s: float = math.inf
@@ -172,7 +176,7 @@ __all__ = [
     "ControlConfig",
     "Profile",
     "control_config",
-    "with_camera",
+    "for_robot",
     "with_standoff",
 ]
 
@@ -186,14 +190,21 @@ def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
     return replace(profile, standoff_m=standoff_m)
 
 
-def with_camera(profile: Profile, hfov_deg: float | None) -> Profile:
-    """``profile`` seeing through a camera ``hfov_deg`` degrees across (None: no camera), as the
-    onboard law needs to turn a pixel into a bearing."""
-    if hfov_deg is None:
-        return replace(profile, hfov=0.0)
-    if not math.isfinite(hfov_deg) or not 0 < hfov_deg < 180:
-        raise ValueError(f"a camera's field of view is between 0 and 180 degrees, not {hfov_deg}")
-    return replace(profile, hfov=math.radians(hfov_deg))
+def for_robot(profile: Profile, robot: Robot) -> Profile:
+    """``profile`` fitted to ``robot``: an operator's full deflection is at most the robot's top
+    speed (so the stick spans the robot's range rather than saturating early), the follow law
+    knows of walls on a turtlesim only, and the onboard law sees through the robot's camera
+    (its field of view turns a pixel into a bearing; no camera, no bearing). Every command is
+    clamped to the limits as well, by the pilot's limiter."""
+    limits = robot.limits
+    camera = robot.camera
+    return replace(
+        profile,
+        manual_linear=min(profile.manual_linear, limits.max_linear),
+        manual_angular=min(profile.manual_angular, limits.max_angular),
+        walls=robot.turtlesim,
+        hfov=0.0 if camera is None else math.radians(camera.hfov_deg),
+    )
 
 
 @dataclass(frozen=True)

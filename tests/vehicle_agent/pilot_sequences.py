@@ -3,8 +3,13 @@
 must answer every input with the same event records, and the same wake-up for the next tick.
 
 A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``goal`` (the goal message
-as the relay sends it), ``stop`` (), ``mode`` (mode, operator), ``drive`` (seq, linear,
-angular), ``pose`` (x, y, theta), ``tick`` (), ``new_link`` (), ``halt`` ().
+as the relay sends it, and when its frame was taken if the vehicle knows), ``stop`` (), ``mode``
+(mode, operator), ``drive`` (seq, linear, angular), ``pose`` (x, y, theta), ``tick`` (),
+``new_link`` (), ``halt`` ().
+
+Every sequence runs with every profile on every robot preset (:data:`ROBOTS`): turtlesim's limits
+change nothing, a Burger's clamp and ramp the commands (the last sequences are about that); the
+onboard profile sees through the robot's camera (none on a turtlesim: it only searches).
 """
 
 from __future__ import annotations
@@ -13,7 +18,8 @@ from typing import Any
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE, Profile, with_camera
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.robot import PRESETS
 from vehicle_agent.control import Pose
 from vehicle_agent.pilot import Pilot
 
@@ -23,9 +29,7 @@ Step = tuple[str, float, list[Any]]
 RELAY_CLOCK_MS = 5_000_000.0
 
 
-# The camera the onboard profile sees through in the sequences: the simulated diffdrive robot's
-# field of view, and a face's real height as the operations spec declares it.
-CAMERA_HFOV_DEG = 60.0
+# A face's real height as the operations spec declares it (goals with a box carry it).
 FACE_HEIGHT_M = 0.24
 
 
@@ -204,22 +208,50 @@ SEQUENCES: dict[str, list[Step]] = {
         goal(2, 10.5, x=620.0, y=200.0, box_h=80.0),
         ("stop", 10.6, []),
     ],
+    "an operator's commands ramped, then stopped at once": [
+        CENTRE_POSE,
+        ("mode", 0.0, ["manual", "ann"]),
+        ("drive", 0.1, [1, 1.0, -1.0]),
+        ("tick", 0.15, []),
+        ("drive", 0.2, [2, 1.0, -1.0]),
+        ("tick", 0.25, []),
+        ("drive", 0.3, [3, -1.0, 1.0]),
+        ("tick", 0.33, []),
+        ("tick", 0.4, []),
+        ("drive", 0.4, [4, -1.0, 1.0]),
+        ("tick", 0.45, []),
+        ("drive", 0.5, [5, 0.0, 0.0]),
+        ("tick", 0.55, []),
+        ("drive", 0.6, [6, 0.4, -0.2]),
+        *[("tick", round(0.6 + 0.05 * k, 2), []) for k in range(1, 9)],
+        ("halt", 1.02, []),
+    ],
+    "the autopilot ramped toward a target far behind": [
+        CENTRE_POSE,
+        goal(1, 0.1, x=0.0, y=470.0),
+        *[
+            step
+            for k in range(1, 16)
+            for step in (("tick", round(0.1 + 0.05 * k, 2), []), at(CENTRE_POSE, 0.12 + 0.05 * k))
+        ],
+        goal(2, 0.9, x=600.0, y=20.0),
+        ("tick", 0.95, []),
+        at(CENTRE_POSE, 1.0),
+        ("stop", 1.02, []),
+        ("tick", 1.05, []),
+    ],
 }
 
-
-def fitted(profile: Profile) -> Profile:
-    """``profile`` seeing through the sequences' camera (only the onboard law looks)."""
-    return with_camera(profile, CAMERA_HFOV_DEG)
+# The robots every sequence runs on.
+ROBOTS = tuple(PRESETS)
 
 
-# The profiles as the sequences run them, on both sides (the page gets them in its config).
-SEQUENCE_PROFILES: dict[str, Profile] = {name: fitted(p) for name, p in PROFILES.items()}
-
-
-def pilot(profile: str) -> Pilot:
-    """The pilot each sequence runs against, built as the agent builds it: the profile's, with
-    the protocol's dead-man, tick and freshness rule (the page gets them through its config)."""
-    return Pilot(SEQUENCE_PROFILES[profile])
+def pilot(profile: str, robot: str = "turtlesim") -> Pilot:
+    """The pilot each sequence runs against, built as the agent builds it: the profile fitted to
+    the robot, its limits, the protocol's dead-man, tick and freshness rule (the page gets them
+    through its config)."""
+    described = PRESETS[robot]
+    return Pilot(for_robot(PROFILES[profile], described), limits=described.limits)
 
 
 def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEvent]:
@@ -245,10 +277,10 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
     raise ValueError(f"no such input {kind!r}")
 
 
-def run(steps: list[Step], profile: str) -> list[Any]:
+def run(steps: list[Step], profile: str, robot: str = "turtlesim") -> list[Any]:
     """Each step's answer: its records (log-line objects), the seconds to the next tick, the
     mode, the operator and the search status the pose tells the client."""
-    driven = pilot(profile)
+    driven = pilot(profile, robot)
     out: list[Any] = []
     for kind, t, args in steps:
         records = [ev.record(event) for event in feed(driven, kind, t, args)]

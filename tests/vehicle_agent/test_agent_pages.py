@@ -11,6 +11,7 @@ import contextlib
 import math
 import statistics
 from collections.abc import AsyncIterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -28,6 +29,7 @@ from app.protocol.events import (
     TwistSent,
     of_kind,
 )
+from app.protocol.robot import TURTLESIM, Camera, Robot
 from app.relay.service import RelayService
 from app.server.serve import RunningServer
 from tests.helpers.waiting import eventually
@@ -109,7 +111,7 @@ async def scene(
     server: RunningServer,
     browser: Browser,
     profile: str = "default",
-    camera_hfov_deg: float | None = None,
+    robot: Robot = TURTLESIM,
 ) -> AsyncIterator[Scene]:
     events: list[AnyEvent] = []
     log = EventLog()
@@ -117,7 +119,7 @@ async def scene(
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
     turtle = SimTurtle()
     agent = Agent(
-        AgentConfig(server=server.url, profile=profile, camera_hfov_deg=camera_hfov_deg),
+        AgentConfig(server=server.url, profile=profile, robot=robot),
         SyntheticVideo(W, H, fps=15, path=path),
         turtle,
         log,
@@ -361,7 +363,8 @@ async def test_onboard_searches_where_the_face_left_then_stops_and_the_client_is
     """Issue 36: the face leaves the view by the right; the vehicle (a camera 60° across, as if
     the turtle carried it) turns right to find it, gives up after a turn and a half at 1.6 rad/s
     and stops; the client's page says each; the face back, it steers again."""
-    async with scene(server, module_browser, profile="onboard", camera_hfov_deg=60.0) as s:
+    robot = replace(TURTLESIM, camera=Camera("/camera", "sensor_msgs/CompressedImage", 60.0))
+    async with scene(server, module_browser, profile="onboard", robot=robot) as s:
         s.path.x = 0.8  # right of the image centre: a bearing of about -16°
         await s.start_piloting()
         await eventually(

@@ -11,7 +11,8 @@ import pytest
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE, with_camera
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.robot import PRESETS
 from tests.vehicle_agent import pilot_sequences
 from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal
 from vehicle_agent.control import Goal, Pose, Profile, pixel_bearing, target_range
@@ -175,12 +176,13 @@ def test_a_control_law_plugs_in() -> None:
     assert calls[0][1] == CENTRE and calls[0][0].seq == 1
 
 
+@pytest.mark.parametrize("robot", pilot_sequences.ROBOTS)
 @pytest.mark.parametrize("profile", sorted(PROFILES))
 @pytest.mark.parametrize("name", sorted(SEQUENCES))
 def test_the_shared_sequences_give_records_the_event_log_reads_back(
-    profile: str, name: str
+    profile: str, name: str, robot: str
 ) -> None:
-    answers = pilot_sequences.run(SEQUENCES[name], profile)
+    answers = pilot_sequences.run(SEQUENCES[name], profile, robot)
     assert len(answers) == len(SEQUENCES[name])
     for records, next_tick, mode, _, search in answers:
         for record in records:
@@ -193,7 +195,8 @@ def test_the_shared_sequences_give_records_the_event_log_reads_back(
 # --- the onboard law: a camera the vehicle carries --------------------------------------------
 
 # The diffdrive robot's camera: 60° across a 640-pixel frame, so f = 320 / tan 30° = 554.26 px.
-ONBOARD = with_camera(PROFILES["onboard"], 60.0)
+# The law alone: the profile as the diffdrive robot gets it, without the robot's limiter.
+ONBOARD = for_robot(PROFILES["onboard"], PRESETS["diffdrive"])
 ODOM = Pose(1.0, 3.0, 0.0)
 FOCAL_PX = 320 / math.tan(math.radians(30))
 

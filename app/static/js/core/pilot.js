@@ -10,15 +10,18 @@
 // the manual gate (core/manual.js: while an operator holds the wheel, goals are dropped with
 // why 'manual' and drive commands steer, until the dead-man), then the freshness gate
 // (core/freshness.js: latest wins, stale goals dropped), then the controller (core/control.js,
-// with the control law the profile names). A lost link, a mode change and a stop halt the turtle.
+// with the control law the profile names); every Twist, the operator's too, then passes the
+// robot's limiter (core/limits.js: clamped to its top speeds, ramped within its accelerations, a
+// stop at once). A lost link, a mode change and a stop halt the turtle.
 // The searching profiles record when a search for a lost target starts (`search`, and the side
 // it turns to) and how it ends (`search_ended`: found, timed_out when its time ran out and the
 // vehicle stopped, or stopped when piloting did).
 import { Controller } from './control.js';
 import { GoalGate } from './freshness.js';
+import { Limiter } from './limits.js';
 import { ManualDrive } from './manual.js';
 
-function twistSent(twist, now) {
+function record(twist, now) {
   if (twist === null) return [];
   return [
     {
@@ -38,16 +41,19 @@ export class Pilot {
 
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
-   * @param profile one of `controlLaw.profiles`
+   * @param profile one of `controlLaw.profiles` (fitted to the robot by the server)
    * @param {{deadmanS: number, tickS: number, freshness: {maxAgeS: number, windowS: number},
-   *   law?: Function}} rules the protocol's numbers (`config.control`,
-   *   `config.protocol.goalFreshness`); `law` replaces the profile's control law
+   *   limits: Object, law?: Function}} rules the protocol's numbers (`config.control`,
+   *   `config.protocol.goalFreshness`) and the robot's limits (`config.robot.description.limits`);
+   *   `law` replaces the profile's control law
    */
-  constructor(controlLaw, profile, { deadmanS, tickS, freshness, law = null }) {
+  constructor(controlLaw, profile, { deadmanS, tickS, freshness, limits, law = null }) {
     this.profile = profile;
     this.tickS = tickS;
     this.controller = new Controller(controlLaw, profile, law);
     this.manual = new ManualDrive(profile, deadmanS);
+    // Between every command and the robot: its top speeds and accelerations.
+    this.limiter = new Limiter(limits, tickS);
     // Latest-wins on the lossy goal channel; reset for every new link.
     this.gate = new GoalGate(freshness);
   }
@@ -111,7 +117,7 @@ export class Pilot {
       targetHeightM: goal.targetHeightM ?? null,
     };
     const twist = this.controller.goal(target, now, capturedAt);
-    return [applied, ...this.#searched(searching, 'found', now), ...twistSent(twist, now)];
+    return [applied, ...this.#searched(searching, 'found', now), ...this.#sent(twist, now)];
   }
 
   /** The relay stopped piloting: the autopilot's turtle stops. */
@@ -119,7 +125,7 @@ export class Pilot {
     const searching = this.controller.searchSince;
     const twist = this.controller.stop();
     this.#searchTimedOut = false;
-    return [...this.#searched(searching, 'stopped', now), ...twistSent(twist, now)];
+    return [...this.#searched(searching, 'stopped', now), ...this.#sent(twist, now)];
   }
 
   /**
@@ -133,7 +139,7 @@ export class Pilot {
     this.controller.stop();
     this.#searchTimedOut = false;
     const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
-    return [changed, ...this.#searched(searching, 'stopped', now), ...twistSent(stopped, now)];
+    return [changed, ...this.#searched(searching, 'stopped', now), ...this.#sent(stopped, now)];
   }
 
   /** An operator's drive command: it steers in manual mode when it is the newest. */
@@ -141,25 +147,28 @@ export class Pilot {
     const twist = this.manual.drive(seq, linear, angular, now);
     const moving = twist !== null && (twist.linear !== 0 || twist.angular !== 0);
     const received = { ev: 'drive', seq, applied: twist !== null, moving, t: now };
-    return [received, ...twistSent(twist, now)];
+    return [received, ...this.#sent(twist, now)];
   }
 
   /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it (a search starts on it). */
   pose(pose, now) {
     const searching = this.controller.searchSince;
     const twist = this.controller.pose(pose, now);
-    return [...this.#searched(searching, 'timed_out', now), ...twistSent(twist, now)];
+    return [...this.#searched(searching, 'timed_out', now), ...this.#sent(twist, now)];
   }
 
-  /** The clock: the goal timeout, the clock-driven profile's period, the dead-man. */
+  /**
+   * The clock: the goal timeout, the clock-driven profile's period, the dead-man, and the next
+   * step of a ramp under way.
+   */
   tick(now) {
     const searching = this.controller.searchSince;
-    const twist = this.controller.tick(now);
-    return [
-      ...this.#searched(searching, 'timed_out', now),
-      ...twistSent(twist, now),
-      ...twistSent(this.manual.tick(now), now),
+    const done = [
+      ...this.#sent(this.controller.tick(now), now),
+      ...this.#sent(this.manual.tick(now), now),
     ];
+    const searched = this.#searched(searching, 'timed_out', now);
+    return [...searched, ...(done.length > 0 ? done : record(this.limiter.tick(now), now))];
   }
 
   /**
@@ -206,5 +215,10 @@ export class Pilot {
       return [{ ev: 'search_ended', why: end, after_s: now - before, t: now }];
     }
     return [];
+  }
+
+  // The record of publishing `twist` (null: nothing to publish) within the limits.
+  #sent(twist, now) {
+    return twist === null ? [] : record(this.limiter.command(twist, now), now);
   }
 }
