@@ -54,8 +54,9 @@ Box = tuple[int, int, int, int]
 # it once per image. Bounded, for a long batch of images.
 _REFERENCES: dict[tuple[str, str, Box | None], Detection] = {}
 _REFERENCES_KEPT = 512
-# Which OpenCV.js the analyzer loads (app/static/js/vision-worker.js).
-OpenCvBuild = Literal["auto", "simd", "official"]
+# An OpenCV.js build the analyzer can be told to load (app/static/js/vision-worker.js); told
+# nothing, it loads the one the relay page loads.
+OpenCvBuild = Literal["simd", "official"]
 OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
 
 
@@ -147,11 +148,13 @@ class Harness:
     Use :func:`open_harness`; one harness serves a whole batch of images.
     """
 
-    def __init__(self, page: Page, spec: Spec, build: str) -> None:
+    def __init__(self, page: Page, spec: Spec, build: str, server_url: str) -> None:
         self.page = page
         self.spec = spec
         # The OpenCV.js build the page loaded: "simd" or "official".
         self.build = build
+        # The server the page came from, for other pages in the same browser.
+        self.server_url = server_url
 
     def run(
         self,
@@ -325,10 +328,10 @@ def _pair(
 
 @contextmanager
 def open_harness(
-    settings: Settings | None = None, build: OpenCvBuild = "auto"
+    settings: Settings | None = None, build: OpenCvBuild | None = None
 ) -> Iterator[Harness]:
     """Start the server and headless Chromium on the parity page, with the OpenCV.js ``build``
-    (``auto``: SIMD where the browser has it); stop both afterwards."""
+    (None: the build the relay page loads, by the same rule); stop both afterwards."""
     settings = settings or Settings()
     spec = load_spec(settings.operations_spec)
     server = start_in_thread(settings)
@@ -338,7 +341,8 @@ def open_harness(
             try:
                 page = browser.new_page()
                 page.on("console", lambda m: log.debug("page console: %s", m.text))
-                page.goto(f"{server.url}/parity?opencv={build}")
+                # No ?opencv= on the relay's page either (relay_service.relay_url).
+                page.goto(f"{server.url}/parity" + ("" if build is None else f"?opencv={build}"))
                 # A function, not an expression: Playwright evals a bare expression inside the
                 # page, which the page's CSP (no 'unsafe-eval') refuses.
                 page.wait_for_function(
@@ -346,7 +350,7 @@ def open_harness(
                 )
                 if page.evaluate("document.body.dataset.ready") != "true":
                     raise RuntimeError(f"parity page: {page.text_content('#state')}")
-                yield Harness(page, spec, page.evaluate("document.body.dataset.opencv"))
+                yield Harness(page, spec, page.evaluate("document.body.dataset.opencv"), server.url)
             finally:
                 browser.close()
     finally:
@@ -375,9 +379,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--opencv",
         choices=OPENCV_BUILDS,
-        default="auto",
-        help="OpenCV.js build: simd (scripts/build-opencv-js), official (npm) or auto (default:"
-        " SIMD where the browser supports it)",
+        help="OpenCV.js build: simd (scripts/build-opencv-js) or official (npm); default: the"
+        " one the relay page loads (SIMD where the browser supports it)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 

@@ -11,8 +11,11 @@ from app.server.config import Settings
 from app.tools import parity
 
 
-def open_harness(build: parity.OpenCvBuild = "auto") -> AbstractContextManager[parity.Harness]:
-    """The harness on a development server that asks for no token, with OpenCV.js ``build``."""
+def open_harness(
+    build: parity.OpenCvBuild | None = None,
+) -> AbstractContextManager[parity.Harness]:
+    """The harness on a development server that asks for no token, with OpenCV.js ``build``
+    (None: the relay's, as ``autopilot parity`` loads by default)."""
     return parity.open_harness(Settings(environment="development", token=None), build)
 
 

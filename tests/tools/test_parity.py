@@ -18,10 +18,11 @@ import pytest
 
 from app.resources import OPERATIONS_SPEC
 from app.tools import parity
+from app.tools.relay_service import relay_url
 from app.vision import reference, window
 from app.vision.spec import CascadeOperation, load_spec
 from tests.helpers.harness import open_harness
-from tests.vision.frames import FACES, write_generated_frames
+from tests.vision.frames import FACES, clip_stills, write_generated_frames
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -37,6 +38,23 @@ def harness(request: pytest.FixtureRequest) -> Iterator[parity.Harness]:
     with open_harness(request.param) as opened:
         assert opened.build == request.param  # loaded, not fallen back to the other
         yield opened
+
+
+def test_parity_checks_the_build_the_relay_loads() -> None:
+    """`autopilot parity` with its defaults and the page `autopilot relay` opens, in one
+    Chromium, run the same OpenCV.js build."""
+    with open_harness() as harness:
+        browser = harness.page.context.browser
+        assert browser is not None
+        relay = browser.new_page()
+        try:
+            relay.goto(relay_url(harness.server_url, "builds", "relay", "default"))
+            relay.wait_for_function(
+                "() => window.autopilotStatus?.opencvBuild", timeout=parity.READY_TIMEOUT_MS
+            )
+            assert relay.evaluate("() => window.autopilotStatus.opencvBuild") == harness.build
+        finally:
+            relay.close()
 
 
 def describe(report: parity.Report) -> str:
@@ -79,6 +97,22 @@ def test_generated_frames_with_every_operation(harness: parity.Harness, tmp_path
         bool(by_name[(f.stem, "fire")].js_boxes) for f in frames if "flame" in f.stem
     )
     assert faces_found >= 8 and flames_found == 6, (faces_found, flames_found)
+
+
+# Stills of the clip where a reduction that rounds its ties up instead of to even (the SIMD
+# build's INTER_AREA did, 640 -> 480 for face_small) finds a box too many, one too few, none.
+TIE_STILLS = (30, 245, 270)
+
+
+def test_clip_stills_whose_reduction_has_ties(harness: parity.Harness, tmp_path: Path) -> None:
+    report = parity.Report()
+    for index, frame in zip(TIE_STILLS, clip_stills(TIE_STILLS), strict=True):
+        path = tmp_path / f"clip-{index}.png"
+        cv2.imwrite(str(path), frame)
+        harness.check(path, ["face_small"], report)
+    assert report.ok, describe(report)
+    # Not agreement on nothing: the stills hold faces.
+    assert sum(len(p.py_boxes) for p in report.details if p.around is None) >= 2
 
 
 def test_thesis_profile_on_a_few_photos(harness: parity.Harness) -> None:
