@@ -100,6 +100,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " thread and stage, codec counters, worker timers (relay-cost.md)",
     )
     parser.add_argument(
+        "--opencv-builds",
+        action="store_true",
+        help="time the cascades on each OpenCV.js build instead, side by side on the same frames,"
+        " with Python as the baseline (opencv-builds.md)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -129,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
         return asyncio.run(_recorder(args))
     if args.relay_cost:
         return asyncio.run(_relay_cost(args))
+    if args.opencv_builds:
+        return asyncio.run(_opencv_builds(args))
     obj = asyncio.run(_bench(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
@@ -187,6 +195,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--recorder")
     if args.relay_cost:
         argv.append("--relay-cost")
+    if args.opencv_builds:
+        argv.append("--opencv-builds")
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -245,6 +255,37 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     finally:
         server.stop()
     log.info("relay cost report: %s", relaycost.write_report(args.out, found))
+    if args.json:
+        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    return 0
+
+
+async def _opencv_builds(args: argparse.Namespace) -> int:
+    """The cascades on each OpenCV.js build: print the figures, write opencv-builds.md."""
+    from playwright.async_api import async_playwright
+
+    from app.server.serve import start_in_thread
+    from app.tools.bench import jsnative
+    from app.tools.browser import launch_options
+
+    plan = QUICK if args.quick else FULL
+    frames = jsnative.synthetic_frames(int(plan["frames"]) + jsnative.WARMUP_FRAMES)
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                times = await jsnative.compare_builds(browser, server.url, frames)
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    found = {
+        "frames": int(plan["frames"]),
+        "load_average": round(os.getloadavg()[0], 2),
+        "ops": [t.figures() for t in times],
+    }
+    log.info("OpenCV.js builds report: %s", jsnative.write_builds_report(args.out, found))
     if args.json:
         sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
     return 0
