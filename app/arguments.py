@@ -2,17 +2,19 @@
 
 ``float()`` accepts ``nan`` and ``inf``, and ``int()`` any size: a goal timeout of ``nan`` would
 never expire and a port of 70000 fails deep inside the server. These types turn such a value
-into argparse's one-line usage error instead. The ``--profile`` options are declared here too, so
-that every command lists the same profiles with the same default. Imports only the protocol core,
-so the agent and the tools can all use it.
+into argparse's one-line usage error instead. The ``--profile`` and ``--token`` options are
+declared here too, so that every command lists the same profiles with the same default and reads
+its token the same way. Imports only the protocol core, so the agent and the tools can all use it.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 
-from app.protocol import constants, control
+from app.protocol import control, relay_profiles, tokens
+from app.protocol.rooms import Role
 
 
 def _number(text: str) -> float:
@@ -73,10 +75,21 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
 
 
 def add_relay_profile(parser: argparse.ArgumentParser, purpose: str) -> None:
-    """``--profile``: one of the relay profiles (:data:`app.protocol.constants.PROFILES`)."""
+    """``--profile``: one of the relay profiles (:data:`app.protocol.relay_profiles.PROFILES`)."""
     parser.add_argument(
         "--profile",
-        choices=constants.PROFILES,
-        default=constants.DEFAULT_PROFILE,
-        help=f"{purpose} (default: {constants.DEFAULT_PROFILE})",
+        choices=relay_profiles.PROFILES,
+        default=relay_profiles.DEFAULT_PROFILE,
+        help=f"{purpose} (default: {relay_profiles.DEFAULT_PROFILE})",
+    )
+
+
+def add_token_option(parser: argparse.ArgumentParser, role: Role) -> None:
+    """``--token``: a token for ``role`` in the room, from ``autopilot token``; by default read
+    from the environment, so that it stays out of the process list."""
+    parser.add_argument(
+        "--token",
+        default=os.environ.get(tokens.ACCESS_TOKEN_ENV),
+        help=f"{role} token for the room, from `autopilot token` "
+        f"(default: ${tokens.ACCESS_TOKEN_ENV})",
     )

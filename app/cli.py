@@ -15,7 +15,7 @@ from app.supervise import configure_logging
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("app.server.serve", "run the signaling server, role pages and simulated turtle"),
-    "relay": ("app.tools.relay_service", "run the relay page in headless Chromium"),
+    "relay": ("app.relay.cli", "run the relay page in headless Chromium"),
     "vehicle": ("vehicle_agent.cli", "run the Python vehicle agent (aiortc)"),
     "demo": ("app.tools.demo", "run the whole system on an embedded default"),
     "parity": ("app.tools.parity", "compare OpenCV.js detections with Python OpenCV"),

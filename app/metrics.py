@@ -6,7 +6,7 @@ metrics name rooms' counts and refusals, nothing a stranger needs). Each process
 apps in one process (the tests, the demo's server thread) never share or clash over a series.
 What each command exports is in ``docs/operations.md``; the metrics themselves live beside the
 code they count (:mod:`app.server.metrics`, :mod:`vehicle_agent.metrics`,
-:mod:`app.tools.relay_metrics`).
+:mod:`app.relay.metrics`).
 """
 
 from __future__ import annotations

@@ -10,5 +10,5 @@ from pathlib import Path
 APP_DIR = Path(__file__).resolve().parent
 STATIC_DIR = APP_DIR / "static"
 TEMPLATES_DIR = APP_DIR / "templates"
-OPERATION_MODULES_DIR = STATIC_DIR / "js" / "operations"
+OPERATION_MODULES_DIR = STATIC_DIR / "js" / "worker" / "operations"
 OPERATIONS_SPEC = APP_DIR / "vision" / "operations.json"

@@ -1,6 +1,6 @@
 """Fixtures for the end-to-end tests: the server, headless Chromium, a fake camera video.
 
-Pages run in Debian's Chromium through Playwright (``app.tools.browser``), one browser per module
+Pages run in Debian's Chromium through Playwright (``app.chromium``), one browser per module
 whose fake camera (a per-browser flag) shows the face on the left; a scene with another camera
 launches its own browser for the vehicle. Every page's screenshot and console are kept under
 ``artifacts/<test>/`` whether the test passes or fails.
@@ -9,17 +9,18 @@ launches its own browser for the vehicle. Every page's screenshot and console ar
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlencode
 
 import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect, sync_playwright
 
+from app.chromium import launch_options
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
 from e2e.helpers import FPS, face_frame, write_y4m
 
 REPO = Path(__file__).resolve().parents[1]
@@ -86,16 +87,25 @@ OpenRole = Callable[..., Page]
 @pytest.fixture
 def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
     """``open_role(role, browser, **query)`` opens a role page in its own browser context;
-    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say).
+    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say),
+    ``device`` sets the context's options (a phone's viewport and touch screen, say), and
+    ``token`` goes in the URL's fragment (``#token=...``), as ``autopilot token`` prints it.
 
     At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
     """
     opened: list[OpenedPage] = []
 
     def open_page(
-        role: str, browser: Browser, init_script: str | None = None, **query: str
+        role: str,
+        browser: Browser,
+        init_script: str | None = None,
+        device: Mapping[str, Any] | None = None,
+        token: str | None = None,
+        **query: str,
     ) -> Page:
-        context = browser.new_context(viewport={"width": 1280, "height": 960})
+        context = browser.new_context(
+            **{"viewport": {"width": 1280, "height": 960}, **(device or {})}
+        )
         context.set_default_timeout(60_000)
         if init_script is not None:
             context.add_init_script(init_script)
@@ -111,7 +121,8 @@ def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator
         page.on("worker", lambda worker: worker.on("console", keep))
         page.on("pageerror", lambda error: entry.console.append(f"pageerror: {error}"))
         opened.append(entry)
-        page.goto(f"{server.url}/{role}?{urlencode(query)}")
+        fragment = "" if token is None else f"#token={token}"
+        page.goto(f"{server.url}/{role}?{urlencode(query)}{fragment}")
         return page
 
     yield open_page

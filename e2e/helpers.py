@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import ssl
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -12,7 +13,7 @@ import cv2
 import httpx
 import numpy as np
 import numpy.typing as npt
-from playwright.sync_api import Browser, Page
+from playwright.sync_api import Browser, CDPSession, Page
 
 from app.protocol.angles import wrap_angle
 from app.server.serve import RunningServer
@@ -68,6 +69,22 @@ def turtle_state(
     return turtle
 
 
+def theta(server: RunningServer) -> float:
+    """The simulated turtle1's heading."""
+    return float(turtle_state(server)["theta"])
+
+
+def ccw_from(start: float, now: float) -> float:
+    """How far a heading turned counter-clockwise from ``start`` to ``now``, in (−π, π]."""
+    return math.remainder(now - start, 2 * math.pi)
+
+
+def stopped(vehicle: Page) -> bool:
+    """The vehicle page's last published Twist is the zero Twist."""
+    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
+    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
+
+
 def heading_error(theta: float, goal: float) -> float:
     """Absolute angle between two headings, in [0, π]."""
     return abs(wrap_angle(theta - goal))
@@ -110,13 +127,47 @@ def module_page(
     server: RunningServer, browser: Browser, module: str, name: str | None = None
 ) -> Iterator[Page]:
     """A page of the server with ``/static/js/<module>.js`` imported as ``window.<name>``
-    (default: the module's name), to run a page module's pure functions against their Python
-    twins."""
+    (default: the module's file name, e.g. ``manual`` for ``core/manual``), to run a page
+    module's pure functions against their Python twins."""
     opened = browser.new_page()
     opened.goto(server.url + "/")
     url = f"/static/js/{module}.js"
-    opened.evaluate(f"async () => {{ window[{name or module!r}] = await import({url!r}); }}")
+    global_name = name or module.rsplit("/", 1)[-1]
+    opened.evaluate(f"async () => {{ window[{global_name!r}] = await import({url!r}); }}")
     try:
         yield opened
     finally:
         opened.close()
+
+
+class Touches:
+    """Fingers on a touch screen page (a context with ``has_touch``), through Chromium's input
+    pipeline as a phone's are: ``Input.dispatchTouchEvent`` takes every finger down with a
+    touchStart or touchMove, the fingers lifting with a touchEnd, and none with a touchCancel
+    (which cancels them all)."""
+
+    def __init__(self, page: Page) -> None:
+        self.cdp: CDPSession = page.context.new_cdp_session(page)
+        self.down: dict[int, tuple[float, float]] = {}
+
+    def _send(self, kind: str, points: dict[int, tuple[float, float]]) -> None:
+        touch_points = [{"x": x, "y": y, "id": finger} for finger, (x, y) in points.items()]
+        self.cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": touch_points})
+
+    def press(self, finger: int, x: float, y: float) -> None:
+        self.down[finger] = (x, y)
+        self._send("touchStart", self.down)
+
+    def move(self, finger: int, x: float, y: float, steps: int = 5) -> None:
+        x0, y0 = self.down[finger]
+        for step in range(1, steps + 1):
+            self.down[finger] = (x0 + (x - x0) * step / steps, y0 + (y - y0) * step / steps)
+            self._send("touchMove", self.down)
+
+    def lift(self, finger: int) -> None:
+        self._send("touchEnd", {finger: self.down.pop(finger)})
+
+    def cancel(self) -> None:
+        """The browser cancels every touch (as when a call comes in)."""
+        self.down.clear()
+        self._send("touchCancel", {})

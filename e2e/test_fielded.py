@@ -19,11 +19,11 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, Playwright, expect
 
+from app.chromium import launch_options
 from app.protocol import tokens
 from app.server import tls
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
 from e2e.conftest import artifacts_dir
 from e2e.helpers import heading_error, status, turtle_state, wait_until
 

@@ -18,7 +18,7 @@ pytestmark = [pytest.mark.browser]
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "freshness") as opened:
+    with module_page(server, browser, "core/freshness") as opened:
         yield opened
 
 

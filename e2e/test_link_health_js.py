@@ -1,6 +1,6 @@
 """link-health.js's figures from getStats() reports: loss over the period, frames per second,
 round trip, the pair's most relayed candidate type, and the warnings at the thresholds of
-app/protocol/constants.py (which reach the page as ``PROTOCOL.health``)."""
+app/protocol/link_health.py (which reach the page as ``PROTOCOL.health``)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol import constants as c
-from app.protocol.browser import browser_protocol
+from app.protocol.link_health import HEALTH
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 
@@ -54,7 +54,7 @@ def report(t_ms: float, received: int, lost: int, frames: int, local: str, remot
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "link-health") as opened:
+    with module_page(server, browser, "net/link-health") as opened:
         yield opened
 
 
@@ -90,14 +90,14 @@ def test_the_pair_is_as_relayed_as_its_most_relayed_end(
 
 
 def test_warnings_at_the_protocol_s_thresholds(page: Page) -> None:
-    limits = browser_protocol()["health"]
+    limits = to_json(page_protocol().health)
     assert limits == {
-        "periodS": c.HEALTH_PERIOD_S,
-        "maxLossPct": c.HEALTH_MAX_LOSS_PCT,
-        "maxRttMs": c.HEALTH_MAX_RTT_MS,
+        "periodS": HEALTH.period_s,
+        "maxLossPct": HEALTH.max_loss_pct,
+        "maxRttMs": HEALTH.max_rtt_ms,
     }
-    calm = {"lossPct": c.HEALTH_MAX_LOSS_PCT, "rttMs": c.HEALTH_MAX_RTT_MS}
+    calm = {"lossPct": HEALTH.max_loss_pct, "rttMs": HEALTH.max_rtt_ms}
     assert page.evaluate(WARNINGS_JS, [calm, limits]) == []
-    bad = {"lossPct": c.HEALTH_MAX_LOSS_PCT + 1, "rttMs": c.HEALTH_MAX_RTT_MS + 1}
+    bad = {"lossPct": HEALTH.max_loss_pct + 1, "rttMs": HEALTH.max_rtt_ms + 1}
     found = page.evaluate(WARNINGS_JS, [bad, limits])
     assert len(found) == 2 and "packet loss" in found[0] and "round trip" in found[1]

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import page_constants
+from app.protocol.control import control_config
+from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.manual_sequences import SEQUENCES, run
@@ -18,19 +19,17 @@ from vehicle_agent.control import PROFILES
 
 pytestmark = [pytest.mark.browser]
 
-CONSTANTS = page_constants()
+CONSTANTS = to_json(control_config())
 
 RUN_JS = """([events, profile, deadmanS]) => {
-  const now = [0];
-  const drive = new manual.ManualDrive(profile, deadmanS, () => now[0]);
+  const drive = new manual.ManualDrive(profile, deadmanS);
   return events.map(([kind, t, args]) => {
-    now[0] = t;
     let twist;
     if (kind === 'mode') twist = drive.setMode(args[0], args[1]);
-    else if (kind === 'drive') twist = drive.drive(...args);
-    else twist = drive.tick();
+    else if (kind === 'drive') twist = drive.drive(...args, t);
+    else twist = drive.tick(t);
     const answer = twist === null ? null : [twist.linear, twist.angular];
-    return [answer, drive.manual, drive.operator, drive.untilDeadman()];
+    return [answer, drive.manual, drive.operator, drive.untilDeadman(t)];
   });
 }"""
 
@@ -44,7 +43,7 @@ def rounded(value: Any) -> Any:
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "manual") as opened:
+    with module_page(server, browser, "core/manual") as opened:
         yield opened
 
 
@@ -55,3 +54,31 @@ def test_scripted_sequences_take_the_same_decisions(page: Page, profile: str) ->
         expected: Any = run(events, PROFILES[profile])
         got = page.evaluate(RUN_JS, [events, constants, CONSTANTS["deadmanS"]])
         assert rounded(got) == rounded(expected), name
+
+
+# The vehicle page's dead-man as vehicle.js builds it: its profile and `deadmanS` from the
+# config the server embeds in /vehicle, with the times given. The last command comes at 1 s.
+VEHICLE_PAGE_DEAD_MAN = """async (times) => {
+  const html = await (await fetch('/vehicle')).text();
+  const page = new DOMParser().parseFromString(html, 'text/html');
+  const config = JSON.parse(page.getElementById('config').textContent);
+  const { ControlLaw } = await import('/static/js/core/control.js');
+  const profile = new ControlLaw(config.control).profiles[config.profile];
+  const drive = new manual.ManualDrive(profile, config.control.deadmanS);
+  drive.setMode('manual', 'ann');
+  const moving = drive.drive(1, 1, 0, 1.0);
+  const left = drive.untilDeadman(1.0);
+  const ticks = times.map((t) => {
+    const twist = drive.tick(t);
+    return twist === null ? null : [twist.linear, twist.angular];
+  });
+  return { moving: [moving.linear, moving.angular], left, ticks };
+}"""
+
+
+def test_the_vehicle_page_stops_0_3_s_after_the_last_drive_command(page: Page) -> None:
+    # The contract (docs/contracts.md) as a number: 0.3 s, not the constant the page is given.
+    got = page.evaluate(VEHICLE_PAGE_DEAD_MAN, [1.1, 1.25, 1.29, 1.0 + 0.3, 1.31])
+    assert got["moving"] == [PROFILES["default"].manual_linear, 0]
+    assert got["left"] == pytest.approx(0.3)
+    assert got["ticks"] == [None, None, None, [0, 0], None]

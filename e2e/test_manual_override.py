@@ -14,10 +14,10 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page, expect
 
-from app.protocol.constants import CLIENT_FORWARD_SCALE_DOWN
+from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, open_room
-from e2e.helpers import heading_error, status, turtle_state, wait_until
+from e2e.helpers import ccw_from, heading_error, status, stopped, theta, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
@@ -33,26 +33,37 @@ navigator.getGamepads = () => [window.stubPad];
 # Left shoulder held (the enable button) and the left stick pushed left, or all let go.
 PAD_LEFT = "() => { stubPad.buttons[4].pressed = true; stubPad.axes[0] = -1; }"
 PAD_RELEASED = "() => { stubPad.buttons[4].pressed = false; stubPad.axes[0] = 0; }"
-
-
-def theta(server: RunningServer) -> float:
-    return float(turtle_state(server)["theta"])
-
-
-def ccw_from(start: float, now: float) -> float:
-    """How far the turtle turned counter-clockwise from ``start``, in (−π, π]."""
-    return math.remainder(now - start, 2 * math.pi)
-
-
-def stopped(vehicle: Page) -> bool:
-    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
-    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
+# On the vehicle page, on its own clock: when it last applied a drive command, and when the zero
+# Twist that followed was published (its status object's fields, watched as the page sets them).
+WATCH_THE_DEAD_MAN = """() => {
+  const status = window.autopilotStatus;
+  const seen = (window.deadMan = { lastDrive: null, stopped: null });
+  let drives = status.drivesApplied;
+  let twist = status.lastTwist;
+  Object.defineProperty(status, 'drivesApplied', {
+    get: () => drives,
+    set: (value) => {
+      drives = value;
+      seen.lastDrive = performance.now();
+      seen.stopped = null;
+    },
+  });
+  Object.defineProperty(status, 'lastTwist', {
+    get: () => twist,
+    set: (value) => {
+      twist = value;
+      const zero = value.linear === 0 && value.angular === 0;
+      if (zero && seen.stopped === null) seen.stopped = performance.now();
+    },
+  });
+}"""
 
 
 def healthy(client: Page) -> bool:
     """Both links measured with plausible figures, and a recent goal at the vehicle."""
     health = client.evaluate("() => structuredClone(window.autopilotHealth)")
-    # The relay forwards the client the video at a reduced size (DESIGN §10, relay cost).
+    # The relay forwards the client the video at a reduced size (docs/architecture.md, "What a
+    # room costs").
     forward = (int(640 / CLIENT_FORWARD_SCALE_DOWN), int(480 / CLIENT_FORWARD_SCALE_DOWN))
     for link, size in ((health["vehicleToRelay"], (640, 480)), (health["relayToClient"], forward)):
         if link is None or link["fps"] is None or link["fps"] <= 0 or link["rttMs"] is None:
@@ -101,9 +112,20 @@ def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     turns_left_then_stops(
         server, vehicle, lambda: keyboard.down("ArrowLeft"), lambda: keyboard.up("ArrowLeft")
     )
-    # The relay still pilots: its goals reach the vehicle and are ignored, counted.
-    ignored = status(vehicle)["goalsIgnored"]
-    wait_until(lambda: status(vehicle)["goalsIgnored"] > ignored, 10, "goals ignored while manual")
+    # The relay still pilots: its goals reach the vehicle and are dropped, recorded as the
+    # agent records them, and none of them steers.
+    dropped = status(vehicle)["goalsDropped"]["manual"]
+    wait_until(
+        lambda: status(vehicle)["goalsDropped"]["manual"] > dropped, 10, "goals dropped (manual)"
+    )
+    records = status(vehicle)["records"]
+    last = next(r for r in reversed(records) if r["ev"] == "goal_dropped")
+    assert last["why"] == "manual" and isinstance(last["seq"], int), last
+    # Since ann took the wheel (or as far back as the page keeps), no goal was applied.
+    taken = max((i for i, r in enumerate(records) if r["ev"] == "mode"), default=-1)
+    if taken >= 0:
+        assert records[taken]["mode"] == "manual", records[taken]
+    assert not any(r["ev"] == "goal" for r in records[taken + 1 :]), records
 
     # Bob sees who drives and cannot take over: the button is off, and the relay refuses.
     expect(bob.get_by_test_id("mode")).to_have_text("ann is driving")
@@ -126,13 +148,19 @@ def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     )
 
     # Bob holds the stick, then his page goes silent (paused: no more commands, no release):
-    # the vehicle's dead-man stops the turtle, with bob still holding the wheel.
+    # the vehicle's dead-man stops the turtle 0.3 s after the last command it applied (the
+    # contract, docs/contracts.md; 0.05 s for the page's timer, 0.01 s for the command being
+    # counted a moment before it is watched), with bob still at the wheel.
+    vehicle.evaluate(WATCH_THE_DEAD_MAN)
     bob.evaluate(PAD_LEFT)
     wait_until(lambda: not stopped(vehicle), 10, "bob's gamepad turning the turtle")
     cdp = bob.context.new_cdp_session(bob)
     cdp.send("Debugger.enable")
     cdp.send("Debugger.pause")  # the page's script stops at its next step: the repeat timer's
     wait_until(lambda: stopped(vehicle), 5, "the dead-man's zero Twist")
+    dead_man = vehicle.evaluate("() => window.deadMan")
+    stopped_after = (dead_man["stopped"] - dead_man["lastDrive"]) / 1000
+    assert 0.3 - 0.01 <= stopped_after <= 0.3 + 0.05, dead_man
     assert status(vehicle)["mode"] == "manual"
     held = theta(server)
     time.sleep(1.0)

@@ -10,8 +10,8 @@ import cv2
 import pytest
 from playwright.sync_api import Browser, Playwright, expect
 
+from app.chromium import launch_options
 from app.server.serve import RunningServer
-from app.tools.browser import launch_options
 from e2e.conftest import OpenRole, artifacts_dir
 from e2e.helpers import (
     FPS,

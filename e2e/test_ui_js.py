@@ -28,7 +28,7 @@ SHOW_TWICE_THEN_CHANGE = """() => {
 def test_show_leaves_unchanged_text_alone(server: RunningServer, browser: Browser) -> None:
     # A still turtle's pose arrives 60 times a second with the same text: rewriting it anyway
     # made the vehicle page lay out and repaint at 60 Hz (0.3 of a core on an idle page).
-    with module_page(server, browser, "ui") as page:
+    with module_page(server, browser, "view/ui") as page:
         assert page.evaluate(SHOW_TWICE_THEN_CHANGE) == [2, "x 2.00"]
 
 
@@ -53,7 +53,7 @@ def test_throttle_runs_at_once_then_at_most_once_a_period_with_the_last_state(
 ) -> None:
     # The figures and the turtle's map are redrawn through it: a person must see the last pose
     # when the turtle stops, not the one before it.
-    with module_page(server, browser, "ui") as page:
+    with module_page(server, browser, "view/ui") as page:
         seen = page.evaluate(THROTTLE_TEN_CALLS)
     assert [state for _, state in seen] == [1, 10], seen
     # Deferred to the end of the period (less a millisecond: the page clock is coarse).

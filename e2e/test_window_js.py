@@ -25,7 +25,7 @@ WIDTH, HEIGHT = 256, 192
 
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
-    with module_page(server, browser, "window", name="searchWindow") as opened:
+    with module_page(server, browser, "core/tracking-window", name="searchWindow") as opened:
         yield opened
 
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import logging
 from collections.abc import AsyncIterator, Callable, Iterator
+from pathlib import Path
 
 import pytest
 import pytest_asyncio
 from playwright.async_api import Browser, Page, async_playwright
 
+from app.chromium import launch_options
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
+from app.tools.redis_server import redis_server
 from tests.helpers.sockets import Records
 
 
@@ -40,6 +42,26 @@ def start_server() -> Iterator[Callable[[Settings], RunningServer]]:
 def server(start_server: Callable[[Settings], RunningServer], settings: Settings) -> RunningServer:
     """The app with default settings, running on a free port."""
     return start_server(settings)
+
+
+@pytest.fixture
+def redis_url(tmp_path: Path) -> Iterator[str]:
+    """A fresh Debian ``redis-server`` on a free port, stopped after the test (the fleet's and
+    the relay pool's tests)."""
+    with redis_server(tmp_path) as url:
+        yield url
+
+
+@pytest.fixture
+def start_instance(
+    redis_url: str, start_server: Callable[[Settings], RunningServer]
+) -> Callable[[], RunningServer]:
+    """Start one more instance of the service on the test's Redis (in this process)."""
+
+    def start() -> RunningServer:
+        return start_server(Settings(environment="development", token=None, redis_url=redis_url))
+
+    return start
 
 
 @pytest.fixture

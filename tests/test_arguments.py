@@ -16,7 +16,7 @@ from app.arguments import (
     positive_integer,
     positive_number,
 )
-from app.protocol import constants, control
+from app.protocol import control, relay_profiles
 
 
 @pytest.mark.parametrize(
@@ -64,7 +64,11 @@ def test_refuses_with_the_reason(parse: Callable[[str], float], text: str, words
     [
         (add_vehicle_profile, list(control.PROFILES), "fastest"),
         # follow is a vehicle profile: the relay paces it as default and has no such profile.
-        (partial(add_relay_profile, purpose="relay profile"), list(constants.PROFILES), "follow"),
+        (
+            partial(add_relay_profile, purpose="relay profile"),
+            list(relay_profiles.PROFILES),
+            "follow",
+        ),
     ],
 )
 def test_profile_options_offer_the_protocol_profiles(
@@ -72,7 +76,7 @@ def test_profile_options_offer_the_protocol_profiles(
 ) -> None:
     parser = argparse.ArgumentParser(exit_on_error=False)
     add(parser)
-    assert parser.parse_args([]).profile == constants.DEFAULT_PROFILE
+    assert parser.parse_args([]).profile == relay_profiles.DEFAULT_PROFILE
     for name in profiles:
         assert parser.parse_args(["--profile", name]).profile == name
     with pytest.raises(argparse.ArgumentError, match=foreign):

@@ -1,20 +1,82 @@
-"""Every vendored file is the one its provenance names: app/static/VENDORED.json's sha256 of each
-path matches the file in the repository (scripts/vendor.sh and scripts/build-opencv-js write
-both)."""
+"""Every vendored file is the one its provenance names, and OpenCV is one version everywhere.
+
+app/static/VENDORED.json (written by scripts/vendor alone) records each vendored file's package,
+version and sha256; the files in the repository must match it, and it must match the pins in
+pyproject.toml. OpenCV is pinned once, by the opencv-python-headless dependency: the places that
+cannot read that pin (constraints.txt, written from what was installed; the record itself) are
+checked against it here.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import json
+import re
+import tomllib
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+STATIC = REPO / "app/static"
+FIELDS = {"path", "package", "version", "source", "file", "sha256"}
+
+
+def vendored() -> dict[str, Any]:
+    document: dict[str, Any] = json.loads((STATIC / "VENDORED.json").read_text())
+    return document
+
+
+def pyproject() -> dict[str, Any]:
+    with (REPO / "pyproject.toml").open("rb") as file:
+        return tomllib.load(file)
+
+
+def opencv_pin() -> str:
+    pins = [
+        match.group(1)
+        for requirement in pyproject()["project"]["dependencies"]
+        if (match := re.fullmatch(r"opencv-python-headless==([0-9.]+)", requirement))
+    ]
+    assert len(pins) == 1, pins
+    return pins[0]
 
 
 def test_each_vendored_file_matches_its_recorded_sha256() -> None:
-    vendored = json.loads((REPO / "app/static/VENDORED.json").read_text())
-    assert vendored["files"]
-    for entry in vendored["files"]:
+    document = vendored()
+    assert document["written_by"] == "scripts/vendor"
+    assert document["files"]
+    for entry in document["files"]:
+        assert FIELDS <= set(entry) and all(entry[key] for key in FIELDS), entry
         data = (REPO / entry["path"]).read_bytes()
         assert hashlib.sha256(data).hexdigest() == entry["sha256"], entry["path"]
-        assert entry["package"], entry
+
+
+def test_every_vendored_file_is_recorded() -> None:
+    on_disk = {
+        str(path.relative_to(REPO))
+        for path in [*STATIC.glob("opencv*.js"), *(STATIC / "vendor").iterdir()]
+    }
+    assert on_disk == {entry["path"] for entry in vendored()["files"]}
+
+
+def test_the_record_holds_the_npm_packages_pyproject_pins() -> None:
+    opencv = ".".join(opencv_pin().split(".")[:3])
+    pins = pyproject()["tool"]["autopilot"]["vendor"]["npm"]
+    by_path = {entry["path"]: entry for entry in vendored()["files"]}
+    for path, pin in pins.items():
+        entry = by_path[path]
+        assert entry["package"] == pin["package"] and entry["file"] == pin["file"], entry
+        assert entry["version"] == pin["version"].format(opencv=opencv), entry
+    # The official OpenCV.js is the pinned OpenCV's build.
+    assert by_path["app/static/opencv.js"]["version"].startswith(f"{opencv}-")
+
+
+def test_opencv_is_one_version_on_both_sides() -> None:
+    pin = opencv_pin()
+    built = [e for e in vendored()["files"] if e["package"] == "opencv-python-headless"]
+    assert [e["path"] for e in built] == ["app/static/opencv-simd.js"]
+    assert built[0]["version"] == pin
+    sdist_sha256 = pyproject()["tool"]["autopilot"]["vendor"]["opencv-sdist-sha256"]
+    assert sdist_sha256 in built[0]["source"]
+    constraints = (REPO / "constraints.txt").read_text().splitlines()
+    assert f"opencv-python-headless=={pin}" in constraints

@@ -3,7 +3,13 @@
 One :class:`Agent` runs until cancelled. It logs in as a vehicle, waits for a relay in the room,
 offers to it and keeps that link alive: when the relay leaves, the link fails or the signaling
 server goes away, the turtle gets a zero Twist and the agent reconnects with backoff, without
-restarting. Everything that happens is dispatched from one queue, one handler per event kind.
+restarting. With a token it renews its session when the server says (``renew``), before the
+token expires, and uses the fresh token from then on: for a later login, and on the server's
+``/rosbridge``. Everything that happens is dispatched from one queue, one handler per event kind.
+
+What to do with the relay's goals, stops, mode changes and drive commands, the turtle's poses
+and the clock is the :class:`~vehicle_agent.pilot.Pilot`'s to decide; the agent feeds it (with
+the time) and acts on its answers: publishes its Twists and logs its records.
 """
 
 from __future__ import annotations
@@ -19,16 +25,21 @@ from typing import Any
 
 from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
+from pydantic import ValidationError
 
 from app.protocol import channels, jsonedge
-from app.protocol.constants import AUTOPILOT_CHANNEL, DEFAULT_ROOM
+from app.protocol import events as ev
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.errors import describe
+from app.protocol.events import PilotEvent
+from app.protocol.rooms import DEFAULT_ROOM
+from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
-from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
+from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
-from vehicle_agent.freshness import GoalGate
-from vehicle_agent.manual import ManualDrive
 from vehicle_agent.peer import RelayLink
+from vehicle_agent.pilot import Pilot
 from vehicle_agent.signaling import SignalingClient, SignalingError
 from vehicle_agent.turtle import Turtle, TurtleError
 
@@ -37,7 +48,6 @@ log = logging.getLogger(__name__)
 # The relay must answer and ICE must connect within this long, or the agent offers again.
 CONNECT_TIMEOUT_S = 10.0
 TELEMETRY_PERIOD_S = 0.1
-TICK_PERIOD_S = 0.05
 
 # Handles one validated data-channel message from the relay.
 ChannelHandler = Callable[[str, Any], None]
@@ -83,24 +93,20 @@ class Agent:
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
-        self.controller = Controller(profile)
-        # The operator's wheel (manual override): while manual, goals are ignored (counted).
-        self.manual = ManualDrive(profile)
-        self.goals_ignored = 0
-        # Latest-wins on the lossy goal channel; reset for every new link.
-        self.goal_gate = GoalGate()
+        self.pilot = Pilot(profile)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
         self._link: RelayLink | None = None
         self._relay: str | None = None
         self._client: SignalingClient | None = None
+        # The session's token as last renewed (the next login uses it), and the renewal's timer.
+        self.token = config.token
+        self._renewal: asyncio.TimerHandle | None = None
         self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
         self._last_telemetry = 0.0
-        # When the last goal was applied on this link (its age rides the pose: link health).
-        self._last_goal_at: float | None = None
         self.logged_in = asyncio.Event()
         self._handlers: dict[str, Callable[[Any], Awaitable[None]]] = {
             "login": self._ignore,
@@ -108,6 +114,7 @@ class Agent:
             "answer": self._on_answer,
             "candidate": self._on_candidate,
             "leave": self._on_leave,
+            "renewed": self._on_renewed,
             "error": self._on_server_error,
         }
         # What the session loop's queue carries (besides "closed", which ends the session).
@@ -115,6 +122,7 @@ class Agent:
             "signal": self._on_signal,
             "link_down": self._on_link_event,
             "retry": self._on_retry,
+            "renew": self._on_renew,
         }
         # One handler per message the vehicle accepts on `autopilot` (channels.RECEIVERS).
         self._channel_handlers: dict[type[channels.ChannelMessage], ChannelHandler] = {
@@ -151,7 +159,6 @@ class Agent:
             if spawn is not None:
                 spawn.cancel()
             await self._drop_link("agent stopping")
-            self._publish(self.controller.stop())
             await self.turtle.close()
             self.video.stop()
 
@@ -165,7 +172,7 @@ class Agent:
                 self.config.server,
                 self.config.name,
                 self.config.room,
-                token=self.config.token,
+                token=self.token,
                 tls=self.config.tls,
             )
             try:
@@ -201,6 +208,7 @@ class Agent:
     async def _session(self, client: SignalingClient, peers: list[dict[str, Any]]) -> None:
         self._queue = asyncio.Queue()
         reader = asyncio.create_task(self._read(client), name="signaling-reader")
+        self._renew_after(client.renew_in)
         try:
             await self._on_peers({"peers": peers})
             while True:
@@ -214,6 +222,33 @@ class Agent:
             if self._retry is not None:
                 self._retry.cancel()
                 self._retry = None
+            if self._renewal is not None:
+                self._renewal.cancel()
+                self._renewal = None
+
+    def _renew_after(self, seconds: float | None) -> None:
+        """Ask for a fresh token in ``seconds`` (None: the server asks for no tokens)."""
+        if seconds is None:
+            return
+        queue = self._queue
+        loop = asyncio.get_running_loop()
+        self._renewal = loop.call_later(seconds, queue.put_nowait, ("renew", None))
+
+    async def _on_renew(self, payload: None) -> None:
+        self._renewal = None
+        if self._client is not None:
+            await self._client.send(Renew(type="renew").model_dump(exclude_none=True))
+
+    async def _on_renewed(self, message: dict[str, Any]) -> None:
+        try:
+            renewed = Renewed.model_validate(message)
+        except ValidationError as exc:
+            log.warning("malformed renewal from the server: %s", describe(exc))
+            return
+        self.token = renewed.token
+        self.turtle.renew(renewed.token)
+        log.debug("token renewed; next renewal in %.0f s", renewed.renewIn)
+        self._renew_after(renewed.renewIn)
 
     async def _on_signal(self, message: dict[str, Any]) -> None:
         handler = self._handlers.get(message["type"])
@@ -308,10 +343,8 @@ class Agent:
         )
         link.on_up = self._on_link_up
         self._link = link
-        self.goal_gate.reset()
-        self._last_goal_at = None
-        self.manual.reset_link()
-        self.events.emit("link", state="offer", relay=link.relay)
+        self._act(self.pilot.new_link(time.monotonic()))
+        self.events.emit(ev.LinkChanged(state="offer", relay=link.relay, t=time.monotonic()))
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
 
@@ -319,11 +352,13 @@ class Agent:
         candidates = link.local_candidate_types()
         log.info("link to %s up (local candidates: %s)", link.relay, ", ".join(candidates))
         self.events.emit(
-            "link",
-            state="up",
-            relay=link.relay,
-            local_candidates=candidates,
-            selected=link.selected_candidate_type(),
+            ev.LinkChanged(
+                state="up",
+                relay=link.relay,
+                local_candidates=tuple(candidates),
+                selected=link.selected_candidate_type(),
+                t=time.monotonic(),
+            )
         )
 
     def _check_connected(self, link: RelayLink) -> None:
@@ -346,11 +381,14 @@ class Agent:
 
     async def _drop_link(self, reason: str) -> None:
         link, self._link = self._link, None
-        self._halt()
+        # Stop at once, autopilot or operator: the link that carried the commands is gone.
+        self._act(self.pilot.halt(time.monotonic()))
         if link is None:
             return
         log.info("link to %s down: %s", link.relay, reason)
-        self.events.emit("link", state="down", relay=link.relay, reason=reason)
+        self.events.emit(
+            ev.LinkChanged(state="down", relay=link.relay, reason=reason, t=time.monotonic())
+        )
         await link.close()
 
     # --- data channel ----------------------------------------------------------------------
@@ -386,59 +424,26 @@ class Agent:
         return channels.Error(reason=reason, ref=ref)
 
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
-        if self.manual.manual:
-            self.goals_ignored += 1
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why="manual")
-            return
-        verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
-        if verdict != "fresh":
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
-            return
-        self._last_goal_at = time.monotonic()
-        self.events.emit(
-            "goal",
-            seq=goal.seq,
-            op=goal.op,
-            frame=goal.frame,
-            x=goal.x,
-            y=goal.y,
-            w=goal.w,
-            h=goal.h,
-        )
-        self._publish(
-            self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
-        )
+        self._act(self.pilot.goal(goal, time.monotonic()))
 
     def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)
-        self._publish(self.controller.stop())
+        self._act(self.pilot.stop(time.monotonic()))
 
     def _on_mode(self, relay: str, message: channels.ModeChange) -> None:
-        # Whichever way the mode changes, the turtle stops first: the autopilot's last command
-        # must not outlive its goals, nor the operator's outlive the wheel.
-        changed = self.manual.set_mode(message.mode, message.operator)
-        if changed is None:
-            return
-        self.controller.stop()
-        log.info(
-            "mode %s%s (%s)",
-            message.mode,
-            f" by {message.operator}" if message.operator else "",
-            message.reason or relay,
-        )
-        self.events.emit("mode", mode=message.mode, operator=message.operator)
-        self._publish(changed)
+        done = self.pilot.mode_change(message.mode, message.operator, time.monotonic())
+        if done:
+            log.info(
+                "mode %s%s (%s)",
+                message.mode,
+                f" by {message.operator}" if message.operator else "",
+                message.reason or relay,
+            )
+        self._act(done)
 
     def _on_drive(self, relay: str, message: channels.Drive) -> None:
-        twist = self.manual.drive(message.seq, message.linear, message.angular)
-        moving = twist is not None and not twist.is_zero
-        self.events.emit("drive", seq=message.seq, applied=twist is not None, moving=moving)
-        self._publish(twist)
-
-    def _halt(self) -> None:
-        """Stop at once, autopilot or operator: the link that carried the commands is gone."""
-        stopped = self.controller.stop()
-        self._publish(self.manual.set_mode("auto", None) or stopped)
+        now = time.monotonic()
+        self._act(self.pilot.drive(message.seq, message.linear, message.angular, now))
 
     def _on_peer_error(self, relay: str, message: channels.Error) -> None:
         log.warning("%r reported an error: %r", relay, message.reason)
@@ -454,49 +459,45 @@ class Agent:
         except TurtleError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
-            self.events.emit("spawn", ok=False, reason=str(exc))
+            self.events.emit(ev.SpawnStep(ok=False, reason=str(exc), t=time.monotonic()))
             return
         log.info("spawn step: turtle turned to θ = %.4f rad", SPAWN_THETA)
-        self.events.emit("spawn", ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA)
+        self.events.emit(
+            ev.SpawnStep(ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA, t=time.monotonic())
+        )
 
     def _on_pose(self, pose: Pose) -> None:
         self.pose = pose
         if self._first_pose is not None and not self._first_pose.done():
             self._first_pose.set_result(pose)
-        self._publish(self.controller.pose(pose))
         now = time.monotonic()
+        self._act(self.pilot.pose(pose, now))
         if now - self._last_telemetry >= TELEMETRY_PERIOD_S:
             self._last_telemetry = now
             link = self._link
             sent = False
             if link is not None and all(map(math.isfinite, (pose.x, pose.y, pose.theta))):
                 # Pose is state: the lossy channel, where a late one is skipped, not waited for.
-                last_goal = self._last_goal_at
-                age = None if last_goal is None else (now - last_goal) * 1000
+                age_s = self.pilot.goal_age(now)
+                age = None if age_s is None else age_s * 1000
                 sent = link.send_state(
                     channels.Pose(
                         x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
                     )
                 )
-            self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
+            self.events.emit(ev.PoseReport(x=pose.x, y=pose.y, theta=pose.theta, sent=sent, t=now))
 
     async def _tick(self) -> None:
         while True:
-            waits = (self.controller.until_timeout(), self.manual.until_deadman())
-            await asyncio.sleep(min([TICK_PERIOD_S, *(w for w in waits if w is not None)]))
-            self._publish(self.controller.tick())
-            self._publish(self.manual.tick())
+            await asyncio.sleep(self.pilot.next_tick(time.monotonic()))
+            self._act(self.pilot.tick(time.monotonic()))
 
-    def _publish(self, twist: Twist | None) -> None:
-        if twist is None:
-            return
-        self.turtle.publish(twist)
-        self.events.emit(
-            "twist",
-            seq=twist.seq,
-            frame=twist.frame,
-            linear=twist.linear_x,
-            angular=twist.angular_z,
-        )
-        if twist.is_zero and twist.seq is None:
-            log.info("turtle stopped")
+    def _act(self, done: list[PilotEvent]) -> None:
+        """Carry out what the pilot did: publish its Twists, log its records, in order."""
+        for event in done:
+            if isinstance(event, ev.TwistSent):
+                twist = Twist(event.linear, event.angular, event.seq, event.frame)
+                self.turtle.publish(twist)
+                if twist.is_zero and twist.seq is None:
+                    log.info("turtle stopped")
+            self.events.emit(event)

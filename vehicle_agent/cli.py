@@ -6,17 +6,22 @@ import argparse
 import asyncio
 import contextlib
 import logging
-import os
 import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
 
 from aiortc import RTCIceServer
 
-from app.arguments import add_vehicle_profile, non_negative_number, positive_number
+from app.arguments import (
+    add_token_option,
+    add_vehicle_profile,
+    non_negative_number,
+    positive_number,
+)
 from app.metrics import add_metrics_arguments
-from app.protocol.constants import DEFAULT_ROOM, VIDEO_FPS, VIDEO_SIZE
+from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import on_stop_signals
 from vehicle_agent import recorder
 from vehicle_agent.agent import Agent, AgentConfig
@@ -28,9 +33,6 @@ from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
-
-# Read when --token is not given, so the token stays out of the process list.
-TOKEN_ENV = "AUTOPILOT_ACCESS_TOKEN"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -119,11 +121,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--events", type=Path, metavar="PATH", help="append a JSON-lines event log here"
     )
-    parser.add_argument(
-        "--token",
-        default=os.environ.get(TOKEN_ENV),
-        help=f"vehicle token for the room, from `autopilot token` (default: ${TOKEN_ENV})",
-    )
+    add_token_option(parser, "vehicle")
     parser.add_argument(
         "--ca-file",
         type=Path,
@@ -167,13 +165,7 @@ async def _main(args: argparse.Namespace) -> int:
         args.video,
         args.size,
         args.fps,
-        on_frame=lambda info: events.emit(
-            "frame_sent",
-            frame=info.frame,
-            face_x=info.face_x,
-            face_y=info.face_y,
-            jump=info.jump,
-        ),
+        on_frame=events.emit,
         sweep_s=args.sweep_s,
     )
     turtle: Turtle = SimTurtle()
@@ -211,12 +203,18 @@ async def _main(args: argparse.Namespace) -> int:
             await flight.close()
             totals = flight.totals()
             log.info(
-                "flight recorder: %(images)d images, %(messages)d messages (%(dropped)d dropped) "
-                "in %(files)d file(s), %(frames_held)d of %(frames)d camera frames held; its CPU "
-                "%(cpu_s).2f s over %(seconds).0f s",
-                totals,
+                "flight recorder: %d images, %d messages (%d dropped) in %d file(s), %d of %d "
+                "camera frames held; its CPU %.2f s over %.0f s",
+                totals.images,
+                totals.messages,
+                totals.dropped,
+                totals.files,
+                totals.frames_held,
+                totals.frames,
+                totals.cpu_s,
+                totals.seconds,
             )
-            events.emit("recorder", **totals)
+            events.emit(totals)
         events.close()
         if metrics is not None:
             metrics.close()

@@ -1,10 +1,10 @@
 """The vehicle's RTCPeerConnection to the room's relay (aiortc).
 
-The vehicle is always the offerer (DESIGN §2): it adds its video track, opens the reliable
-``autopilot`` and the lossy ``autopilot-state`` data channels (``app.protocol.channels``) and
-sends an offer; the relay answers and trickles its candidates. aiortc gathers
-its own candidates before the offer goes out, so they ride inside the SDP. A link is used once:
-when it fails or the relay goes away the agent closes it and makes a new one.
+The vehicle is always the offerer (docs/architecture.md, "Signaling protocol"): it adds its
+video track, opens the reliable ``autopilot`` and the lossy ``autopilot-state`` data channels
+(``app.protocol.channels``) and sends an offer; the relay answers and trickles its candidates.
+aiortc gathers its own candidates before the offer goes out, so they ride inside the SDP. A link
+is used once: when it fails or the relay goes away the agent closes it and makes a new one.
 """
 
 from __future__ import annotations
@@ -26,12 +26,13 @@ from aiortc import (
 from aiortc.sdp import candidate_from_sdp
 
 from app.protocol.channels import (
+    AUTOPILOT_CHANNEL,
+    AUTOPILOT_STATE_CHANNEL,
     STATE_CHANNEL_MAX_RETRANSMITS,
     STATE_CHANNEL_ORDERED,
     ChannelMessage,
     dump,
 )
-from app.protocol.constants import AUTOPILOT_CHANNEL, AUTOPILOT_STATE_CHANNEL
 from app.protocol.signaling import IceTransportPolicy
 
 log = logging.getLogger(__name__)

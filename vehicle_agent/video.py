@@ -1,8 +1,8 @@
 """Video sources for the agent, as aiortc ``MediaStreamTrack`` subclasses.
 
 * :class:`SyntheticVideo` -- a generated scene in which a real face photo moves along a known
-  path; each frame carries its number as the frame tag of docs/contracts.md, so the relay can
-  read it back and echo it in its goals (latency measurement), and
+  path; each frame carries its number as the frame tag (:mod:`app.protocol.frametag`), so the
+  relay can read it back and echo it in its goals (latency measurement), and
   :meth:`SyntheticVideo.face_centre` tells tests and benchmarks where the face truly is.
 * :class:`FileVideo` -- anything PyAV opens (``.y4m``, ``.mp4``, ...), looped forever.
 * a V4L2 device (``/dev/videoN``) through aiortc's ``MediaPlayer``.
@@ -31,13 +31,9 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
-from app.protocol.constants import (
-    TAG_BITS,
-    TAG_BLOCKS_PER_WIDTH,
-    TAG_MARKER_BLOCKS,
-    VIDEO_FPS,
-    VIDEO_SIZE,
-)
+from app.protocol import frametag
+from app.protocol.events import FrameSent
+from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -49,11 +45,6 @@ TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 
 Image = npt.NDArray[np.uint8]
 
-# Frame tag layout (docs/contracts.md): a row of square blocks along the top edge, the marker
-# blocks first, then the bits.
-TAG_FIRST_BIT_BLOCK = TAG_MARKER_BLOCKS
-
-
 # The --video values of the generated scenes: the moving face (SyntheticVideo) and the
 # target-lock scene (TwoFaceVideo).
 SYNTHETIC = "synthetic"
@@ -62,40 +53,6 @@ TWO_FACES = "two-faces"
 
 class VideoSourceError(RuntimeError):
     """A video source could not be opened; the message names the source and the problem."""
-
-
-# --- frame tag -----------------------------------------------------------------------------
-
-
-def tag_block_size(width: int) -> int:
-    """Side of one tag block in pixels for a frame ``width`` pixels wide."""
-    return width // TAG_BLOCKS_PER_WIDTH
-
-
-def draw_frame_tag(rgb: Image, frame: int) -> None:
-    """Write ``frame`` (mod 2**24) into the top row of ``rgb`` in place."""
-    b = tag_block_size(rgb.shape[1])
-    values = [255, 0] + [255 if (frame >> (TAG_BITS - 1 - i)) & 1 else 0 for i in range(TAG_BITS)]
-    for i, value in enumerate(values):
-        rgb[0:b, i * b : (i + 1) * b] = value
-
-
-def read_frame_tag(rgb: Image) -> int | None:
-    """The frame number written by :func:`draw_frame_tag`, or None when there is no tag."""
-    b = tag_block_size(rgb.shape[1])
-    if b < 2:
-        return None
-    blocks = TAG_FIRST_BIT_BLOCK + TAG_BITS
-    lo, hi = b // 4, b // 4 + max(1, b // 2)
-    # The inner square of every block at once (rows, block, columns, channel): the mean of each.
-    inner = rgb[lo:hi, : blocks * b].reshape(hi - lo, blocks, b, -1)[:, :, lo:hi]
-    bits = inner.mean(axis=(0, 2, 3)) >= 128
-    if not bits[0] or bits[1]:
-        return None
-    value = 0
-    for bit in bits[TAG_FIRST_BIT_BLOCK:]:
-        value = (value << 1) | int(bit)
-    return value
 
 
 # --- synthetic scene ---------------------------------------------------------------------
@@ -211,18 +168,6 @@ class DriftPath:
 
 def _ease(u: float) -> float:
     return 0.5 - 0.5 * math.cos(math.pi * u)
-
-
-@dataclass(frozen=True)
-class FrameInfo:
-    """What the synthetic source put into one frame, and when it handed the frame over."""
-
-    frame: int
-    sent_at: float  # time.monotonic()
-    face_x: float  # true face centre, pixels
-    face_y: float
-    # The face leapt across the frame since the previous frame (see SweepPath).
-    jump: bool = False
 
 
 class _FaceSprite:
@@ -385,11 +330,11 @@ class SyntheticVideo(PacedVideoTrack):
         fps: float = VIDEO_FPS,
         path: FacePath | None = None,
         photo: Path = DEFAULT_FACE,
-        on_frame: Callable[[FrameInfo], None] | None = None,
+        on_frame: Callable[[FrameSent], None] | None = None,
         flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
-        if width < 2 * TAG_BLOCKS_PER_WIDTH or height < 48:
+        if width < 2 * frametag.LAYOUT.blocks_per_width or height < 48:
             raise VideoSourceError(
                 f"synthetic video needs at least 80x48 pixels, not {width}x{height}"
             )
@@ -422,7 +367,7 @@ class SyntheticVideo(PacedVideoTrack):
         if flame is not None:
             draw_flame(img, flame[0], flame[1], frame)
         self._paste(img, self._sprite, self.face_centre(frame))
-        draw_frame_tag(img, frame)
+        frametag.stamp(img, frame)
         return img
 
     def _paste(self, img: Image, sprite: _FaceSprite, centre: tuple[float, float]) -> None:
@@ -441,22 +386,30 @@ class SyntheticVideo(PacedVideoTrack):
         frame = av.VideoFrame.from_ndarray(self.render(index), format="rgb24")
         if self.on_frame is not None:
             cx, cy = self.face_centre(index)
-            self.on_frame(FrameInfo(index, time.monotonic(), cx, cy, self.jumped(index)))
+            self.on_frame(
+                FrameSent(
+                    frame=index, face_x=cx, face_y=cy, jump=self.jumped(index), t=time.monotonic()
+                )
+            )
         return frame
 
 
 class TwoFaceVideo(SyntheticVideo):
-    """The target-lock scene (DESIGN §10): two faces drifting slowly, a large one on the left
+    """The target-lock scene (docs/architecture.md, "Which target"): two faces drifting slowly, a large one on the left
     (the default choice) and one ``small_share`` its size on the right; no flame. The large
-    face is :meth:`face_centre`, the small one :meth:`small_centre`."""
+    face is :meth:`face_centre`, the small one :meth:`small_centre`. A third, tiny face
+    (``tiny_share`` of the large one, :meth:`tiny_centre`) drifts up between them: too small
+    for the relay's reduced-size scan to find, as a person far away is, it has no box until the
+    operator clicks it (a full-resolution search around the click, app/protocol/lock.py)."""
 
     def __init__(
         self,
         width: int = VIDEO_SIZE[0],
         height: int = VIDEO_SIZE[1],
         fps: float = VIDEO_FPS,
-        on_frame: Callable[[FrameInfo], None] | None = None,
+        on_frame: Callable[[FrameSent], None] | None = None,
         small_share: float = 0.65,
+        tiny_share: float = 1 / 3,
     ) -> None:
         super().__init__(
             width, height, fps, DriftPath(0.3, 0.45, 0.06, 0.04, 9.0), on_frame=on_frame, flame=None
@@ -464,17 +417,26 @@ class TwoFaceVideo(SyntheticVideo):
         self.small_path = DriftPath(0.72, 0.5, 0.05, 0.05, 7.0, phase=1.0)
         self.small_px = max(24, round(height // 4 * small_share))
         self._small = _FaceSprite(SMALL_FACE, face_px=self.small_px)
+        self.tiny_path = DriftPath(0.62, 0.19, 0.02, 0.01, 11.0, phase=2.0)
+        self.tiny_px = max(12, round(height // 4 * tiny_share))
+        self._tiny = _FaceSprite(DEFAULT_FACE, face_px=self.tiny_px)
 
     def small_centre(self, frame: int) -> tuple[float, float]:
         """True centre (pixels) of the small face's box in frame number ``frame``."""
         fx, fy = self.small_path(frame / self.fps)
         return fx * self.width, fy * self.height
 
+    def tiny_centre(self, frame: int) -> tuple[float, float]:
+        """True centre (pixels) of the tiny face's box in frame number ``frame``."""
+        fx, fy = self.tiny_path(frame / self.fps)
+        return fx * self.width, fy * self.height
+
     def render(self, frame: int) -> Image:
-        """Frame number ``frame``: the scene with both faces, and the tag on top."""
+        """Frame number ``frame``: the scene with its three faces, and the tag on top."""
         img = super().render(frame)
         self._paste(img, self._small, self.small_centre(frame))
-        draw_frame_tag(img, frame)
+        self._paste(img, self._tiny, self.tiny_centre(frame))
+        frametag.stamp(img, frame)
         return img
 
 
@@ -562,7 +524,7 @@ def open_source(
     source: str,
     size: tuple[int, int] | None = None,
     fps: float | None = None,
-    on_frame: Callable[[FrameInfo], None] | None = None,
+    on_frame: Callable[[FrameSent], None] | None = None,
     sweep_s: float | None = None,
 ) -> MediaStreamTrack:
     """The track for a ``--video`` value: ``synthetic``, ``two-faces``, ``/dev/videoN`` or a

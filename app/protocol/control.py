@@ -2,18 +2,19 @@
 
 Written once here and read by both vehicles: the Python agent's law
 (:mod:`vehicle_agent.control`) imports them, and the browser vehicle page's ``control.js``
-receives them through its embedded config (:func:`page_constants`), so neither re-types a gain,
+receives them through its embedded config (:func:`control_config`), so neither re-types a gain,
 a distance or a profile name.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
-from typing import Any, Literal
+from dataclasses import dataclass, replace
+from typing import Literal
 
-from app.protocol.constants import DEFAULT_PROFILE, TERRAIN_CENTRE, WORLD_SIZE
-from app.protocol.constants import Profile as RelayProfile
+from app.protocol.relay_profiles import DEFAULT_PROFILE
+from app.protocol.relay_profiles import Profile as RelayProfile
+from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).
@@ -28,6 +29,9 @@ Law = Literal["rotate", "follow"]
 # live operator never trips it, and a lost or stuck client stops the vehicle within 0.3 s.
 DEADMAN_S = 0.3
 DRIVE_REPEAT_S = 0.1
+# A vehicle's pilot looks at its clock this often (goal timeout, the clock-driven profile's
+# period, the dead-man), and sooner when a stop falls due before.
+TICK_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -130,9 +134,11 @@ __all__ = [
     "DRIVE_REPEAT_S",
     "PROFILES",
     "TERRAIN_CENTRE",
+    "TICK_S",
     "WORLD_SIZE",
+    "ControlConfig",
     "Profile",
-    "page_constants",
+    "control_config",
     "with_standoff",
 ]
 
@@ -146,32 +152,29 @@ def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
     return replace(profile, standoff_m=standoff_m)
 
 
-def _camel(name: str) -> str:
-    head, *rest = name.split("_")
-    return head + "".join(part.capitalize() for part in rest)
+@dataclass(frozen=True)
+class ControlConfig:
+    """Everything ``control.js`` and ``manual.js`` need, for a page's embedded config."""
+
+    world_size: float
+    terrain_centre: float
+    min_target_distance_m: float
+    spawn_theta: float
+    deadman_s: float
+    drive_repeat_s: float
+    tick_s: float
+    profiles: dict[str, Profile]
 
 
-def _json_number(value: Any) -> Any:
-    # JSON has no infinity: null stands for "no limit" / "never" on the page.
-    if isinstance(value, float) and math.isinf(value):
-        return None
-    return value
-
-
-def profile_constants(profile: Profile) -> dict[str, Any]:
-    """One profile as the page sees it: camelCase keys, infinities as null."""
-    return {_camel(f.name): _json_number(getattr(profile, f.name)) for f in fields(profile)}
-
-
-def page_constants(profiles: dict[str, Profile] | None = None) -> dict[str, Any]:
-    """Everything ``control.js`` needs, JSON-ready, for a page's embedded config."""
-    chosen = PROFILES if profiles is None else profiles
-    return {
-        "worldSize": WORLD_SIZE,
-        "terrainCentre": TERRAIN_CENTRE,
-        "minTargetDistanceM": MIN_TARGET_DISTANCE_M,
-        "spawnTheta": SPAWN_THETA,
-        "deadmanS": DEADMAN_S,
-        "driveRepeatS": DRIVE_REPEAT_S,
-        "profiles": {name: profile_constants(p) for name, p in chosen.items()},
-    }
+def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
+    """The control law's numbers with ``profiles`` (default: :data:`PROFILES`)."""
+    return ControlConfig(
+        world_size=WORLD_SIZE,
+        terrain_centre=TERRAIN_CENTRE,
+        min_target_distance_m=MIN_TARGET_DISTANCE_M,
+        spawn_theta=SPAWN_THETA,
+        deadman_s=DEADMAN_S,
+        drive_repeat_s=DRIVE_REPEAT_S,
+        tick_s=TICK_S,
+        profiles=PROFILES if profiles is None else profiles,
+    )

@@ -17,7 +17,7 @@ learn a robot's flavour from rosapi ``topic_type`` and fall back to a setting.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Final, Literal, cast, get_args
 
 RosFlavour = Literal["1", "2", "jazzy"]
@@ -81,10 +81,6 @@ class RosTypes:
     def rosapi(self, name: str) -> str:
         """The type of rosapi's service ``name`` (``Topics``, ``GetParam``, ...)."""
         return type_name(self.flavour, self.rosapi_package, "srv", name)
-
-    def as_json(self) -> dict[str, str]:
-        """The table as plain JSON, for a page's embedded config."""
-        return {k: v for k, v in asdict(self).items() if isinstance(v, str)}
 
 
 def _types(flavour: RosFlavour) -> RosTypes:
@@ -153,11 +149,14 @@ def detect(pose_reported: str | None, twist_reported: str | None, setting: RosSe
     return Detected(flavour, types.pose, twist_reported or types.twist, reported is not None)
 
 
-def page_config() -> dict[str, object]:
+@dataclass(frozen=True)
+class RosConfig:
     """What the vehicle page needs to pick its type names, for its embedded config."""
-    return {
-        "default": DEFAULT_FLAVOUR,
-        "detectTimeoutS": DETECT_TIMEOUT_S,
-        "settings": list(ROS_SETTINGS),
-        "types": {flavour: types.as_json() for flavour, types in TYPES.items()},
-    }
+
+    default: RosFlavour
+    detect_timeout_s: float
+    settings: tuple[RosSetting, ...]
+    types: dict[RosFlavour, RosTypes]
+
+
+ROS_CONFIG: Final = RosConfig(DEFAULT_FLAVOUR, DETECT_TIMEOUT_S, ROS_SETTINGS, TYPES)

@@ -37,7 +37,7 @@ WORKER_POLICY = "; ".join(
     }.items()
 )
 # Scripts that run as the vision worker (and what it imports with importScripts()).
-WORKER_PATHS = frozenset({"/static/js/vision-worker.js"})
+WORKER_PATHS = frozenset({"/static/js/worker/vision-worker.js"})
 
 COMMON_HEADERS = {
     "X-Content-Type-Options": "nosniff",

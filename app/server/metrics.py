@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Final, Protocol
 
 from prometheus_client import CollectorRegistry, Counter, Gauge
 
-from app.protocol.constants import ROLES
+from app.protocol.rooms import ROLES
 from app.protocol.signaling import INCOMING_TYPES
 from app.signaling.hub import REFUSALS, Census, Refusal
 

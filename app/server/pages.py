@@ -1,12 +1,12 @@
 """The role pages (vehicle, relay, client) and an index linking them.
 
-Each page embeds its configuration as ``<script type="application/json" id="config">`` so the
-ES modules need no globals: the signaling path, the default rosbridge URL (this server's
-``/rosbridge``) and what the query string asks for, the control law's numbers, and the protocol
-constants and data-channel schemas rendered from :mod:`app.protocol` (``config.protocol``, read
-by ``protocol.js``). ICE servers are not in it: each login reply carries them, with TURN
-credentials minted for that login. Nor is the token: the page reads it from its URL fragment,
-which no server sees.
+Each page embeds its configuration (:class:`app.protocol.page.PageConfig`) as ``<script
+type="application/json" id="config">`` so the ES modules need no globals: the signaling path, the
+default rosbridge URL (this server's ``/rosbridge``) and what the query string asks for, the
+control law's numbers, and the protocol constants and data-channel schemas rendered from
+:mod:`app.protocol` (``config.protocol``). ICE servers are not in it: each login reply carries
+them, with TURN credentials minted for that login. Nor is the token: the page reads it from its
+URL fragment, which no server sees.
 """
 
 from __future__ import annotations
@@ -18,11 +18,16 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.protocol.browser import browser_protocol
-from app.protocol.constants import DEFAULT_ROOM, ROLES, Role
-from app.protocol.control import DEFAULT_PROFILE, PROFILES, page_constants, with_standoff
-from app.protocol.ros import AUTO, ROS_SETTINGS
-from app.protocol.ros import page_config as ros_page_config
+from app.protocol.control import (
+    DEFAULT_PROFILE,
+    PROFILES,
+    ControlConfig,
+    control_config,
+    with_standoff,
+)
+from app.protocol.page import BaseConfig, PageConfig, page_protocol, to_json
+from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
+from app.protocol.ros import AUTO, ROS_CONFIG, ROS_SETTINGS
 from app.resources import TEMPLATES_DIR
 from app.server.tls import insecure_rosbridge
 
@@ -37,40 +42,42 @@ def _ws_base(request: Request) -> str:
 
 
 def page_config(request: Request, role: Role) -> dict[str, Any]:
-    """What a role page needs to run on its own, ``?auto=1`` included."""
+    """What a role page needs to run on its own, ``?auto=1`` included, as the page reads it."""
     query = request.query_params
     asked = query.get("profile", DEFAULT_PROFILE)
     # An unknown profile falls back to the default rather than breaking the page.
     profile = PROFILES[asked if asked in PROFILES else DEFAULT_PROFILE]
     own_rosbridge = f"{_ws_base(request)}/rosbridge"
     rosbridge = query.get("rosbridge") or own_rosbridge
-    return {
-        "role": role,
-        "wsPath": "/ws",
-        "room": query.get("room", DEFAULT_ROOM),
-        "name": query.get("name", ""),
-        "auto": query.get("auto") in ("1", "true", "yes"),
+    ros = query.get("ros", AUTO)
+    config = PageConfig(
+        role=role,
+        ws_path="/ws",
+        room=query.get("room", DEFAULT_ROOM),
+        name=query.get("name", ""),
+        auto=query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
-        "profile": profile.relay_profile if role == "relay" else profile.name,
-        "control": _control(query.get("standoff")),
-        # The vehicle page's spawn step (turn to face up at start); ?spawn=0 switches it off.
-        "spawnStep": query.get("spawn") not in ("0", "false", "no"),
-        # The relay's own video preview (?preview=0: none, for an unattended relay).
-        "preview": query.get("preview") not in ("0", "false", "no"),
-        "rosbridge": rosbridge,
+        profile=profile.relay_profile if role == "relay" else profile.name,
+        control=_control(query.get("standoff")),
+        # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended).
+        spawn_step=query.get("spawn") not in ("0", "false", "no"),
+        preview=query.get("preview") not in ("0", "false", "no"),
+        rosbridge=rosbridge,
         # The page's token (read from the URL fragment) goes only to this server's rosbridge.
-        "rosbridgeAuth": rosbridge == own_rosbridge,
-        "rosbridgeError": insecure_rosbridge(rosbridge, request.url.scheme),
-        # ``ros=1|2|jazzy`` is the fallback when the robot's rosapi cannot name its types.
-        "ros": ros if (ros := query.get("ros", AUTO)) in ROS_SETTINGS else AUTO,
-        "rosTypes": ros_page_config(),
-        "protocol": browser_protocol(),
-    }
+        rosbridge_auth=rosbridge == own_rosbridge,
+        rosbridge_error=insecure_rosbridge(rosbridge, request.url.scheme),
+        ros=ros if ros in ROS_SETTINGS else AUTO,
+        ros_types=ROS_CONFIG,
+        protocol=page_protocol(),
+    )
+    converted: dict[str, Any] = to_json(config)
+    return converted
 
 
 def base_config() -> dict[str, Any]:
     """The config of a page with no role (index, parity): the protocol alone."""
-    return {"protocol": browser_protocol()}
+    converted: dict[str, Any] = to_json(BaseConfig(page_protocol()))
+    return converted
 
 
 def _standoff(text: str | None) -> float | None:
@@ -85,10 +92,10 @@ def _standoff(text: str | None) -> float | None:
     return value if math.isfinite(value) and value >= 0 else None
 
 
-def _control(standoff: str | None) -> dict[str, Any]:
+def _control(standoff: str | None) -> ControlConfig:
     """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance."""
     profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
-    return page_constants(profiles)
+    return control_config(profiles)
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:

@@ -25,6 +25,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from app.arguments import add_vehicle_profile, port
+from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol import tokens
 from app.protocol.control import PROFILES
@@ -33,8 +34,6 @@ from app.server import tls
 from app.server.config import Settings, describe_settings_error
 from app.server.serve import ANY_ADDRESS, RunningServer, reachable_hosts, start_in_thread
 from app.supervise import Backoff, on_stop_signals, sleep_unless
-from app.tools.browser import BrowserNotFound, chromium_path
-from app.tools.relay_service import TOKEN_ENV
 from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
 
@@ -110,7 +109,11 @@ def children_for(
         if secret is None:
             return {}
         now = time.time()
-        return {TOKEN_ENV: tokens.sign(secret, room, role, now=now, ttl_s=DEMO_TOKEN_TTL_S)}
+        return {
+            tokens.ACCESS_TOKEN_ENV: tokens.sign(
+                secret, room, role, now=now, ttl_s=DEMO_TOKEN_TTL_S
+            )
+        }
 
     return [
         # The relay paces its snapshots by the relay profile this vehicle profile pairs with.

@@ -34,10 +34,10 @@ import numpy as np
 from playwright.sync_api import Page, sync_playwright
 
 from app.arguments import add_relay_profile
-from app.protocol.constants import Profile
+from app.chromium import launch_options
+from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
-from app.tools.browser import launch_options
 from app.vision.reference import Detection, detect
 from app.vision.spec import CascadeOperation, ColourOperation, Spec, load_spec
 
@@ -54,7 +54,7 @@ Box = tuple[int, int, int, int]
 # it once per image. Bounded, for a long batch of images.
 _REFERENCES: dict[tuple[str, str, Box | None], Detection] = {}
 _REFERENCES_KEPT = 512
-# An OpenCV.js build the analyzer can be told to load (app/static/js/vision-worker.js); told
+# An OpenCV.js build the analyzer can be told to load (app/static/js/worker/vision-worker.js); told
 # nothing, it loads the one the relay page loads.
 OpenCvBuild = Literal["simd", "official"]
 OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
@@ -341,7 +341,7 @@ def open_harness(
             try:
                 page = browser.new_page()
                 page.on("console", lambda m: log.debug("page console: %s", m.text))
-                # No ?opencv= on the relay's page either (relay_service.relay_url).
+                # No ?opencv= on the relay's page either (app.relay.page.relay_url).
                 page.goto(f"{server.url}/parity" + ("" if build is None else f"?opencv={build}"))
                 # A function, not an expression: Playwright evals a bare expression inside the
                 # page, which the page's CSP (no 'unsafe-eval') refuses.

@@ -1,11 +1,11 @@
 """The operations spec (``app/vision/operations.json``): models, loading and validation.
 
 One declarative file configures every operation for both sides: the relay's OpenCV.js modules
-(``app/static/js/operations/``) fetch it from ``/operations.json`` with every default filled in
-and every profile's parameters already merged, and :func:`app.vision.reference.detect` runs the
-same pipeline with Python OpenCV so parity checks compare like with like. The spec is validated
-once at start-up: a cascade file that the pinned OpenCV wheel does not ship, or a module that
-does not exist, stops the server with a message naming the entry.
+(``app/static/js/worker/operations/``) fetch it from ``/operations.json`` with every default filled
+in and every profile's parameters already merged, and :func:`app.vision.reference.detect` runs the
+same pipeline with Python OpenCV so parity checks compare like with like. The spec is validated once
+at start-up: a cascade file that the pinned OpenCV wheel does not ship, or a module that does not
+exist, stops the server with a message naming the entry.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from pydantic import (
 )
 from pydantic.alias_generators import to_camel
 
-from app.protocol.constants import PROFILES, Profile
 from app.protocol.errors import describe
+from app.protocol.relay_profiles import PROFILES, Profile
 from app.resources import OPERATION_MODULES_DIR
 
 

@@ -1,4 +1,4 @@
-"""Fixtures of the fleet tests: a real Redis per test and app instances sharing it."""
+"""Fixtures of the fleet tests: ``autopilot serve`` processes sharing the test's Redis."""
 
 from __future__ import annotations
 
@@ -6,37 +6,14 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol
 
 import httpx
 import pytest
 
-from app.server.config import Settings
-from app.server.serve import RunningServer
 from app.supervise import free_port
-from app.tools.redis_server import redis_server
-
-
-@pytest.fixture
-def redis_url(tmp_path: Path) -> Iterator[str]:
-    """A fresh Debian ``redis-server`` on a free port, stopped after the test."""
-    with redis_server(tmp_path) as url:
-        yield url
-
-
-@pytest.fixture
-def start_instance(
-    redis_url: str, start_server: Callable[[Settings], RunningServer]
-) -> Callable[[], RunningServer]:
-    """Start one more instance of the service on the test's Redis (in this process)."""
-
-    def start() -> RunningServer:
-        return start_server(Settings(environment="development", token=None, redis_url=redis_url))
-
-    return start
-
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -10,7 +10,7 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 
 
 @dataclass(frozen=True)
@@ -99,6 +99,8 @@ SAMPLES: list[Sample] = [
     Sample(C, "relay", '{"type": "lock", "x": 470.5}', False, "y"),
     Sample(C, "relay", '{"type": "lock", "x": "left", "y": 230}', False, "x"),
     Sample(C, "relay", '{"type": "unlock"}', True),
+    Sample(C, "relay", '{"type": "stopRobot"}', True),
+    Sample(C, "relay", '{"type": "robotStopped", "by": "ann", "reason": "pressed"}', False),
     Sample(C, "relay", '{"type": "lockState", "state": "none"}', False),
     # relay -> client on `control`
     Sample(C, "client", json.dumps(OPS), True),
@@ -123,6 +125,14 @@ SAMPLES: list[Sample] = [
     Sample(C, "client", _with(DETECTIONS, locked=[1, 2, 30, 40]), True),
     Sample(C, "client", _with(DETECTIONS, locked=None), True),
     Sample(C, "client", _with(DETECTIONS, locked=[1, 2]), False, "locked"),
+    Sample(C, "client", _with(DETECTIONS, candidates=[[1, 2, 30, 40], [50, 60, 7, 8]]), True),
+    Sample(C, "client", _with(DETECTIONS, candidates=[]), True),
+    Sample(C, "client", _with(DETECTIONS, candidates=[[1, 2, 30]]), False, "candidates"),
+    Sample(C, "client", '{"type": "robotStopped", "by": "ann", "reason": "Stop robot"}', True),
+    Sample(C, "client", '{"type": "robotStopped", "by": null, "reason": "nobody"}', True),
+    Sample(C, "client", '{"type": "robotStopped", "by": "ann"}', False, "reason"),
+    Sample(C, "client", '{"type": "robotStopped", "by": "", "reason": "r"}', False, "by"),
+    Sample(C, "client", '{"type": "stopRobot"}', False),
     Sample(C, "client", '{"type": "lockState", "state": "locked", "box": [1, 2, 3, 4]}', True),
     Sample(C, "client", '{"type": "lockState", "state": "none", "reason": "lost"}', True),
     Sample(C, "client", '{"type": "lockState", "state": "held"}', False, "state"),

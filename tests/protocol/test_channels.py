@@ -7,7 +7,7 @@ import math
 import pytest
 
 from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL
+from app.protocol.channels import AUTOPILOT_CHANNEL
 from tests.protocol.samples import GOAL, SAMPLES, Sample
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 
 from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
 from app.protocol.signaling import INCOMING_TYPES
 from app.resources import STATIC_DIR
 
@@ -20,20 +20,28 @@ TYPE_LITERAL = re.compile(r"\btype: '(\w+)'")
 
 # What each module sends on a data channel: (module, channel, receiving role, types).
 CHANNEL_SENDS = [
-    ("vehicle.js", AUTOPILOT_CHANNEL, "relay", {"pose"}),
+    ("pages/vehicle.js", AUTOPILOT_CHANNEL, "relay", {"pose"}),
     # askRelay(type) sends start/stop on `control` when signaling is down.
-    ("client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
-    ("client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive"}),
-    ("relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "mode", "health"}),
-    ("relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop", "mode", "drive"}),
-    ("snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
-    ("snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),
-    ("lock-view.js", CONTROL_CHANNEL, "relay", {"lock", "unlock"}),
+    ("pages/client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
+    ("pages/client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive", "stopRobot"}),
+    (
+        "pages/relay.js",
+        CONTROL_CHANNEL,
+        "client",
+        {"state", "ops", "error", "pose", "health", "robotStopped"},
+    ),
+    ("pages/relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop"}),
+    # The operator seat's mode changes go to the vehicle and the clients, its drives to the vehicle.
+    ("core/relay-seats.js", CONTROL_CHANNEL, "client", {"mode"}),
+    ("core/relay-seats.js", AUTOPILOT_CHANNEL, "vehicle", {"mode", "drive"}),
+    ("core/snapshot-loop.js", AUTOPILOT_CHANNEL, "vehicle", {"goal"}),
+    ("core/snapshot-loop.js", CONTROL_CHANNEL, "client", {"detections", "lockState"}),
+    ("view/lock-view.js", CONTROL_CHANNEL, "relay", {"lock", "unlock"}),
     # serveChannel's error replies go back on whichever channel the bad message came from.
-    ("peer.js", AUTOPILOT_CHANNEL, "vehicle", {"error"}),
+    ("net/peer.js", AUTOPILOT_CHANNEL, "vehicle", {"error"}),
 ]
 SENT_ON_CHANNEL = {(module, kind) for module, _, _, kinds in CHANNEL_SENDS for kind in kinds}
-MODULES = sorted({module for module, _ in SENT_ON_CHANNEL} | {"room.js", "signaling.js"})
+MODULES = sorted({module for module, _ in SENT_ON_CHANNEL} | {"net/room.js", "net/signaling.js"})
 
 
 def test_every_type_a_page_writes_is_a_signaling_or_channel_model() -> None:

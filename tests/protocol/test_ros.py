@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from app.protocol.ros import TYPES, detect, page_config, spellings
+from app.protocol.page import to_json
+from app.protocol.ros import ROS_CONFIG, TYPES, detect, spellings
 
 
 def test_each_flavour_spells_turtlesim_types_its_own_way() -> None:
@@ -48,9 +49,11 @@ def test_detect_prefers_the_robots_answer_then_the_setting(
 
 
 def test_page_config_carries_the_whole_table() -> None:
-    config = page_config()
+    config = to_json(ROS_CONFIG)
     assert config["default"] == "2"
+    assert config["detectTimeoutS"] == 3.0
     types = config["types"]
     assert isinstance(types, dict)
     assert types["jazzy"]["pose"] == "turtlesim_msgs/msg/Pose"
+    assert types["1"]["teleportAbsolute"] == "turtlesim/TeleportAbsolute"
     assert config["settings"] == ["auto", "1", "2", "jazzy"]

@@ -13,12 +13,10 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Page
 
 from app.protocol import channels
-from app.server.config import Settings
-from app.server.serve import RunningServer, start_in_thread
-from app.tools.browser import launch_options
+from tests.helpers.served_page import served_page
 from tests.protocol.samples import SAMPLES
 
 pytestmark = [pytest.mark.browser]
@@ -26,9 +24,9 @@ pytestmark = [pytest.mark.browser]
 # A stand-in RTCDataChannel (an EventTarget with label, readyState and send) served by the real
 # serveChannel; a handler per accepted type records what got through, send() the error replies.
 RECEIVE_ALL = """async (samples) => {
-  const { serveChannel } = await import('/static/js/peer.js');
-  const { SCHEMAS } = await import('/static/js/protocol.js');
-  const { acceptedTypes } = await import('/static/js/schema.js');
+  const { serveChannel } = await import('/static/js/net/peer.js');
+  const { SCHEMAS } = await import('/static/js/config.js');
+  const { acceptedTypes } = await import('/static/js/core/schema.js');
   const quiet = { info() {}, warn() {}, error() {} };
   return samples.map(({ label, role, text }) => {
     const channel = new EventTarget();
@@ -49,16 +47,8 @@ RECEIVE_ALL = """async (samples) => {
 
 @pytest.fixture(scope="module")
 def page() -> Iterator[Page]:
-    server: RunningServer = start_in_thread(Settings(environment="development", token=None))
-    try:
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(**launch_options())
-            opened = browser.new_page()
-            opened.goto(server.url + "/")
-            yield opened
-            browser.close()
-    finally:
-        server.stop()
+    with served_page() as opened:
+        yield opened
 
 
 def test_browser_and_python_agree_on_every_sample(page: Page) -> None:
@@ -87,7 +77,7 @@ def test_schema_js_refuses_a_keyword_it_does_not_know(page: Page) -> None:
     # waved through by a validator that skips what it does not understand.
     error = page.evaluate(
         """async () => {
-             const { validate } = await import('/static/js/schema.js');
+             const { validate } = await import('/static/js/core/schema.js');
              try { validate({ type: 'string', pattern: '^a' }, 'b'); return null; }
              catch (err) { return err.message; }
            }"""

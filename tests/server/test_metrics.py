@@ -21,7 +21,7 @@ from websockets.asyncio.client import ClientConnection, connect
 
 from app.metrics import start_metrics_server
 from app.protocol import tokens
-from app.protocol.constants import Role
+from app.protocol.rooms import Role
 from app.server.config import Settings
 from app.server.metrics import MESSAGE_TYPES, ServerMetrics
 from app.server.serve import RunningServer

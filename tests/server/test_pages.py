@@ -13,7 +13,8 @@ import pytest
 from pydantic import SecretStr
 
 from app.protocol.control import PROFILES, TERRAIN_CENTRE, WORLD_SIZE
-from app.protocol.ros import page_config as ros_page_config
+from app.protocol.page import to_json
+from app.protocol.ros import ROS_CONFIG
 from app.server.config import IceServer, Settings
 from app.server.serve import RunningServer
 
@@ -84,7 +85,7 @@ def test_defaults_no_ice_servers_and_this_servers_rosbridge(
     assert config["rosbridge"] == server.url.replace("http://", "ws://") + "/rosbridge"
     # The page learns the robot's flavour from rosapi unless told; the type table comes along.
     assert config["ros"] == "auto"
-    assert config["rosTypes"] == ros_page_config()
+    assert config["rosTypes"] == to_json(ROS_CONFIG)
 
 
 def test_query_sets_room_name_auto_profile_and_rosbridge(server: RunningServer) -> None:
@@ -171,7 +172,7 @@ def test_client_has_exactly_the_thesis_buttons_the_console_s_and_a_labelled_oper
     parser = Buttons()
     parser.feed(html)
     thesis = ["Connect", "Join Room", "Leave Room", "Set Operation", "Start Piloting"]
-    console = ["Take Over", "Hand Back", "Unlock"]  # the operator's console
+    console = ["Stop robot", "Take Over", "Hand Back", "Unlock"]  # the operator's console
     assert sorted(parser.labels) == sorted([*thesis, "Stop Piloting", *console])
     assert re.search(r'<label for="operation">Select Operation</label>', html)
     assert re.search(r'<select id="operation"', html)

@@ -20,11 +20,11 @@ from typing import Any
 import pytest
 
 from app.metrics import MetricsServer, start_metrics_server
+from app.relay.metrics import RelayMetrics
 from app.resources import APP_DIR
 from app.server.metrics import ServerMetrics
 from app.server.serve import RunningServer
 from app.supervise import free_port, stop_process
-from app.tools.relay_metrics import RelayMetrics
 from tests.helpers.waiting import wait_until
 from vehicle_agent.metrics import VehicleMetrics
 

@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 from playwright.async_api import Page
 
-from app.protocol.ros import RosFlavour, page_config
+from app.protocol.page import to_json
+from app.protocol.ros import ROS_CONFIG, RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
 
@@ -66,15 +67,15 @@ async def test_pick_types_follows_the_python_rule(
     await context_page.goto(f"{server.url}/healthz")
     picked: dict[str, Any] = await context_page.evaluate(
         """async ([table, setting, pose, twist]) => {
-          const { pickTypes } = await import('/static/js/rosflavour.js');
+          const { pickTypes } = await import('/static/js/core/rosflavour.js');
           return pickTypes(table, setting, pose, twist);
         }""",
-        [page_config(), setting, pose, twist],
+        [to_json(ROS_CONFIG), setting, pose, twist],
     )
     flavour, from_robot = expected
     assert (picked["flavour"], picked["fromRobot"]) == (flavour, from_robot)
-    types = page_config()["types"]
+    types = to_json(ROS_CONFIG)["types"]
     assert isinstance(types, dict)
     assert picked["pose"] == types[flavour]["pose"] == POSE_TYPE[flavour]
     assert picked["twist"] == (twist or types[flavour]["twist"])
-    assert picked["teleport"] == types[flavour]["teleport_absolute"]
+    assert picked["teleport"] == types[flavour]["teleportAbsolute"]

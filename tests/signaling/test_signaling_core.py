@@ -1,4 +1,5 @@
-"""The signaling rules of DESIGN §2, exercised on the sans-I/O hub directly (no sockets)."""
+"""The signaling rules (docs/architecture.md, "Signaling protocol"), exercised on the sans-I/O
+hub directly (no sockets)."""
 
 from __future__ import annotations
 
@@ -135,6 +136,22 @@ def test_same_name_in_another_room_is_fine(h: Harness) -> None:
     assert [p.name for p in h.hub.roster("b")] == ["v"]
 
 
+def test_second_vehicle_in_a_room_is_refused_until_the_first_leaves(h: Harness) -> None:
+    # Issue 37: a room pilots one vehicle. A second one, token or not, would take the relay's
+    # video and seat; it is told at the door which vehicle the room has.
+    first = h.login("v1", "vehicle", room="lab")
+    conn = h.hub.connect()
+    login = {"type": "login", "name": "v2", "role": "vehicle", "room": "lab"}
+    actions = h.send(conn, login)
+    reply = to(conn, actions)[0]
+    assert reply["success"] is False and "'v1'" in reply["reason"], reply
+    assert_error(actions, conn, "login", "vehicle", "'v1'")
+    assert [p.name for p in h.hub.roster("lab")] == ["v1"]
+    h.login("v2", "vehicle", room="other")
+    h.send(first, {"type": "leave"})
+    h.login("v2", "vehicle", room="lab")
+
+
 def test_second_relay_in_a_room_is_refused_but_fine_in_another_room(h: Harness) -> None:
     h.login("r1", "relay")
     conn = h.hub.connect()
@@ -149,8 +166,8 @@ def test_second_relay_in_a_room_is_refused_but_fine_in_another_room(h: Harness) 
 def test_refused_login_can_be_retried_on_the_same_connection(h: Harness) -> None:
     h.login("v", "vehicle")
     conn = h.hub.connect()
-    h.send(conn, {"type": "login", "name": "v", "role": "vehicle"})
-    reply = to(conn, h.send(conn, {"type": "login", "name": "v2", "role": "vehicle"}))[0]
+    h.send(conn, {"type": "login", "name": "v", "role": "client"})  # the name is taken
+    reply = to(conn, h.send(conn, {"type": "login", "name": "c", "role": "client"}))[0]
     assert reply["success"] is True
 
 

@@ -16,9 +16,9 @@ import cv2
 import numpy as np
 import pytest
 
+from app.relay.page import relay_url
 from app.resources import OPERATIONS_SPEC
 from app.tools import parity
-from app.tools.relay_service import relay_url
 from app.vision import reference, window
 from app.vision.spec import CascadeOperation, load_spec
 from tests.helpers.harness import open_harness

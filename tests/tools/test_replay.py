@@ -1,19 +1,29 @@
-"""``autopilot replay``'s agreement rule and its answers to bad input (the real replay of a
-recorded demo run is in test_demo.py)."""
+"""``autopilot replay``'s agreement rule, its exit status against ``--min-agreement`` and its
+answers to bad input (the real replay of a recorded demo run is in test_demo.py)."""
 
 from __future__ import annotations
 
+import base64
+import contextlib
+import json
 from pathlib import Path
 from typing import Any
 
+import cv2
 import pytest
+from mcap.writer import Writer
 
 from app.cli import main
+from app.protocol.events import GoalApplied
+from app.recording import EVENT_CHANNELS, IMAGE_TOPIC, message
+from app.tools import replay
 from app.tools.replay import AGREE_FRACTION, Recording, compare
+from tests.helpers.harness import open_harness
+from vehicle_agent.video import FixedPath, SyntheticVideo
 
 
-def _goal(frame: int, x: float, op: str = "face") -> dict[str, Any]:
-    return {"seq": frame, "op": op, "frame": frame, "x": x, "y": 240.0, "w": 640, "h": 480}
+def _goal(frame: int, x: float, y: float = 240.0, op: str = "face") -> GoalApplied:
+    return GoalApplied(seq=frame, op=op, frame=frame, x=x, y=y, w=640, h=480, t=frame / 30)
 
 
 def test_goals_are_compared_on_recorded_frames_and_agree_within_the_tolerance() -> None:
@@ -54,3 +64,46 @@ def test_an_unreadable_recording_is_one_line_and_exit_status_2(
         assert "cannot read the recording" in capsys.readouterr().err
     assert main(["replay", str(tmp_path / "missing.mcap")]) == 2
     assert "cannot read the recording" in capsys.readouterr().err
+
+
+def _write_recording(path: Path, goals: dict[int, tuple[float, float]]) -> None:
+    """An MCAP file as the recorder writes it: for each frame tag, the camera's image of that
+    frame (a face at a fixed place) and the goal the relay sent for it, at (x, y)."""
+    video = SyntheticVideo(path=FixedPath(0.3, 0.42))
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema(name="any", encoding="jsonschema", data=b"{}")
+        images, goal_topic = (
+            writer.register_channel(topic, message_encoding="json", schema_id=schema)
+            for topic in (IMAGE_TOPIC, EVENT_CHANNELS[GoalApplied].topic)
+        )
+        for frame, (x, y) in goals.items():
+            bgr = cv2.cvtColor(video.render(frame), cv2.COLOR_RGB2BGR)
+            jpeg = base64.b64encode(cv2.imencode(".jpg", bgr)[1].tobytes()).decode()
+            image = {"format": "jpeg", "data": jpeg, "frame": frame}
+            goal = message(_goal(frame, x, y))
+            for channel, fields in ((images, image), (goal_topic, goal)):
+                data = json.dumps(fields).encode()
+                writer.add_message(channel, log_time=frame, data=data, publish_time=frame)
+        writer.finish()  # type: ignore[no-untyped-call]
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_replay_exits_1_below_the_minimum_agreement_and_0_at_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Two recorded goals: one on the face the replay finds, one far from it: 50 % agree.
+    face = SyntheticVideo(path=FixedPath(0.3, 0.42)).face_centre(0)
+    recording = tmp_path / "run.mcap"
+    _write_recording(recording, {1: face, 2: (face[0] + 300, face[1])})
+    with open_harness() as harness:
+        # Both runs analyse in the one real harness (a launch costs seconds).
+        monkeypatch.setattr(replay, "open_harness", lambda: contextlib.nullcontext(harness))
+        statuses = []
+        for minimum in ("50.01", "50"):
+            statuses.append(main(["replay", "--min-agreement", minimum, "--json", str(recording)]))
+            last = json.loads(capsys.readouterr().out.splitlines()[-1])
+            assert (last["goals_compared"], last["agreed"]) == (2, 1), last
+    assert statuses == [1, 0]

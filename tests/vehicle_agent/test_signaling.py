@@ -28,11 +28,11 @@ def test_ws_url_refuses_what_is_not_a_server_url(server: str) -> None:
 
 
 async def test_login_returns_the_roster(server: RunningServer) -> None:
-    first = SignalingClient(server.url, "v1", "room-a")
+    first = SignalingClient(server.url, "r1", "room-a", role="relay")
     assert await first.connect() == []
-    second = SignalingClient(server.url, "v2", "room-a")
+    second = SignalingClient(server.url, "v1", "room-a")
     try:
-        assert await second.connect() == [{"name": "v1", "role": "vehicle"}]
+        assert await second.connect() == [{"name": "r1", "role": "relay"}]
     finally:
         await second.close()
         await first.close()

@@ -11,19 +11,18 @@ import cv2
 import numpy as np
 import pytest
 
+from app.protocol import frametag
+from app.protocol.events import FrameSent
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec
 from vehicle_agent.video import (
     FileVideo,
     FixedPath,
-    FrameInfo,
     SweepPath,
     SyntheticVideo,
     VideoSourceError,
-    draw_frame_tag,
     open_source,
-    read_frame_tag,
 )
 
 CASCADE = cv2.CascadeClassifier(
@@ -37,25 +36,12 @@ def detect_faces(rgb: np.ndarray) -> list[tuple[int, int, int, int]]:
     return [tuple(int(v) for v in f) for f in found]
 
 
-@pytest.mark.parametrize("frame", [0, 1, 2, 255, 4096, 123_456, 2**24 - 1])
-@pytest.mark.parametrize("width", [320, 640, 1280])
-def test_frame_tag_round_trip(frame: int, width: int) -> None:
-    rgb = np.full((width * 3 // 4, width, 3), 90, np.uint8)
-    draw_frame_tag(rgb, frame)
-    assert read_frame_tag(rgb) == frame
-
-
-def test_untagged_frame_reads_as_none() -> None:
-    assert read_frame_tag(np.full((480, 640, 3), 200, np.uint8)) is None
-    assert read_frame_tag(np.zeros((480, 640, 3), np.uint8)) is None
-
-
 def test_synthetic_face_is_found_by_the_cascade_where_the_source_says() -> None:
     video = SyntheticVideo(640, 480, fps=15)
     try:
         for frame in (0, 60, 75, 90, 150, 170):  # left hold, glide, right hold, glide back
             rgb = video.render(frame)
-            assert read_frame_tag(rgb) == frame
+            assert frametag.read(rgb) == frame
             faces = detect_faces(rgb)
             assert len(faces) == 1, f"frame {frame}: {faces}"
             x, y, w, h = faces[0]
@@ -107,7 +93,7 @@ def test_a_shorter_sweep_keeps_the_shape_and_any_window_of_one_cycle_holds_both_
 
 def test_synthetic_frames_flag_exactly_the_jumps() -> None:
     fps = 30.0
-    infos: list[FrameInfo] = []
+    infos: list[FrameSent] = []
     video = SyntheticVideo(320, 240, fps=fps, on_frame=infos.append)
     path = video.path
     assert isinstance(path, SweepPath)
@@ -157,20 +143,20 @@ def test_a_scene_without_a_flame_gives_the_fire_operation_nothing() -> None:
 
 
 async def test_synthetic_track_paces_tags_and_reports_frames() -> None:
-    infos: list[FrameInfo] = []
+    infos: list[FrameSent] = []
     video = SyntheticVideo(320, 240, fps=50, path=FixedPath(0.3, 0.5), on_frame=infos.append)
     try:
         frames = [await video.recv() for _ in range(10)]
     finally:
         video.stop()
-    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    tags = [frametag.read(f.to_ndarray(format="rgb24")) for f in frames]
     assert tags == list(range(10))
     assert [f.pts for f in frames] == [round(i * 90_000 / 50) for i in range(10)]
     assert frames[0].time_base == fractions.Fraction(1, 90_000)
     assert [i.frame for i in infos] == list(range(10))
     assert infos[0].face_x == pytest.approx(0.3 * 320)
     # 9 frame periods at 50 fps take about 180 ms.
-    assert infos[-1].sent_at - infos[0].sent_at == pytest.approx(0.18, abs=0.1)
+    assert infos[-1].t - infos[0].t == pytest.approx(0.18, abs=0.1)
 
 
 def write_tagged_clip(path: Path, codec: str, frames: int, size: tuple[int, int]) -> None:
@@ -200,7 +186,7 @@ async def test_file_source_loops(tmp_path: Path, suffix: str, codec: str) -> Non
         frames = [await track.recv() for _ in range(12)]
     finally:
         track.stop()
-    tags = [read_frame_tag(f.to_ndarray(format="rgb24")) for f in frames]
+    tags = [frametag.read(f.to_ndarray(format="rgb24")) for f in frames]
     assert tags == [0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 0, 1]
 
 

@@ -24,6 +24,90 @@ CLICKS_AT = (0.5, 12.5, 17.0)  # on the small track (never missed on these snaps
 Event = list[Any]
 
 
+# The rule itself on two faces, written out rather than computed by either side (lock.py and
+# lock.js are each checked against it): each event and what must come of it -- for a snapshot
+# the box chosen and the state, for a click [locked, state], for unlock [state]. The small face
+# is clicked; its track is kept while the large face stays, grows, passes right over it, and
+# while a third face a little larger than it (of a similar size) is in the picture; a snapshot
+# that misses it chooses nothing, not the large face; a move with no overlap is followed to the
+# nearest centre within reach; after Unlock the large face is the target again; a click on a box
+# inside a larger one locks the inner one.
+TWO_FACES: list[tuple[Event, list[Any]]] = [
+    (["snapshot", 0.0, [[100, 100, 130, 130], [440, 200, 76, 76]]], [[100, 100, 130, 130], "none"]),
+    (["click", 0.01, [478.0, 238.0]], [True, "locked"]),
+    (
+        ["snapshot", 0.05, [[104, 102, 132, 132], [446, 204, 78, 78]]],
+        [[446, 204, 78, 78], "locked"],
+    ),
+    (
+        ["snapshot", 0.1, [[90, 96, 170, 170], [250, 330, 98, 98], [450, 206, 76, 76]]],
+        [[450, 206, 76, 76], "locked"],
+    ),
+    (
+        ["snapshot", 0.15, [[400, 170, 130, 130], [456, 210, 76, 76]]],
+        [[456, 210, 76, 76], "locked"],
+    ),
+    (["snapshot", 0.2, [[380, 170, 130, 130]]], [None, "lost"]),
+    (
+        ["snapshot", 0.25, [[250, 330, 98, 98], [380, 170, 130, 130], [470, 215, 76, 76]]],
+        [[470, 215, 76, 76], "locked"],
+    ),
+    (
+        ["snapshot", 0.3, [[250, 330, 98, 98], [546, 223, 60, 60], [100, 100, 130, 130]]],
+        [[546, 223, 60, 60], "locked"],
+    ),
+    (["unlock", 0.31, None], ["none"]),
+    (
+        ["snapshot", 0.35, [[546, 223, 60, 60], [100, 100, 130, 130]]],
+        [[100, 100, 130, 130], "none"],
+    ),
+    (["snapshot", 0.4, [[100, 100, 130, 130], [140, 120, 48, 48]]], [[100, 100, 130, 130], "none"]),
+    (["click", 0.41, [164.0, 144.0]], [True, "locked"]),
+    (
+        ["snapshot", 0.45, [[101, 100, 130, 130], [142, 121, 48, 48]]],
+        [[142, 121, 48, 48], "locked"],
+    ),
+]
+
+
+# The click rule itself (near = 0.5 of a box's own size; a click window 0.6 of the shorter
+# side), written out: [x, y, boxes, the box picked or None]. LARGE is 130 wide and tall, from 100
+# to 230: half of it is 65 pixels; SMALL is 76 wide, from 440.
+LARGE, SMALL = [100, 100, 130, 130], [440, 200, 76, 76]
+NEAR_CLICKS: list[list[Any]] = [
+    [230 + 65, 165, [LARGE], LARGE],  # on the limit, to the right
+    [230 + 66, 165, [LARGE], None],
+    [165, 100 - 65, [LARGE], LARGE],  # above
+    [165, 100 - 66, [LARGE], None],
+    [100 - 65, 230 + 65, [LARGE], LARGE],  # a corner, half of it either way
+    [100 - 65, 230 + 66, [LARGE], None],
+    # Each box in its own size: 50 pixels from a 200-pixel box (a quarter of it) beats 50 from
+    # a 50-pixel one (the whole of it), whichever comes first.
+    [250, 25, [[300, 0, 50, 50], [0, 0, 200, 200]], [0, 0, 200, 200]],
+    [405, 238, [LARGE, SMALL], SMALL],  # 35 pixels left of SMALL: 0.46 of it
+    [400, 238, [LARGE, SMALL], None],  # 40 pixels: 0.53 of it
+    [228, 238, [SMALL, LARGE], LARGE],  # inside a box: that box, whatever it is near
+    [150, 150, [LARGE, [130, 130, 40, 40]], [130, 130, 40, 40]],  # the smallest under it
+]
+# [x, y, width, height, the window searched or None]: a square 0.6 of the frame's shorter side
+# (288 of 480), centred on the click, moved inside the frame; none for a click outside it.
+CLICK_WINDOWS: list[list[Any]] = [
+    [320, 240, 640, 480, [176, 96, 288, 288]],
+    [10, 10, 640, 480, [0, 0, 288, 288]],
+    [630, 470, 640, 480, [352, 192, 288, 288]],
+    [700, 10, 640, 480, None],
+    [10, -1, 640, 480, None],
+]
+
+
+def decisions(events: list[Event], outcomes: list[list[Any]]) -> list[list[Any]]:
+    """What TWO_FACES states of each outcome of :func:`run` (or of lock.js's run)."""
+    return [
+        [o[2], o[3]] if kind == "snapshot" else o
+        for (kind, _, _), o in zip(events, outcomes, strict=True)
+    ]
+
+
 def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
     """The events, and for each snapshot which track each of its boxes came from."""
     rng = random.Random(seed)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page
 
-from app.protocol.constants import PROFILES
+from app.protocol import frametag
+from app.protocol.relay_profiles import PROFILES
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec
@@ -55,10 +56,7 @@ def tagged_frame(number: int, width: int = 640, height: int = 480) -> np.ndarray
     """A grey RGBA frame carrying ``number`` as the contract's frame tag."""
     frame = np.full((height, width, 4), 90, np.uint8)
     frame[..., 3] = 255
-    b = width // 40
-    bits = [1, 0] + [(number >> (23 - i)) & 1 for i in range(24)]
-    for i, bit in enumerate(bits):
-        frame[:b, i * b : (i + 1) * b, :3] = 255 if bit else 0
+    frametag.stamp(frame[..., :3], number)
     return frame
 
 

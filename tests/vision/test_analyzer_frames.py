@@ -3,8 +3,8 @@
 The relay transfers each frame as a ``VideoFrame`` and the worker converts it to RGBA straight
 into the reused frame Mat (``VideoFrame.copyTo``). These tests build such frames from known
 pixels and check what a user of the relay relies on: the box lands where the flame is, Python
-OpenCV on the analysed pixels finds the same box, and frames sent back to back are each analysed
-on their own pixels.
+OpenCV on the analysed pixels finds the same box, frames sent back to back are each analysed
+on their own pixels, and each frame's tag reads back.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy.typing as npt
 import pytest
 from playwright.sync_api import Page
 
+from app.protocol import frametag
 from app.resources import OPERATIONS_SPEC
 from app.vision import window
 from app.vision.reference import detect
@@ -187,3 +188,70 @@ def test_a_window_search_converts_only_its_part_and_finds_what_python_finds(page
     assert np.array_equal(window.crop(analysed, rects[1]), read)
     assert 0 < windowed["converted"] < WIDTH * HEIGHT / 2, windowed["converted"]
     assert not np.array_equal(analysed, rgba)
+
+
+def lowered(bgr: npt.NDArray[np.uint8], rows: int) -> npt.NDArray[np.uint8]:
+    """``bgr`` moved down by ``rows``, a flat band above it."""
+    out = np.full_like(bgr, 110)
+    out[rows:] = bgr[:-rows]
+    return out
+
+
+def test_the_tag_of_a_bt601_frame_reads_back_when_only_a_window_is_converted(page: Page) -> None:
+    # The frame before carries another number, converted whole: a tag read from rows this frame
+    # did not convert would read that number (or no tag) instead of this frame's.
+    scene = lowered(face_scene(), 150)
+    (face,) = detect(SPEC.op("face"), as_rgba_by_python(scene)).boxes
+    before, tagged = scene.copy(), scene.copy()
+    frametag.stamp(before, 0x123456)
+    frametag.stamp(tagged, 0xABCDEF)
+    # The window search reads nothing of the tag's rows (the 16 top rows of a 640-wide frame):
+    # they are converted for the tag alone.
+    detect_width = SPEC.op("face").params.detect_width
+    assert detect_width is not None
+    region = detect(SPEC.op("face"), as_rgba_by_python(tagged), around=face).region
+    assert region is not None
+    rects = window.source_rect(
+        region, WIDTH, HEIGHT, (detect_width, HEIGHT * detect_width // WIDTH)
+    )
+    assert rects is not None and rects[1][1] >= 16, rects
+    calls = [
+        [i420_payload(before), "face", {}],
+        [i420_payload(tagged), "face", {"around": list(face)}],
+    ]
+    first, windowed = page.evaluate(IN_TURN, [calls, BT601_LIMITED])
+    assert first["frame"] == 0x123456
+    assert 0 < windowed["converted"] < WIDTH * HEIGHT / 2, windowed["converted"]
+    assert windowed["frame"] == 0xABCDEF
+
+
+def test_the_tag_of_a_wide_bt601_frame_reads_back_when_only_a_window_is_converted(
+    page: Page,
+) -> None:
+    # A frame wider than 4:3: its tag's blocks (16 rows high, from its width) reach below a
+    # fortieth of its height, and a window far below them converts none of their rows. The
+    # frame before holds the opposite bits, so any row left unconverted reads as its.
+    width, height = 640, 240
+    scene = np.asarray(cv2.resize(face_scene(), (width, height)), np.uint8)
+    before, tagged = scene.copy(), scene.copy()
+    frametag.stamp(before, 0x5A3C0F)
+    frametag.stamp(tagged, 0x5A3C0F ^ 0xFFFFFF)
+    calls = [
+        [i420_payload(before), "face", {}],
+        [i420_payload(tagged), "face", {"around": [280, 140, 80, 80]}],
+    ]
+    first, windowed = page.evaluate(IN_TURN, [calls, BT601_LIMITED])
+    assert first["frame"] == 0x5A3C0F
+    assert 0 < windowed["converted"] < width * height / 2, windowed["converted"]
+    assert windowed["frame"] == 0x5A3C0F ^ 0xFFFFFF
+
+
+def test_the_tag_of_a_full_range_i420_frame_reads_back(page: Page) -> None:
+    # Chromium converts such a frame whole: its tag reads back from every block.
+    frames = [flame_scene((40 + 90 * i, 200, 80, 70)) for i in range(3)]
+    for i, frame in enumerate(frames):
+        frametag.stamp(frame, 777 + i)
+    results = page.evaluate(
+        "([frames, op]) => analyzeAll(frames, op, {})", [[i420_payload(f) for f in frames], "fire"]
+    )
+    assert [r["frame"] for r in results] == [777, 778, 779]

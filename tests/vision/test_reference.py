@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.protocol.constants import PROFILES
+from app.protocol.relay_profiles import PROFILES
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec

@@ -1,8 +1,9 @@
 """The relay's snapshot → goal loop (snapshot-loop.js) driven with frames, with no WebRTC.
 
 Headless Chromium on the parity page, which has the relay's analyzer; the test imports the loop
-module there, feeds it synthetic RGBA frames (a face pasted at a known place, a frame tag in the
-top row, or nothing at all) on an injected clock, and checks the goals it hands the sender.
+module there, feeds it synthetic RGBA frames (faces pasted at known places, a frame tag in the
+top row, or nothing at all) on an injected clock, and checks the goals it hands the sender and
+what the target lock, held in the analyzer's worker, becomes.
 """
 
 from __future__ import annotations
@@ -13,14 +14,19 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 import pytest
 from playwright.sync_api import Page
 
-from app.protocol import channels
-from app.protocol.constants import AUTOPILOT_CHANNEL, CONTROL_CHANNEL, DEFAULT_PROFILE
+from app.protocol import channels, frametag
+from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
+from app.protocol.relay_profiles import DEFAULT_PROFILE
+from app.resources import OPERATIONS_SPEC
+from app.vision import lock, spec
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
-from vehicle_agent.video import draw_frame_tag
+from tests.vision.relay_steps import RelaySteps
+from vehicle_agent.video import TwoFaceVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -31,8 +37,8 @@ FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 # Feeds the frames in order (a null entry stops the loop), then two at once to see the second
 # skipped while the first is analysed. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
-  const { SnapshotLoop } = await import('/static/js/snapshot-loop.js');
-  const { PROTOCOL } = await import('/static/js/protocol.js');
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  await window.analyzer.unlock(); // another test's lock
   const rgba = (b64) => ({ width: %d, height: %d,
     data: Uint8ClampedArray.from(atob(b64), (c) => c.charCodeAt(0)) });
   let now = 0;
@@ -40,7 +46,7 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
   const emitted = { goal: [], detections: [] };
   const loop = new SnapshotLoop({
     analyzer: window.analyzer, profile, op: window.analyzer.defaultOp,
-    sendGoal: (goal) => { sent.push(goal); return true; }, lockRule: PROTOCOL.lock,
+    sendGoal: (goal) => { sent.push(goal); return true; },
     clock: () => now, wallClock: () => 1.7e12 + now,
   });
   for (const type of Object.keys(emitted)) {
@@ -67,19 +73,25 @@ def page() -> Iterator[Page]:
         yield opened
 
 
+def faces(at: list[tuple[int, int, int]], tag: int) -> str:
+    """Base64 RGBA of a grey frame with a face of side ``size`` at each ``(x, y, size)`` (its
+    top-left corner) and a frame tag."""
+    frame = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
+    for x, y, size in at:
+        frame[y : y + size, x : x + size] = cv2.resize(
+            face_crop(), (size, size), interpolation=cv2.INTER_AREA
+        )
+    frametag.stamp(frame, tag)
+    rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
+    return base64.b64encode(rgba.tobytes()).decode()
+
+
 def scene(face_at: tuple[int, int] | None, tag: int) -> tuple[str, Placed | None]:
     """Base64 RGBA of a grey frame with the face (top-left corner ``face_at``) and a tag."""
-    frame = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
-    placed = None
-    if face_at is not None:
-        x, y = face_at
-        frame[y : y + FACE_SIZE, x : x + FACE_SIZE] = cv2.resize(
-            face_crop(), (FACE_SIZE, FACE_SIZE), interpolation=cv2.INTER_AREA
-        )
-        placed = Placed(x, y, FACE_SIZE, FACE_SIZE)
-    draw_frame_tag(frame, tag)
-    rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
-    return base64.b64encode(rgba.tobytes()).decode(), placed
+    if face_at is None:
+        return faces([], tag), None
+    x, y = face_at
+    return faces([(x, y, FACE_SIZE)], tag), Placed(x, y, FACE_SIZE, FACE_SIZE)
 
 
 def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page) -> None:
@@ -124,3 +136,211 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
     assert second is None  # one snapshot in flight at a time: the other frame is skipped
     assert got["afterStop"] is None
     assert (got["snapshots"], got["goalsSent"]) == (len(layout) + 1, 4)
+
+
+# Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
+# t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
+# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; the lock
+# messages the loop announced (the lock is the analyzer's worker's: another test's goes first);
+# and the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
+# and reason of the lock message a click led to.
+LOCK_STEPS = """async ({ frames, steps, profile }) => {
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
+  await window.analyzer.unlock();
+  await window.analyzer.resetTracking();
+  let now = 0;
+  const loop = new SnapshotLoop({
+    analyzer: window.analyzer, profile, op: window.analyzer.defaultOp, track: true,
+    sendGoal: () => true, clock: () => now,
+  });
+  const messages = [];
+  loop.addEventListener('lock', (event) => messages.push(event.detail));
+  loop.start();
+  const outcomes = [];
+  const details = [];
+  for (const [kind, t, arg] of steps) {
+    now = t * 1000;
+    if (kind === 'click') {
+      outcomes.push(await loop.lockAt(arg[0], arg[1]));
+      const { state, box, reason } = messages.at(-1);
+      details.push({ state, box, reason });
+      continue;
+    }
+    const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
+    outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
+    const { boxes, candidates, locked } = outcome.detections;
+    details.push([boxes, candidates, locked]);
+  }
+  loop.stop();
+  await window.analyzer.unlock();
+  return { outcomes, details, announced: messages.map((m) => m.state), messages };
+}""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
+
+
+def test_a_locked_face_that_jumped_is_found_by_the_whole_frame_search(page: Page) -> None:
+    # The face is clicked, then shows up far from where it was (beyond the lock's reach: a
+    # person who walked behind something and out the other side). Near it is looked for first,
+    # so the far face is not taken for it; once it has been unseen for the search time (1 s,
+    # app/protocol), the whole frame is searched and the far face is the locked target again,
+    # long before the lock would be released (3 s).
+    (here, placed_here), (there, placed_there) = scene((40, 100), 1), scene((400, 220), 2)
+    assert placed_here is not None and placed_there is not None
+    steps = [
+        ["frame", 0.05, 0],
+        ["click", 0.06, list(placed_here.centre)],
+        ["frame", 0.1, 0],
+        ["frame", 0.6, 1],
+        ["frame", 1.2, 1],
+        ["frame", 1.25, 1],
+    ]
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": [here, there], "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    outcomes = got["outcomes"]
+
+    def on(goal: list[float] | None, placed: Placed) -> bool:
+        cx, cy = placed.centre
+        return (
+            goal is not None
+            and abs(goal[0] - cx) < FACE_SIZE / 4
+            and abs(goal[1] - cy) < FACE_SIZE / 4
+        )
+
+    assert on(outcomes[0][0], placed_here) and outcomes[1] is True
+    assert on(outcomes[2][0], placed_here) and outcomes[2][1] == "locked"
+    assert outcomes[3] == [None, "lost"]  # 0.5 s unseen: the far face is not its track yet
+    assert on(outcomes[4][0], placed_there) and outcomes[4][1] == "locked"
+    assert on(outcomes[5][0], placed_there) and outcomes[5][1] == "locked"
+    assert got["announced"] == ["locked", "lost", "locked"]
+
+
+def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(page: Page) -> None:
+    # Two faces: the larger is the target until the smaller one is clicked. The smaller face
+    # then leaves (lost, and searched for in the whole frame after 1 s), comes back elsewhere
+    # (found again), and leaves for longer than the release time (3 s): the lock lets go and
+    # the larger face is the target again. The lock is decided in the analyzer's worker.
+    large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
+    frames = [faces([large, small], 1), faces([large, small_elsewhere], 2), faces([large], 3)]
+    small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
+    steps = [
+        ["frame", 0.05, 0],
+        ["click", 0.07, small_centre],
+        ["frame", 0.1, 0],
+        ["frame", 0.15, 2],  # gone: lost
+        ["frame", 1.2, 2],  # unseen for over 1 s: searching the whole frame
+        ["frame", 1.25, 1],  # back, out of the lock's reach: found by the whole-frame search
+        ["frame", 4.3, 2],  # unseen for over 3 s: released (this snapshot still looked)
+        ["frame", 4.35, 2],
+    ]
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    outcomes = got["outcomes"]
+
+    def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
+        x, y, size = face
+        return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
+
+    assert on(outcomes[0][0], large) and outcomes[0][1] == "none"
+    assert outcomes[1] is True
+    assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
+    assert outcomes[3] == [None, "lost"]
+    assert outcomes[4] == [None, "searching"]
+    assert on(outcomes[5][0], small_elsewhere) and outcomes[5][1] == "locked"
+    assert outcomes[6] == [None, "none"]
+    assert on(outcomes[7][0], large)
+    assert got["announced"] == ["locked", "lost", "searching", "locked", "none"]
+    assert "not seen for more than 3 s" in got["messages"][-1]["reason"]
+
+
+def relay_snapshots_in_python(
+    frames: list[npt.NDArray[np.uint8]], steps: list[list[Any]]
+) -> list[Any]:
+    """What LOCK_STEPS tells of each step (``combined``), from the Python reference and
+    app/vision's lock and window as the relay's worker composes them (tests/vision/relay_steps.py):
+    the same decisions on the same pixels."""
+    op = spec.load_spec(OPERATIONS_SPEC).op("face")
+    assert isinstance(op, spec.CascadeOperation)
+    relay = RelaySteps(op)
+    outcomes: list[Any] = []
+    for kind, t, arg in steps:
+        if kind == "click":
+            relay.click(arg[0], arg[1], t)
+            box = relay.lock.box
+            outcomes.append({"state": relay.lock.state, "box": None if box is None else list(box)})
+            continue
+        snap = relay.snapshot(frames[arg], t)
+        locked = relay.lock.box if relay.lock.state == "locked" else None
+        outcomes.append(
+            [
+                None if snap.target is None else list(snap.target),
+                relay.lock.state,
+                [list(b) for b in snap.found.boxes],
+                [list(b) for b in snap.candidates],
+                None if locked is None else list(locked),
+            ]
+        )
+    return outcomes
+
+
+def combined(steps: list[list[Any]], answer: dict[str, Any]) -> list[Any]:
+    """LOCK_STEPS' answer, step by step: a snapshot's [goal, state, boxes, candidates, locked],
+    a click's {state, box}."""
+    return [
+        {"state": d["state"], "box": d["box"]} if kind == "click" else [*o, *d]
+        for (kind, _, _), o, d in zip(steps, answer["outcomes"], answer["details"], strict=True)
+    ]
+
+
+def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_python_does(
+    page: Page,
+) -> None:
+    # The two-face scene with its tiny face, as the relay's loop sees it: between full scans the
+    # second face rides along as a candidate; a click near (not in) it locks it; a click on the
+    # tiny face, which no scan of the reduced frame finds, locks it by the full-resolution search
+    # around the click, and the goals follow it through the tracker's periodic full scan. Each
+    # step as the Python reference, lock and window take it on the same pixels.
+    scene = TwoFaceVideo(WIDTH, HEIGHT)
+    indices = [0, 4, 8, 12]
+    rgbas = [cv2.cvtColor(scene.render(i), cv2.COLOR_RGB2RGBA) for i in indices]
+    frames = [base64.b64encode(rgba.tobytes()).decode() for rgba in rgbas]
+    small_x, small_y = scene.small_centre(indices[1])
+    tiny = scene.tiny_centre(indices[3])
+    steps: list[list[Any]] = [["frame", 0.05 * (k + 1), k % 4] for k in range(4)]
+    # Beside the small face's box: its centre plus 0.7 of its side to the right (beyond its
+    # half-width box edge, within half its size past that edge).
+    steps.append(["click", 0.21, [small_x + 0.7 * scene.small_px, small_y]])
+    steps += [["frame", 0.25, 0], ["frame", 0.3, 1]]
+    steps.append(["frame", 0.35, 3])  # a window snapshot, so the click finds no box near
+    steps.append(["click", 0.36, list(tiny)])
+    steps += [["frame", 0.4 + 0.05 * k, (3 - k % 2)] for k in range(33)]
+    answer = page.evaluate(
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    got = combined(steps, answer)
+    want = relay_snapshots_in_python(rgbas, steps)
+    assert got == want
+
+    def on(box: list[int] | None, centre: tuple[float, float]) -> bool:
+        return box is not None and lock.contains((box[0], box[1], box[2], box[3]), *centre)
+
+    first, windowed = got[0], got[1]
+    assert len(first[2]) == 2  # the full scan found both faces
+    assert len(windowed[2]) == 1 and len(windowed[3]) == 2  # the window: one, and two candidates
+    near = got[4]
+    assert near["state"] == "locked" and on(near["box"], (small_x, small_y))
+    assert not lock.contains(tuple(near["box"]), *steps[4][2])  # type: ignore[arg-type]
+    search = got[8]
+    assert search["state"] == "locked" and on(search["box"], tiny)
+    reasons = [
+        d["reason"]
+        for (kind, _, _), d in zip(steps, answer["details"], strict=True)
+        if kind == "click"
+    ]
+    assert reasons == [None, "found by a full-resolution search around the click"]
+    followed = got[9:]
+    assert all(
+        o[1] == "locked" and on(o[4], scene.tiny_centre(indices[3 - k % 2]))
+        for k, o in enumerate(followed)
+    )

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from app.arguments import positive_number
-from app.protocol.constants import VIDEO_FPS
 from app.protocol.control import PROFILES
+from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
 from app.tools.bench import report
 from app.tools.bench.field import ORDER as FIELD_CONDITIONS
@@ -208,9 +208,9 @@ async def _recorder(args: argparse.Namespace) -> int:
     """The flight recorder's cost: print the figures, write recorder.md; 1 if not measured."""
     from playwright.async_api import async_playwright
 
+    from app.chromium import launch_options
     from app.server.serve import start_in_thread
     from app.tools.bench import recording
-    from app.tools.browser import launch_options
 
     seconds = args.seconds or (RECORDER_QUICK_S if args.quick else RECORDER_FULL_S)
     server = start_in_thread()
@@ -234,9 +234,9 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     """Where one room's relay cores go: print the figures, write relay-cost.md."""
     from playwright.async_api import async_playwright
 
+    from app.chromium import launch_options
     from app.server.serve import start_in_thread
     from app.tools.bench import relaycost
-    from app.tools.browser import launch_options
 
     seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
     server = start_in_thread()
@@ -266,7 +266,7 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
 
     from app.server.serve import start_in_thread
     from app.tools.bench import jsnative
-    from app.tools.browser import launch_options
+    from app.chromium import launch_options
 
     plan = QUICK if args.quick else FULL
     frames = jsnative.synthetic_frames(int(plan["frames"]) + jsnative.WARMUP_FRAMES)
@@ -295,9 +295,9 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     # Imported here: they pull in Playwright, aiortc and the server, which --help does not need.
     from playwright.async_api import async_playwright
 
+    from app.chromium import launch_options
     from app.server.serve import start_in_thread
     from app.tools.bench import lock, override
-    from app.tools.browser import launch_options
 
     plan = dict(QUICK if args.quick else FULL)
     if args.seconds is not None:

@@ -58,7 +58,8 @@ FULL = {"rooms": 200, "failover_rooms": 20}
 QUICK = {"rooms": 200, "failover_rooms": 10}
 CANDIDATES = 10
 PACING_S = 0.02  # between two candidates of one peer, as a browser trickles them
-# Rooms arrive this fast: 200 rooms over 20 s; a session lasts ~1.3 s, so ~13 negotiate at once.
+# Rooms arrive this fast (200 rooms over 20 s): a session lasts about a second, so about a dozen
+# negotiate at once, as on a busy service.
 ARRIVAL_ROOMS_PER_S = 10.0
 # ... and for the burst figure, every room within this long.
 BURST_S = 5.0
@@ -267,7 +268,7 @@ async def bench_instance_failover(redis_url: str, logdir: Path, rooms: int) -> f
 
 async def bench_pool_takeover(redis_url: str, logdir: Path) -> float:
     """Seconds from SIGKILL of the serving pool until another pool's relay joined the room."""
-    from app.tools.relay_pool import start_pool_process
+    from app.relay.pool import start_pool_process
 
     with serve_instance(redis_url, logdir) as (url, _):
         async with contextlib.AsyncExitStack() as stack:
@@ -300,9 +301,9 @@ async def bench_relay_density(redis_url: str, logdir: Path, max_rooms: int) -> d
     import redis.asyncio as aioredis
     from playwright.async_api import async_playwright
 
+    from app.chromium import launch_options
+    from app.relay.pool import start_pool_process
     from app.server.fleet import keys
-    from app.tools.browser import launch_options
-    from app.tools.relay_pool import start_pool_process
 
     steps: list[dict[str, Any]] = []
     children: list[subprocess.Popen[bytes]] = []

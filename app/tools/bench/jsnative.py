@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 from playwright.async_api import Browser, Page
 
-from app.protocol.constants import PROFILES, Profile
+from app.protocol.relay_profiles import PROFILES, Profile
 from app.server.config import Settings
 from app.tools.bench.stats import summarize
 from app.tools.parity import OPENCV_BUILDS, OpenCvBuild

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from app.protocol.constants import THESIS_SNAPSHOT_PERIOD_MS
+from app.protocol.relay_profiles import THESIS_SNAPSHOT_PERIOD_MS
 from app.tools.bench.stats import (
     FaceSample,
     HeadingSample,

@@ -23,7 +23,7 @@ import logging
 import time
 from typing import TYPE_CHECKING, Any
 
-from app.tools.browser import chromium_path, launch_options
+from app.chromium import chromium_path, launch_options
 
 if TYPE_CHECKING:
     from playwright.sync_api import Page, Playwright

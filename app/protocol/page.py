@@ -1,0 +1,202 @@
+"""The config every page embeds (``<script type="application/json" id="config">``), as dataclasses.
+
+What a page knows of the protocol -- profile names, channel labels, the frame tag's layout, the
+lock's rule, the control law's numbers, the ROS type names, the data-channel schemas -- is
+rendered from the Python that owns it, each fact once, so no JS module types it again. The
+dataclasses below say which facts and where in the config; :func:`to_json` is the one
+conversion into what the page parses (camelCase field names, JSON numbers). The server fills a
+:class:`PageConfig` per request (``app/server/pages.py``); ``js/config.js`` parses it, and
+``schema.js`` validates data-channel messages against ``protocol.schemas``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+from app.protocol import relay_profiles
+from app.protocol.channels import (
+    AUTOPILOT_CHANNEL,
+    AUTOPILOT_STATE_CHANNEL,
+    CONTROL_CHANNEL,
+    GOAL_AGE_WINDOW_S,
+    GOAL_MAX_AGE_S,
+    STATE_CHANNEL_MAX_RETRANSMITS,
+    STATE_CHANNEL_ORDERED,
+    channel_schemas,
+)
+from app.protocol.control import PROFILES as VEHICLE_PROFILES
+from app.protocol.control import ControlConfig
+from app.protocol.frametag import LAYOUT, FrameTagLayout
+from app.protocol.link_health import HEALTH, HealthLimits
+from app.protocol.lock import LockRule
+from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
+from app.protocol.ros import RosConfig, RosSetting
+from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
+
+
+def camel(name: str) -> str:
+    """``snake_case`` as ``camelCase``."""
+    head, *rest = name.split("_")
+    return head + "".join(part.capitalize() for part in rest)
+
+
+@dataclass(frozen=True)
+class Verbatim:
+    """JSON that reaches the page as it is, not walked again on every page served (the
+    data-channel schemas: generated JSON Schema, large, whose keys are not field names)."""
+
+    json: dict[str, Any]
+
+
+def to_json(value: Any) -> Any:
+    """``value`` as the page reads it: a dataclass becomes an object of its fields, named in
+    camelCase; a mapping keeps its keys (profile names, channel labels are data, not field
+    names); tuples become arrays; an infinity becomes null (JSON has none: "no limit",
+    "never"); :class:`Verbatim` is left as it is."""
+    if isinstance(value, Verbatim):
+        return value.json
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {camel(f.name): to_json(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {key: to_json(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [to_json(item) for item in value]
+    if isinstance(value, float) and math.isinf(value):
+        return None
+    return value
+
+
+@dataclass(frozen=True)
+class ProfileNames:
+    """The relay's profiles and the vehicle's."""
+
+    relay: tuple[str, ...]
+    vehicle: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class RelayPacing:
+    """How often a relay profile takes a snapshot (None: every decoded frame)."""
+
+    snapshot_period_ms: int | None
+
+
+@dataclass(frozen=True)
+class ChannelLabels:
+    """The data channels' labels."""
+
+    autopilot: str
+    autopilot_state: str
+    control: str
+
+
+@dataclass(frozen=True)
+class StateChannelOptions:
+    """RTCDataChannelInit of the lossy state channel."""
+
+    ordered: bool
+    max_retransmits: int
+
+
+@dataclass(frozen=True)
+class GoalFreshness:
+    """The latest-wins gate's numbers (``freshness.js``)."""
+
+    max_age_s: float
+    window_s: float
+
+
+@dataclass(frozen=True)
+class VideoSize:
+    """The frame size the vehicle page asks its camera for."""
+
+    width: int
+    height: int
+
+
+@dataclass(frozen=True)
+class PageProtocol:
+    """What every page gets, with a role or without (``config.protocol``)."""
+
+    roles: tuple[Role, ...]
+    default_room: str
+    profiles: ProfileNames
+    default_profile: str
+    relay_profiles: dict[str, RelayPacing]
+    channels: ChannelLabels
+    state_channel_options: StateChannelOptions
+    goal_freshness: GoalFreshness
+    video: VideoSize
+    # How much smaller the relay's forward to a client is, per side.
+    client_forward_scale_down: float
+    frame_tag: FrameTagLayout
+    lock: LockRule
+    health: HealthLimits
+    # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
+    schemas: Verbatim
+
+
+@dataclass(frozen=True)
+class PageConfig:
+    """A role page's whole config: what it needs to run on its own, ``?auto=1`` included."""
+
+    role: Role
+    ws_path: str
+    room: str
+    name: str
+    auto: bool
+    # The vehicle profile, or on the relay page the relay profile it pairs with.
+    profile: str
+    # The control law's numbers, the world's geometry among them.
+    control: ControlConfig
+    # The vehicle page's spawn step (turn to face up at start).
+    spawn_step: bool
+    # The relay's own video preview.
+    preview: bool
+    rosbridge: str
+    # Whether the page's token goes to ``rosbridge`` (only to this server's own).
+    rosbridge_auth: bool
+    # Why ``rosbridge`` cannot be used from this page, or None.
+    rosbridge_error: str | None
+    # The fallback when the robot's rosapi cannot name its types.
+    ros: RosSetting
+    ros_types: RosConfig
+    protocol: PageProtocol
+
+
+@dataclass(frozen=True)
+class BaseConfig:
+    """The config of a page with no role (index, parity): the protocol alone."""
+
+    protocol: PageProtocol
+
+
+@cache
+def page_protocol() -> PageProtocol:
+    """The protocol every page gets (built once; never mutated)."""
+    return PageProtocol(
+        roles=ROLES,
+        default_room=DEFAULT_ROOM,
+        profiles=ProfileNames(relay=relay_profiles.PROFILES, vehicle=tuple(VEHICLE_PROFILES)),
+        default_profile=relay_profiles.DEFAULT_PROFILE,
+        relay_profiles={
+            name: RelayPacing(relay_profiles.RELAY_SNAPSHOT_PERIOD_MS[name])
+            for name in relay_profiles.PROFILES
+        },
+        channels=ChannelLabels(AUTOPILOT_CHANNEL, AUTOPILOT_STATE_CHANNEL, CONTROL_CHANNEL),
+        state_channel_options=StateChannelOptions(
+            STATE_CHANNEL_ORDERED, STATE_CHANNEL_MAX_RETRANSMITS
+        ),
+        goal_freshness=GoalFreshness(GOAL_MAX_AGE_S, GOAL_AGE_WINDOW_S),
+        video=VideoSize(*VIDEO_SIZE),
+        client_forward_scale_down=CLIENT_FORWARD_SCALE_DOWN,
+        frame_tag=LAYOUT,
+        lock=LockRule(),
+        health=HEALTH,
+        schemas=Verbatim(channel_schemas()),
+    )

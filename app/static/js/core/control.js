@@ -1,0 +1,246 @@
+// The control laws and the controller that paces them (docs/architecture.md, "Vehicle control"):
+// a port of vehicle_agent/control.py so the browser vehicle and the Python agent behave alike,
+// checked against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js)
+// drives it. Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not
+// written here: they come from app/protocol/control.py through the page's embedded config
+// (`config.control`).
+//
+// Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
+// its origin bottom-left with y growing upward. A goal pixel is flipped vertically when mapped
+// to the terrain: a face in the top half of the frame is a target in the upper half.
+// Times are seconds, as in Python, so both sides compute the same doubles.
+
+/** `angle` wrapped into (−π, π]. */
+export function wrapAngle(angle) {
+  let wrapped = angle % (2 * Math.PI);
+  if (wrapped <= -Math.PI) wrapped += 2 * Math.PI;
+  else if (wrapped > Math.PI) wrapped -= 2 * Math.PI;
+  return wrapped;
+}
+
+function clamp(value, low, high) {
+  return Math.max(low, Math.min(high, value));
+}
+
+// JSON has no infinity: the config sends null for "no limit" / "never".
+function profileFrom(constants) {
+  const unbounded = (value) => (value === null ? Infinity : value);
+  return Object.freeze({
+    ...constants,
+    maxAngular: unbounded(constants.maxAngular),
+    searchAfterS: unbounded(constants.searchAfterS),
+  });
+}
+
+/** The law with the shared numbers of `config.control` (see app/protocol/control.py). */
+export class ControlLaw {
+  constructor(constants) {
+    this.worldSize = constants.worldSize;
+    this.terrainCentre = constants.terrainCentre;
+    this.minTargetDistanceM = constants.minTargetDistanceM;
+    this.spawnTheta = constants.spawnTheta;
+    this.profiles = Object.freeze(
+      Object.fromEntries(
+        Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)]),
+      ),
+    );
+    Object.freeze(this);
+  }
+
+  /** Terrain metres {x, y} of goal pixel (x, y) in a w×h frame (image y flipped). */
+  pixelToTerrain(x, y, w, h) {
+    return { x: (x * this.terrainCentre) / (w / 2), y: ((h - y) * this.terrainCentre) / (h / 2) };
+  }
+
+  /** Signed turn in (−π, π] that makes the turtle at `pose` face `goal`; null if undefined. */
+  steeringError(goal, pose) {
+    const target = this.pixelToTerrain(goal.x, goal.y, goal.w, goal.h);
+    return this.#headingError(target.x, target.y, pose);
+  }
+
+  #headingError(tx, ty, pose) {
+    const dx = tx - pose.x;
+    const dy = ty - pose.y;
+    if (Math.hypot(dx, dy) < this.minTargetDistanceM) return null;
+    return wrapAngle(Math.atan2(dy, dx) - pose.theta);
+  }
+
+  /** The profile's angular velocity for a steering error. */
+  angularCommand(error, profile) {
+    if (Math.abs(error) < profile.deadband) return 0;
+    return clamp(profile.gain * error, -profile.maxAngular, profile.maxAngular);
+  }
+
+  /** Metres the turtle can travel straight ahead (or straight back) before a wall. */
+  wallClearance(pose, forward) {
+    const sign = forward ? 1 : -1;
+    let clearance = Infinity;
+    for (const [position, component] of [
+      [pose.x, sign * Math.cos(pose.theta)],
+      [pose.y, sign * Math.sin(pose.theta)],
+    ]) {
+      if (component > 1e-12)
+        clearance = Math.min(clearance, (this.worldSize - position) / component);
+      else if (component < -1e-12) clearance = Math.min(clearance, -position / component);
+    }
+    return Math.max(0, clearance);
+  }
+
+  /**
+   * {linear, angular} that take the turtle to `profile.standoffM` from terrain point (tx, ty):
+   * turn towards it, drive as much as it faces it, slow near walls.
+   */
+  followCommand(tx, ty, pose, profile) {
+    const margin = profile.wallMarginM;
+    // A target at the edge of the frame would lead the turtle into the wall; aim inside.
+    const x = clamp(tx, margin, this.worldSize - margin);
+    const y = clamp(ty, margin, this.worldSize - margin);
+    const error = this.#headingError(x, y, pose);
+    if (error === null) return { linear: 0, angular: 0 };
+    const angular = this.angularCommand(error, profile);
+    const distance = Math.hypot(x - pose.x, y - pose.y);
+    let linear = clamp(
+      profile.linearGain * (distance - profile.standoffM),
+      -profile.maxLinear,
+      profile.maxLinear,
+    );
+    // Only the part of the heading that points at the target is worth driving along.
+    linear *= Math.max(0, Math.cos(error));
+    // Slower with less clearance ahead (behind, when backing off); zero at the wall margin.
+    const allowed = Math.max(
+      0,
+      profile.wallGain * (this.wallClearance(pose, linear >= 0) - margin),
+    );
+    return { linear: clamp(linear, -allowed, allowed), angular };
+  }
+
+  /** The rotate law: turn in place to face the goal's terrain point. */
+  rotate(goal, pose, profile) {
+    const error = this.steeringError(goal, pose);
+    // No defined heading: hold still rather than keep the last turn going.
+    return { linear: 0, angular: error === null ? 0 : this.angularCommand(error, profile) };
+  }
+
+  /** The follow law: drive to the profile's standoff from the goal's terrain point. */
+  follow(goal, pose, profile) {
+    const target = this.pixelToTerrain(goal.x, goal.y, goal.w, goal.h);
+    return this.followCommand(target.x, target.y, pose, profile);
+  }
+
+  /**
+   * The control law `profile.law` names, as a function (goal, pose, profile) -> {linear,
+   * angular}: the laws of vehicle_agent/control.py's LAWS. A new law is a method here, an
+   * entry below and its Python twin.
+   */
+  lawOf(profile) {
+    const laws = { rotate: this.rotate, follow: this.follow };
+    const law = laws[profile.law];
+    if (law === undefined) throw new Error(`no control law ${profile.law}`);
+    return law.bind(this);
+  }
+}
+
+export const ZERO_TWIST = Object.freeze({ linear: 0, angular: 0, seq: null, frame: null });
+
+/**
+ * Turns goals into Twists with one profile and the law it names (or `law`, a function
+ * (goal, pose, profile) -> {linear, angular}). Call `goal` for each goal, `pose` for each pose
+ * update and `tick` every few tens of milliseconds, each with the time now (seconds, one
+ * clock); each returns the Twist to publish now, or null. Closed-loop profiles answer a new
+ * goal at once (rate-capped by `minIntervalS`) and pose updates every `periodS`; the thesis
+ * profile publishes on its own clock. After a goal timeout or `stop` exactly one zero Twist
+ * comes back, then nothing until the next goal. The follow profile turns in place to search
+ * when no goal came for `searchAfterS`.
+ */
+export class Controller {
+  #goal = null;
+  #goalAt = 0;
+  #unanswered = false;
+  #lastSide = 1;
+  #pose = null;
+  #lastPublish = null;
+
+  constructor(controlLaw, profile, law = null) {
+    this.profile = profile;
+    this.law = law ?? controlLaw.lawOf(profile);
+  }
+
+  /** True while goals are arriving. */
+  get active() {
+    return this.#goal !== null;
+  }
+
+  /** True while the follow profile has lost its target and turns to find it. */
+  searching(now) {
+    return this.#goal !== null && this.#lost(now);
+  }
+
+  goal(goal, now) {
+    this.#goal = goal;
+    this.#goalAt = now;
+    this.#unanswered = true;
+    return this.#due(now);
+  }
+
+  pose(pose, now) {
+    this.#pose = pose;
+    return this.#checkTimeout(now) ?? (this.profile.onPose ? this.#due(now) : null);
+  }
+
+  tick(now) {
+    return this.#checkTimeout(now) ?? (this.profile.onPose ? null : this.#due(now));
+  }
+
+  stop() {
+    if (this.#goal === null) return null;
+    this.#goal = null;
+    this.#unanswered = false;
+    this.#lastPublish = null;
+    return ZERO_TWIST;
+  }
+
+  #lost(now) {
+    return now - this.#goalAt > this.profile.searchAfterS;
+  }
+
+  /**
+   * Seconds until the goal timeout stops the turtle (0 when due), null with no goal. A caller
+   * that ticks on a coarse period wakes up at this moment too, so the stop goes out on time.
+   */
+  untilTimeout(now) {
+    if (this.#goal === null) return null;
+    return Math.max(0, this.#goalAt + this.profile.goalTimeoutS - now);
+  }
+
+  #checkTimeout(now) {
+    if (this.#goal !== null && now - this.#goalAt >= this.profile.goalTimeoutS) {
+      return this.stop();
+    }
+    return null;
+  }
+
+  #due(now) {
+    const goal = this.#goal;
+    const pose = this.#pose;
+    if (goal === null || pose === null) return null;
+    const last = this.#lastPublish;
+    const profile = this.profile;
+    if (profile.onPose) {
+      const gap = this.#unanswered ? profile.minIntervalS : profile.periodS;
+      if (last !== null && now - last < gap) return null;
+      this.#lastPublish = now;
+    } else {
+      if (last !== null && now - last < profile.periodS) return null;
+      // The clock-driven profile keeps a fixed cadence (like the thesis's setInterval) instead
+      // of drifting by the tick granularity; after a pause it starts a new grid.
+      this.#lastPublish =
+        last !== null && now - last < 2 * profile.periodS ? last + profile.periodS : now;
+    }
+    this.#unanswered = false;
+    if (this.#lost(now))
+      return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
+    const { linear, angular } = this.law(goal, pose, profile);
+    if (angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
+    return { linear, angular, seq: goal.seq ?? null, frame: goal.frame ?? null };
+  }
+}

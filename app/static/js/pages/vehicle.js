@@ -1,0 +1,390 @@
+// The vehicle page: camera to the relay, goals from the lossy `autopilot-state` data channel
+// (latest wins) turned into Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to
+// the relay on the same channel; `stop` on the reliable `autopilot` channel. What to do with
+// goals, stops, mode changes, drive commands, poses and the clock is the pilot's to decide
+// (core/pilot.js, the twin of the agent's vehicle_agent/pilot.py): this page feeds it, with the
+// time, and acts on its records: publishes their Twists, counts and shows them.
+import { ControlLaw } from '../core/control.js';
+import { Pilot } from '../core/pilot.js';
+import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
+import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
+import { RoomSession } from '../net/room.js';
+import { pickTypes } from '../core/rosflavour.js';
+import { byTestId, fmt, Log, show } from '../view/ui.js';
+
+const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
+const ROS_RETRY_MS = 2000;
+// The pilot's latest records kept in the status (the agent's event log keeps them all).
+const RECORDS_KEPT = 200;
+
+const config = CONFIG;
+const log = new Log(byTestId('log'));
+const room = new RoomSession(config, log);
+const law = new ControlLaw(config.control);
+const pilot = new Pilot(law, law.profiles[config.profile], {
+  deadmanS: config.control.deadmanS,
+  tickS: config.control.tickS,
+  freshness: PROTOCOL.goalFreshness,
+});
+/** The page's clock, in the seconds the pilot takes. */
+const now = () => performance.now() / 1000;
+
+/** The page's one session object, read-only for tests and benchmarks. */
+const status = {
+  // The pilot's records, as the agent's event log has them: counted by kind, the latest kept.
+  events: { goal: 0, goal_dropped: 0, mode: 0, drive: 0, twist: 0 },
+  records: [],
+  goalsReceived: 0, // goals applied
+  lastGoal: null,
+  twistsPublished: 0, // Twists that reached rosbridge
+  lastTwist: null,
+  pose: null,
+  rosConnected: false,
+  rosFlavour: null, // '1', '2' or 'jazzy' once connected
+  rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
+  relayChannelOpen: false,
+  // Goals not applied, by why: not newer (old), too late (stale), an operator held the wheel.
+  goalsDropped: { old: 0, stale: 0, manual: 0 },
+  mode: 'auto', // 'manual' while an operator holds the wheel
+  operator: null,
+  drivesApplied: 0,
+};
+window.autopilotStatus = status;
+
+/** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
+class Turtle {
+  /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
+  constructor(url, setting, rosTypes, token) {
+    this.url = url;
+    this.setting = setting;
+    this.rosTypes = rosTypes;
+    this.token = token;
+    this.types = null; // learnt on each connection
+    this.ros = null;
+    this.cmdVel = null;
+    this.spawnDone = false;
+    this.reported = false; // an outage has been logged
+    this.onPose = () => {};
+  }
+
+  /** The page's token was renewed: prove the fresh one to rosbridge, which ends a session whose
+   *  token expires (only where the old one was sent: this server's own /rosbridge). */
+  renew(token) {
+    if (!this.token) return;
+    this.token = token;
+    this.ros?.callOnConnection({ op: 'auth', token });
+  }
+
+  connect() {
+    const ros = new ROSLIB.Ros({ url: this.url });
+    this.ros = ros;
+    // Queued for the moment the socket opens, ahead of the subscriptions made on 'connection'.
+    if (this.token) ros.callOnConnection({ op: 'auth', token: this.token });
+    ros.on('connection', () => {
+      log.info(`rosbridge connected: ${this.url}`);
+      this.reported = false;
+      status.rosConnected = true;
+      show('ros-state', 'connected');
+      this.#learnTypes(ros);
+    });
+    // roslib throws on an 'error' nobody listens to; the 'close' that follows is what we report.
+    ros.on('error', () => {});
+    ros.on('close', () => {
+      if (this.ros !== ros) return;
+      // Said once per outage, not on every retry.
+      if (status.rosConnected || !this.reported) {
+        log.error(`rosbridge ${this.url} unreachable; retrying every ${ROS_RETRY_MS / 1000} s`);
+      }
+      this.reported = true;
+      status.rosConnected = false;
+      this.cmdVel = null;
+      show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
+      setTimeout(() => this.connect(), ROS_RETRY_MS);
+    });
+  }
+
+  // The robot's own type names from rosapi topic_type; the ros= setting when it cannot say.
+  async #learnTypes(ros) {
+    const [pose, twist] = await Promise.all(
+      ['/turtle1/pose', '/turtle1/cmd_vel'].map((topic) => this.#topicType(ros, topic)),
+    );
+    if (this.ros !== ros) return; // reconnected meanwhile
+    const types = pickTypes(this.rosTypes, this.setting, pose, twist);
+    this.types = types;
+    status.rosFlavour = types.flavour;
+    status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
+    const from = types.fromRobot
+      ? 'as its rosapi reports'
+      : `from ros=${this.setting}: rosapi did not say`;
+    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.twist}) ${from}`);
+    show('ros-state', `connected (ROS ${types.flavour})`);
+    this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: types.twist });
+    const topic = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: types.pose });
+    topic.subscribe((msg) => this.#pose(msg));
+  }
+
+  #topicType(ros, topic) {
+    return new Promise((resolve) => {
+      const timer = setTimeout(() => resolve(null), this.rosTypes.detectTimeoutS * 1000);
+      const done = (type) => {
+        clearTimeout(timer);
+        resolve(type || null);
+      };
+      ros.getTopicType(topic, done, () => done(null));
+    });
+  }
+
+  publish(twist) {
+    if (this.cmdVel === null) return false;
+    this.cmdVel.publish({
+      linear: { x: twist.linear, y: 0, z: 0 },
+      angular: { x: 0, y: 0, z: twist.angular },
+    });
+    return true;
+  }
+
+  #pose(msg) {
+    if (!this.spawnDone) {
+      this.spawnDone = true;
+      this.#spawnStep(msg);
+    }
+    this.onPose({ x: msg.x, y: msg.y, theta: msg.theta });
+  }
+
+  // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
+  #spawnStep(pose) {
+    if (!config.spawnStep) return;
+    const service = new ROSLIB.Service({
+      ros: this.ros,
+      name: '/turtle1/teleport_absolute',
+      serviceType: this.types.teleport,
+    });
+    service.callService(
+      { x: pose.x, y: pose.y, theta: law.spawnTheta },
+      () => log.info('spawn step: turtle1 turned to π/2'),
+      (err) => log.error(`spawn step failed: ${err}`),
+    );
+  }
+}
+
+const turtle = new Turtle(
+  config.rosbridge,
+  config.ros,
+  config.rosTypes,
+  config.rosbridgeAuth ? config.token : null,
+);
+/** Everything else this page holds, in one place. */
+const session = {
+  channel: null, // the open `autopilot` data channel (reliable)
+  stateChannel: null, // the open `autopilot-state` data channel (unordered, no retransmits)
+  lastPoseSent: 0,
+  rosWarned: false, // a lost Twist has been reported for this outage
+};
+
+function publish(twist, why) {
+  if (!turtle.publish(twist)) {
+    // Once per outage: goals keep coming at frame rate and would flood the log.
+    if (!session.rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
+    session.rosWarned = true;
+    return;
+  }
+  session.rosWarned = false;
+  status.twistsPublished += 1;
+  status.lastTwist = twist;
+  const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
+  const goal = twist.seq !== null ? ` (goal ${twist.seq})` : '';
+  show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${goal}`);
+  if (twist.linear === 0 && twist.angular === 0 && twist.seq === null)
+    log.info(`zero Twist: ${why}`);
+}
+
+/**
+ * Carry out what the pilot did, in order: count and keep each record, show the mode, publish
+ * the Twists. `why` says what a zero Twist answers, for the log.
+ */
+function act(records, why) {
+  for (const record of records) {
+    status.events[record.ev] += 1;
+    status.records.push(record);
+    if (status.records.length > RECORDS_KEPT) status.records.shift();
+    switch (record.ev) {
+      case 'goal':
+        status.goalsReceived += 1;
+        status.lastGoal = record;
+        show('goals-received', String(status.goalsReceived));
+        break;
+      case 'goal_dropped':
+        status.goalsDropped[record.why] += 1;
+        break;
+      case 'mode':
+        status.mode = record.mode;
+        status.operator = record.operator;
+        show('mode', record.mode === 'manual' ? `manual: ${record.operator}` : 'autopilot');
+        log.info(`mode ${record.mode}${record.operator ? ` by ${record.operator}` : ''} (${why})`);
+        break;
+      case 'drive':
+        if (record.applied) status.drivesApplied += 1;
+        break;
+      case 'twist':
+        publish(record, why);
+        break;
+      default:
+        log.error(`the pilot made an unknown record ${record.ev}`);
+    }
+  }
+}
+
+function halt(reason) {
+  act(pilot.halt(now()), reason);
+}
+
+function onMode(msg) {
+  act(pilot.modeChange(msg.mode, msg.operator ?? null, now()), msg.reason ?? 'relay');
+}
+
+function onDrive(msg) {
+  const stopping = msg.linear === 0 && msg.angular === 0;
+  act(
+    pilot.drive(msg.seq, msg.linear, msg.angular, now()),
+    stopping ? 'operator stopped' : 'operator',
+  );
+}
+
+turtle.onPose = (pose) => {
+  status.pose = pose;
+  show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
+  const t = now();
+  act(pilot.pose(pose, t), 'goals stopped coming');
+  if (t - session.lastPoseSent < POSE_FORWARD_MS / 1000) return;
+  const age = pilot.goalAge(t);
+  const goalAgeMs = age === null ? null : age * 1000;
+  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs }))
+    session.lastPoseSent = t;
+};
+
+function tick() {
+  const t = now();
+  // In manual mode the autopilot has no goal to time out: a stop there is the dead-man's.
+  const why = pilot.mode === 'manual' ? 'dead-man: no drive command' : 'goals stopped coming';
+  act(pilot.tick(t), why);
+  setTimeout(tick, pilot.nextTick(now()) * 1000);
+}
+tick();
+
+/** A goal, already validated against the protocol's Goal model by serveChannel. */
+function onGoal(msg) {
+  const wasActive = pilot.active;
+  const records = pilot.goal(msg, now());
+  if (!wasActive && records[0].ev === 'goal') log.info(`piloting: first goal (${msg.op})`);
+  act(records, 'goal');
+}
+
+function setupPeer(peer, stream) {
+  // No contentHint and no degradationPreference: on a capped uplink Chromium's default
+  // (balanced) kept the most frames per second, which the control loop lives on; 'motion'
+  // (maintain-framerate) kept fewer and 'detail' fewest (`autopilot bench --field`, video rows).
+  if (stream !== null) for (const track of stream.getVideoTracks()) peer.pc.addTrack(track, stream);
+  const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
+  const handlers = {
+    goal: onGoal,
+    stop: () => act(pilot.stop(now()), 'relay says stop'),
+    mode: onMode,
+    drive: onDrive,
+  };
+  serveChannel(dc, handlers, log, SCHEMAS.autopilot.vehicle);
+  // A new link: the relay's seq starts again, and a new relay knows of no operator.
+  act(pilot.newLink(now()), 'a new relay link');
+  const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);
+  serveChannel(
+    state,
+    { goal: onGoal, drive: onDrive },
+    log,
+    SCHEMAS[CHANNELS.autopilotState].vehicle,
+  );
+  state.addEventListener('open', () => {
+    session.stateChannel = state;
+  });
+  state.addEventListener('close', () => {
+    if (session.stateChannel === state) session.stateChannel = null;
+  });
+  dc.addEventListener('open', () => {
+    session.channel = dc;
+    status.relayChannelOpen = true;
+    log.info(`autopilot channel to ${peer.remote} open`);
+    showState();
+  });
+  dc.addEventListener('close', () => {
+    if (session.channel !== dc) return;
+    session.channel = null;
+    status.relayChannelOpen = false;
+    halt('relay channel closed');
+    showState();
+  });
+}
+
+function showState() {
+  const parts = [room.describe({ withRoster: false })];
+  if (room.phase === 'joined') {
+    const relay = room.relay;
+    if (relay === undefined) parts.push('waiting for a relay');
+    else
+      parts.push(
+        status.relayChannelOpen
+          ? `relay ${relay.name} connected`
+          : `connecting to relay ${relay.name}`,
+      );
+  }
+  show('state', parts.join(' · '));
+}
+
+async function startCamera() {
+  if (!window.isSecureContext) {
+    // Browsers hide navigator.mediaDevices from plain-HTTP pages of any host but this one.
+    const why =
+      'no camera: browsers give the camera only to pages served over HTTPS (or from localhost); ' +
+      'serve with --self-signed or --cert and open https://… (see docs/deploying.md)';
+    log.error(why);
+    show('camera-state', why);
+    return null;
+  }
+  try {
+    const stream = await navigator.mediaDevices.getUserMedia({
+      video: { width: { ideal: PROTOCOL.video.width }, height: { ideal: PROTOCOL.video.height } },
+      audio: false,
+    });
+    byTestId('camera').srcObject = stream;
+    const settings = stream.getVideoTracks()[0].getSettings();
+    log.info(`camera on: ${settings.width}×${settings.height}`);
+    show('camera-state', `camera on: ${settings.width}×${settings.height}`);
+    return stream;
+  } catch (err) {
+    const why = `camera unavailable (${err.name}: ${err.message}); connecting without video`;
+    log.error(why);
+    show('camera-state', why);
+    return null;
+  }
+}
+
+room.addEventListener('renewed', (event) => turtle.renew(event.detail));
+room.bindControls();
+room.addEventListener('phase', showState);
+room.addEventListener('roster', showState);
+room.addEventListener('problem', showState);
+room.addEventListener('phase', (event) => {
+  if (event.detail === 'disconnected') halt('left the room');
+});
+if (config.rosbridgeError) {
+  log.error(config.rosbridgeError);
+  show('ros-state', 'refused: insecure rosbridge URL');
+} else {
+  turtle.connect();
+}
+const stream = await startCamera();
+const link = new RelayLink(room, { log, setup: (peer) => setupPeer(peer, stream) });
+link.addEventListener('lost', (event) => {
+  halt(event.detail);
+  showState();
+});
+link.addEventListener('peer', showState);
+link.sync();
+if (config.auto) room.autoJoin();
