@@ -80,3 +80,14 @@ def test_opencv_is_one_version_on_both_sides() -> None:
     assert sdist_sha256 in built[0]["source"]
     constraints = (REPO / "constraints.txt").read_text().splitlines()
     assert f"opencv-python-headless=={pin}" in constraints
+
+
+def test_the_simd_build_records_each_patch_build_opencv_js_applies() -> None:
+    """scripts/build-opencv-js applies every scripts/opencv-js-patches/*.patch; a patch changed
+    or added without a rebuild (and its record) fails here."""
+    (entry,) = [e for e in vendored()["files"] if e["path"] == "app/static/opencv-simd.js"]
+    patches = sorted((REPO / "scripts/opencv-js-patches").glob("*.patch"))
+    assert patches
+    assert [p["path"] for p in entry["patches"]] == [str(p.relative_to(REPO)) for p in patches]
+    for recorded, patch in zip(entry["patches"], patches, strict=True):
+        assert hashlib.sha256(patch.read_bytes()).hexdigest() == recorded["sha256"]

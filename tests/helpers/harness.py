@@ -7,12 +7,13 @@ from contextlib import AbstractContextManager, contextmanager
 
 from playwright.sync_api import Page
 
+from app.protocol.opencv import OpenCvBuild
 from app.server.config import Settings
 from app.tools import parity
 
 
 def open_harness(
-    build: parity.OpenCvBuild | None = None,
+    build: OpenCvBuild | None = None,
 ) -> AbstractContextManager[parity.Harness]:
     """The harness on a development server that asks for no token, with OpenCV.js ``build``
     (None: the relay's, as ``autopilot parity`` loads by default)."""

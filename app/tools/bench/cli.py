@@ -261,33 +261,52 @@ async def _relay_cost(args: argparse.Namespace) -> int:
 
 
 async def _opencv_builds(args: argparse.Namespace) -> int:
-    """The cascades on each OpenCV.js build: print the figures, write opencv-builds.md."""
+    """The cascades on each OpenCV.js build: print the figures, write opencv-builds.md; 1 when
+    the build the relay loads is not the one the measurement chooses."""
     from playwright.async_api import async_playwright
 
-    from app.server.serve import start_in_thread
-    from app.tools.bench import jsnative
     from app.chromium import launch_options
+    from app.server.serve import start_in_thread
+    from app.tools.bench import jsnative, opencv_builds
 
     plan = QUICK if args.quick else FULL
     frames = jsnative.synthetic_frames(int(plan["frames"]) + jsnative.WARMUP_FRAMES)
+    started = datetime.datetime.now(datetime.UTC)
+    load_before = os.getloadavg()[0]
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
             browser = await playwright.chromium.launch(**launch_options())
             try:
-                times = await jsnative.compare_builds(browser, server.url, frames)
+                times = await opencv_builds.compare_builds(browser, server.url, frames)
+                browser_version = browser.version
             finally:
                 await browser.close()
     finally:
         server.stop()
-    found = {
-        "frames": int(plan["frames"]),
-        "load_average": round(os.getloadavg()[0], 2),
-        "ops": [t.figures() for t in times],
-    }
-    log.info("OpenCV.js builds report: %s", jsnative.write_builds_report(args.out, found))
+    found = opencv_builds.decide(
+        {
+            "command": _command(args),
+            "started": started.isoformat(timespec="seconds"),
+            "machine": _machine(),
+            "chromium": browser_version,
+            "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+            "frames": int(plan["frames"]),
+            "ops": [opencv_builds.op_figures(t) for t in times],
+        }
+    )
+    log.info("OpenCV.js builds report: %s", opencv_builds.write_report(args.out, found))
     if args.json:
         sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    if found["choice"] != found["relay_loads"]:
+        log.error(
+            "measured: the relay should load the %s OpenCV.js (%s); it loads the %s"
+            " (app/protocol/opencv.py)",
+            found["choice"],
+            found["reason"],
+            found["relay_loads"],
+        )
+        return 1
     return 0
 
 
@@ -437,6 +456,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if args.relay_cost:
         parts.append("--relay-cost")
+    if args.opencv_builds:
+        parts.append("--opencv-builds")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

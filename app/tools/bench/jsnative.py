@@ -6,22 +6,14 @@ same RGBA array with ``cv2.setNumThreads(1)``. Both pipelines start from RGBA (g
 reduction and detection included) so the ratio compares like with like. The two run one after
 the other, never at the same time, so neither steals the other's core; each frame is timed a few
 times on each side and the fastest run kept.
-
-:func:`compare_builds` (``autopilot bench --opencv-builds``) sets the OpenCV.js builds side by side
-the same way: one parity page per build in one Chromium, each frame analysed by every cascade
-operation on each build in turn (a full scan, then the window around the largest box) and by
-Python, so that the machine's drift falls on every side alike; the figure is the median of the
-per-frame ratios between the builds.
 """
 
 from __future__ import annotations
 
 import base64
-import json
 import logging
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -29,13 +21,12 @@ import numpy as np
 import numpy.typing as npt
 from playwright.async_api import Browser, Page
 
+from app.protocol.opencv import OpenCvBuild
 from app.protocol.relay_profiles import PROFILES, Profile
 from app.server.config import Settings
-from app.tools.bench.stats import summarize
-from app.tools.parity import OPENCV_BUILDS, OpenCvBuild
 from app.vision import window
 from app.vision.reference import detect
-from app.vision.spec import CascadeOperation, CascadeParams, load_spec
+from app.vision.spec import CascadeParams, load_spec
 
 log = logging.getLogger(__name__)
 
@@ -51,8 +42,8 @@ REPEATS = 3
 # page's fromBase64, and every timed run analyses that copy (the analyzer copies the pixels to
 # its worker, so the page's frame stays whole). around: search only the window around that box,
 # as detect-then-track does between full scans.
-_LOAD_JS = "(b64) => { window.benchFrame = new Uint8ClampedArray(window.fromBase64(b64).buffer); }"
-_ANALYZE_JS = """async ([width, height, opId, profile, around]) => {
+LOAD_JS = "(b64) => { window.benchFrame = new Uint8ClampedArray(window.fromBase64(b64).buffer); }"
+ANALYZE_JS = """async ([width, height, opId, profile, around]) => {
   const data = window.benchFrame;
   const r = await window.analyzer.analyze({ width, height, data }, opId, { profile, around });
   return { ms: r.ms, boxes: r.boxes };
@@ -98,7 +89,7 @@ async def compare(
     """Time ``op_id`` on every frame in OpenCV.js (in ``browser``) and in Python, per profile."""
     spec = load_spec((settings or Settings()).operations_spec)
     op = spec.op(op_id)
-    page = await _parity_page(browser, base_url)
+    page = await parity_page(browser, base_url)
     try:
         results: dict[str, Comparison] = {}
         threads = cv2.getNumThreads()
@@ -110,11 +101,11 @@ async def compare(
                 tracks = isinstance(params, CascadeParams) and params.full_scan_every > 1
                 for i, rgba in enumerate(frames):
                     height, width = rgba.shape[:2]
-                    await page.evaluate(_LOAD_JS, base64.b64encode(rgba.tobytes()).decode("ascii"))
+                    await page.evaluate(LOAD_JS, base64.b64encode(rgba.tobytes()).decode("ascii"))
                     js_ms, native_ms, window_ms = [], [], []
                     for _ in range(REPEATS):
                         js: dict[str, Any] = await page.evaluate(
-                            _ANALYZE_JS, [width, height, op_id, profile, None]
+                            ANALYZE_JS, [width, height, op_id, profile, None]
                         )
                         js_ms.append(float(js["ms"]))
                         started = time.perf_counter()
@@ -123,7 +114,7 @@ async def compare(
                         around = window.largest([tuple(b) for b in js["boxes"]])
                         if around is not None and tracks:
                             windowed: dict[str, Any] = await page.evaluate(
-                                _ANALYZE_JS, [width, height, op_id, profile, around]
+                                ANALYZE_JS, [width, height, op_id, profile, around]
                             )
                             window_ms.append(float(windowed["ms"]))
                     if i < WARMUP_FRAMES:
@@ -154,7 +145,7 @@ async def compare(
         await page.close()
 
 
-async def _parity_page(browser: Browser, base_url: str, build: OpenCvBuild | None = None) -> Page:
+async def parity_page(browser: Browser, base_url: str, build: OpenCvBuild | None = None) -> Page:
     """A parity page whose analyzer is ready, with OpenCV.js ``build`` (None: the relay's)."""
     page = await browser.new_page()
     await page.goto(f"{base_url}/parity" + ("" if build is None else f"?opencv={build}"))
@@ -165,133 +156,3 @@ async def _parity_page(browser: Browser, base_url: str, build: OpenCvBuild | Non
         await page.close()
         raise RuntimeError(f"the parity page's analyzer did not start: {state}")
     return page
-
-
-@dataclass
-class BuildTimes:
-    """One cascade operation's detection times, a value per frame: each build's full scans and
-    window searches (on the frames where every build found a box), and Python's full scans."""
-
-    op: str
-    full_ms: dict[str, list[float]]
-    window_ms: dict[str, list[float]]
-    python_ms: list[float] = field(default_factory=list)
-    # Frames on which a build's boxes were Python's, per build.
-    same_boxes: dict[str, int] = field(default_factory=dict)
-    frames: int = 0
-
-    def figures(self) -> dict[str, Any]:
-        """Per scan: each build's p50 (ms), the median per-frame ratio of the first build of
-        OPENCV_BUILDS to the second, and (full scans) Python's p50."""
-        first, second = OPENCV_BUILDS
-        out: dict[str, Any] = {"op": self.op, "frames": self.frames, "same_boxes": self.same_boxes}
-        for scan, times in (("full", self.full_ms), ("window", self.window_ms)):
-            ratios = [a / b for a, b in zip(times[first], times[second], strict=True)]
-            out[scan] = {build: _p50(times[build]) for build in OPENCV_BUILDS}
-            out[scan] |= {"ratio": _p50(ratios, 3), "frames": len(ratios)}
-        out["full"]["python"] = _p50(self.python_ms)
-        return out
-
-
-def _p50(values: list[float], digits: int = 2) -> float | None:
-    found = summarize(values)
-    return None if found is None else round(found.p50, digits)
-
-
-async def compare_builds(
-    browser: Browser, base_url: str, frames: list[Rgba], settings: Settings | None = None
-) -> list[BuildTimes]:
-    """Every cascade operation's default-profile detection on every OpenCV.js build and in
-    Python, interleaved frame by frame (module docstring)."""
-    spec = load_spec((settings or Settings()).operations_spec)
-    cascades = [op for op in spec.operations if isinstance(op, CascadeOperation)]
-    pages: dict[OpenCvBuild, Page] = {}
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        for build in OPENCV_BUILDS:
-            pages[build] = await _parity_page(browser, base_url, build)
-        found = [
-            BuildTimes(
-                op.id,
-                full_ms={b: [] for b in OPENCV_BUILDS},
-                window_ms={b: [] for b in OPENCV_BUILDS},
-                same_boxes=dict.fromkeys(OPENCV_BUILDS, 0),
-            )
-            for op in cascades
-        ]
-        for i, rgba in enumerate(frames):
-            height, width = rgba.shape[:2]
-            encoded = base64.b64encode(rgba.tobytes()).decode("ascii")
-            for page in pages.values():
-                await page.evaluate(_LOAD_JS, encoded)
-            for op, times in zip(cascades, found, strict=True):
-                full: dict[str, list[float]] = {b: [] for b in OPENCV_BUILDS}
-                windowed: dict[str, list[float]] = {b: [] for b in OPENCV_BUILDS}
-                boxes: dict[str, list[window.Box]] = {}
-                python_ms = []
-                for _ in range(REPEATS):
-                    for build, page in pages.items():
-                        args = [width, height, op.id, "default", None]
-                        js = await page.evaluate(_ANALYZE_JS, args)
-                        full[build].append(float(js["ms"]))
-                        boxes[build] = sorted((x, y, w, h) for x, y, w, h in js["boxes"])
-                        around = window.largest(boxes[build])
-                        if around is not None:
-                            args[-1] = around
-                            js = await page.evaluate(_ANALYZE_JS, args)
-                            windowed[build].append(float(js["ms"]))
-                    started = time.perf_counter()
-                    native = detect(op, rgba)
-                    python_ms.append((time.perf_counter() - started) * 1000.0)
-                if i < WARMUP_FRAMES:
-                    continue
-                times.frames += 1
-                times.python_ms.append(min(python_ms))
-                for build in OPENCV_BUILDS:
-                    times.full_ms[build].append(min(full[build]))
-                    times.same_boxes[build] += boxes[build] == sorted(native.boxes)
-                # Only where every build searched a window: the ratio pairs frames.
-                if all(windowed.values()):
-                    for build in OPENCV_BUILDS:
-                        times.window_ms[build].append(min(windowed[build]))
-        return found
-    finally:
-        cv2.setNumThreads(threads)
-        for page in pages.values():
-            await page.close()
-
-
-def write_builds_report(out: Path, found: dict[str, Any]) -> Path:
-    """``opencv-builds.md`` and ``opencv-builds.json`` in ``out``: ``found`` holds each
-    operation's :meth:`BuildTimes.figures` under ``ops``, and the run's frames and load."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "opencv-builds.json").write_text(json.dumps(found, indent=2) + "\n")
-    first, second = OPENCV_BUILDS
-    lines = [
-        "# The cascade on each OpenCV.js build",
-        "",
-        f"`autopilot bench --opencv-builds`: {found['frames']} frames of the agent's synthetic "
-        f"scene ({WARMUP_FRAMES} more not counted), default profile, every build and Python in "
-        f"turn on each frame, the fastest of {REPEATS} runs each (load average "
-        f"{found['load_average']} at the end). Detection ms, p50 over the frames; the ratio is "
-        f"the median of the per-frame ratios {first} / {second}.",
-        "",
-        f"| operation | scan | frames | {first} | {second} | {first} / {second} | Python |",
-        "|---|---|---:|---:|---:|---:|---:|",
-    ]
-    for op in found["ops"]:
-        for scan in ("full", "window"):
-            row = {k: "–" if v is None else v for k, v in op[scan].items()}
-            lines.append(
-                f"| {op['op']} | {scan} | {row['frames']} | {row[first]} | {row[second]}"
-                f" | {row['ratio']} | {row.get('python', '')} |"
-            )
-    same = ", ".join(
-        f"{op['op']} " + " / ".join(str(op["same_boxes"][b]) for b in OPENCV_BUILDS)
-        for op in found["ops"]
-    )
-    lines += ["", f"Frames whose full-scan boxes were Python's ({first} / {second}): {same}."]
-    path = out / "opencv-builds.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
