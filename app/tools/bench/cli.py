@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.arguments import positive_number
+from app.arguments import positive_integer, positive_number
 from app.protocol.control import PROFILES
 from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
@@ -103,7 +103,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--opencv-builds",
         action="store_true",
         help="time the cascades on each OpenCV.js build instead, side by side on the same frames,"
-        " with Python as the baseline (opencv-builds.md)",
+        " with Python as the baseline, and check the build the relay loads (opencv-builds.md)",
+    )
+    parser.add_argument(
+        "--frames",
+        type=positive_integer,
+        metavar="N",
+        help=f"with --opencv-builds: count N frames (default {FULL['frames']:g}, --quick"
+        f" {QUICK['frames']:g})",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
@@ -120,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the benchmark; 0 when every figure was measured, 1 when some could not be."""
     if args.condition and not args.field:
         log.error("--condition goes with --field")
+        return 2
+    if args.frames is not None and not args.opencv_builds:
+        log.error("--frames goes with --opencv-builds")
         return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
@@ -197,6 +207,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--relay-cost")
     if args.opencv_builds:
         argv.append("--opencv-builds")
+    if args.frames is not None:
+        argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -269,8 +281,8 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
     from app.server.serve import start_in_thread
     from app.tools.bench import jsnative, opencv_builds
 
-    plan = QUICK if args.quick else FULL
-    frames = jsnative.synthetic_frames(int(plan["frames"]) + jsnative.WARMUP_FRAMES)
+    counted = args.frames or int((QUICK if args.quick else FULL)["frames"])
+    frames = jsnative.synthetic_frames(counted + jsnative.WARMUP_FRAMES)
     started = datetime.datetime.now(datetime.UTC)
     load_before = os.getloadavg()[0]
     server = start_in_thread()
@@ -291,7 +303,7 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
             "machine": _machine(),
             "chromium": browser_version,
             "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
-            "frames": int(plan["frames"]),
+            "frames": counted,
             "ops": [opencv_builds.op_figures(t) for t in times],
         }
     )
@@ -458,6 +470,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--relay-cost")
     if args.opencv_builds:
         parts.append("--opencv-builds")
+    if args.frames is not None:
+        parts.append(f"--frames {args.frames}")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:
