@@ -13,7 +13,8 @@ const WORKER_URL = `/static/js/worker/vision-worker.js?${new URLSearchParams({
     defaultProfile: PROTOCOL.defaultProfile,
     lock: PROTOCOL.lock,
   }),
-  opencv: new URLSearchParams(globalThis.location?.search ?? '').get('opencv') ?? PROTOCOL.opencvBuild,
+  opencv:
+    new URLSearchParams(globalThis.location?.search ?? '').get('opencv') ?? PROTOCOL.opencvBuild,
 })}`;
 
 /**
