@@ -24,6 +24,7 @@ from playwright.async_api import Browser, Page
 from app.protocol.opencv import OpenCvBuild
 from app.protocol.relay_profiles import PROFILES, Profile
 from app.server.config import Settings
+from app.tools.parity import READY_TIMEOUT_MS
 from app.vision import window
 from app.vision.reference import detect
 from app.vision.spec import CascadeParams, load_spec
@@ -150,7 +151,9 @@ async def parity_page(browser: Browser, base_url: str, build: OpenCvBuild | None
     page = await browser.new_page()
     await page.goto(f"{base_url}/parity" + ("" if build is None else f"?opencv={build}"))
     # A function, not an expression, which the page's CSP would refuse to eval.
-    await page.wait_for_function("() => document.body.dataset.ready !== undefined", timeout=180_000)
+    await page.wait_for_function(
+        "() => document.body.dataset.ready !== undefined", timeout=READY_TIMEOUT_MS
+    )
     if await page.evaluate("document.body.dataset.ready") != "true":
         state = await page.text_content("#state")
         await page.close()
