@@ -127,9 +127,10 @@ class CutOff(RecordingError):
 
 
 # Bounds on what a file may make the reader hold, whatever it says of itself: a chunk expands
-# at most this many times its compressed size (the recorder's JSON and JPEG chunks expand a few
-# times; a zstd bomb, thousands), and never beyond the chunk limit.
-EXPANSION_LIMIT: Final = 100
+# at most this many times its compressed size, and never beyond the chunk limit. The recorder's
+# chunks with images expand a few times, a still turtle's poses alone a hundred; a zstd bomb,
+# tens of thousands.
+EXPANSION_LIMIT: Final = 1000
 CHUNK_LIMIT: Final = 64 * 2**20
 _MAGIC: Final = b"\x89MCAP0\r\n"
 _RECORD_HEAD: Final = struct.Struct("<BQ")
@@ -309,23 +310,29 @@ def _recorded(
 
 
 def _records(path: Path) -> Iterator[tuple[int, int, bytes]]:
-    """(offset, opcode, body) of each record of the file's data section."""
+    """(offset, opcode, body) of each record of the file's data section. A record that runs
+    past the end is a cut (:class:`CutOff`) in a file that was never finished, and damage in
+    one that was (it ends with the magic)."""
     size = path.stat().st_size
     with path.open("rb") as stream:
         magic = stream.read(len(_MAGIC))
         if magic != _MAGIC:
             what = "empty" if not magic else f"not an MCAP file (it starts {magic!r})"
             raise RecordingError(f"{path} is {what}")
+        stream.seek(max(size - len(_MAGIC), len(_MAGIC)))
+        overrun = RecordingError if stream.read() == _MAGIC else CutOff
+        stream.seek(len(_MAGIC))
         offset = len(_MAGIC)
         while True:
             head = stream.read(_RECORD_HEAD.size)
             if len(head) < _RECORD_HEAD.size:
-                raise CutOff(f"{path} is cut off at byte {offset}: the rest is missing")
+                raise overrun(f"{path} is cut off at byte {offset}: the rest is missing")
             opcode, length = _RECORD_HEAD.unpack(head)
             remaining = size - offset - _RECORD_HEAD.size
             if length > remaining:
-                raise CutOff(
-                    f"{path} is cut off at byte {offset}: its {_opcode_name(opcode)} record "
+                problem = "is cut off" if overrun is CutOff else "is damaged"
+                raise overrun(
+                    f"{path} {problem} at byte {offset}: its {_opcode_name(opcode)} record "
                     f"says {length} bytes, {remaining} remain"
                 )
             yield offset, opcode, stream.read(length)
