@@ -7,7 +7,13 @@ the camera on :data:`IMAGE_TOPIC`, each channel with a JSON Schema that Foxglove
 read natively; an event's schema is derived from its dataclass (:func:`json_schema`) and its
 message is its record without ``ev`` (the topic names the kind). ``autopilot replay``
 (``app/tools/replay.py``) reads the files back here (:func:`messages`, :func:`events`,
-:func:`summary`), without the recorder's media stack.
+:func:`images`, :func:`summary`), without the recorder's media stack.
+
+A file is read as damaged files must be (docs/recording.md): record by record from its start,
+each length checked against what is left, each chunk's expansion bounded and its checksum
+checked, so that whatever a file says it cannot make the reader hold more than a fixed multiple
+of its size; anything wrong is a :class:`RecordingError` naming the file, the byte offset and the
+channel. A file cut off (:class:`CutOff`) reads up to its cut.
 """
 
 from __future__ import annotations

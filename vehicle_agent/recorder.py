@@ -27,6 +27,12 @@ drains the queue once a second, JPEG-encodes and writes. A full queue drops the 
 or the recorder's ``clock``), taken when the event happened. Files roll over by size and age, and
 only the newest ``max_files`` are kept, so a day's run cannot fill the disk unnoticed.
 
+A disk that refuses must not stop the vehicle: the first file is opened when the recorder starts,
+so that a folder it cannot write is said then (:class:`RecorderError`); a write refused later
+(a full disk) is one warning, the file is left as far as it got (its whole chunks read back,
+``app/recording.py``), what comes meanwhile is dropped and counted, and each drain tries a new
+file until the disk takes one.
+
 The recorder counts its own CPU time, the loop's share and the writer thread's
 (:meth:`FlightRecorder.totals`), so that what it costs the agent is measured directly, not only
 as the difference between two runs of a noisy machine (``autopilot bench --recorder``).
