@@ -134,8 +134,8 @@ class CutOff(RecordingError):
 
 # Bounds on what a file may make the reader hold, whatever it says of itself: a chunk expands
 # at most this many times its compressed size, and never beyond the chunk limit. The recorder's
-# chunks with images expand a few times, a still turtle's poses alone a hundred; a zstd bomb,
-# tens of thousands.
+# chunks with images expand a few times, a still turtle's poses alone far more (their numbers
+# repeat), a zstd bomb of zeros more again by orders of magnitude.
 EXPANSION_LIMIT: Final = 1000
 CHUNK_LIMIT: Final = 64 * 2**20
 _MAGIC: Final = b"\x89MCAP0\r\n"
