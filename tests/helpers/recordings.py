@@ -35,7 +35,8 @@ async def record(
         )  # fmt: skip
         twist = ev.TwistSent(seq=sent.frame, frame=sent.frame, linear=0.5, angular=0.1, t=t)
         pose = ev.PoseReport(x=5.5, y=5.5, theta=1.0, sent=True, t=t)
-        loop.call_later(0.06, lambda: [events.emit(e) for e in (goal, twist, pose)])
+        for event in (goal, twist, pose):
+            loop.call_later(0.06, events.emit, event)
 
     video = SyntheticVideo(320, 240, fps=20, on_frame=answer)
     camera = asyncio.create_task(recorder.record_video(video))

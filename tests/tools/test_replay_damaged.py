@@ -41,7 +41,7 @@ def real(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return small_recording(tmp_path_factory.mktemp("real"))
 
 
-def _replay(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, list[str], str]:
+def _replay(capsys: pytest.CaptureFixture[str], *args: str | Path) -> tuple[int, list[str], str]:
     """Exit status, stderr lines and stdout of ``autopilot replay args``."""
     status = main(["replay", *map(str, args)])
     out, err = capsys.readouterr()
@@ -87,8 +87,9 @@ def _first(topic: str, damaged: Callable[[dict[str, Any]], Any]) -> Callable[...
 
 
 def _png(fields: dict[str, Any]) -> dict[str, Any]:
-    jpeg = np.frombuffer(base64.b64decode(fields["data"]), np.uint8)
-    png = cv2.imencode(".png", cv2.imdecode(jpeg, cv2.IMREAD_COLOR))[1].tobytes()
+    bgr = cv2.imdecode(np.frombuffer(base64.b64decode(fields["data"]), np.uint8), cv2.IMREAD_COLOR)
+    assert bgr is not None
+    png = cv2.imencode(".png", bgr)[1].tobytes()
     return {**fields, "data": base64.b64encode(png).decode()}
 
 

@@ -69,6 +69,17 @@ def test_a_read_only_folder_stops_the_vehicle_at_start_in_one_line(tmp_path: Pat
     assert_one_line_error(done, f"cannot record into {tmp_path}: Read-only file system")
 
 
+class _Kept(logging.Handler):
+    """Keeps each record's level and message."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.records: list[tuple[str, str]] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append((record.levelname, record.getMessage()))
+
+
 def full_disk_scenario(folder: str) -> None:
     """Run in the namespace (``folder`` a small tmpfs): fill the disk but for a little, record
     a synthetic camera and goals, free the disk a moment after the recorder first fails, record
@@ -76,9 +87,8 @@ def full_disk_scenario(folder: str) -> None:
     root = Path(folder)
     space = os.statvfs(root)
     (root / "filler").write_bytes(bytes(space.f_bavail * space.f_frsize - 24 * 1024))
-    logged: list[tuple[str, str]] = []
-    handler = logging.Handler()
-    handler.emit = lambda r: logged.append((r.levelname, r.getMessage()))  # type: ignore[method-assign]
+    handler = _Kept()
+    logged = handler.records
     logging.getLogger("vehicle_agent").addHandler(handler)
     logging.getLogger("vehicle_agent").setLevel(logging.INFO)
     thread_faults: list[str] = []
@@ -94,12 +104,12 @@ def full_disk_scenario(folder: str) -> None:
         return await recording_task
 
     recorder = asyncio.run(run())
-    files = []
+    files: list[dict[str, Any]] = []
     for path in recorder.files:
         cuts: list[CutOff] = []
         topics = [topic for topic, _, _ in recording.messages([path], cuts.append)]
-        files.append({"messages": len(topics), "images": topics.count(recording.IMAGE_TOPIC)})
-        files[-1]["cut"] = [str(cut) for cut in cuts]
+        images = topics.count(recording.IMAGE_TOPIC)
+        files.append({"messages": len(topics), "images": images, "cut": [str(c) for c in cuts]})
     totals = recorder.totals()
     result = {"files": files, "logged": logged, "thread_faults": thread_faults}
     result["totals"] = {"frames": totals.frames, "dropped": totals.dropped}
