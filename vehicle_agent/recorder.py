@@ -405,7 +405,14 @@ class FlightRecorder:
             try:
                 self._finish()
             except OSError as exc:
-                self._fail(exc)
+                # Stopping: nothing more will come to drop or to resume for.
+                path = self.files[-1] if self.files else self.settings.folder
+                log.warning(
+                    "flight recorder cannot finish %s (%s); its whole chunks stay readable",
+                    path,
+                    exc.strerror or exc,
+                )
+                self._close_file()
 
     def _drain(self) -> None:
         """Write what is queued; while the disk refuses, drop it and try a new file."""

@@ -19,6 +19,7 @@ from typing import Any
 import pytest
 
 from app import recording
+from app.protocol import events as ev
 from app.recording import CutOff
 from tests.helpers.recordings import SMALL_CHUNK_BYTES, record
 from tests.test_cli_errors import assert_one_line_error
@@ -137,3 +138,39 @@ def test_a_full_disk_costs_one_line_and_recording_resumes_when_space_returns(
     # The file the disk cut off reads up to its cut; the new one is whole, with images.
     assert first["messages"] > 0 and len(first["cut"]) == 1, first
     assert second["images"] > 0 and second["cut"] == [], second
+
+
+def full_at_close_scenario(folder: str) -> None:
+    """Run in the namespace: queue events, fill the disk, close; print what was logged and
+    what the file reads back as JSON."""
+    root = Path(folder)
+    handler = _Kept()
+    logging.getLogger("vehicle_agent").addHandler(handler)
+    logging.getLogger("vehicle_agent").setLevel(logging.INFO)
+    recorder = FlightRecorder(RecordSettings(root / "rec", room="disk"))
+    for i in range(400):
+        # Operators' names that do not compress: the chunk is more than the disk has left.
+        recorder.on_event(ev.ModeChanged(mode="manual", operator=os.urandom(16).hex(), t=i))
+    space = os.statvfs(root)
+    (root / "filler").write_bytes(bytes(space.f_bavail * space.f_frsize))
+    asyncio.run(recorder.close())
+    cuts: list[CutOff] = []
+    read = len(list(recording.messages(recorder.files, cuts.append)))
+    result = {"logged": handler.records, "read": read, "cuts": [str(c) for c in cuts]}
+    sys.stdout.write(json.dumps(result) + "\n")
+
+
+@needs_mount
+def test_a_disk_full_when_the_recorder_closes_costs_one_line(tmp_path: Path) -> None:
+    code = (
+        f"from {__name__} import full_at_close_scenario; full_at_close_scenario({str(tmp_path)!r})"
+    )
+    done = _in_namespace("size=256k", tmp_path, sys.executable, "-c", code)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr and "Exception" not in done.stderr, done.stderr
+    result: dict[str, Any] = json.loads(done.stdout.splitlines()[-1])
+    said = [(level, text) for level, text in result["logged"] if level != "INFO"]
+    assert len(said) == 1 and "cannot finish" in said[0][1], result
+    assert "No space left on device" in said[0][1], result
+    # What never reached the disk is lost; the file is what it took, cut off, and reads.
+    assert result["read"] == 0 and len(result["cuts"]) == 1, result
