@@ -155,8 +155,9 @@ PROFILES: dict[str, Profile] = {
         gain=4.0,
         max_angular=2.5,
         deadband=0.02,
-        linear_gain=1.0,
-        max_linear=0.8,
+        # A walker at 0.6 m/s is trailed 0.6 / 2.5 m beyond the standoff.
+        linear_gain=2.5,
+        max_linear=1.0,
         standoff_m=1.2,
         slow_bearing=0.45,
         search_after_s=0.3,

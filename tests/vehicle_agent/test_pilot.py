@@ -295,9 +295,13 @@ def test_the_standoff_is_held_far_drives_near_backs_off() -> None:
     assert at_standoff.linear == pytest.approx(0.0, abs=1e-9)
     near = _command(onboard(), face(1, 0.0, x=320.0, range_m=0.6), 0.0)
     assert near.linear < 0
-    # Bounded both ways.
-    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=20.0), 0.0).linear <= 0.8
-    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=0.2), 0.0).linear >= -0.8
+    # 0.2 m too far: 2.5 (m/s)/m, so that a walker at 0.6 m/s is trailed 0.24 m beyond the
+    # standoff, not 0.6 m.
+    a_little_far = _command(onboard(), face(1, 0.0, x=320.0, range_m=1.4), 0.0)
+    assert a_little_far.linear == pytest.approx(0.5, abs=1e-6)
+    # Bounded both ways, at 1 m/s.
+    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=20.0), 0.0).linear == 1.0
+    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=0.2), 0.0).linear == -1.0
 
 
 def test_forward_speed_falls_as_the_bearing_grows_and_stops_well_off_it() -> None:
