@@ -25,8 +25,9 @@ from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
 from app.protocol.rooms import DEFAULT_ROOM
 from app.supervise import Backoff
+from vehicle_agent.capture_times import CaptureTimes
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
-from vehicle_agent.events import EventLog
+from vehicle_agent.events import Event, EventLog
 from vehicle_agent.freshness import GoalGate
 from vehicle_agent.manual import ManualDrive
 from vehicle_agent.peer import RelayLink
@@ -102,6 +103,9 @@ class Agent:
         self._last_telemetry = 0.0
         # When the last goal was applied on this link (its age rides the pose: link health).
         self._last_goal_at: float | None = None
+        # The camera's tagged frames (its frame_sent events), batched for the relay's clients.
+        self._capture_times = CaptureTimes()
+        self.events.listeners.append(self._on_event)
         self.logged_in = asyncio.Event()
         self._handlers: dict[str, Callable[[Any], Awaitable[None]]] = {
             "login": self._ignore,
@@ -443,6 +447,20 @@ class Agent:
 
     def _on_peer_error(self, relay: str, message: channels.Error) -> None:
         log.warning("%r reported an error: %r", relay, message.reason)
+
+    # --- the camera's capture times --------------------------------------------------------
+
+    def _on_event(self, event: Event) -> None:
+        if event["ev"] != "frame_sent":
+            return
+        t = float(event["t"])
+        # The event's clock is monotonic, which no other process can read; the clients compare
+        # the capture time with their own wall clock.
+        captured_ms = (time.time() - (time.monotonic() - t)) * 1000
+        batch = self._capture_times.add(int(event["frame"]), captured_ms, t)
+        if batch is not None and self._link is not None:
+            # State, like pose: a lost batch is a few frames without a figure.
+            self._link.send_state(batch)
 
     # --- turtle ------------------------------------------------------------------------------
 
