@@ -10,8 +10,8 @@ The vehicle opens two channels to the relay (DESIGN §9 "Lossy links"). ``autopi
 and ordered: mode commands (``stop``) and error reports, which must arrive. ``autopilot-state`` is
 unordered and never retransmits: goals (relay -> vehicle), pose and frame capture times (vehicle
 -> relay) are state, only the newest matters, and a lost one is better skipped than waited for
-(no head-of-line blocking on a lossy link). The vehicle applies a goal only if its ``seq`` is newer than every
-goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
+(no head-of-line blocking on a lossy link). The vehicle applies a goal only if its ``seq`` is
+newer than every goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
 ``app/static/js/core/freshness.js``). The client's ``control`` channel is reliable.
 """
 

@@ -27,14 +27,16 @@ export class RelayLinks extends EventTarget {
    * @param {import('../view/ui.js').Log} options.log
    * @param {(name: string) => object} options.controlHandlers a client's control-channel
    *   handlers, by message type (serveChannel)
-   * @param {(msg: object) => void} options.onPose the vehicle's pose, validated
+   * @param {{pose: (msg: object) => void, frameTimes: (msg: object) => void}}
+   *   options.vehicleHandlers the served vehicle's messages, validated: its pose, the capture
+   *   times of its frames
    */
-  constructor({ room, log, controlHandlers, onPose }) {
+  constructor({ room, log, controlHandlers, vehicleHandlers }) {
     super();
     this.room = room;
     this.log = log;
     this.controlHandlers = controlHandlers;
-    this.onPose = onPose;
+    this.vehicleHandlers = vehicleHandlers;
     this.vehicleTrack = null; // the served vehicle's video track
     this.vehicle = null; // the served vehicle's name while its autopilot channel is open
   }
@@ -230,9 +232,9 @@ export class RelayLinks extends EventTarget {
   #onDataChannel(entry, channel) {
     const name = entry.peer.remote;
     if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilotState) {
-      // Goals go out and pose comes in here: unordered, never retransmitted, latest wins.
+      // Goals go out, pose and capture times come in here: unordered, never retransmitted.
       const schema = SCHEMAS[CHANNELS.autopilotState].relay;
-      serveChannel(channel, { pose: (msg) => this.onPose(msg) }, this.log, schema);
+      serveChannel(channel, this.vehicleHandlers, this.log, schema);
       channel.addEventListener('open', () => {
         entry.stateChannel = channel;
       });
@@ -243,7 +245,7 @@ export class RelayLinks extends EventTarget {
     }
     if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilot) {
       const schema = SCHEMAS.autopilot.relay;
-      serveChannel(channel, { pose: (msg) => this.onPose(msg) }, this.log, schema);
+      serveChannel(channel, { pose: this.vehicleHandlers.pose }, this.log, schema);
       channel.addEventListener('open', () => {
         entry.channel = channel;
         this.log.info(`autopilot channel to vehicle ${name} open`);

@@ -18,6 +18,7 @@ import {
   throttle,
 } from '../view/ui.js';
 import { DriveInput } from '../view/drive-input.js';
+import { GlassView } from '../view/glass-view.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
 
@@ -29,6 +30,12 @@ const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
 const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
+// Vehicle capture → presentation here, frame by frame (view/glass-view.js).
+const glassView = new GlassView({
+  video,
+  layout: PROTOCOL.frameTag,
+  figure: byTestId('glass-to-glass'),
+});
 // A click on the video locks the relay on the target there; Unlock releases it.
 const lockPanel = new LockPanel({
   stage: video.parentElement,
@@ -70,6 +77,18 @@ const health = {
   relayToClient: null, // measured here
   goalAgeMs: null, // from the vehicle's pose: since it last applied a goal
   warnings: [],
+  /** Vehicle capture → presentation here: {p50Ms, p95Ms, lastMs, frames} of the latest
+   * frames, or null until a tagged frame's capture time is known (docs/contracts.md). */
+  get glassToGlass() {
+    return glassView.glass.summary();
+  },
+  /** The same, every frame measured (the latest 2000, ms, oldest first), and how many. */
+  get glassToGlassMs() {
+    return glassView.glass.samples.toArray();
+  },
+  get framesTimed() {
+    return glassView.glass.count;
+  },
 };
 window.autopilotHealth = health;
 
@@ -266,6 +285,7 @@ function setupPeer(peer) {
     preferLowLatency(event.detail.receiver);
     status.videoTracks += 1;
     video.srcObject = new MediaStream([event.detail.track]);
+    glassView.newVideo();
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
@@ -277,6 +297,7 @@ function setupPeer(peer) {
     lockState: onLockState,
     mode: onMode,
     health: onHealth,
+    frameTimes: (msg) => glassView.captured(msg),
   };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
@@ -394,6 +415,7 @@ link.addEventListener('lost', () => {
   forgetMode();
   session.meter = null;
   Object.assign(health, { vehicleToRelay: null, relayToClient: null, goalAgeMs: null });
+  glassView.newVideo();
   showHealth();
   clearDetections();
   showState();

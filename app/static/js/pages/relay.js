@@ -116,7 +116,8 @@ const session = {
       handBack: () => handBack(name),
       drive: (msg) => forwardDrive(msg, name),
     }),
-    onPose,
+    // The capture times go to every client as they came: each measures its own glass to glass.
+    vehicleHandlers: { pose: onPose, frameTimes: (msg) => session.links.broadcast(msg) },
   }),
 };
 
