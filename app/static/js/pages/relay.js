@@ -54,6 +54,10 @@ const status = {
     return session.links.clients;
   },
   vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
+  /** How each client gets the video: {name: 'pass-through' | 're-encode'} (relay-links.js). */
+  get forwards() {
+    return session.links.forwards;
+  },
   lock: 'none', // the target lock's state (lock.js)
   /** The client holding the wheel (manual override), or null: the autopilot steers. */
   get operator() {
