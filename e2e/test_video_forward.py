@@ -19,14 +19,13 @@ from playwright.sync_api import Browser, Page, expect
 
 from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
 from app.server.serve import RunningServer
+from app.tools.bench.relaycost import NO_ENCODED_TRANSFORMS
 from e2e.conftest import OpenRole
 from e2e.helpers import VIDEO, status, wait_for_live_video
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
 ROOM = "forward"
-# The relay page with no encoded transforms, as in a browser that has none.
-NO_TRANSFORMS = "delete window.RTCRtpScriptTransform;"
 
 
 @contextmanager
@@ -34,8 +33,17 @@ def agent(server: RunningServer) -> Iterator[subprocess.Popen[bytes]]:
     """The Python vehicle agent (synthetic face video, tagged) in the room, as a process."""
     process = subprocess.Popen(
         [
-            sys.executable, "-m", "vehicle_agent", "--server", server.url, "--room", ROOM,
-            "--name", "vehicle", "--fps", "15",
+            sys.executable,
+            "-m",
+            "vehicle_agent",
+            "--server",
+            server.url,
+            "--room",
+            ROOM,
+            "--name",
+            "vehicle",
+            "--fps",
+            "15",
         ],  # fmt: skip
         stdin=subprocess.DEVNULL,
     )
@@ -111,7 +119,8 @@ def test_the_client_measures_glass_to_glass_on_the_vehicle_s_frames(
 def test_without_encoded_transforms_the_relay_encodes_for_each_client(
     open_role: OpenRole, browser: Browser, server: RunningServer
 ) -> None:
-    relay = open_role("relay", browser, NO_TRANSFORMS, room=ROOM, name="relay", auto="1")
+    # The relay page as in a browser without encoded transforms.
+    relay = open_role("relay", browser, NO_ENCODED_TRANSFORMS, room=ROOM, name="relay", auto="1")
     client = open_joined(open_role, "client", browser, name="client")
     with agent(server):
         wait_for_live_video(client)

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.arguments import positive_number
+from app.arguments import positive_integer, positive_number
 from app.protocol.control import PROFILES
 from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
@@ -100,6 +100,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " thread and stage, codec counters, worker timers (relay-cost.md)",
     )
     parser.add_argument(
+        "--baseline",
+        action="store_true",
+        help="with --relay-cost: also measure the fallback that encodes the video for each client"
+        " (the relay's encoded transforms removed), the two forwards in alternation",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=positive_integer,
+        default=2,
+        metavar="N",
+        help="with --baseline: this many runs of each forward (2)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -114,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the benchmark; 0 when every figure was measured, 1 when some could not be."""
     if args.condition and not args.field:
         log.error("--condition goes with --field")
+        return 2
+    if args.baseline and not args.relay_cost:
+        log.error("--baseline goes with --relay-cost")
         return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
@@ -187,6 +203,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--recorder")
     if args.relay_cost:
         argv.append("--relay-cost")
+    if args.baseline:
+        argv += ["--baseline", "--rounds", str(args.rounds)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -229,24 +247,30 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     from app.tools.bench import relaycost
 
     seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
+    # With --baseline: the forward as the relay does it and the fallback, in alternation.
+    forwards = list(relaycost.FORWARDS) * args.rounds if args.baseline else ["as is"]
+    runs = []
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
-            # The relay alone in a Chromium of its own: all its threads are the relay's.
-            relay = await playwright.chromium.launch(
-                **launch_options(extra_args=[relaycost.MARKER])
-            )
-            client = await playwright.chromium.launch(**launch_options())
-            try:
-                found = await relaycost.run(relay, client, server.url, seconds, args.fps)
-            finally:
-                await relay.close()
-                await client.close()
+            for forward in forwards:
+                # The relay alone in a Chromium of its own: all its threads are the relay's.
+                relay = await playwright.chromium.launch(
+                    **launch_options(extra_args=[relaycost.MARKER])
+                )
+                client = await playwright.chromium.launch(**launch_options())
+                try:
+                    runs.append(
+                        await relaycost.run(relay, client, server.url, seconds, args.fps, forward)
+                    )
+                finally:
+                    await relay.close()
+                    await client.close()
     finally:
         server.stop()
-    log.info("relay cost report: %s", relaycost.write_report(args.out, found))
+    log.info("relay cost report: %s", relaycost.write_report(args.out, runs))
     if args.json:
-        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+        sys.stdout.write(json.dumps(relaycost.report_object(runs), allow_nan=False) + "\n")
     return 0
 
 
@@ -396,6 +420,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if args.relay_cost:
         parts.append("--relay-cost")
+    if args.baseline:
+        parts.append(f"--baseline --rounds {args.rounds}")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

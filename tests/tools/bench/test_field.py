@@ -5,7 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from app.tools.bench.field import figures, link_drop_times, stale_goals_applied, write
+from app.tools.bench.field import (
+    figures,
+    link_drop_times,
+    samples_since,
+    stale_goals_applied,
+    write,
+)
 
 
 def _log() -> list[dict[str, Any]]:
@@ -33,6 +39,18 @@ def test_figures_have_every_key_and_plausible_values() -> None:
     assert row.heading_error_deg_median is not None and row.heading_error_deg_median < 1
     assert row.stale_goals_applied == 0
     assert row.problems == {}
+
+
+def test_the_client_glass_to_glass_over_the_window() -> None:
+    # The ring holds the latest samples; those taken since the first reading are the window's.
+    before = {"count": 10, "ms": [90.0] * 10}
+    after = {"count": 14, "ms": [90.0] * 10 + [40.0, 50.0, 60.0, 70.0]}
+    row = figures("rtt_150", _log(), (1.0, 3.0))
+    row.client_glass(samples_since(before, after))
+    assert (row.client_glass_to_glass_ms_p50, row.client_glass_to_glass_ms_p95) == (55.0, 68.5)
+    empty = figures("loss_2", _log(), (1.0, 3.0))
+    empty.client_glass(samples_since(after, after))
+    assert "client_glass_to_glass_ms_p50" in empty.problems
 
 
 def test_a_goal_applied_after_a_newer_one_counts_as_stale_until_the_next_link() -> None:
