@@ -58,7 +58,7 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
                error: e,
                default: e === null ? null : law.angularCommand(e, law.profiles.default),
                thesis: e === null ? null : law.angularCommand(e, law.profiles.thesis),
-               follow: law.command(goal, pose, law.profiles.follow),
+               follow: law.follow(goal, pose, law.profiles.follow),
                ahead: law.wallClearance(pose, true),
                behind: law.wallClearance(pose, false),
              };
@@ -128,24 +128,20 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
 
     js = page.evaluate(
         """([profile, events]) => {
-             let now = 0;
-             const c = new control.Controller(law, law.profiles[profile], () => now);
+             const c = new control.Controller(law, law.profiles[profile]);
              return events.map(([kind, t, arg]) => {
-               now = t;
-               const twist = kind === 'goal' ? c.goal(arg) : kind === 'pose' ? c.pose(arg)
-                 : kind === 'tick' ? c.tick() : c.stop();
-               const until = c.untilTimeout();
+               const twist = kind === 'goal' ? c.goal(arg, t) : kind === 'pose' ? c.pose(arg, t)
+                 : kind === 'tick' ? c.tick(t) : c.stop();
+               const until = c.untilTimeout(t);
                return [twist === null ? null : [twist.linear, twist.angular, twist.seq], until];
              });
            }""",
         [profile, events],
     )
-    now = 0.0
-    controller = control.Controller(control.PROFILES[profile], clock=lambda: now)
+    controller = control.Controller(control.PROFILES[profile])
     expected: list[list[float | int | None] | None] = []
     untils: list[float | None] = []
     for kind, t, arg in events:
-        now = t
         if kind == "goal":
             assert arg is not None
             twist = controller.goal(
@@ -156,17 +152,18 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
                     int(arg["h"]),
                     int(arg["seq"]),
                     int(arg["frame"]),
-                )
+                ),
+                t,
             )
         elif kind == "pose":
             assert arg is not None
-            twist = controller.pose(control.Pose(**arg))
+            twist = controller.pose(control.Pose(**arg), t)
         elif kind == "tick":
-            twist = controller.tick()
+            twist = controller.tick(t)
         else:
             twist = controller.stop()
         expected.append(None if twist is None else [twist.linear_x, twist.angular_z, twist.seq])
-        untils.append(controller.until_timeout())
+        untils.append(controller.until_timeout(t))
     published = [e for e in expected if e is not None]
     assert any(e[1] != 0 for e in published), "the script never drove the turtle"
     assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 import pytest
 from playwright.sync_api import Playwright
 
+from app.protocol.events import GoalApplied, LinkChanged, TwistSent
 from app.tools.lab import Lab
 from app.tools.lab.stack import FieldStack, field_stack
 from e2e.conftest import artifacts_dir
@@ -53,20 +54,20 @@ def _facing(field: FieldStack, band: tuple[float, float]) -> bool:
 @pytest.mark.parametrize("field", ["clean", "turn_only"], indirect=True)
 def test_the_turtle_turns_to_the_face_across_the_nats(field: FieldStack) -> None:
     field.start_piloting()
-    wait_until(lambda: bool(field.events("goal")), 90, "the first goal at the agent")
+    wait_until(lambda: bool(field.events(GoalApplied)), 90, "the first goal at the agent")
     wait_until(lambda: _facing(field, LEFT), 60, "the turtle to face the face on the left")
     wait_until(lambda: _facing(field, RIGHT), 60, "the turtle to face the face on the right")
-    up = next(e for e in field.events("link") if e["state"] == "up")
+    up = next(e for e in field.events(LinkChanged) if e.state == "up")
     if field.lab.condition.ice_transport_policy == "relay":
         # The agent gathered relayed candidates only (a relayed candidate exists only after
         # coturn accepted the credentials the server minted for this login), so the link it
         # piloted through went through coturn.
-        assert up["local_candidates"] == ["relay"]
-        assert up["selected"] == "relay"
+        assert up.local_candidates == ("relay",)
+        assert up.selected == "relay"
     else:
         # Without the relay policy every kind is gathered; which pair ICE nominates first is a
         # race (coturn's relayed pair can win on a loaded machine), so only gathering is checked.
-        assert "host" in up["local_candidates"] and "relay" in up["local_candidates"]
+        assert "host" in up.local_candidates and "relay" in up.local_candidates
 
 
 @pytest.mark.parametrize("field", ["link_drop"], indirect=True)
@@ -74,29 +75,29 @@ def test_a_link_outage_stops_the_turtle_and_piloting_resumes_by_itself(
     field: FieldStack,
 ) -> None:
     field.start_piloting()
-    wait_until(lambda: len(field.events("goal")) >= 20, 90, "goals to flow")
+    wait_until(lambda: len(field.events(GoalApplied)) >= 20, 90, "goals to flow")
     with field.lab.outage():
         dark_at = time.monotonic()
         time.sleep(field.lab.condition.outage_s)
     back_at = time.monotonic()
     # Goals resume by themselves: no agent restart, no page reload.
     wait_until(
-        lambda: any(e["t"] > back_at for e in field.events("goal")), 60, "goals after the outage"
+        lambda: any(e.t > back_at for e in field.events(GoalApplied)), 60, "goals after the outage"
     )
     assert field.agent.poll() is None, "the agent restarted"
-    goals = field.events("goal")
-    last_before = max(e["t"] for e in goals if e["t"] < dark_at + 0.1)
+    goals = field.events(GoalApplied)
+    last_before = max(e.t for e in goals if e.t < dark_at + 0.1)
     stops = [
         e
-        for e in field.events("twist")
-        if e["seq"] is None and e["angular"] == 0 and last_before < e["t"] < back_at
+        for e in field.events(TwistSent)
+        if e.seq is None and e.angular == 0 and last_before < e.t < back_at
     ]
     assert stops, "no zero Twist while the link was dark"
-    first_after = min(e["t"] for e in goals if e["t"] > back_at)
+    first_after = min(e.t for e in goals if e.t > back_at)
     # Logged for the record; the targets (0.75 s, 3 s) belong to the bench.
     log.info(
         "link_drop: stop %.2f s after the last goal, goals again %.2f s after the link came back",
-        stops[0]["t"] - last_before,
+        stops[0].t - last_before,
         first_after - back_at,
     )
 
@@ -106,7 +107,7 @@ def test_the_link_health_panel_shows_the_robot_link_s_loss(field: FieldStack) ->
     # 10 % of the robot link's packets are dropped each way: the relay's reading of the
     # vehicle's video shows it, and the client page warns (the threshold is 5 %).
     field.start_piloting()
-    wait_until(lambda: bool(field.events("goal")), 90, "the first goal at the agent")
+    wait_until(lambda: bool(field.events(GoalApplied)), 90, "the first goal at the agent")
 
     shown: list[str] = []
     read = """() => ({

@@ -22,16 +22,14 @@ pytestmark = [pytest.mark.browser]
 CONSTANTS = to_json(control_config())
 
 RUN_JS = """([events, profile, deadmanS]) => {
-  const now = [0];
-  const drive = new manual.ManualDrive(profile, deadmanS, () => now[0]);
+  const drive = new manual.ManualDrive(profile, deadmanS);
   return events.map(([kind, t, args]) => {
-    now[0] = t;
     let twist;
     if (kind === 'mode') twist = drive.setMode(args[0], args[1]);
-    else if (kind === 'drive') twist = drive.drive(...args);
-    else twist = drive.tick();
+    else if (kind === 'drive') twist = drive.drive(...args, t);
+    else twist = drive.tick(t);
     const answer = twist === null ? null : [twist.linear, twist.angular];
-    return [answer, drive.manual, drive.operator, drive.untilDeadman()];
+    return [answer, drive.manual, drive.operator, drive.untilDeadman(t)];
   });
 }"""
 
@@ -59,21 +57,19 @@ def test_scripted_sequences_take_the_same_decisions(page: Page, profile: str) ->
 
 
 # The vehicle page's dead-man as vehicle.js builds it: its profile and `deadmanS` from the
-# config the server embeds in /vehicle, on an injected clock. The last command comes at 1 s.
+# config the server embeds in /vehicle, with the times given. The last command comes at 1 s.
 VEHICLE_PAGE_DEAD_MAN = """async (times) => {
   const html = await (await fetch('/vehicle')).text();
   const page = new DOMParser().parseFromString(html, 'text/html');
   const config = JSON.parse(page.getElementById('config').textContent);
   const { ControlLaw } = await import('/static/js/core/control.js');
   const profile = new ControlLaw(config.control).profiles[config.profile];
-  const now = [1.0];
-  const drive = new manual.ManualDrive(profile, config.control.deadmanS, () => now[0]);
+  const drive = new manual.ManualDrive(profile, config.control.deadmanS);
   drive.setMode('manual', 'ann');
-  const moving = drive.drive(1, 1, 0);
-  const left = drive.untilDeadman();
+  const moving = drive.drive(1, 1, 0, 1.0);
+  const left = drive.untilDeadman(1.0);
   const ticks = times.map((t) => {
-    now[0] = t;
-    const twist = drive.tick();
+    const twist = drive.tick(t);
     return twist === null ? null : [twist.linear, twist.angular];
   });
   return { moving: [moving.linear, moving.angular], left, ticks };

@@ -127,9 +127,20 @@ def test_take_over_drive_refuse_a_second_operator_hand_back_and_the_dead_man(
     turns_left_then_stops(
         server, vehicle, lambda: keyboard.down("ArrowLeft"), lambda: keyboard.up("ArrowLeft")
     )
-    # The relay still pilots: its goals reach the vehicle and are ignored, counted.
-    ignored = status(vehicle)["goalsIgnored"]
-    wait_until(lambda: status(vehicle)["goalsIgnored"] > ignored, 10, "goals ignored while manual")
+    # The relay still pilots: its goals reach the vehicle and are dropped, recorded as the
+    # agent records them, and none of them steers.
+    dropped = status(vehicle)["goalsDropped"]["manual"]
+    wait_until(
+        lambda: status(vehicle)["goalsDropped"]["manual"] > dropped, 10, "goals dropped (manual)"
+    )
+    records = status(vehicle)["records"]
+    last = next(r for r in reversed(records) if r["ev"] == "goal_dropped")
+    assert last["why"] == "manual" and isinstance(last["seq"], int), last
+    # Since ann took the wheel (or as far back as the page keeps), no goal was applied.
+    taken = max((i for i, r in enumerate(records) if r["ev"] == "mode"), default=-1)
+    if taken >= 0:
+        assert records[taken]["mode"] == "manual", records[taken]
+    assert not any(r["ev"] == "goal" for r in records[taken + 1 :]), records
 
     # Bob sees who drives and cannot take over: the button is off, and the relay refuses.
     expect(bob.get_by_test_id("mode")).to_have_text("ann is driving")

@@ -4,6 +4,10 @@ One :class:`Agent` runs until cancelled. It logs in as a vehicle, waits for a re
 offers to it and keeps that link alive: when the relay leaves, the link fails or the signaling
 server goes away, the turtle gets a zero Twist and the agent reconnects with backoff, without
 restarting. Everything that happens is dispatched from one queue, one handler per event kind.
+
+What to do with the relay's goals, stops, mode changes and drive commands, the turtle's poses
+and the clock is the :class:`~vehicle_agent.pilot.Pilot`'s to decide; the agent feeds it (with
+the time) and acts on its answers: publishes its Twists and logs its records.
 """
 
 from __future__ import annotations
@@ -21,16 +25,17 @@ from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
 
 from app.protocol import channels, jsonedge
+from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.events import PilotEvent
 from app.protocol.rooms import DEFAULT_ROOM
 from app.supervise import Backoff
 from vehicle_agent.capture_times import CaptureTimes
-from vehicle_agent.control import PROFILES, SPAWN_THETA, Controller, Goal, Pose, Twist
-from vehicle_agent.events import Event, EventLog
-from vehicle_agent.freshness import GoalGate
-from vehicle_agent.manual import ManualDrive
+from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
+from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
+from vehicle_agent.pilot import Pilot
 from vehicle_agent.signaling import SignalingClient, SignalingError
 from vehicle_agent.turtle import Turtle, TurtleError
 
@@ -39,7 +44,6 @@ log = logging.getLogger(__name__)
 # The relay must answer and ICE must connect within this long, or the agent offers again.
 CONNECT_TIMEOUT_S = 10.0
 TELEMETRY_PERIOD_S = 0.1
-TICK_PERIOD_S = 0.05
 
 # Handles one validated data-channel message from the relay.
 ChannelHandler = Callable[[str, Any], None]
@@ -85,12 +89,7 @@ class Agent:
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
-        self.controller = Controller(profile)
-        # The operator's wheel (manual override): while manual, goals are ignored (counted).
-        self.manual = ManualDrive(profile)
-        self.goals_ignored = 0
-        # Latest-wins on the lossy goal channel; reset for every new link.
-        self.goal_gate = GoalGate()
+        self.pilot = Pilot(profile)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
@@ -101,8 +100,6 @@ class Agent:
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
         self._last_telemetry = 0.0
-        # When the last goal was applied on this link (its age rides the pose: link health).
-        self._last_goal_at: float | None = None
         # The camera's tagged frames (its frame_sent events), batched for the relay's clients.
         self._capture_times = CaptureTimes()
         self.events.listeners.append(self._on_event)
@@ -156,7 +153,6 @@ class Agent:
             if spawn is not None:
                 spawn.cancel()
             await self._drop_link("agent stopping")
-            self._publish(self.controller.stop())
             await self.turtle.close()
             self.video.stop()
 
@@ -313,10 +309,8 @@ class Agent:
         )
         link.on_up = self._on_link_up
         self._link = link
-        self.goal_gate.reset()
-        self._last_goal_at = None
-        self.manual.reset_link()
-        self.events.emit("link", state="offer", relay=link.relay)
+        self._act(self.pilot.new_link(time.monotonic()))
+        self.events.emit(ev.LinkChanged(state="offer", relay=link.relay, t=time.monotonic()))
         await link.start()
         asyncio.get_running_loop().call_later(CONNECT_TIMEOUT_S, self._check_connected, link)
 
@@ -324,11 +318,13 @@ class Agent:
         candidates = link.local_candidate_types()
         log.info("link to %s up (local candidates: %s)", link.relay, ", ".join(candidates))
         self.events.emit(
-            "link",
-            state="up",
-            relay=link.relay,
-            local_candidates=candidates,
-            selected=link.selected_candidate_type(),
+            ev.LinkChanged(
+                state="up",
+                relay=link.relay,
+                local_candidates=tuple(candidates),
+                selected=link.selected_candidate_type(),
+                t=time.monotonic(),
+            )
         )
 
     def _check_connected(self, link: RelayLink) -> None:
@@ -351,11 +347,14 @@ class Agent:
 
     async def _drop_link(self, reason: str) -> None:
         link, self._link = self._link, None
-        self._halt()
+        # Stop at once, autopilot or operator: the link that carried the commands is gone.
+        self._act(self.pilot.halt(time.monotonic()))
         if link is None:
             return
         log.info("link to %s down: %s", link.relay, reason)
-        self.events.emit("link", state="down", relay=link.relay, reason=reason)
+        self.events.emit(
+            ev.LinkChanged(state="down", relay=link.relay, reason=reason, t=time.monotonic())
+        )
         await link.close()
 
     # --- data channel ----------------------------------------------------------------------
@@ -391,73 +390,39 @@ class Agent:
         return channels.Error(reason=reason, ref=ref)
 
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
-        if self.manual.manual:
-            self.goals_ignored += 1
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why="manual")
-            return
-        verdict = self.goal_gate.admit(goal.seq, goal.t, time.monotonic())
-        if verdict != "fresh":
-            self.events.emit("goal_dropped", seq=goal.seq, frame=goal.frame, why=verdict)
-            return
-        self._last_goal_at = time.monotonic()
-        self.events.emit(
-            "goal",
-            seq=goal.seq,
-            op=goal.op,
-            frame=goal.frame,
-            x=goal.x,
-            y=goal.y,
-            w=goal.w,
-            h=goal.h,
-        )
-        self._publish(
-            self.controller.goal(Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame))
-        )
+        self._act(self.pilot.goal(goal, time.monotonic()))
 
     def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)
-        self._publish(self.controller.stop())
+        self._act(self.pilot.stop(time.monotonic()))
 
     def _on_mode(self, relay: str, message: channels.ModeChange) -> None:
-        # Whichever way the mode changes, the turtle stops first: the autopilot's last command
-        # must not outlive its goals, nor the operator's outlive the wheel.
-        changed = self.manual.set_mode(message.mode, message.operator)
-        if changed is None:
-            return
-        self.controller.stop()
-        log.info(
-            "mode %s%s (%s)",
-            message.mode,
-            f" by {message.operator}" if message.operator else "",
-            message.reason or relay,
-        )
-        self.events.emit("mode", mode=message.mode, operator=message.operator)
-        self._publish(changed)
+        done = self.pilot.mode_change(message.mode, message.operator, time.monotonic())
+        if done:
+            log.info(
+                "mode %s%s (%s)",
+                message.mode,
+                f" by {message.operator}" if message.operator else "",
+                message.reason or relay,
+            )
+        self._act(done)
 
     def _on_drive(self, relay: str, message: channels.Drive) -> None:
-        twist = self.manual.drive(message.seq, message.linear, message.angular)
-        moving = twist is not None and not twist.is_zero
-        self.events.emit("drive", seq=message.seq, applied=twist is not None, moving=moving)
-        self._publish(twist)
-
-    def _halt(self) -> None:
-        """Stop at once, autopilot or operator: the link that carried the commands is gone."""
-        stopped = self.controller.stop()
-        self._publish(self.manual.set_mode("auto", None) or stopped)
+        now = time.monotonic()
+        self._act(self.pilot.drive(message.seq, message.linear, message.angular, now))
 
     def _on_peer_error(self, relay: str, message: channels.Error) -> None:
         log.warning("%r reported an error: %r", relay, message.reason)
 
     # --- the camera's capture times --------------------------------------------------------
 
-    def _on_event(self, event: Event) -> None:
-        if event["ev"] != "frame_sent":
+    def _on_event(self, event: ev.AnyEvent) -> None:
+        if not isinstance(event, ev.FrameSent):
             return
-        t = float(event["t"])
         # The event's clock is monotonic, which no other process can read; the clients compare
         # the capture time with their own wall clock.
-        captured_ms = (time.time() - (time.monotonic() - t)) * 1000
-        batch = self._capture_times.add(int(event["frame"]), captured_ms, t)
+        captured_ms = (time.time() - (time.monotonic() - event.t)) * 1000
+        batch = self._capture_times.add(event.frame, captured_ms, event.t)
         if batch is not None and self._link is not None:
             # State, like pose: a lost batch is a few frames without a figure.
             self._link.send_state(batch)
@@ -473,49 +438,45 @@ class Agent:
         except TurtleError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
-            self.events.emit("spawn", ok=False, reason=str(exc))
+            self.events.emit(ev.SpawnStep(ok=False, reason=str(exc), t=time.monotonic()))
             return
         log.info("spawn step: turtle turned to θ = %.4f rad", SPAWN_THETA)
-        self.events.emit("spawn", ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA)
+        self.events.emit(
+            ev.SpawnStep(ok=True, x=pose.x, y=pose.y, theta=SPAWN_THETA, t=time.monotonic())
+        )
 
     def _on_pose(self, pose: Pose) -> None:
         self.pose = pose
         if self._first_pose is not None and not self._first_pose.done():
             self._first_pose.set_result(pose)
-        self._publish(self.controller.pose(pose))
         now = time.monotonic()
+        self._act(self.pilot.pose(pose, now))
         if now - self._last_telemetry >= TELEMETRY_PERIOD_S:
             self._last_telemetry = now
             link = self._link
             sent = False
             if link is not None and all(map(math.isfinite, (pose.x, pose.y, pose.theta))):
                 # Pose is state: the lossy channel, where a late one is skipped, not waited for.
-                last_goal = self._last_goal_at
-                age = None if last_goal is None else (now - last_goal) * 1000
+                age_s = self.pilot.goal_age(now)
+                age = None if age_s is None else age_s * 1000
                 sent = link.send_state(
                     channels.Pose(
                         x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
                     )
                 )
-            self.events.emit("pose", x=pose.x, y=pose.y, theta=pose.theta, sent=sent)
+            self.events.emit(ev.PoseReport(x=pose.x, y=pose.y, theta=pose.theta, sent=sent, t=now))
 
     async def _tick(self) -> None:
         while True:
-            waits = (self.controller.until_timeout(), self.manual.until_deadman())
-            await asyncio.sleep(min([TICK_PERIOD_S, *(w for w in waits if w is not None)]))
-            self._publish(self.controller.tick())
-            self._publish(self.manual.tick())
+            await asyncio.sleep(self.pilot.next_tick(time.monotonic()))
+            self._act(self.pilot.tick(time.monotonic()))
 
-    def _publish(self, twist: Twist | None) -> None:
-        if twist is None:
-            return
-        self.turtle.publish(twist)
-        self.events.emit(
-            "twist",
-            seq=twist.seq,
-            frame=twist.frame,
-            linear=twist.linear_x,
-            angular=twist.angular_z,
-        )
-        if twist.is_zero and twist.seq is None:
-            log.info("turtle stopped")
+    def _act(self, done: list[PilotEvent]) -> None:
+        """Carry out what the pilot did: publish its Twists, log its records, in order."""
+        for event in done:
+            if isinstance(event, ev.TwistSent):
+                twist = Twist(event.linear, event.angular, event.seq, event.frame)
+                self.turtle.publish(twist)
+                if twist.is_zero and twist.seq is None:
+                    log.info("turtle stopped")
+            self.events.emit(event)

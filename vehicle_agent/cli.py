@@ -165,13 +165,7 @@ async def _main(args: argparse.Namespace) -> int:
         args.video,
         args.size,
         args.fps,
-        on_frame=lambda info: events.emit(
-            "frame_sent",
-            frame=info.frame,
-            face_x=info.face_x,
-            face_y=info.face_y,
-            jump=info.jump,
-        ),
+        on_frame=events.emit,
         sweep_s=args.sweep_s,
     )
     turtle: Turtle = SimTurtle()
@@ -209,12 +203,18 @@ async def _main(args: argparse.Namespace) -> int:
             await flight.close()
             totals = flight.totals()
             log.info(
-                "flight recorder: %(images)d images, %(messages)d messages (%(dropped)d dropped) "
-                "in %(files)d file(s), %(frames_held)d of %(frames)d camera frames held; its CPU "
-                "%(cpu_s).2f s over %(seconds).0f s",
-                totals,
+                "flight recorder: %d images, %d messages (%d dropped) in %d file(s), %d of %d "
+                "camera frames held; its CPU %.2f s over %.0f s",
+                totals.images,
+                totals.messages,
+                totals.dropped,
+                totals.files,
+                totals.frames_held,
+                totals.frames,
+                totals.cpu_s,
+                totals.seconds,
             )
-            events.emit("recorder", **totals)
+            events.emit(totals)
         events.close()
         if metrics is not None:
             metrics.close()

@@ -1,8 +1,10 @@
-"""The control law of DESIGN §5 and its profiles (docs/contracts.md).
+"""The control laws and the controller that paces them (docs/contracts.md).
 
-Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks and answers with the
-:class:`Twist` to publish, if any. The browser vehicle page's ``control.js`` is a port of this
-module, checked against it on a grid (``e2e/test_control_js.py``); the numbers both use live in
+Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks, each with the time, and
+answers with the :class:`Twist` to publish, if any; the vehicle's pilot
+(:mod:`vehicle_agent.pilot`) drives it. The law it applies is the one its profile names
+(:data:`LAWS`). The browser vehicle page's ``control.js`` is a port of this module, checked
+against it on a grid (``e2e/test_control_js.py``); the numbers both use live in
 :mod:`app.protocol.control`.
 
 Coordinate conventions: image pixels have their origin at the top-left corner with y growing
@@ -14,7 +16,6 @@ of the frame is a target in the upper half of the terrain, i.e. the turtle looks
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,6 +26,7 @@ from app.protocol.control import (
     SPAWN_THETA,
     TERRAIN_CENTRE,
     WORLD_SIZE,
+    Law,
     Profile,
 )
 
@@ -33,6 +35,8 @@ __all__ = [
     "SPAWN_THETA",
     "TERRAIN_CENTRE",
     "WORLD_SIZE",
+    "LAWS",
+    "ControlLaw",
     "Controller",
     "Goal",
     "Pose",
@@ -41,7 +45,9 @@ __all__ = [
     "ZERO_TWIST",
     "angular_command",
     "follow_command",
+    "follow_law",
     "pixel_to_terrain",
+    "rotate_law",
     "steering_error",
     "wall_clearance",
     "wrap_angle",
@@ -159,35 +165,47 @@ def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[
     return _clamp(linear, -allowed, allowed), angular
 
 
-def _command(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
-    if profile.law == "follow":
-        tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
-        # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
-        if not all(map(math.isfinite, (tx, ty, pose.x, pose.y, pose.theta))):
-            return 0.0, 0.0
-        return follow_command(tx, ty, pose, profile)
+def rotate_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+    """The rotate law: turn in place to face the goal's terrain point."""
     error = steering_error(goal, pose)
     # No defined heading: hold still rather than keep the last turn going.
     return 0.0, 0.0 if error is None else angular_command(error, profile)
 
 
+def follow_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+    """The follow law: drive to the profile's standoff from the goal's terrain point."""
+    tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
+    # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
+    if not all(map(math.isfinite, (tx, ty, pose.x, pose.y, pose.theta))):
+        return 0.0, 0.0
+    return follow_command(tx, ty, pose, profile)
+
+
+# A control law: the (linear, angular) command that steers from ``pose`` toward ``goal``.
+ControlLaw = Callable[[Goal, Pose, Profile], tuple[float, float]]
+# The laws a profile can name (``Profile.law``); a new law is a function and an entry here (and
+# its twin in control.js).
+LAWS: dict[Law, ControlLaw] = {"rotate": rotate_law, "follow": follow_law}
+
+
 class Controller:
-    """Turns goals into Twists with one profile.
+    """Turns goals into Twists with one profile and the control law it names.
 
     Call :meth:`goal` for each goal, :meth:`pose` for each pose update and :meth:`tick`
-    regularly (every few tens of milliseconds); each returns the Twist to publish now, if any.
+    regularly (every few tens of milliseconds), each with the time now (seconds, one clock);
+    each returns the Twist to publish now, if any.
 
     Closed-loop profiles (``on_pose``) answer a new goal at once, as soon as the command-rate
     cap (``min_interval_s`` since the previous Twist) allows, and between goals answer pose
     updates every ``period_s``. The thesis profile publishes on its own clock. After a goal
     timeout or :meth:`stop` exactly one zero Twist is returned, then nothing until the next
     goal. The follow profile turns in place to search when no goal came for
-    ``search_after_s``.
+    ``search_after_s``. ``law`` replaces the profile's (:data:`LAWS`).
     """
 
-    def __init__(self, profile: Profile, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, profile: Profile, law: ControlLaw | None = None) -> None:
         self.profile = profile
-        self._clock = clock
+        self.law = LAWS[profile.law] if law is None else law
         self._goal: Goal | None = None
         self._goal_at = 0.0
         # The latest goal has not produced a Twist yet.
@@ -202,32 +220,31 @@ class Controller:
         """True while goals are arriving (the turtle is being piloted)."""
         return self._goal is not None
 
-    @property
-    def searching(self) -> bool:
+    def searching(self, now: float) -> bool:
         """True while the follow profile has lost its target and turns to find it."""
-        return self._goal is not None and self._lost(self._clock())
+        return self._goal is not None and self._lost(now)
 
-    def goal(self, goal: Goal) -> Twist | None:
+    def goal(self, goal: Goal, now: float) -> Twist | None:
         """Take a new goal and answer it now when the profile's timing allows."""
         self._goal = goal
-        self._goal_at = self._clock()
+        self._goal_at = now
         self._unanswered = True
-        return self._due()
+        return self._due(now)
 
-    def pose(self, pose: Pose) -> Twist | None:
+    def pose(self, pose: Pose, now: float) -> Twist | None:
         """Take a pose update; closed-loop profiles answer with a Twist when one is due."""
         self._pose = pose
-        timed_out = self._check_timeout()
+        timed_out = self._check_timeout(now)
         if timed_out is not None:
             return timed_out
-        return self._due() if self.profile.on_pose else None
+        return self._due(now) if self.profile.on_pose else None
 
-    def tick(self) -> Twist | None:
+    def tick(self, now: float) -> Twist | None:
         """Check the goal timeout and, for the thesis profile, the publishing period."""
-        timed_out = self._check_timeout()
+        timed_out = self._check_timeout(now)
         if timed_out is not None:
             return timed_out
-        return None if self.profile.on_pose else self._due()
+        return None if self.profile.on_pose else self._due(now)
 
     def stop(self) -> Twist | None:
         """Piloting stopped or the relay left: one zero Twist if the turtle was being driven."""
@@ -241,7 +258,7 @@ class Controller:
     def _lost(self, now: float) -> bool:
         return now - self._goal_at > self.profile.search_after_s
 
-    def until_timeout(self) -> float | None:
+    def until_timeout(self, now: float) -> float | None:
         """Seconds until the goal timeout stops the turtle (0 when due), None with no goal.
 
         A caller that ticks on a coarse period wakes up at this moment too, so the stop goes
@@ -249,18 +266,17 @@ class Controller:
         """
         if self._goal is None:
             return None
-        return max(0.0, self._goal_at + self.profile.goal_timeout_s - self._clock())
+        return max(0.0, self._goal_at + self.profile.goal_timeout_s - now)
 
-    def _check_timeout(self) -> Twist | None:
-        if self._goal is not None and self._clock() - self._goal_at >= self.profile.goal_timeout_s:
+    def _check_timeout(self, now: float) -> Twist | None:
+        if self._goal is not None and now - self._goal_at >= self.profile.goal_timeout_s:
             return self.stop()
         return None
 
-    def _due(self) -> Twist | None:
+    def _due(self, now: float) -> Twist | None:
         goal, pose = self._goal, self._pose
         if goal is None or pose is None:
             return None
-        now = self._clock()
         last = self._last_publish
         profile = self.profile
         if profile.on_pose:
@@ -280,7 +296,7 @@ class Controller:
         self._unanswered = False
         if self._lost(now):
             return Twist(0.0, self._last_side * profile.search_angular)
-        linear, angular = _command(goal, pose, profile)
+        linear, angular = self.law(goal, pose, profile)
         if angular != 0.0:
             self._last_side = 1.0 if angular > 0 else -1.0
         return Twist(linear, angular, seq=goal.seq, frame=goal.frame)

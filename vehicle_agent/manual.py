@@ -1,20 +1,18 @@
-"""The operator's wheel at the vehicle: mode, drive commands and the dead-man (DESIGN §10).
+"""The operator's wheel at the vehicle: mode, drive commands and the dead-man.
 
 Sans-I/O, like :mod:`vehicle_agent.control`: a :class:`ManualDrive` is told the mode the relay
-set, each drive command and the clock, and answers with the :class:`Twist` to publish, if any.
-While manual, goals are the caller's to ignore (:attr:`ManualDrive.manual`) and only drive
-commands move the turtle, scaled to the profile's manual speeds. A vehicle that moves on a drive
-command and hears none for ``DEADMAN_S`` stops (one zero Twist). The browser vehicle page's
-``manual.js`` is a port of this module, checked against it (e2e/test_manual_js.py).
+set, each drive command and the clock (the time given with each), and answers with the
+:class:`Twist` to publish, if any. While manual, goals are the caller's to ignore
+(:attr:`ManualDrive.manual`; the pilot drops them) and only drive commands move the turtle,
+scaled to the profile's manual speeds. A vehicle that moves on a drive command and hears none for
+the dead-man time (``DEADMAN_S`` in :mod:`app.protocol.control`, given to the constructor) stops
+(one zero Twist). The browser vehicle page's ``core/manual.js`` is a port of this module, checked
+against it (tests/vehicle_agent/manual_sequences.py, e2e/test_manual_js.py).
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 from app.protocol.channels import Mode
-from app.protocol.control import DEADMAN_S
 from vehicle_agent.control import ZERO_TWIST, Profile, Twist
 
 
@@ -25,9 +23,9 @@ def _unit(value: float) -> float:
 class ManualDrive:
     """Mode, the newest drive command and the dead-man of one vehicle."""
 
-    def __init__(self, profile: Profile, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, profile: Profile, deadman_s: float) -> None:
         self.profile = profile
-        self._clock = clock
+        self.deadman_s = deadman_s
         self.mode: Mode = "auto"
         self.operator: str | None = None
         self._last_seq = 0
@@ -55,12 +53,13 @@ class ManualDrive:
         self._last_seq = 0
         self._moving = False
 
-    def drive(self, seq: int, linear: float, angular: float) -> Twist | None:
-        """A drive command; its Twist, or None when not manual or not the newest command."""
+    def drive(self, seq: int, linear: float, angular: float, now: float) -> Twist | None:
+        """A drive command at ``now``; its Twist, or None when not manual or not the newest
+        command."""
         if not self.manual or seq <= self._last_seq:
             return None
         self._last_seq = seq
-        self._last_at = self._clock()
+        self._last_at = now
         twist = Twist(
             _unit(linear) * self.profile.manual_linear,
             _unit(angular) * self.profile.manual_angular,
@@ -68,15 +67,15 @@ class ManualDrive:
         self._moving = not twist.is_zero
         return twist
 
-    def tick(self) -> Twist | None:
-        """The dead-man: the zero Twist once no command came for ``DEADMAN_S`` while moving."""
-        if self._moving and self._clock() - self._last_at >= DEADMAN_S:
+    def tick(self, now: float) -> Twist | None:
+        """The dead-man: the zero Twist once no command came for ``deadman_s`` while moving."""
+        if self._moving and now - self._last_at >= self.deadman_s:
             self._moving = False
             return ZERO_TWIST
         return None
 
-    def until_deadman(self) -> float | None:
+    def until_deadman(self, now: float) -> float | None:
         """Seconds until the dead-man stops the turtle, None while it is not moving."""
         if not self._moving:
             return None
-        return max(0.0, self._last_at + DEADMAN_S - self._clock())
+        return max(0.0, self._last_at + self.deadman_s - now)

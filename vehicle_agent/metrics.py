@@ -5,23 +5,23 @@
 knows nothing of it. The goal age is the time since the previous goal applied on the same link,
 i.e. how old the goal the turtle was steering by had become when a newer one replaced it (the
 ``goalAgeMs`` the agent reports in its pose telemetry, observed at each goal). It is not the
-relay-to-vehicle delay: the goal's ``t`` is the relay's clock, which this machine's need not match
-(see :mod:`vehicle_agent.freshness`).
+relay-to-vehicle delay: the goal message's own ``t`` is the relay's clock, which this machine's
+need not match (see :mod:`vehicle_agent.freshness`).
 """
 
 from __future__ import annotations
 
 import argparse
-from typing import Final
+from typing import Final, get_args
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from app.metrics import MetricsServer, serve_metrics
-from vehicle_agent.events import Event, EventLog
+from app.protocol import events as ev
+from vehicle_agent.events import EventLog
 
-# The ``why`` label's values: the latest-wins verdicts, goals ignored in manual mode, and one
-# bucket for any reason a later agent may add.
-DROP_REASONS: Final = ("old", "stale", "manual", "other")
+# The ``why`` label's values: the latest-wins verdicts and goals ignored in manual mode.
+DROP_REASONS: Final = get_args(ev.DropReason)
 # Seconds: the relay's profiles send a goal every 30 to 300 ms; a second or more is an outage.
 GOAL_AGE_BUCKETS: Final = (0.025, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 5.0)
 
@@ -67,29 +67,29 @@ class VehicleMetrics:
             self.goals_dropped.labels(why)
         self._last_goal_t: float | None = None
 
-    def on_event(self, event: Event) -> None:
+    def on_event(self, event: ev.AnyEvent) -> None:
         """Count one event of the agent's :class:`~vehicle_agent.events.EventLog`."""
-        match event["ev"]:
-            case "goal":
+        match event:
+            case ev.GoalApplied(t=t):
                 self.goals_applied.inc()
                 if self._last_goal_t is not None:
-                    self.goal_age.observe(event["t"] - self._last_goal_t)
-                self._last_goal_t = event["t"]
-            case "goal_dropped":
-                why = event.get("why")
-                self.goals_dropped.labels(why if why in DROP_REASONS else "other").inc()
-            case "twist":
+                    self.goal_age.observe(t - self._last_goal_t)
+                self._last_goal_t = t
+            case ev.GoalDropped(why=why):
+                self.goals_dropped.labels(why).inc()
+            case ev.TwistSent():
                 self.twists.inc()
-            case "link":
-                up = event.get("state") == "up"
-                self.link_up.set(1 if up else 0)
-                if not up:
+            case ev.LinkChanged(state=state):
+                self.link_up.set(1 if state == "up" else 0)
+                if state != "up":
                     # A new offer starts a new link (goal seq and age start again) and the
                     # agent returns to auto whenever a link is offered or drops.
                     self._last_goal_t = None
                     self.mode.set(0)
-            case "mode":
-                self.mode.set(1 if event.get("mode") == "manual" else 0)
+            case ev.ModeChanged(mode=mode):
+                self.mode.set(1 if mode == "manual" else 0)
+            case _:
+                pass  # the other kinds are not counted
 
 
 def serve_agent_metrics(args: argparse.Namespace, events: EventLog) -> MetricsServer | None:

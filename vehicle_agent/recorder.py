@@ -1,24 +1,25 @@
 """The flight recorder: what the vehicle saw, was told and did, in MCAP files Foxglove opens.
 
 ``autopilot vehicle --record DIR`` writes ``DIR/autopilot-<room>-<UTC time>.mcap``: the camera as
-``foxglove.CompressedImage`` (JPEG, each with its frame tag), the turtle's pose, every Twist sent,
-every goal received (seq, op, frame tag) or dropped, mode changes, drive commands and link events.
+``foxglove.CompressedImage`` (JPEG, each with its frame tag), and the agent's events on the topics
+of :mod:`app.recording` (pose, every Twist sent, every goal received or dropped, mode changes,
+drive commands, link events), whose JSON Schemas derive from the events' dataclasses.
 
-Why ``mcap`` with JSON Schema rather than ``foxglove-sdk`` with protobuf: the agent already has
-every message as a JSON-able dict (its event log), the schemas read like the wire protocol's, and
-Foxglove and Lichtblick read JSON-schema channels natively; the base64 of the images costs a
-third more bytes before compression, and zstd chunk compression wins most of it back.
+Why ``mcap`` with JSON Schema rather than ``foxglove-sdk`` with protobuf: every event is already a
+JSON-able record (its event-log line), the schemas read like the wire protocol's, and Foxglove and
+Lichtblick read JSON-schema channels natively; zstd chunk compression wins back most of what the
+base64 of the images adds.
 
 Which camera images are kept: ``--record-fps`` of them, and by preference the frames the relay
 sent goals for (a goal names its frame by tag), so that ``autopilot replay`` can check the goals
 against their own images. The loop holds camera frames to pick from (references, their tags read
 from the top rows only, and only when a search asks), but only from shortly before an image is
 due: from as long before as the last goal took to come back for its frame, plus a margin (from a
-second before, after a period that no goal filled). Holding every frame for a second cost the
-loop most of its share of the recorder (whoever lets go of a 640×480 frame last pays for freeing
-it) and 27 MB of memory; holding from the lead keeps two or three frames a period on a quick
-link and still finds a slow link's goals. When no goal names a held frame (autopilot off, a camera
-without tags) the newest frame is kept a period after it was due, so the rate holds either way.
+second before, after a period that no goal filled). Holding every frame for a second would cost
+the loop most of the recorder's share (whoever lets go of a frame last pays for freeing it) and
+memory; holding from the lead still finds a slow link's goals. When no goal names a held frame
+(autopilot off, a camera without tags) the newest frame is kept a period after it was due, so
+the rate holds either way.
 
 Recording never waits on the disk: the agent's loop only stamps an item and queues it; one thread
 drains the queue once a second, JPEG-encodes and writes. A full queue drops the item
@@ -28,7 +29,7 @@ only the newest ``max_files`` are kept, so a day's run cannot fill the disk unno
 
 The recorder counts its own CPU time, the loop's share and the writer thread's
 (:meth:`FlightRecorder.totals`), so that what it costs the agent is measured directly, not only
-as the difference between two runs of a noisy machine.
+as the difference between two runs of a noisy machine (``autopilot bench --recorder``).
 """
 
 from __future__ import annotations
@@ -53,13 +54,13 @@ import numpy as np
 from aiortc import MediaStreamTrack
 from mcap.writer import CompressionType, Writer
 
+from app import recording
 from app.arguments import positive_number
 from app.protocol import frametag
-from vehicle_agent.events import Event
+from app.protocol.events import AnyEvent, GoalApplied, RecorderTotals
 
 log = logging.getLogger(__name__)
 
-IMAGE_TOPIC: Final = "/camera/image/compressed"
 # How long camera frames are held at most for a goal to name one (glass-to-goal is tens of
 # milliseconds; a loaded relay's, hundreds).
 HOLD_NS: Final = 1_000_000_000
@@ -73,80 +74,13 @@ _FIRST_PLANE_CHANNELS: Final = {
     **dict.fromkeys(("yuv420p", "yuvj420p", "yuv422p", "yuv444p", "nv12", "gray"), 1),
     **dict.fromkeys(("rgb24", "bgr24"), 3),
 }
-# Event-log kinds (vehicle_agent/events.py) and the topic each is recorded on.
-EVENT_TOPICS: Final = {
-    "pose": "/turtle1/pose",
-    "twist": "/turtle1/cmd_vel",
-    "goal": "/autopilot/goal",
-    "goal_dropped": "/autopilot/goal_dropped",
-    "mode": "/autopilot/mode",
-    "drive": "/autopilot/drive",
-    "link": "/autopilot/link",
-}
-
-_STAMP = {
-    "type": "object",
-    "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
-}
-# foxglove.CompressedImage as Foxglove's JSON schema has it, plus the frame tag.
-IMAGE_SCHEMA: Final = "foxglove.CompressedImage"
-_IMAGE_PROPERTIES: Final[dict[str, Any]] = {
-    "timestamp": _STAMP,
-    "frame_id": {"type": "string"},
-    "data": {"type": "string", "contentEncoding": "base64"},
-    "format": {"type": "string"},
-    "frame": {"type": ["integer", "null"], "description": "frame tag (docs/contracts.md)"},
-}
-_NUMBER = {"type": "number"}
-_MAYBE_INT = {"type": ["integer", "null"]}
-_MAYBE_STR = {"type": ["string", "null"]}
-# One schema per event kind: the fields the event log writes (``t``: monotonic seconds).
-_EVENT_SCHEMAS: Final[dict[str, tuple[str, dict[str, Any]]]] = {
-    "pose": ("turtlesim.Pose", {"x": _NUMBER, "y": _NUMBER, "theta": _NUMBER}),
-    "twist": (
-        "autopilot.Twist",
-        {"linear": _NUMBER, "angular": _NUMBER, "seq": _MAYBE_INT, "frame": _MAYBE_INT},
-    ),
-    "goal": (
-        "autopilot.Goal",
-        {
-            "seq": {"type": "integer"},
-            "op": {"type": "string"},
-            "frame": _MAYBE_INT,
-            "x": _NUMBER,
-            "y": _NUMBER,
-            "w": _NUMBER,
-            "h": _NUMBER,
-        },
-    ),
-    "goal_dropped": (
-        "autopilot.GoalDropped",
-        {"seq": {"type": "integer"}, "frame": _MAYBE_INT, "why": {"type": "string"}},
-    ),
-    "mode": ("autopilot.Mode", {"mode": {"type": "string"}, "operator": _MAYBE_STR}),
-    "drive": (
-        "autopilot.Drive",
-        {"seq": {"type": "integer"}, "applied": {"type": "boolean"}, "moving": {"type": "boolean"}},
-    ),
-    "link": (
-        "autopilot.Link",
-        {
-            "state": {"type": "string"},
-            "relay": {"type": "string"},
-            "reason": _MAYBE_STR,
-            "selected": _MAYBE_STR,
-        },
-    ),
-}
-
 # Items waiting for the writer thread (about a hundred a second under the autopilot); beyond
 # this the recorder drops rather than queue memory.
 QUEUE_LIMIT: Final = 512
 # The writer thread drains the queue this often. Not woken per item: a wake-up per event would
-# hand the GIL back and forth with the agent's loop dozens of times a second; and a second's
-# items in one go cost the thread a quarter less than a tenth's ten times (JPEG included: its
-# code and tables stay in the cache), 2026-11-26. Nothing is lost for it: a file is only
-# readable up to its last whole chunk (1 MB, tens of seconds) until it is finished.
+# hand the GIL back and forth with the agent's loop dozens of times a second, and larger batches
+# cost the thread less per item (JPEG's code and tables stay in the cache). Nothing is lost for
+# it: a file is only readable up to its last whole chunk until it is finished.
 DRAIN_PERIOD_S: Final = 1.0
 
 
@@ -325,12 +259,12 @@ class FlightRecorder:
 
     # --- the agent's side: stamp and queue, never wait --------------------------------------
 
-    def on_event(self, event: Event) -> None:
+    def on_event(self, event: AnyEvent) -> None:
         """An event-log listener: queue the kinds that are recorded."""
         started = time.thread_time()
-        if event["ev"] in EVENT_TOPICS:
-            self._put(event["ev"], event)
-        if event["ev"] == "goal":
+        if type(event) in recording.EVENT_CHANNELS:
+            self._put("event", event)
+        if isinstance(event, GoalApplied):
             self._image_for_goal(event)
         self._loop_cpu_s += time.thread_time() - started
 
@@ -366,14 +300,14 @@ class FlightRecorder:
             self._lead_ns = HOLD_NS
             self._keep_image(self._held[-1], now)
 
-    def _image_for_goal(self, event: Event) -> None:
+    def _image_for_goal(self, goal: GoalApplied) -> None:
         now = self._clock()
-        if now < self._due_ns or event.get("frame") is None:
+        if now < self._due_ns or goal.frame is None:
             return
         for held in reversed(self._held):
             if held.arrived_ns <= self._kept_ns:
                 return  # images go forward in time, as the camera did
-            if held.tag == event["frame"]:
+            if held.tag == goal.frame:
                 self._lead_ns = min(HOLD_NS, now - held.arrived_ns + LEAD_MARGIN_NS)
                 self._keep_image(held, now)
                 return
@@ -387,7 +321,9 @@ class FlightRecorder:
         self._kept_ns = held.arrived_ns
         self._put("image", held, held.arrived_ns)
 
-    def _put(self, kind: str, payload: Any, log_ns: int | None = None) -> None:
+    def _put(
+        self, kind: Literal["image", "event"], payload: Any, log_ns: int | None = None
+    ) -> None:
         if len(self._queue) >= QUEUE_LIMIT:
             if self.dropped == 0:
                 log.warning("flight recorder falling behind: dropping what it cannot write")
@@ -399,24 +335,23 @@ class FlightRecorder:
         """Write what is queued, finish the file and stop the writer thread."""
         await asyncio.to_thread(self._stop)
 
-    def totals(self) -> dict[str, Any]:
-        """What was recorded and what it cost: images, messages, items dropped, files, camera
-        frames seen and held, and CPU seconds (``cpu_s`` = ``loop_cpu_s`` + ``writer_cpu_s``)
-        over ``seconds`` of recording. Not counted: the camera relay's hand-over of each frame to
-        the recorder's tap."""
+    def totals(self) -> RecorderTotals:
+        """What was recorded and what it cost, as the event the agent logs when the recorder
+        stops. Not counted: the camera relay's hand-over of each frame to the recorder's tap."""
         loop, writer = self._loop_cpu_s, self._writer_cpu_s
-        return {
-            "images": self.images,
-            "messages": self.messages,
-            "dropped": self.dropped,
-            "files": len(self.files),
-            "frames": self._frames,
-            "frames_held": self._frames_held,
-            "cpu_s": round(loop + writer, 4),
-            "loop_cpu_s": round(loop, 4),
-            "writer_cpu_s": round(writer, 4),
-            "seconds": round(time.monotonic() - self._started_s, 3),
-        }
+        return RecorderTotals(
+            images=self.images,
+            messages=self.messages,
+            dropped=self.dropped,
+            files=len(self.files),
+            frames=self._frames,
+            frames_held=self._frames_held,
+            cpu_s=round(loop + writer, 4),
+            loop_cpu_s=round(loop, 4),
+            writer_cpu_s=round(writer, 4),
+            seconds=round(time.monotonic() - self._started_s, 3),
+            t=time.monotonic(),
+        )
 
     def _stop(self) -> None:
         self._stopping.set()
@@ -431,10 +366,11 @@ class FlightRecorder:
                 while self._queue:
                     kind, log_ns, payload = self._queue.popleft()
                     if kind == "image":
-                        self._write(IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
+                        self._write(recording.IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
                         self.images += 1
                     else:
-                        self._write(EVENT_TOPICS[kind], log_ns, _fields(kind, payload))
+                        topic = recording.EVENT_CHANNELS[type(payload)].topic
+                        self._write(topic, log_ns, recording.message(payload))
                 self._writer_cpu_s = time.thread_time()
                 if stopping:
                     break
@@ -445,7 +381,7 @@ class FlightRecorder:
 
     def _image(self, held: _Held, log_ns: int) -> dict[str, Any]:
         # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
-        # packed RGB's channels is three times faster in OpenCV (the synthetic camera's frames).
+        # packed RGB's channels is faster in OpenCV (the synthetic camera's frames).
         if held.frame.format.name == "rgb24":
             rgb = held.frame.to_ndarray(format="rgb24")
             bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
@@ -491,10 +427,9 @@ class FlightRecorder:
         writer = Writer(self._file, compression=CompressionType.ZSTD)
         writer.start(profile="", library="webrtc-autopilot flight recorder")
         self._channels = {}
-        for topic, title, properties in _schemas():
-            schema = json.dumps({"title": title, "type": "object", "properties": properties})
+        for topic, schema in recording.channels():
             schema_id = writer.register_schema(
-                name=title, encoding="jsonschema", data=schema.encode()
+                name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
             )
             self._channels[topic] = writer.register_channel(
                 topic=topic, message_encoding="json", schema_id=schema_id
@@ -521,14 +456,3 @@ class FlightRecorder:
         if self._file is not None:
             self._file.close()
             self._file = None
-
-
-def _schemas() -> list[tuple[str, str, dict[str, Any]]]:
-    """Every channel: its topic, schema name and properties."""
-    events = [(EVENT_TOPICS[kind], *spec) for kind, spec in _EVENT_SCHEMAS.items()]
-    return [(IMAGE_TOPIC, IMAGE_SCHEMA, _IMAGE_PROPERTIES), *events]
-
-
-def _fields(kind: str, event: Event) -> dict[str, Any]:
-    """The event's recorded fields (the schema's), without the log's own ``ev`` and ``t``."""
-    return {name: event.get(name) for name in _EVENT_SCHEMAS[kind][1]}

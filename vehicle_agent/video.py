@@ -32,6 +32,7 @@ from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
 from app.protocol import frametag
+from app.protocol.events import FrameSent
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 
 log = logging.getLogger(__name__)
@@ -167,18 +168,6 @@ class DriftPath:
 
 def _ease(u: float) -> float:
     return 0.5 - 0.5 * math.cos(math.pi * u)
-
-
-@dataclass(frozen=True)
-class FrameInfo:
-    """What the synthetic source put into one frame, and when it handed the frame over."""
-
-    frame: int
-    sent_at: float  # time.monotonic()
-    face_x: float  # true face centre, pixels
-    face_y: float
-    # The face leapt across the frame since the previous frame (see SweepPath).
-    jump: bool = False
 
 
 class _FaceSprite:
@@ -341,7 +330,7 @@ class SyntheticVideo(PacedVideoTrack):
         fps: float = VIDEO_FPS,
         path: FacePath | None = None,
         photo: Path = DEFAULT_FACE,
-        on_frame: Callable[[FrameInfo], None] | None = None,
+        on_frame: Callable[[FrameSent], None] | None = None,
         flame: tuple[float, float] | None = DEFAULT_FLAME,
     ) -> None:
         super().__init__(fps)
@@ -397,7 +386,11 @@ class SyntheticVideo(PacedVideoTrack):
         frame = av.VideoFrame.from_ndarray(self.render(index), format="rgb24")
         if self.on_frame is not None:
             cx, cy = self.face_centre(index)
-            self.on_frame(FrameInfo(index, time.monotonic(), cx, cy, self.jumped(index)))
+            self.on_frame(
+                FrameSent(
+                    frame=index, face_x=cx, face_y=cy, jump=self.jumped(index), t=time.monotonic()
+                )
+            )
         return frame
 
 
@@ -411,7 +404,7 @@ class TwoFaceVideo(SyntheticVideo):
         width: int = VIDEO_SIZE[0],
         height: int = VIDEO_SIZE[1],
         fps: float = VIDEO_FPS,
-        on_frame: Callable[[FrameInfo], None] | None = None,
+        on_frame: Callable[[FrameSent], None] | None = None,
         small_share: float = 0.65,
     ) -> None:
         super().__init__(
@@ -518,7 +511,7 @@ def open_source(
     source: str,
     size: tuple[int, int] | None = None,
     fps: float | None = None,
-    on_frame: Callable[[FrameInfo], None] | None = None,
+    on_frame: Callable[[FrameSent], None] | None = None,
     sweep_s: float | None = None,
 ) -> MediaStreamTrack:
     """The track for a ``--video`` value: ``synthetic``, ``two-faces``, ``/dev/videoN`` or a

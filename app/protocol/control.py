@@ -29,6 +29,9 @@ Law = Literal["rotate", "follow"]
 # live operator never trips it, and a lost or stuck client stops the vehicle within 0.3 s.
 DEADMAN_S = 0.3
 DRIVE_REPEAT_S = 0.1
+# A vehicle's pilot looks at its clock this often (goal timeout, the clock-driven profile's
+# period, the dead-man), and sooner when a stop falls due before.
+TICK_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -131,6 +134,7 @@ __all__ = [
     "DRIVE_REPEAT_S",
     "PROFILES",
     "TERRAIN_CENTRE",
+    "TICK_S",
     "WORLD_SIZE",
     "ControlConfig",
     "Profile",
@@ -158,6 +162,7 @@ class ControlConfig:
     spawn_theta: float
     deadman_s: float
     drive_repeat_s: float
+    tick_s: float
     profiles: dict[str, Profile]
 
 
@@ -170,5 +175,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         spawn_theta=SPAWN_THETA,
         deadman_s=DEADMAN_S,
         drive_repeat_s=DRIVE_REPEAT_S,
+        tick_s=TICK_S,
         profiles=PROFILES if profiles is None else profiles,
     )

@@ -1,9 +1,9 @@
 """``autopilot replay``: a flight recording as a regression test of the vision path.
 
-The recorded camera images (``--record``, vehicle_agent/recorder.py) go through the relay's own
-OpenCV.js analyzer in headless Chromium (the parity page's worker path: ``autopilot parity``),
-and the goal each one yields is compared with the goal the relay sent for the same frame, paired
-by frame tag. ``--summary`` only lists what a recording holds.
+The recorded camera images (``autopilot vehicle --record``, read through ``app/recording.py``) go
+through the relay's own OpenCV.js analyzer in headless Chromium (the parity page's worker path:
+``autopilot parity``), and the goal each one yields is compared with the goal the relay sent for
+the same frame, paired by frame tag. ``--summary`` only lists what a recording holds.
 
 Agreement rule: the replayed goal exists and lies within ``AGREE_FRACTION`` of the frame's width
 of the recorded one. Not pixel equality: the relay analysed the decoded VP8 video, the replay the
@@ -21,18 +21,18 @@ import base64
 import json
 import math
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
 
 from app.arguments import add_relay_profile
+from app.protocol.events import GoalApplied
 from app.protocol.relay_profiles import Profile
+from app.recording import IMAGE_TOPIC, events, messages, summary
 from app.tools.parity import open_harness
-from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
 
 # A replayed goal agrees when within this fraction of the frame's width of the recorded one.
 AGREE_FRACTION = 0.05
@@ -46,7 +46,7 @@ class Recording:
     """What replay needs from one or more MCAP files: images and goals by frame tag."""
 
     images: dict[int, bytes] = field(default_factory=dict)
-    goals: dict[int, dict[str, Any]] = field(default_factory=dict)
+    goals: dict[int, GoalApplied] = field(default_factory=dict)
     untagged_images: int = 0
 
 
@@ -71,14 +71,6 @@ class Replay:
         return {**asdict(self), "agreement_pct": round(self.agreement_pct, 2)}
 
 
-def messages(paths: Sequence[Path]) -> Iterator[tuple[str, int, dict[str, Any]]]:
-    """Every message of the files in log-time order per file: (topic, log time ns, fields)."""
-    for path in paths:
-        with path.open("rb") as stream:
-            for _, channel, message in make_reader(stream).iter_messages(log_time_order=True):
-                yield channel.topic, message.log_time, json.loads(message.data)
-
-
 def load(paths: Sequence[Path]) -> Recording:
     """The recorded images (JPEG bytes) and applied goals, each by frame tag."""
     recording = Recording()
@@ -88,8 +80,9 @@ def load(paths: Sequence[Path]) -> Recording:
                 recording.untagged_images += 1
             else:
                 recording.images[fields["frame"]] = base64.b64decode(fields["data"])
-        elif topic == EVENT_TOPICS["goal"] and fields.get("frame") is not None:
-            recording.goals[fields["frame"]] = fields
+    for _, event in events(paths):
+        if isinstance(event, GoalApplied) and event.frame is not None:
+            recording.goals[event.frame] = event
     return recording
 
 
@@ -102,55 +95,25 @@ def compare(recording: Recording, analyse: Any, op: str | None = None) -> Replay
         if jpeg is None:
             continue
         replay.goals_compared += 1
-        target = analyse(jpeg, op or goal["op"])
+        target = analyse(jpeg, op or goal.op)
         distance = None
         if target is not None:
             replay.goals_replayed += 1
-            distance = math.hypot(target["x"] - goal["x"], target["y"] - goal["y"])
-            if distance <= AGREE_FRACTION * goal["w"]:
+            distance = math.hypot(target["x"] - goal.x, target["y"] - goal.y)
+            if distance <= AGREE_FRACTION * goal.w:
                 replay.agreed += 1
                 continue
         if len(replay.disagreements) < LISTED:
             replay.disagreements.append(
                 {
                     "frame": frame,
-                    "op": op or goal["op"],
-                    "recorded": [goal["x"], goal["y"]],
+                    "op": op or goal.op,
+                    "recorded": [goal.x, goal.y],
                     "replayed": None if target is None else [target["x"], target["y"]],
                     "distance_px": None if distance is None else round(distance, 1),
                 }
             )
     return replay
-
-
-def summary(paths: Sequence[Path]) -> dict[str, Any]:
-    """Channels (topic, schema, messages), duration and size of the files, from their
-    summary sections."""
-    channels: dict[str, dict[str, Any]] = {}
-    start, end, size = None, None, 0
-    for path in paths:
-        size += path.stat().st_size
-        with path.open("rb") as stream:
-            found = make_reader(stream).get_summary()
-        if found is None or found.statistics is None:
-            raise McapError(f"{path} has no summary (a recording cut off before it was finished)")
-        stats = found.statistics
-        for channel_id, channel in found.channels.items():
-            entry = channels.setdefault(
-                channel.topic,
-                {"schema": found.schemas[channel.schema_id].name, "messages": 0},
-            )
-            entry["messages"] += stats.channel_message_counts.get(channel_id, 0)
-        if stats.message_count:
-            start = min(start or stats.message_start_time, stats.message_start_time)
-            end = max(end or stats.message_end_time, stats.message_end_time)
-    duration = 0.0 if start is None or end is None else (end - start) / 1e9
-    return {
-        "files": len(paths),
-        "bytes": size,
-        "duration_s": round(duration, 3),
-        "channels": channels,
-    }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -179,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         if args.summary:
             return _print_summary(summary(args.files), args.json)
         recording = load(args.files)
+    # ValueError: JSON that is not a message, or not its topic's event (EventError).
     except (OSError, McapError, ValueError, KeyError) as exc:
         sys.stderr.write(f"autopilot replay: cannot read the recording: {exc}\n")
         return 2

@@ -21,13 +21,14 @@ import redis.asyncio as aioredis
 from playwright.async_api import async_playwright
 
 from app.chromium import launch_options
+from app.protocol.events import AnyEvent, GoalApplied, TwistSent
 from app.relay.pool import RelayPool, room_members, start_pool_process
 from app.server.fleet import keys
 from app.server.serve import RunningServer
 from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_agent_pages import H, W, page_until
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.events import Event, EventLog
+from vehicle_agent.events import EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -39,7 +40,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
 ) -> None:
     first, second = start_instance(), start_instance()
     redis = aioredis.Redis.from_url(redis_url, decode_responses=True)
-    events: list[Event] = []
+    events: list[AnyEvent] = []
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # the face on the left
@@ -53,7 +54,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
         return math.degrees(turtle.sim.pose("turtle1").theta)
 
     def goals() -> int:
-        return sum(e["ev"] == "goal" for e in events)
+        return sum(isinstance(e, GoalApplied) for e in events)
 
     async def relay_holder() -> str | None:
         holder = await redis.get(keys.relay_lease("default"))
@@ -98,7 +99,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
             pool_a.send_signal(signal.SIGKILL)
             pool_a.wait(timeout=10)
             await eventually(
-                lambda: any(e["ev"] == "twist" and e["seq"] is None for e in events[-50:]),
+                lambda: any(isinstance(e, TwistSent) and e.seq is None for e in events[-50:]),
                 10,
                 "a zero Twist once the relay is gone",
             )

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from app.protocol.events import AnyEvent, TwistSent
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import Pose
-from vehicle_agent.events import Event, EventLog
+from vehicle_agent.events import EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -15,7 +16,7 @@ class Vehicle:
     """A real :class:`Agent` (never run) driving a :class:`SimTurtle`; records its events."""
 
     def __init__(self, profile: str) -> None:
-        self.events: list[Event] = []
+        self.events: list[AnyEvent] = []
         log = EventLog()
         log.listeners.append(self.events.append)
         self.turtle = SimTurtle()
@@ -24,7 +25,7 @@ class Vehicle:
             AgentConfig(server="http://127.0.0.1:9", profile=profile), video, self.turtle, log
         )
         # The turtle's pose, as its first pose update would give it.
-        self.agent.controller.pose(Pose(5.5, 5.5, 0.0))
+        self.agent.pilot.pose(Pose(5.5, 5.5, 0.0), 0.0)
 
-    def twists(self) -> list[Event]:
-        return [e for e in self.events if e["ev"] == "twist"]
+    def twists(self) -> list[TwistSent]:
+        return [e for e in self.events if isinstance(e, TwistSent)]

@@ -28,11 +28,12 @@ import pytest
 from playwright.sync_api import sync_playwright
 
 from app.chromium import launch_options
+from app.protocol import events as ev
+from app.recording import EVENT_CHANNELS, IMAGE_TOPIC
 from app.relay import cli as relay_cli
 from app.tools.demo import children_for
 from tests.helpers.processes import descendants, wait_all_gone
 from vehicle_agent import cli as agent_cli
-from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
@@ -192,9 +193,11 @@ def check_recording(files: list[Path]) -> None:
     counts = {topic: entry["messages"] for topic, entry in channels.items()}
     # Images at the recording's 5 per second while the turtle turned and then for a while.
     assert counts[IMAGE_TOPIC] >= 5 * RECORDED_PILOTING_S, counts
-    for kind in ("goal", "twist", "pose"):
-        assert counts[EVENT_TOPICS[kind]] > 0, counts
-    assert counts[EVENT_TOPICS["link"]] >= 2, counts  # offered, up (and down at the end)
+    for kind in (ev.GoalApplied, ev.TwistSent, ev.PoseReport):
+        assert counts[EVENT_CHANNELS[kind].topic] > 0, counts
+    assert counts[EVENT_CHANNELS[ev.LinkChanged].topic] >= 2, (
+        counts
+    )  # offered, up (and down at the end)
     replayed = replay()
     assert replayed["goals_compared"] >= 10, replayed
     assert replayed["agreement_pct"] == 100.0, replayed

@@ -14,15 +14,16 @@ import pytest
 from mcap.writer import Writer
 
 from app.cli import main
+from app.protocol.events import GoalApplied
+from app.recording import EVENT_CHANNELS, IMAGE_TOPIC, message
 from app.tools import replay
 from app.tools.replay import AGREE_FRACTION, Recording, compare
 from tests.helpers.harness import open_harness
-from vehicle_agent.recorder import EVENT_TOPICS, IMAGE_TOPIC
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 
-def _goal(frame: int, x: float, op: str = "face") -> dict[str, Any]:
-    return {"seq": frame, "op": op, "frame": frame, "x": x, "y": 240.0, "w": 640, "h": 480}
+def _goal(frame: int, x: float, y: float = 240.0, op: str = "face") -> GoalApplied:
+    return GoalApplied(seq=frame, op=op, frame=frame, x=x, y=y, w=640, h=480, t=frame / 30)
 
 
 def test_goals_are_compared_on_recorded_frames_and_agree_within_the_tolerance() -> None:
@@ -75,15 +76,15 @@ def _write_recording(path: Path, goals: dict[int, tuple[float, float]]) -> None:
         schema = writer.register_schema(name="any", encoding="jsonschema", data=b"{}")
         images, goal_topic = (
             writer.register_channel(topic, message_encoding="json", schema_id=schema)
-            for topic in (IMAGE_TOPIC, EVENT_TOPICS["goal"])
+            for topic in (IMAGE_TOPIC, EVENT_CHANNELS[GoalApplied].topic)
         )
         for frame, (x, y) in goals.items():
             bgr = cv2.cvtColor(video.render(frame), cv2.COLOR_RGB2BGR)
             jpeg = base64.b64encode(cv2.imencode(".jpg", bgr)[1].tobytes()).decode()
             image = {"format": "jpeg", "data": jpeg, "frame": frame}
-            goal = {"seq": frame, "op": "face", "frame": frame, "x": x, "y": y, "w": 640, "h": 480}
-            for channel, message in ((images, image), (goal_topic, goal)):
-                data = json.dumps(message).encode()
+            goal = message(_goal(frame, x, y))
+            for channel, fields in ((images, image), (goal_topic, goal)):
+                data = json.dumps(fields).encode()
                 writer.add_message(channel, log_time=frame, data=data, publish_time=frame)
         writer.finish()  # type: ignore[no-untyped-call]
 

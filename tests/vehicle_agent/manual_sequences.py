@@ -48,18 +48,17 @@ SEQUENCES: dict[str, list[Event]] = {
 
 
 def run(events: list[Event], profile: Profile) -> list[Any]:
-    """Each event's answer: the Twist as [linear, angular] or None, then manual and operator."""
-    now = [0.0]
-    drive = ManualDrive(profile, clock=lambda: now[0])
+    """Each event's answer: the Twist as [linear, angular] or None, then manual, operator and
+    the seconds to the dead-man (the protocol's dead-man time, as the vehicles get it)."""
+    drive = ManualDrive(profile, DEADMAN_S)
     out: list[Any] = []
     for kind, t, args in events:
-        now[0] = t
         if kind == "mode":
             twist = drive.set_mode(args[0], args[1])
         elif kind == "drive":
-            twist = drive.drive(*args)
+            twist = drive.drive(*args, t)
         else:
-            twist = drive.tick()
+            twist = drive.tick(t)
         answer = None if twist is None else [twist.linear_x, twist.angular_z]
-        out.append([answer, drive.manual, drive.operator, drive.until_deadman()])
+        out.append([answer, drive.manual, drive.operator, drive.until_deadman(t)])
     return out

@@ -16,11 +16,12 @@ from typing import Any
 
 import pytest
 
+from app.protocol.events import AnyEvent, DriveReceived, TwistSent
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.events import Event, EventLog
+from vehicle_agent.events import EventLog
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -35,18 +36,18 @@ RIGHT = (0.8 * W, 0.42 * H)
 class Running:
     agent: Agent
     turtle: SimTurtle
-    events: list[Event]
+    events: list[AnyEvent]
 
     def heading_deg(self) -> float:
         return math.degrees(self.turtle.sim.pose("turtle1").theta)
 
-    def twists(self) -> list[Event]:
-        return [e for e in self.events if e["ev"] == "twist"]
+    def twists(self) -> list[TwistSent]:
+        return [e for e in self.events if isinstance(e, TwistSent)]
 
 
 @contextlib.asynccontextmanager
 async def running_agent(server_url: str, **config: Any) -> AsyncIterator[Running]:
-    events: list[Event] = []
+    events: list[AnyEvent] = []
     log = EventLog()
     log.listeners.append(events.append)
     video = SyntheticVideo(
@@ -158,11 +159,9 @@ async def test_goals_turn_the_turtle_to_the_face_and_stop_zeroes(server: Running
         await pilot_until(relay, RIGHT, lambda: 0 < run.heading_deg() < 30)
         # Each Twist names the goal (and so the video frame) that caused it.
         last = run.twists()[-1]
-        assert last["seq"] is not None and last["frame"] in relay.tags
+        assert last.seq is not None and last.frame in relay.tags
         relay.send({"type": "stop"})
-        await eventually(
-            lambda: run.twists()[-1]["angular"] == 0.0 and run.twists()[-1]["seq"] is None
-        )
+        await eventually(lambda: run.twists()[-1].angular == 0.0 and run.twists()[-1].seq is None)
         settled = run.heading_deg()
         await asyncio.sleep(0.5)
         assert run.heading_deg() == pytest.approx(settled, abs=0.01)
@@ -174,7 +173,7 @@ async def test_goal_timeout_stops_the_turtle(server: RunningServer) -> None:
         # Keep the face far from where the turtle looks, so it is still turning when goals stop.
         await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
         last_goal = asyncio.get_running_loop().time()
-        await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+        await eventually(lambda: run.twists()[-1].seq is None, timeout=5)
         stopped_after = asyncio.get_running_loop().time() - last_goal
         # The default timeout (0.7 s) wakes the ticker on time; room for a loaded machine.
         assert 0.6 < stopped_after < 1.5
@@ -197,28 +196,26 @@ async def test_the_dead_man_stops_the_turtle_0_3_s_after_the_last_drive_command(
             relay.send({"type": "drive", "seq": seq, "linear": 0, "angular": 1})
             await asyncio.sleep(0.1)
         await eventually(lambda: len(drives(run)) == 5, timeout=5, what="five drive commands")
-        last = drives(run)[-1]["t"]
+        last = drives(run)[-1].t
         await eventually(lambda: stops_after(run, last) != [], timeout=5, what="the dead-man")
         # Held, the key kept the turtle moving: no zero Twist between its commands.
-        assert stops_after(run, drives(run)[0]["t"]) == stops_after(run, last)
-        # (The drive event is stamped a moment after the time the dead-man counts from.)
-        assert 0.3 - 0.01 <= stops_after(run, last)[0]["t"] - last <= 0.3 + 0.05
+        assert stops_after(run, drives(run)[0].t) == stops_after(run, last)
+        # The drive event is stamped with the time the dead-man counts from.
+        assert 0.3 <= stops_after(run, last)[0].t - last <= 0.3 + 0.05
         settled = run.heading_deg()
         await asyncio.sleep(0.3)
         assert run.heading_deg() == pytest.approx(settled, abs=0.01)
 
 
-def drives(run: Running) -> list[Event]:
+def drives(run: Running) -> list[DriveReceived]:
     """The drive commands the agent applied."""
-    return [e for e in run.events if e["ev"] == "drive" and e["applied"]]
+    return [e for e in run.events if isinstance(e, DriveReceived) and e.applied]
 
 
-def stops_after(run: Running, t: float) -> list[Event]:
+def stops_after(run: Running, t: float) -> list[TwistSent]:
     """The zero Twists published after ``t`` (monotonic seconds)."""
     return [
-        e
-        for e in run.twists()
-        if e["t"] > t and e["seq"] is None and e["linear"] == 0 and e["angular"] == 0
+        e for e in run.twists() if e.t > t and e.seq is None and e.linear == 0 and e.angular == 0
     ]
 
 
@@ -253,7 +250,7 @@ async def test_relay_leaving_stops_the_turtle_and_a_new_relay_pilots_again(
             await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
             left_at = asyncio.get_running_loop().time()
         # The relay left while goals were flowing: zero Twist at once, not after the timeout.
-        await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+        await eventually(lambda: run.twists()[-1].seq is None, timeout=5)
         assert asyncio.get_running_loop().time() - left_at < 0.6
         async with relay_in(server) as relay:
             await connected(relay)
@@ -281,7 +278,7 @@ async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None
                 await connected(relay)
                 await pilot_until(relay, LEFT, lambda: run.heading_deg() > 120)
                 await asyncio.to_thread(first.stop)
-                await eventually(lambda: run.twists()[-1]["seq"] is None, timeout=5)
+                await eventually(lambda: run.twists()[-1].seq is None, timeout=5)
                 await eventually(lambda: not run.agent.logged_in.is_set(), timeout=5)
             second = await asyncio.to_thread(serve_on, free_port)
             try:

@@ -19,12 +19,13 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
+from app.protocol.events import AnyEvent, GoalApplied, LinkChanged, TwistSent
 from app.relay.service import RelayService
 from app.server.serve import RunningServer
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import pixel_to_terrain
-from vehicle_agent.events import Event, EventLog
+from vehicle_agent.events import EventLog
 from vehicle_agent.signaling import LoginRefused
 from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
@@ -63,7 +64,7 @@ class Scene:
         path: FixedPath,
         relay: RelayService,
         client: Page,
-        events: list[Event],
+        events: list[AnyEvent],
     ) -> None:
         self.agent, self.turtle, self.path = agent, turtle, path
         self.relay, self.client, self.events = relay, client, events
@@ -71,11 +72,14 @@ class Scene:
     def heading_deg(self) -> float:
         return math.degrees(self.turtle.sim.pose("turtle1").theta)
 
-    def last_twist(self) -> Event | None:
-        return next((e for e in reversed(self.events) if e["ev"] == "twist"), None)
+    def last_twist(self) -> TwistSent | None:
+        return next((e for e in reversed(self.events) if isinstance(e, TwistSent)), None)
+
+    def last_goal(self) -> GoalApplied | None:
+        return next((e for e in reversed(self.events) if isinstance(e, GoalApplied)), None)
 
     def goals(self) -> int:
-        return sum(e["ev"] == "goal" for e in self.events)
+        return sum(isinstance(e, GoalApplied) for e in self.events)
 
     async def start_piloting(self) -> None:
         button = self.client.get_by_role("button", name="Start Piloting")
@@ -96,7 +100,7 @@ class Scene:
 async def scene(
     server: RunningServer, browser: Browser, profile: str = "default"
 ) -> AsyncIterator[Scene]:
-    events: list[Event] = []
+    events: list[AnyEvent] = []
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
@@ -136,8 +140,8 @@ async def test_agent_is_piloted_by_the_real_relay_page(
         # The synthetic face on the left: the turtle turns to face it (≈170°).
         await eventually(lambda: 150 < s.heading_deg() <= 180, 90, "the turtle to face left")
         # Goals echo the frame tag the relay read out of the video.
-        goal = next(e for e in reversed(s.events) if e["ev"] == "goal")
-        assert goal["frame"] is not None and goal["w"] == W
+        goal = s.last_goal()
+        assert goal is not None and goal.frame is not None and goal.w == W
         # The unattended relay reads the decoder's frames and shows no preview.
         assert s.relay.page is not None
         assert await s.relay.page.evaluate(PREVIEW_JS) is False
@@ -150,7 +154,7 @@ async def test_agent_is_piloted_by_the_real_relay_page(
         # Stop Piloting: a zero Twist, and the turtle stays put.
         await s.stop_piloting()
         await eventually(
-            lambda: (t := s.last_twist()) is not None and t["seq"] is None and t["angular"] == 0,
+            lambda: (t := s.last_twist()) is not None and t.seq is None and t.angular == 0,
             5,
             "a zero Twist after Stop Piloting",
         )
@@ -169,7 +173,7 @@ async def test_agent_is_piloted_by_the_real_relay_page(
             await s.relay.page.goto("chrome://crash", timeout=5000)
         killed = asyncio.get_running_loop().time()
         await eventually(
-            lambda: (t := s.last_twist()) is not None and t["seq"] is None,
+            lambda: (t := s.last_twist()) is not None and t.seq is None,
             5,
             "a zero Twist after the relay died",
         )
@@ -212,12 +216,12 @@ async def test_thesis_profile_end_to_end(server: RunningServer, module_browser: 
             cadence."""
             times: list[float] = []
             for e in s.events:
-                if e["ev"] != "twist":
+                if not isinstance(e, TwistSent):
                     continue
-                if e["seq"] is None:
+                if e.seq is None:
                     times.clear()
                 else:
-                    times.append(e["t"])
+                    times.append(e.t)
             return times
 
         # turtlesim runs a command for 1 s and angular.z = e, so one Twist turns the turtle by
@@ -232,7 +236,7 @@ async def test_thesis_profile_end_to_end(server: RunningServer, module_browser: 
         assert [round((t - times[0]) / period) for t in times] == list(range(len(times))), times
 
         def goal_times() -> list[float]:
-            return [e["t"] for e in s.events if e["ev"] == "goal"]
+            return [e.t for e in s.events if isinstance(e, GoalApplied)]
 
         await eventually(lambda: len(goal_times()) >= 5, 30, "five thesis-profile goals")
         goals = goal_times()
@@ -311,8 +315,8 @@ async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame
         assert flame is not None
 
         def last_goal() -> tuple[float, float] | None:
-            goal = next((e for e in reversed(s.events) if e["ev"] == "goal"), None)
-            return None if goal is None else (goal["x"], goal["y"])
+            goal = s.last_goal()
+            return None if goal is None else (goal.x, goal.y)
 
         def goal_near(point: tuple[float, float]) -> bool:
             goal = last_goal()
@@ -341,12 +345,12 @@ async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted
         face_x = s.path.x * W
 
         def goals_on_the_first_face() -> bool:
-            goal = next(e for e in reversed(s.events) if e["ev"] == "goal")
-            return bool(abs(goal["x"] - face_x) < 0.1 * W)
+            goal = s.last_goal()
+            return goal is not None and abs(goal.x - face_x) < 0.1 * W
 
         assert goals_on_the_first_face()
         # The second vehicle's scene has its face on the other side.
-        second_events: list[Event] = []
+        second_events: list[AnyEvent] = []
         second_log = EventLog()
         second_log.listeners.append(second_events.append)
         second = Agent(
@@ -360,7 +364,7 @@ async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted
         given = loop.time() + 10
 
         def linked() -> bool:
-            return any(e["ev"] == "link" and e["state"] == "up" for e in second_events)
+            return any(isinstance(e, LinkChanged) and e.state == "up" for e in second_events)
 
         # Its chance in the room: refused at the door, or linked to the relay, or 10 s trying.
         await eventually(

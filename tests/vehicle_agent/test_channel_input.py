@@ -8,6 +8,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from app.protocol.events import GoalApplied
 from tests.helpers.agent import H, Vehicle, W
 from vehicle_agent.control import PROFILES, Controller, Goal, Pose, angular_command
 
@@ -20,9 +21,9 @@ def vehicles(request: pytest.FixtureRequest) -> Vehicle:
 
 @pytest.fixture
 def vehicle(vehicles: Vehicle) -> Iterator[Vehicle]:
-    vehicles.events.clear()
     # Every case sends seq 1 again: a fresh link, as far as the latest-wins rule is concerned.
-    vehicles.agent.goal_gate.reset()
+    vehicles.agent.pilot.new_link(0.0)
+    vehicles.events.clear()
     yield vehicles
 
 
@@ -49,7 +50,7 @@ def test_hostile_goals_get_an_error_and_never_drive_the_turtle(vehicle: Vehicle,
     assert vehicle.twists() == []
     # The handler still works: a good goal is taken.
     assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None
-    assert [e["x"] for e in vehicle.events if e["ev"] == "goal"] == [10]
+    assert [e.x for e in vehicle.events if isinstance(e, GoalApplied)] == [10]
     vehicle.turtle.sim.step()
     pose = vehicle.turtle.sim.pose("turtle1")
     assert all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta))
@@ -57,10 +58,10 @@ def test_hostile_goals_get_an_error_and_never_drive_the_turtle(vehicle: Vehicle,
 
 def test_a_nan_goal_in_the_controller_holds_still_in_both_profiles() -> None:
     for profile in PROFILES.values():
-        controller = Controller(profile, clock=lambda: 100.0)
-        controller.pose(Pose(5.5, 5.5, 0.0))
-        twist = controller.goal(Goal(math.nan, 10.0, W, H, 1)) or controller.pose(
-            Pose(5.5, 5.5, 0.0)
+        controller = Controller(profile)
+        controller.pose(Pose(5.5, 5.5, 0.0), 100.0)
+        twist = controller.goal(Goal(math.nan, 10.0, W, H, 1), 100.0) or controller.pose(
+            Pose(5.5, 5.5, 0.0), 100.0
         )
         assert twist is not None and math.isfinite(twist.angular_z), profile.name
         assert twist.angular_z == 0.0

@@ -1,4 +1,4 @@
-"""The control law of DESIGN §5 / docs/contracts.md, with an injected clock."""
+"""The control laws and the controller (docs/contracts.md), with the time given by the test."""
 
 from __future__ import annotations
 
@@ -92,12 +92,12 @@ def test_target_on_the_turtle_has_no_heading() -> None:
 
 def test_default_profile_publishes_on_pose_updates_at_most_every_50_ms() -> None:
     clock = FakeClock()
-    control = Controller(PROFILES["default"], clock)
-    assert control.pose(CENTRE) is None  # no goal yet
-    control.goal(Goal(320, 40, 640, 480, seq=1, frame=7))
+    control = Controller(PROFILES["default"])
+    assert control.pose(CENTRE, clock.now) is None  # no goal yet
+    control.goal(Goal(320, 40, 640, 480, seq=1, frame=7), clock.now)
     published = []
     for _ in range(20):  # 20 pose updates 16 ms apart = 320 ms
-        twist = control.pose(CENTRE)
+        twist = control.pose(CENTRE, clock.now)
         if twist is not None:
             published.append((clock.now, twist))
         clock.now += 0.016
@@ -113,14 +113,14 @@ def test_default_profile_publishes_on_pose_updates_at_most_every_50_ms() -> None
 
 def test_default_profile_is_proportional_with_a_deadband() -> None:
     clock = FakeClock()
-    control = Controller(PROFILES["default"], clock)
-    control.pose(CENTRE)
-    twist = control.goal(pixel_towards(5))
+    control = Controller(PROFILES["default"])
+    control.pose(CENTRE, clock.now)
+    twist = control.goal(pixel_towards(5), clock.now)
     assert twist is not None
     assert twist.angular_z == pytest.approx(6.0 * math.radians(5), rel=1e-6)
     clock.now += 0.1
     # Facing the target already: inside the 0.01 rad deadband, the command is zero.
-    twist = control.goal(Goal(600, 240, 640, 480))
+    twist = control.goal(Goal(600, 240, 640, 480), clock.now)
     assert twist is not None and twist.angular_z == 0.0
 
 
@@ -129,27 +129,28 @@ def test_goal_timeout_gives_one_zero_twist_then_nothing() -> None:
     timeout = PROFILES["default"].goal_timeout_s
     # The field target: a vehicle that loses its goals stops within 0.75 s of the last one.
     assert timeout <= 0.75
-    control = Controller(PROFILES["default"], clock)
-    control.goal(Goal(320, 40, 640, 480))
-    assert control.until_timeout() == pytest.approx(timeout)
-    assert control.pose(CENTRE) is not None
+    control = Controller(PROFILES["default"])
+    control.goal(Goal(320, 40, 640, 480), clock.now)
+    assert control.until_timeout(clock.now) == pytest.approx(timeout)
+    assert control.pose(CENTRE, clock.now) is not None
     clock.now += timeout - 0.01
-    assert control.tick() is None  # still inside the timeout
-    assert control.until_timeout() == pytest.approx(0.01)
+    assert control.tick(clock.now) is None  # still inside the timeout
+    assert control.until_timeout(clock.now) == pytest.approx(0.01)
     clock.now += 0.01
-    stop = control.tick()  # due at the timeout itself, not a tick later
+    stop = control.tick(clock.now)  # due at the timeout itself, not a tick later
     assert stop is not None and stop.is_zero
     assert not control.active
-    assert control.until_timeout() is None
+    assert control.until_timeout(clock.now) is None
     clock.now += 1.0
-    assert control.tick() is None
-    assert control.pose(CENTRE) is None
+    assert control.tick(clock.now) is None
+    assert control.pose(CENTRE, clock.now) is None
 
 
 def test_stop_gives_one_zero_twist_only_when_driving() -> None:
-    control = Controller(PROFILES["default"], FakeClock())
+    clock = FakeClock()
+    control = Controller(PROFILES["default"])
     assert control.stop() is None
-    control.goal(Goal(320, 40, 640, 480))
+    control.goal(Goal(320, 40, 640, 480), clock.now)
     stop = control.stop()
     assert stop is not None and stop.is_zero
     assert control.stop() is None
@@ -157,27 +158,27 @@ def test_stop_gives_one_zero_twist_only_when_driving() -> None:
 
 def test_thesis_profile_publishes_the_latest_goal_every_1100_ms() -> None:
     clock = FakeClock()
-    control = Controller(PROFILES["thesis"], clock)
-    control.pose(CENTRE)
+    control = Controller(PROFILES["thesis"])
+    control.pose(CENTRE, clock.now)
     published = []
 
     def run_until(t_end: float) -> None:
         while clock.now < t_end:
-            twist = control.tick()
+            twist = control.tick(clock.now)
             if twist is not None:
                 published.append((round(clock.now - 100.0, 3), twist))
             clock.now = round(clock.now + 0.01, 6)
 
     # First goal: face straight up → +90°, published at once.
-    first = control.goal(Goal(320, 40, 640, 480, seq=1))
+    first = control.goal(Goal(320, 40, 640, 480, seq=1), clock.now)
     assert first is not None and first.angular_z == pytest.approx(math.pi / 2)
     assert first.seq == 1
     published.append((0.0, first))
     run_until(100.5)
     # Two newer goals inside the period: only the latest counts at the next publish.
-    control.goal(Goal(40, 240, 640, 480, seq=2))  # left: +180°
+    control.goal(Goal(40, 240, 640, 480, seq=2), clock.now)  # left: +180°
     run_until(100.8)
-    control.goal(Goal(320, 440, 640, 480, seq=3))  # down: −90°
+    control.goal(Goal(320, 440, 640, 480, seq=3), clock.now)  # down: −90°
     run_until(102.3)
     # Goals every 2 s keep the 2.5 s timeout away.
     times = [t for t, _ in published]
@@ -189,65 +190,65 @@ def test_thesis_profile_publishes_the_latest_goal_every_1100_ms() -> None:
 
 def test_thesis_profile_times_out_after_2_5_s() -> None:
     clock = FakeClock()
-    control = Controller(PROFILES["thesis"], clock)
-    control.pose(CENTRE)
-    control.goal(Goal(320, 40, 640, 480))
+    control = Controller(PROFILES["thesis"])
+    control.pose(CENTRE, clock.now)
+    control.goal(Goal(320, 40, 640, 480), clock.now)
     clock.now += 2.4
-    assert control.tick() is not None  # a regular publish, not a stop
+    assert control.tick(clock.now) is not None  # a regular publish, not a stop
     clock.now += 0.2
-    stop = control.tick()
+    stop = control.tick(clock.now)
     assert stop is not None and stop.is_zero
 
 
 def test_default_profile_answers_a_goal_at_once() -> None:
     """Issue 13: a Twist as soon as a goal lands, not at the next pose update."""
     clock = FakeClock()
-    control = Controller(PROFILES["default"], clock)
-    assert control.goal(Goal(320, 40, 640, 480, seq=1, frame=3)) is None  # no pose yet
-    control.pose(CENTRE)  # the first pose answers the waiting goal
+    control = Controller(PROFILES["default"])
+    assert control.goal(Goal(320, 40, 640, 480, seq=1, frame=3), clock.now) is None  # no pose yet
+    control.pose(CENTRE, clock.now)  # the first pose answers the waiting goal
     clock.now += 0.2
-    twist = control.goal(Goal(600, 240, 640, 480, seq=2, frame=9))
+    twist = control.goal(Goal(600, 240, 640, 480, seq=2, frame=9), clock.now)
     assert twist is not None and (twist.seq, twist.frame) == (2, 9)
     # Goals at 30 fps: every one is answered the moment it arrives, none waits for a pose.
     for k in range(3, 13):
         clock.now += 1 / 30
-        answer = control.goal(Goal(40, 240, 640, 480, seq=k, frame=k))
+        answer = control.goal(Goal(40, 240, 640, 480, seq=k, frame=k), clock.now)
         assert answer is not None and answer.seq == k, k
 
 
 def test_goal_answers_are_rate_capped_and_the_next_pose_delivers_a_capped_goal() -> None:
     clock = FakeClock()
     profile = PROFILES["default"]
-    control = Controller(profile, clock)
-    control.pose(CENTRE)
-    assert control.goal(Goal(320, 40, 640, 480, seq=1)) is not None
+    control = Controller(profile)
+    control.pose(CENTRE, clock.now)
+    assert control.goal(Goal(320, 40, 640, 480, seq=1), clock.now) is not None
     # A second goal well inside the command-rate cap is held back ...
     clock.now += profile.min_interval_s / 4
-    assert control.goal(Goal(40, 240, 640, 480, seq=2)) is None
+    assert control.goal(Goal(40, 240, 640, 480, seq=2), clock.now) is None
     # ... and a pose before the cap has passed does not send it either ...
     clock.now += profile.min_interval_s / 4
-    assert control.pose(CENTRE) is None
+    assert control.pose(CENTRE, clock.now) is None
     # ... but the first pose after the cap does, well before the 50 ms pose period.
     clock.now += profile.min_interval_s
     assert clock.now - 100.0 < profile.period_s
-    twist = control.pose(CENTRE)
+    twist = control.pose(CENTRE, clock.now)
     assert twist is not None and twist.seq == 2
     # Answered: poses go back to the 50 ms period.
     clock.now += 0.016
-    assert control.pose(CENTRE) is None
+    assert control.pose(CENTRE, clock.now) is None
 
 
 def test_thesis_profile_keeps_its_pacing_when_goals_arrive() -> None:
     clock = FakeClock()
-    control = Controller(PROFILES["thesis"], clock)
-    control.pose(CENTRE)
-    assert control.goal(Goal(320, 40, 640, 480, seq=1)) is not None
+    control = Controller(PROFILES["thesis"])
+    control.pose(CENTRE, clock.now)
+    assert control.goal(Goal(320, 40, 640, 480, seq=1), clock.now) is not None
     for k in range(2, 30):  # goals at 30 fps for ~1 s: none is answered on arrival
         clock.now += 1 / 30
-        assert control.goal(Goal(320, 40, 640, 480, seq=k)) is None
-        assert control.pose(CENTRE) is None
+        assert control.goal(Goal(320, 40, 640, 480, seq=k), clock.now) is None
+        assert control.pose(CENTRE, clock.now) is None
     clock.now = 100.0 + 1.11
-    assert control.tick() is not None
+    assert control.tick(clock.now) is not None
 
 
 # --- the follow profile ------------------------------------------------------------------------
@@ -264,7 +265,7 @@ def drive(control: Controller, sim: TurtleSim, clock: FakeClock, seconds: float)
         clock.now += TurtleSim.TICK_S
         sim.step()
         p = sim.pose("turtle1")
-        twist = control.pose(Pose(p.x, p.y, p.theta)) or control.tick()
+        twist = control.pose(Pose(p.x, p.y, p.theta), clock.now) or control.tick(clock.now)
         if twist is not None:
             sim.cmd_vel("turtle1", twist.linear_x, twist.angular_z)
 
@@ -274,7 +275,7 @@ def chase(
 ) -> SimPose:
     """Goals at ``target`` at 30 fps, ``goals`` of them, driving in between; the pose after."""
     for k in range(goals):
-        control.goal(terrain_goal(*target, seq=k))
+        control.goal(terrain_goal(*target, seq=k), clock.now)
         drive(control, sim, clock, 1 / 30)
     return sim.pose("turtle1")
 
@@ -282,7 +283,7 @@ def chase(
 def follow_world() -> tuple[Controller, TurtleSim, FakeClock]:
     clock = FakeClock()
     sim = TurtleSim(clock=clock)
-    return Controller(PROFILES["follow"], clock), sim, clock
+    return Controller(PROFILES["follow"]), sim, clock
 
 
 def test_follow_drives_to_the_standoff_from_the_target() -> None:
@@ -300,8 +301,8 @@ def test_follow_backs_off_when_the_target_comes_too_close() -> None:
     control, sim, clock = follow_world()
     centre = TurtleSim.CENTRE
     target = (centre + 0.4, centre)  # straight ahead, inside the 1 m standoff
-    control.pose(Pose(centre, centre, 0.0))
-    twist = control.goal(terrain_goal(*target))
+    control.pose(Pose(centre, centre, 0.0), clock.now)
+    twist = control.goal(terrain_goal(*target), clock.now)
     assert twist is not None and twist.linear_x < 0
     p = chase(control, sim, clock, target, goals=90)
     assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(1.0, abs=0.05)
@@ -310,7 +311,7 @@ def test_follow_backs_off_when_the_target_comes_too_close() -> None:
 def test_follow_standoff_is_settable() -> None:
     clock = FakeClock()
     sim = TurtleSim(clock=clock)
-    control = Controller(with_standoff(PROFILES["follow"], 2.5), clock)
+    control = Controller(with_standoff(PROFILES["follow"], 2.5))
     target = (9.0, 5.544445)
     p = chase(control, sim, clock, target, goals=150)
     assert math.hypot(p.x - target[0], p.y - target[1]) == pytest.approx(2.5, abs=0.05)
@@ -325,7 +326,7 @@ def test_follow_never_pins_itself_against_a_wall(target: tuple[float, float]) ->
     control, sim, clock = follow_world()
     closest = math.inf
     for k in range(240):
-        control.goal(terrain_goal(*target, seq=k))
+        control.goal(terrain_goal(*target, seq=k), clock.now)
         drive(control, sim, clock, 1 / 30)
         p = sim.pose("turtle1")
         closest = min(closest, p.x, p.y, sim.WORLD_SIZE - p.x, sim.WORLD_SIZE - p.y)
@@ -341,9 +342,10 @@ def test_follow_slows_near_a_wall() -> None:
     profile = PROFILES["follow"]
 
     def speed(pose: Pose, target: tuple[float, float]) -> float:
-        control = Controller(profile, FakeClock())
-        control.pose(pose)
-        twist = control.goal(terrain_goal(*target))
+        clock = FakeClock()
+        control = Controller(profile)
+        control.pose(pose, clock.now)
+        twist = control.goal(terrain_goal(*target), clock.now)
         assert twist is not None
         return twist.linear_x
 
@@ -367,11 +369,11 @@ def test_follow_searches_in_place_when_the_target_is_lost() -> None:
     control, sim, clock = follow_world()
     # Seen on the left (counter-clockwise side), then lost.
     chase(control, sim, clock, (3.0, 8.0), goals=30)
-    assert not control.searching
+    assert not control.searching(clock.now)
     drive(control, sim, clock, profile.search_after_s * 0.9)
-    assert not control.searching
+    assert not control.searching(clock.now)
     drive(control, sim, clock, profile.search_after_s * 0.2)
-    assert control.searching
+    assert control.searching(clock.now)
     before = sim.pose("turtle1")
     drive(control, sim, clock, 1.0)
     after = sim.pose("turtle1")
@@ -379,15 +381,15 @@ def test_follow_searches_in_place_when_the_target_is_lost() -> None:
     assert (after.x, after.y) == pytest.approx((before.x, before.y), abs=1e-9)
     assert wrap_angle(after.theta - before.theta) > 0.5 * profile.search_angular
     # A new goal ends the search at once.
-    twist = control.goal(terrain_goal(3.0, 8.0, seq=99))
+    twist = control.goal(terrain_goal(3.0, 8.0, seq=99), clock.now)
     assert twist is not None and twist.seq == 99
-    assert not control.searching
+    assert not control.searching(clock.now)
 
 
 def test_follow_stops_after_searching_for_the_goal_timeout() -> None:
     profile = PROFILES["follow"]
     control, sim, clock = follow_world()
-    control.goal(terrain_goal(3.0, 8.0))
+    control.goal(terrain_goal(3.0, 8.0), clock.now)
     drive(control, sim, clock, profile.goal_timeout_s + 0.1)
     assert not control.active
     theta = sim.pose("turtle1").theta

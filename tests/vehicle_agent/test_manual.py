@@ -1,11 +1,13 @@
-"""The manual override at the vehicle: the mode, drive commands and the dead-man, on an injected
-clock (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and ``drive``."""
+"""The manual override at the vehicle: the mode, drive commands and the dead-man, with the time
+given by the test (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and
+``drive``."""
 
 from __future__ import annotations
 
 import pytest
 
 from app.protocol.control import DEADMAN_S
+from app.protocol.events import GoalDropped
 from tests.helpers.agent import Vehicle
 from vehicle_agent.control import PROFILES, ZERO_TWIST, Twist
 from vehicle_agent.manual import ManualDrive
@@ -40,24 +42,22 @@ def test_the_dead_man_stops_the_turtle_once_after_the_last_command() -> None:
         [0.0, 0.0],
         None,
     ]
-    assert answers[1][3] == pytest.approx(DEADMAN_S)
+    assert answers[1][3] == pytest.approx(DEADMAN_CONTRACT_S)
     assert answers[2][3] == pytest.approx(0.01)
     assert answers[3][3] is None
 
 
 def test_the_dead_man_fires_0_3_s_after_the_last_command_and_not_before() -> None:
-    now = [1.0]
-    drive = ManualDrive(DEFAULT, clock=lambda: now[0])
+    # Built as the agent's pilot builds it, with the protocol's dead-man time.
+    drive = ManualDrive(DEFAULT, DEADMAN_S)
     drive.set_mode("manual", "ann")
-    assert drive.drive(1, 1.0, 0.0) == Twist(DEFAULT.manual_linear, 0.0)
-    assert drive.until_deadman() == pytest.approx(DEADMAN_CONTRACT_S)
+    assert drive.drive(1, 1.0, 0.0, 1.0) == Twist(DEFAULT.manual_linear, 0.0)
+    assert drive.until_deadman(1.0) == pytest.approx(DEADMAN_CONTRACT_S)
     for t in (1.1, 1.25, 1.29):  # still moving: a held key resends within this
-        now[0] = t
-        assert drive.tick() is None, t
-    now[0] = 1.0 + DEADMAN_CONTRACT_S
-    assert drive.tick() == ZERO_TWIST
-    now[0] = 1.31
-    assert drive.tick() is None and drive.until_deadman() is None  # one zero Twist only
+        assert drive.tick(t) is None, t
+    assert drive.tick(1.0 + DEADMAN_CONTRACT_S) == ZERO_TWIST
+    # One zero Twist only.
+    assert drive.tick(1.31) is None and drive.until_deadman(1.31) is None
 
 
 def test_old_commands_are_dropped_and_shares_clamped_to_the_profile_speeds() -> None:
@@ -85,11 +85,11 @@ def test_a_mode_change_stops_and_a_new_operator_starts_afresh() -> None:
 
 
 def test_a_new_link_is_back_in_auto() -> None:
-    drive = ManualDrive(DEFAULT, clock=lambda: 0.0)
+    drive = ManualDrive(DEFAULT, 0.3)
     drive.set_mode("manual", "ann")
     drive.reset_link()
     assert not drive.manual and drive.operator is None
-    assert drive.drive(1, 1.0, 0.0) is None
+    assert drive.drive(1, 1.0, 0.0, 0.0) is None
 
 
 GOAL = '{"type": "goal", "seq": %d, "op": "face", "x": 10, "y": 100, "w": 320, "h": 240, "t": 0}'
@@ -99,16 +99,19 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     vehicle = Vehicle("default")
     agent = vehicle.agent
     assert agent.handle_channel_message(GOAL % 1, "relay") is None
-    assert vehicle.twists()[-1]["angular"] != 0  # the autopilot steers
+    assert vehicle.twists()[-1].angular != 0  # the autopilot steers
     take = '{"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over by ann"}'
     assert agent.handle_channel_message(take, "relay") is None
-    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     before = len(vehicle.twists())
     assert agent.handle_channel_message(GOAL % 2, "relay") is None
-    assert len(vehicle.twists()) == before and agent.goals_ignored == 1
+    assert len(vehicle.twists()) == before
+    assert vehicle.events[-1] == GoalDropped(
+        seq=2, frame=None, why="manual", t=vehicle.events[-1].t
+    )
     drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
     assert agent.handle_channel_message(drive, "relay") is None
-    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
     # Hostile drive commands are refused with a reason and never move the turtle.
     for bad in (
         '{"type": "drive", "seq": 2, "linear": 2, "angular": 0}',
@@ -118,9 +121,9 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     ):
         reply = agent.handle_channel_message(bad, "relay")
         assert reply is not None and reply.type == "error" and reply.reason, bad
-    assert vehicle.twists()[-1]["angular"] == DEFAULT.manual_angular
+    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
     back = '{"type": "mode", "mode": "auto"}'
     assert agent.handle_channel_message(back, "relay") is None
-    assert (vehicle.twists()[-1]["linear"], vehicle.twists()[-1]["angular"]) == (0.0, 0.0)
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     assert agent.handle_channel_message(GOAL % 3, "relay") is None
-    assert vehicle.twists()[-1]["angular"] != 0  # goals steer again
+    assert vehicle.twists()[-1].angular != 0  # goals steer again

@@ -7,7 +7,10 @@ import json
 import time
 from typing import Any
 
+import pytest
+
 from app.metrics import start_metrics_server
+from app.protocol import events as ev
 from tests.helpers.agent import H, Vehicle, W
 from tests.helpers.metrics import scrape
 from vehicle_agent.metrics import DROP_REASONS, VehicleMetrics
@@ -46,9 +49,9 @@ def test_goals_twists_and_mode_of_the_real_agent_are_served() -> None:
         after = scrape(listener.url)
     finally:
         listener.close()
-    twists = [e for e in vehicle.events if e["ev"] == "twist"]
+    twists = vehicle.twists()
     assert after[("autopilot_vehicle_goals_applied_total", ())] == 2
-    for why, count in {"old": 1, "stale": 1, "manual": 1, "other": 0}.items():
+    for why, count in {"old": 1, "stale": 1, "manual": 1}.items():
         assert after[("autopilot_vehicle_goals_dropped_total", (("why", why),))] == count
     assert after[("autopilot_vehicle_twists_total", ())] == len(twists) > 0
     assert manual == 1 and after[("autopilot_vehicle_mode", ())] == 0
@@ -63,20 +66,23 @@ def test_goals_twists_and_mode_of_the_real_agent_are_served() -> None:
 def test_link_events_set_the_link_gauge_and_start_the_goal_age_afresh() -> None:
     metrics = VehicleMetrics()
     registry = metrics.registry
-    # The events the agent emits (vehicle_agent/events.py) as a link comes and goes.
-    metrics.on_event({"ev": "link", "state": "offer", "relay": "r", "t": 0.0})
-    metrics.on_event({"ev": "link", "state": "up", "relay": "r", "t": 1.0})
+    # The events the agent emits as a link comes and goes.
+    metrics.on_event(ev.LinkChanged(state="offer", relay="r", t=0.0))
+    metrics.on_event(ev.LinkChanged(state="up", relay="r", t=1.0))
     assert registry.get_sample_value("autopilot_vehicle_link_up") == 1
-    metrics.on_event({"ev": "goal", "seq": 1, "t": 2.0})
-    metrics.on_event({"ev": "mode", "mode": "manual", "t": 2.5})
-    metrics.on_event({"ev": "link", "state": "down", "relay": "r", "reason": "gone", "t": 3.0})
+    metrics.on_event(_goal(1, t=2.0))
+    metrics.on_event(ev.ModeChanged(mode="manual", operator="ann", t=2.5))
+    metrics.on_event(ev.LinkChanged(state="down", relay="r", reason="gone", t=3.0))
     assert registry.get_sample_value("autopilot_vehicle_link_up") == 0
     assert registry.get_sample_value("autopilot_vehicle_mode") == 0
-    metrics.on_event({"ev": "link", "state": "up", "relay": "r", "t": 10.0})
-    metrics.on_event({"ev": "goal", "seq": 1, "t": 11.0})
+    metrics.on_event(ev.LinkChanged(state="up", relay="r", t=10.0))
+    metrics.on_event(_goal(1, t=11.0))
     # The first goal of the new link has no previous one: nothing observed across the outage.
     assert registry.get_sample_value("autopilot_vehicle_goal_age_seconds_count") == 0
-    metrics.on_event({"ev": "goal", "seq": 2, "t": 11.1})
+    metrics.on_event(_goal(2, t=11.1))
     assert registry.get_sample_value("autopilot_vehicle_goal_age_seconds_count") == 1
-    metrics.on_event({"ev": "goal_dropped", "seq": 1, "why": "something new", "t": 12.0})
-    assert registry.get_sample_value("autopilot_vehicle_goals_dropped_total", {"why": "other"}) == 1
+    assert registry.get_sample_value("autopilot_vehicle_goal_age_seconds_sum") == pytest.approx(0.1)
+
+
+def _goal(seq: int, t: float) -> ev.GoalApplied:
+    return ev.GoalApplied(seq=seq, op="face", frame=None, x=10, y=100, w=W, h=H, t=t)

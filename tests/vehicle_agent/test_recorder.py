@@ -19,23 +19,26 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from app import recording
+from app.protocol import events as ev
 from app.protocol import frametag
+from app.recording import EVENT_CHANNELS, IMAGE_SCHEMA, IMAGE_TOPIC
 from tests.helpers.agent import Vehicle
 from vehicle_agent import cli as agent_cli
 from vehicle_agent import recorder
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
-from vehicle_agent.recorder import (
-    EVENT_TOPICS,
-    IMAGE_SCHEMA,
-    IMAGE_TOPIC,
-    FlightRecorder,
-    RecordSettings,
-)
-from vehicle_agent.video import FrameInfo, SyntheticVideo
+from vehicle_agent.recorder import FlightRecorder, RecordSettings
+from vehicle_agent.video import SyntheticVideo
 
 FPS = 30.0
 RECORD_FPS = 10.0
+GOALS = EVENT_CHANNELS[ev.GoalApplied].topic
+
+
+def _goal(seq: int, t: float) -> ev.GoalApplied:
+    """A goal for frame ``seq`` (the frame tags count the camera's frames)."""
+    return ev.GoalApplied(seq=seq, op="face", frame=seq, x=100.0, y=200.0, w=640, h=480, t=t)
 
 
 def _read(path: Path) -> tuple[dict[str, tuple[str, str, str]], list[tuple[str, int, Any]]]:
@@ -68,14 +71,17 @@ async def _record(settings: RecordSettings, seconds: float) -> FlightRecorder:
     video = SyntheticVideo(fps=FPS)
     camera = asyncio.create_task(recorder.record_video(video))
     for seq in range(1, 6):
-        events.emit("goal", seq=seq, op="face", frame=seq, x=100.0, y=200.0, w=640, h=480)
-        events.emit("twist", seq=seq, frame=seq, linear=0.5, angular=-0.25)
-        events.emit("pose", x=5.5, y=5.5, theta=1.57, sent=True)
-        events.emit("frame_sent", frame=seq, face_x=1.0, face_y=2.0, jump=False)  # not recorded
-    events.emit("goal_dropped", seq=3, frame=3, why="old")
-    events.emit("mode", mode="manual", operator="ann")
-    events.emit("drive", seq=1, applied=True, moving=True)
-    events.emit("link", state="up", relay="relay", local_candidates=["host"], selected="host")
+        events.emit(_goal(seq, t=seq / 10))
+        events.emit(ev.TwistSent(seq=seq, frame=seq, linear=0.5, angular=-0.25, t=seq / 10))
+        events.emit(ev.PoseReport(x=5.5, y=5.5, theta=1.57, sent=True, t=seq / 10))
+        # Not recorded: the event log's only.
+        events.emit(ev.FrameSent(frame=seq, face_x=1.0, face_y=2.0, t=seq / 10))
+    events.emit(ev.GoalDropped(seq=3, frame=3, why="old", t=1.0))
+    events.emit(ev.ModeChanged(mode="manual", operator="ann", t=1.0))
+    events.emit(ev.DriveReceived(seq=1, applied=True, moving=True, t=1.0))
+    events.emit(
+        ev.LinkChanged(state="up", relay="relay", local_candidates=("host",), selected="host", t=1)
+    )
     await asyncio.sleep(seconds)
     camera.cancel()
     video.stop()
@@ -111,25 +117,25 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     channels, messages = _read(files[0])
 
     assert channels[IMAGE_TOPIC] == (IMAGE_SCHEMA, "jsonschema", "json")
-    assert set(channels) == {IMAGE_TOPIC, *EVENT_TOPICS.values()}
+    assert set(channels) == {IMAGE_TOPIC, *(c.topic for c in EVENT_CHANNELS.values())}
     assert all(encodings == "jsonschema" for _, encodings, _ in channels.values())
 
     counts: dict[str, int] = {}
     for topic, _, _ in messages:
         counts[topic] = counts.get(topic, 0) + 1
-    assert counts[EVENT_TOPICS["goal"]] == 5
-    assert counts[EVENT_TOPICS["twist"]] == 5
-    assert counts[EVENT_TOPICS["pose"]] == 5
-    for kind in ("goal_dropped", "mode", "drive", "link"):
-        assert counts[EVENT_TOPICS[kind]] == 1, kind
+    assert counts[GOALS] == 5
+    assert counts[EVENT_CHANNELS[ev.TwistSent].topic] == 5
+    assert counts[EVENT_CHANNELS[ev.PoseReport].topic] == 5
+    for kind in (ev.GoalDropped, ev.ModeChanged, ev.DriveReceived, ev.LinkChanged):
+        assert counts[EVENT_CHANNELS[kind].topic] == 1, kind
     # 1.5 s of a 30 fps camera at 10 images a second (fewer if a loaded machine delays frames).
     assert 5 <= counts[IMAGE_TOPIC] <= 16, counts
     assert recorder.images == counts[IMAGE_TOPIC] and recorder.dropped == 0
     # What the recorder counts of itself: the same images and messages, and the CPU they took.
     totals = recorder.totals()
-    assert totals["images"] == recorder.images and totals["messages"] == len(messages)
-    assert totals["dropped"] == 0 and totals["files"] == 1 and totals["seconds"] >= 1.5
-    assert 0 < totals["writer_cpu_s"] < totals["cpu_s"] < totals["seconds"], totals
+    assert totals.images == recorder.images and totals.messages == len(messages)
+    assert totals.dropped == 0 and totals.files == 1 and totals.seconds >= 1.5
+    assert 0 < totals.writer_cpu_s < totals.cpu_s < totals.seconds, totals
 
     # On each channel, in the order written (an image is stamped when its frame arrived, a
     # moment before it was chosen, so channels interleave).
@@ -137,8 +143,21 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
         times = [log_time for topic, log_time, _ in messages if topic == channel]
         assert times == sorted(times), channel
 
-    goal = next(fields for topic, _, fields in messages if topic == EVENT_TOPICS["goal"])
-    assert goal == {"seq": 1, "op": "face", "frame": 1, "x": 100.0, "y": 200.0, "w": 640, "h": 480}
+    goal = next(fields for topic, _, fields in messages if topic == GOALS)
+    assert goal == {
+        "seq": 1,
+        "op": "face",
+        "frame": 1,
+        "x": 100.0,
+        "y": 200.0,
+        "w": 640,
+        "h": 480,
+        "t": 0.1,
+    }
+    # Read back typed, every recorded event is the one emitted.
+    recorded = [event for _, event in recording.events(files)]
+    assert recorded[0] == _goal(1, t=0.1)
+    assert {type(event) for event in recorded} == set(EVENT_CHANNELS)
     images = [fields for topic, _, fields in messages if topic == IMAGE_TOPIC]
     camera_video = SyntheticVideo(fps=FPS)
     tags = []
@@ -199,7 +218,7 @@ def test_a_file_rolls_over_at_its_age_and_not_before(
     events.listeners.append(recorder.on_event)
     for offset_s in (t for file in files_s for t in file):
         now[0] = start_ns + round(offset_s * 1e9)
-        events.emit("mode", mode="manual", operator="ann")
+        events.emit(ev.ModeChanged(mode="manual", operator="ann", t=offset_s))
     asyncio.run(recorder.close())
     logged = [
         [(log_time - start_ns) / 1e9 for _, log_time, _ in _read(path)[1]]
@@ -225,15 +244,16 @@ async def test_the_agents_drive_commands_are_recorded(tmp_path: Path) -> None:
     _, messages = _read(recorder.files[0])
     by_topic: dict[str, list[Any]] = {}
     for topic, _, fields in messages:
-        by_topic.setdefault(topic, []).append(fields)
-    assert by_topic[EVENT_TOPICS["drive"]] == [
+        # Without the time the agent stamped it with, which the test cannot know.
+        by_topic.setdefault(topic, []).append({k: v for k, v in fields.items() if k != "t"})
+    assert by_topic[EVENT_CHANNELS[ev.DriveReceived].topic] == [
         {"seq": 1, "applied": True, "moving": True},
         {"seq": 1, "applied": False, "moving": False},
         {"seq": 2, "applied": True, "moving": False},
     ]
-    assert by_topic[EVENT_TOPICS["mode"]] == [{"mode": "manual", "operator": "ann"}]
+    assert by_topic[EVENT_CHANNELS[ev.ModeChanged].topic] == [{"mode": "manual", "operator": "ann"}]
     manual = PROFILES["default"].manual_linear
-    assert [(t["linear"], t["angular"]) for t in by_topic[EVENT_TOPICS["twist"]]] == [
+    assert [(t["linear"], t["angular"]) for t in by_topic[EVENT_CHANNELS[ev.TwistSent].topic]] == [
         (0.0, 0.0),  # taking over stops first
         (manual, 0.0),
         (0.0, 0.0),
@@ -247,12 +267,9 @@ async def _record_with_goals(settings: RecordSettings, seconds: float) -> Flight
     events.listeners.append(recorder.on_event)
     loop = asyncio.get_running_loop()
 
-    def goal_later(info: FrameInfo) -> None:
-        if info.frame % 2 == 0:
-            goal = {"op": "face", "x": 1.0, "y": 2.0, "w": 640, "h": 480}
-            loop.call_later(
-                0.06, lambda: events.emit("goal", seq=info.frame, frame=info.frame, **goal)
-            )
+    def goal_later(sent: ev.FrameSent) -> None:
+        if sent.frame % 2 == 0:
+            loop.call_later(0.06, lambda: events.emit(_goal(sent.frame, t=sent.t + 0.06)))
 
     video = SyntheticVideo(fps=FPS, on_frame=goal_later)
     camera = asyncio.create_task(recorder.record_video(video))
@@ -266,7 +283,7 @@ async def _record_with_goals(settings: RecordSettings, seconds: float) -> Flight
 def test_the_images_kept_are_the_frames_goals_were_sent_for(tmp_path: Path) -> None:
     recorder = asyncio.run(_record_with_goals(RecordSettings(tmp_path, room="lab", fps=10), 2.0))
     _, messages = _read(recorder.files[0])
-    goals = {fields["frame"] for topic, _, fields in messages if topic == EVENT_TOPICS["goal"]}
+    goals = {fields["frame"] for topic, _, fields in messages if topic == GOALS}
     tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
     # The first image is due before any goal; every later one is a frame a goal named (half
     # the camera's frames: sampled by time alone, half the images would not be).
@@ -282,11 +299,11 @@ def test_frames_are_held_only_from_shortly_before_an_image_is_due(tmp_path: Path
     settings = RecordSettings(tmp_path, room="lab", fps=2)
     recorder = asyncio.run(_record_with_goals(settings, 3.0))
     totals = recorder.totals()
-    assert totals["images"] >= 4, totals
+    assert totals.images >= 4, totals
     # (About 40 % on an idle machine; a loaded one delays the goals, and the lead grows with them.)
-    assert 0 < totals["frames_held"] <= 0.8 * totals["frames"], totals
+    assert 0 < totals.frames_held <= 0.8 * totals.frames, totals
     _, messages = _read(recorder.files[0])
-    goals = {fields["frame"] for topic, _, fields in messages if topic == EVENT_TOPICS["goal"]}
+    goals = {fields["frame"] for topic, _, fields in messages if topic == GOALS}
     tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
     assert all(tag in goals for tag in tags[1:]), (tags, sorted(goals))
 

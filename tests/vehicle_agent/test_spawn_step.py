@@ -10,11 +10,12 @@ from collections.abc import AsyncIterator, Callable
 import httpx
 import pytest
 
+from app.protocol.events import AnyEvent, SpawnStep
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.events import Event, EventLog
+from vehicle_agent.events import EventLog
 from vehicle_agent.turtle import RosbridgeTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
@@ -28,7 +29,7 @@ def turtle1(server: RunningServer) -> dict[str, float]:
 
 @contextlib.asynccontextmanager
 async def agent_on_rosbridge(
-    server: RunningServer, spawn_step: bool, events: list[Event]
+    server: RunningServer, spawn_step: bool, events: list[AnyEvent]
 ) -> AsyncIterator[Agent]:
     log = EventLog()
     log.listeners.append(events.append)
@@ -58,13 +59,13 @@ async def test_agent_turns_the_turtle_up_at_start(
     server = start_server(Settings(environment="development", token=None, ros=flavour))
     start = turtle1(server)
     assert start["theta"] == pytest.approx(0.0)
-    events: list[Event] = []
+    events: list[AnyEvent] = []
     async with agent_on_rosbridge(server, True, events):
         async with asyncio.timeout(15):
-            while not any(e["ev"] == "spawn" for e in events):
+            while not any(isinstance(e, SpawnStep) for e in events):
                 await asyncio.sleep(0.05)
-        spawn = next(e for e in events if e["ev"] == "spawn")
-        assert spawn["ok"] is True, spawn
+        spawn = next(e for e in events if isinstance(e, SpawnStep))
+        assert spawn.ok is True, spawn
         after = turtle1(server)
     # Turned where it stood: facing up, not moved.
     assert after["theta"] == pytest.approx(math.pi / 2, abs=1e-6)
@@ -72,7 +73,7 @@ async def test_agent_turns_the_turtle_up_at_start(
 
 
 async def test_spawn_step_can_be_switched_off(server: RunningServer) -> None:
-    events: list[Event] = []
+    events: list[AnyEvent] = []
     async with agent_on_rosbridge(server, False, events) as agent:
         async with asyncio.timeout(15):
             while agent.pose is None:
@@ -80,5 +81,5 @@ async def test_spawn_step_can_be_switched_off(server: RunningServer) -> None:
         # Well past the moment the step would have been answered when switched on.
         await asyncio.sleep(1.0)
         after = turtle1(server)
-    assert not any(e["ev"] == "spawn" for e in events)
+    assert not any(isinstance(e, SpawnStep) for e in events)
     assert after["theta"] == pytest.approx(0.0)

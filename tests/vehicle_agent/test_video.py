@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from app.protocol import frametag
+from app.protocol.events import FrameSent
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec
 from vehicle_agent.video import (
     FileVideo,
     FixedPath,
-    FrameInfo,
     SweepPath,
     SyntheticVideo,
     VideoSourceError,
@@ -93,7 +93,7 @@ def test_a_shorter_sweep_keeps_the_shape_and_any_window_of_one_cycle_holds_both_
 
 def test_synthetic_frames_flag_exactly_the_jumps() -> None:
     fps = 30.0
-    infos: list[FrameInfo] = []
+    infos: list[FrameSent] = []
     video = SyntheticVideo(320, 240, fps=fps, on_frame=infos.append)
     path = video.path
     assert isinstance(path, SweepPath)
@@ -143,7 +143,7 @@ def test_a_scene_without_a_flame_gives_the_fire_operation_nothing() -> None:
 
 
 async def test_synthetic_track_paces_tags_and_reports_frames() -> None:
-    infos: list[FrameInfo] = []
+    infos: list[FrameSent] = []
     video = SyntheticVideo(320, 240, fps=50, path=FixedPath(0.3, 0.5), on_frame=infos.append)
     try:
         frames = [await video.recv() for _ in range(10)]
@@ -156,7 +156,7 @@ async def test_synthetic_track_paces_tags_and_reports_frames() -> None:
     assert [i.frame for i in infos] == list(range(10))
     assert infos[0].face_x == pytest.approx(0.3 * 320)
     # 9 frame periods at 50 fps take about 180 ms.
-    assert infos[-1].sent_at - infos[0].sent_at == pytest.approx(0.18, abs=0.1)
+    assert infos[-1].t - infos[0].t == pytest.approx(0.18, abs=0.1)
 
 
 def write_tagged_clip(path: Path, codec: str, frames: int, size: tuple[int, int]) -> None:

@@ -23,6 +23,15 @@ from typing import Any
 
 import numpy as np
 
+from app.protocol.events import (
+    AnyEvent,
+    FrameSent,
+    GoalApplied,
+    LinkChanged,
+    PoseReport,
+    TwistSent,
+    of_kind,
+)
 from app.protocol.video import VIDEO_SIZE
 from app.tools.bench.stats import (
     PoseSample,
@@ -87,26 +96,27 @@ class FieldRow:
         self.client_glass_to_glass_ms_p95 = round(float(np.percentile(samples, 95)), 1)
 
 
-def figures(condition: str, events: list[dict[str, Any]], window: tuple[float, float]) -> FieldRow:
+def figures(condition: str, events: list[AnyEvent], window: tuple[float, float]) -> FieldRow:
     """The figures of one run from the agent's events, over ``window`` (monotonic seconds)."""
     row = FieldRow(condition)
     start, end = window
-    ups = [e for e in events if e["ev"] == "link" and e["state"] == "up"]
+    links = of_kind(events, LinkChanged)
+    ups = [e for e in links if e.state == "up"]
     if ups:
-        row.candidate_type = ups[0].get("selected")
-        offers = [e["t"] for e in events if e["ev"] == "link" and e["state"] == "offer"]
-        before = [t for t in offers if t <= ups[0]["t"]]
+        row.candidate_type = ups[0].selected
+        before = [e.t for e in links if e.state == "offer" and e.t <= ups[0].t]
         if before:
-            row.connect_ms = round((ups[0]["t"] - before[-1]) * 1000, 1)
+            row.connect_ms = round((ups[0].t - before[-1]) * 1000, 1)
     else:
         row.problems["connect_ms"] = "the link never came up"
-    goals = [e for e in events if e["ev"] == "goal" and start <= e["t"] <= end]
+    goals = [e for e in of_kind(events, GoalApplied) if start <= e.t <= end]
     row.goals_per_s = round(len(goals) / (end - start), 2)
-    frame_sent = {int(e["frame"]): e["t"] for e in events if e["ev"] == "frame_sent"}
+    frames = of_kind(events, FrameSent)
+    frame_sent = {e.frame: e.t for e in frames}
     commands = [
-        (e["t"], int(e["frame"]))
-        for e in events
-        if e["ev"] == "twist" and e.get("frame") is not None and start <= e["t"] <= end
+        (e.t, e.frame)
+        for e in of_kind(events, TwistSent)
+        if e.frame is not None and start <= e.t <= end
     ]
     glass = glass_to_command_ms(frame_sent, commands)
     if glass:
@@ -114,15 +124,11 @@ def figures(condition: str, events: list[dict[str, Any]], window: tuple[float, f
         row.glass_to_command_ms_p95 = round(float(np.percentile(glass, 95)), 1)
     else:
         row.problems["glass_to_command_ms_p50"] = "no tagged goal turned into a Twist"
-    truth = [
-        TruthSample(e["t"], e["face_x"], e["face_y"], *VIDEO_SIZE)
-        for e in events
-        if e["ev"] == "frame_sent"
-    ]
+    truth = [TruthSample(e.t, e.face_x, e.face_y, *VIDEO_SIZE) for e in frames]
     poses = [
-        PoseSample(e["t"], e["x"], e["y"], e["theta"])
-        for e in events
-        if e["ev"] == "pose" and start <= e["t"] <= end
+        PoseSample(e.t, e.x, e.y, e.theta)
+        for e in of_kind(events, PoseReport)
+        if start <= e.t <= end
     ]
     row.heading_error_deg_median = _round(
         heading_error_deg_median(heading_track(poses, truth, pixel_to_terrain), start)
@@ -138,40 +144,36 @@ def samples_since(before: dict[str, Any], after: dict[str, Any]) -> list[float]:
     return [float(ms) for ms in after["ms"][-taken:]] if taken > 0 else []
 
 
-def stale_goals_applied(events: list[dict[str, Any]]) -> int:
+def stale_goals_applied(events: list[AnyEvent]) -> int:
     """Goals applied although a newer one (by seq, or by the frame it was computed from) had
     already been applied on the same link."""
     stale = 0
     newest_seq = newest_frame = -1
     for event in events:
-        if event["ev"] == "link" and event["state"] == "up":
-            newest_seq = newest_frame = -1  # a new link: the relay counts again
-        elif event["ev"] == "goal":
-            frame = event.get("frame")
-            if event["seq"] <= newest_seq or (frame is not None and frame < newest_frame):
-                stale += 1
-            newest_seq = max(newest_seq, event["seq"])
-            if frame is not None:
-                newest_frame = max(newest_frame, frame)
+        match event:
+            case LinkChanged(state="up"):
+                newest_seq = newest_frame = -1  # a new link: the relay counts again
+            case GoalApplied(seq=seq, frame=frame):
+                if seq <= newest_seq or (frame is not None and frame < newest_frame):
+                    stale += 1
+                newest_seq = max(newest_seq, seq)
+                if frame is not None:
+                    newest_frame = max(newest_frame, frame)
     return stale
 
 
 def link_drop_times(
-    events: list[dict[str, Any]], dark_at: float, back_at: float
+    events: list[AnyEvent], dark_at: float, back_at: float
 ) -> dict[str, float | None]:
     """Seconds from the last goal before the outage to the zero Twist, and from the link's
     return to the next applied goal."""
-    goals = [e["t"] for e in events if e["ev"] == "goal"]
+    goals = [e.t for e in of_kind(events, GoalApplied)]
     last = max((t for t in goals if t <= dark_at), default=None)
     stop = next(
         (
-            e["t"]
-            for e in events
-            if e["ev"] == "twist"
-            and e["seq"] is None
-            and e["angular"] == 0
-            and last is not None
-            and e["t"] > last
+            e.t
+            for e in of_kind(events, TwistSent)
+            if e.seq is None and e.angular == 0 and last is not None and e.t > last
         ),
         None,
     )
@@ -215,9 +217,9 @@ def run(
             with field_stack(lab, playwright, out / "field" / name, fps) as stack:
                 stack.start_piloting()
                 deadline = time.monotonic() + FIRST_GOAL_TIMEOUT_S
-                while not stack.events("goal") and time.monotonic() < deadline:
+                while not stack.events(GoalApplied) and time.monotonic() < deadline:
                     time.sleep(0.5)
-                if not stack.events("goal"):
+                if not stack.events(GoalApplied):
                     row = FieldRow(name)
                     row.problems["all"] = f"no goal within {FIRST_GOAL_TIMEOUT_S:g} s"
                     rows.append(row)
@@ -234,16 +236,16 @@ def run(
                     back_at = time.monotonic()
                     time.sleep(max(0.0, start + window_s - time.monotonic()))
                     resume_deadline = back_at + RESUME_TIMEOUT_S
-                    while not any(e["t"] > back_at for e in stack.events("goal")):
+                    while not any(e.t > back_at for e in stack.events(GoalApplied)):
                         if time.monotonic() > resume_deadline:
                             break
                         time.sleep(0.5)
-                    drop = link_drop_times(stack.events(), dark_at, back_at)
+                    drop = link_drop_times(stack.all_events(), dark_at, back_at)
                 else:
                     time.sleep(window_s)
                 end = time.monotonic()
                 frames_after = stack.client.evaluate(_VIDEO_FRAMES_JS)
-                row = figures(name, stack.events(), (start, end))
+                row = figures(name, stack.all_events(), (start, end))
                 row.client_glass(samples_since(glass_before, stack.client.evaluate(_GLASS_JS)))
                 if isinstance(frames_before, int) and isinstance(frames_after, int):
                     row.client_video_fps = round((frames_after - frames_before) / (end - start), 1)

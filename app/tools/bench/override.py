@@ -13,12 +13,13 @@ agent's last applied drive command → its zero Twist.
 from __future__ import annotations
 
 import asyncio
-import json
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from app.protocol.control import DEADMAN_S
+from app.protocol.events import AnyEvent, DriveReceived, TwistSent, of_kind
+from app.recording import read_event_log
 from app.tools.bench.results import ProfileRun, Target
 from app.tools.bench.stack import StackError, StackOptions, run_profile, wait_for
 from app.tools.bench.stats import summarize
@@ -83,15 +84,11 @@ def figures(measured: ProfileRun, presses: list[float], events_path: Path) -> di
     if P50 in measured.problems:
         reasons = dict.fromkeys((P50, P95, DEADMAN), measured.problems[P50])
         return {"values": dict.fromkeys((P50, P95, DEADMAN)), "reasons": reasons, "details": {}}
-    events = [json.loads(line) for line in events_path.read_text().splitlines()]
-    manual = [
-        e
-        for e in events
-        if e["ev"] == "twist" and e["seq"] is None and (e["linear"] or e["angular"])
-    ]
+    events = read_event_log(events_path)
+    manual = [e for e in of_kind(events, TwistSent) if e.seq is None and (e.linear or e.angular)]
     latencies = []
     for pressed in presses:
-        first = next((e["t"] for e in manual if e["t"] >= pressed), None)
+        first = next((e.t for e in manual if e.t >= pressed), None)
         if first is not None and first - pressed < PERIOD_S:
             latencies.append((first - pressed) * 1000)
     summary = summarize(latencies)
@@ -112,21 +109,21 @@ def figures(measured: ProfileRun, presses: list[float], events_path: Path) -> di
     }
 
 
-def _deadman_stop_s(events: list[dict[str, Any]], after: float | None) -> float | None:
+def _deadman_stop_s(events: list[AnyEvent], after: float | None) -> float | None:
     """The last applied drive command → the zero Twist that followed, after the last press
     cycle (the held key whose release never came)."""
     if after is None:
         return None
     last_drive: float | None = None
     for event in events:
-        if event["t"] < after + PERIOD_S:
+        if event.t < after + PERIOD_S:
             continue
-        if event["ev"] == "drive" and event["applied"]:
-            # A stop command (a release arriving late on a loaded machine) stops by itself.
-            last_drive = event["t"] if event["moving"] else None
-        elif event["ev"] == "twist" and last_drive is not None:
-            if event["seq"] is None and not event["linear"] and not event["angular"]:
-                return float(event["t"]) - last_drive
+        match event:
+            case DriveReceived(applied=True, moving=moving, t=t):
+                # A stop command (a release arriving late on a loaded machine) stops by itself.
+                last_drive = t if moving else None
+            case TwistSent(seq=None, linear=0.0, angular=0.0, t=t) if last_drive is not None:
+                return t - last_drive
     return None
 
 

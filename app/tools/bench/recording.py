@@ -3,13 +3,13 @@
 The default-profile stack runs on the same browser and server as it is ("plain") and with the
 agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80),
 in ``ROUNDS`` alternating pairs (plain, recording, plain, recording), each run half of the
-seconds asked for: this machine's speed drifts by tens of percent within the hour, and one run
-after the other put all of the drift into the difference (+3 % and +10 % on two runs of the
-same code). Per mode: the agent process's cores over the measured windows (its CPU time from
-/proc / the window, averaged over the rounds), and the vehicle's share of the latency (goal
-received → its Twist) and the whole glass-to-command, from the agent's own event log. Targets:
-at most 5 % more agent CPU, and no change in glass-to-command beyond the run-to-run noise (the
-report shows both modes' p50 and p95 side by side, and each round's increase).
+seconds asked for: a machine's speed drifts within the hour, and one run after the other would
+put all of the drift into the difference. Per mode: the agent process's cores over the measured
+windows (its CPU time from /proc / the window, averaged over the rounds), and the vehicle's share
+of the latency (goal received → its Twist) and the whole glass-to-command, from the agent's own
+event log. Targets: at most 5 % more agent CPU, and no change in glass-to-command beyond the
+run-to-run noise (the report shows both modes' p50 and p95 side by side, and each round's
+increase).
 
 The difference stays as noisy as the machine, so the recording runs also read the recorder's
 own CPU time from the agent's event log (its ``recorder`` event, written when it stops): the
@@ -27,9 +27,10 @@ from typing import Any
 
 from playwright.async_api import Browser
 
+from app.protocol.events import RecorderTotals, of_kind
+from app.recording import read_event_log
 from app.tools.bench.stack import StackError, StackOptions, run_profile
 from app.tools.bench.stats import summarize
-from vehicle_agent.events import Event
 
 MAX_CPU_INCREASE_PCT = 5.0
 RUNS = ("plain", "recording")
@@ -116,21 +117,20 @@ def _recorder_share(events_paths: list[Path], agent_cores: float | None) -> dict
     """The recorder's own cores (its CPU seconds over its seconds, from the ``recorder`` event
     each recording agent logs when it stops, over all of them) and their share of the agent's;
     empty without the events."""
-    runs: list[Event] = []
+    runs: list[RecorderTotals] = []
     for path in events_paths:
-        with path.open() as lines:
-            runs += [e for e in map(json.loads, lines) if e.get("ev") == "recorder"]
-    seconds = sum(totals["seconds"] for totals in runs)
+        runs += of_kind(read_event_log(path), RecorderTotals)
+    seconds = sum(totals.seconds for totals in runs)
     if not runs or seconds <= 0:
         return {}
-    cores = sum(totals["cpu_s"] for totals in runs) / seconds
-    frames = sum(totals["frames"] for totals in runs)
+    cores = sum(totals.cpu_s for totals in runs) / seconds
+    frames = sum(totals.frames for totals in runs)
     found: dict[str, Any] = {
         "recorder_cores": round(cores, 4),
-        "recorder_writer_cores": round(sum(t["writer_cpu_s"] for t in runs) / seconds, 4),
-        "recorder_images": sum(totals["images"] for totals in runs),
+        "recorder_writer_cores": round(sum(t.writer_cpu_s for t in runs) / seconds, 4),
+        "recorder_images": sum(totals.images for totals in runs),
         "recorder_frames_held_pct": round(
-            100 * sum(totals["frames_held"] for totals in runs) / max(frames, 1)
+            100 * sum(totals.frames_held for totals in runs) / max(frames, 1)
         ),
     }
     if agent_cores:

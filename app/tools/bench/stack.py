@@ -10,7 +10,6 @@ vehicle's from its event log. Agent events and this process share one clock
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import signal
 import sys
@@ -26,8 +25,10 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
+from app.protocol.events import FrameSent, GoalApplied, PoseReport, TwistSent
 from app.protocol.urls import page_url
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
+from app.recording import read_event_log
 from app.tools.bench.cpu import tree_cpu_s
 from app.tools.bench.results import MemorySample, ProfileRun
 from app.tools.bench.stats import (
@@ -334,7 +335,7 @@ async def _memory(relay: Page, run: ProfileRun) -> MemorySample:
 
 
 def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
-    """Fill ``run`` from the agent's event log (see ``vehicle_agent/events.py``)."""
+    """Fill ``run`` from the agent's event log (the kinds of ``app/protocol/events.py``)."""
     if not path.exists():
         run.problems["glass_to_command_ms_p50"] = "the agent wrote no event log"
         return
@@ -342,29 +343,21 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
     poses: list[PoseSample] = []
     truth: list[TruthSample] = []
     first_command: float | None = None
-    for line in path.read_text().splitlines():
-        event = json.loads(line)
-        kind, t = event["ev"], float(event["t"])
-        if kind == "frame_sent":
-            run.frame_sent[int(event["frame"])] = t
-            run.face.append(
-                FaceSample(
-                    int(event["frame"]),
-                    event["face_x"],
-                    event["face_y"],
-                    bool(event.get("jump", False)),
-                )
-            )
-            truth.append(TruthSample(t, event["face_x"], event["face_y"], *options.size))
-        elif kind == "goal":
-            run.goals.append((t, event.get("frame")))
-            if event.get("frame") is not None:
-                run.goal_points.setdefault(int(event["frame"]), (event["x"], event["y"]))
-        elif kind == "twist" and event.get("frame") is not None:
-            run.commands.append((t, int(event["frame"])))
-            first_command = t if first_command is None else first_command
-        elif kind == "pose":
-            poses.append(PoseSample(t, event["x"], event["y"], event["theta"]))
+    for event in read_event_log(path):
+        match event:
+            case FrameSent(frame=frame, face_x=face_x, face_y=face_y, jump=jump, t=t):
+                run.frame_sent[frame] = t
+                run.face.append(FaceSample(frame, face_x, face_y, jump))
+                truth.append(TruthSample(t, face_x, face_y, *options.size))
+            case GoalApplied(frame=frame, x=x, y=y, t=t):
+                run.goals.append((t, frame))
+                if frame is not None:
+                    run.goal_points.setdefault(frame, (x, y))
+            case TwistSent(frame=int(frame), t=t):
+                run.commands.append((t, frame))
+                first_command = t if first_command is None else first_command
+            case PoseReport(x=x, y=y, theta=theta, t=t):
+                poses.append(PoseSample(t, x, y, theta))
     window = run.window or (float("-inf"), float("inf"))
     poses = [p for p in poses if window[0] <= p.t <= window[1]]
     run.heading = heading_track(poses, truth, pixel_to_terrain)

@@ -9,7 +9,6 @@ launcher that enters the operator's namespace.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import subprocess
 from collections.abc import Iterator
@@ -21,6 +20,8 @@ from playwright.sync_api import Browser, Page, Playwright
 from playwright.sync_api import Error as PlaywrightError
 
 from app.chromium import chromium_path, launch_options
+from app.protocol.events import AnyEvent, E, PoseReport, of_kind
+from app.recording import read_event_log
 from app.tools.lab.lab import CLOUD, Lab
 from app.tools.lab.netns import LabError
 
@@ -40,17 +41,20 @@ class FieldStack:
     client: Page
     console: list[str]
 
-    def events(self, kind: str | None = None) -> list[dict[str, Any]]:
-        """The agent's events (all, or of one kind), oldest first."""
-        text = self.events_path.read_text() if self.events_path.exists() else ""
-        # The last line may be half-written while the agent runs.
-        events = [json.loads(line) for line in text.splitlines() if line.endswith("}")]
-        return [e for e in events if kind is None or e["ev"] == kind]
+    def all_events(self) -> list[AnyEvent]:
+        """The agent's events so far, oldest first."""
+        if not self.events_path.exists():
+            return []
+        return read_event_log(self.events_path, growing=True)
+
+    def events(self, kind: type[E]) -> list[E]:
+        """The agent's events of one kind so far, oldest first."""
+        return of_kind(self.all_events(), kind)
 
     def heading_deg(self) -> float | None:
         """The turtle's last reported heading in [0, 360), or None before any pose."""
-        poses = self.events("pose")
-        return math.degrees(poses[-1]["theta"]) % 360 if poses else None
+        poses = self.events(PoseReport)
+        return math.degrees(poses[-1].theta) % 360 if poses else None
 
     def start_piloting(self) -> None:
         """Press Start Piloting on the client page once the relay is ready for it."""

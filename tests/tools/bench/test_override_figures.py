@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import pytest
 
+from app.protocol.events import DriveReceived, TwistSent
 from app.tools.bench.override import PERIOD_S, _deadman_stop_s
 
 
-def drive(t: float, moving: bool) -> dict[str, object]:
-    return {"ev": "drive", "t": t, "seq": 1, "applied": True, "moving": moving}
+def drive(t: float, moving: bool) -> DriveReceived:
+    return DriveReceived(seq=1, applied=True, moving=moving, t=t)
 
 
-def twist(t: float, angular: float) -> dict[str, object]:
-    return {"ev": "twist", "t": t, "seq": None, "frame": None, "linear": 0.0, "angular": angular}
+def twist(t: float, angular: float) -> TwistSent:
+    return TwistSent(seq=None, frame=None, linear=0.0, angular=angular, t=t)
 
 
 def test_the_zero_twist_after_the_last_moving_command() -> None:

@@ -1,7 +1,9 @@
-// The control law of DESIGN §5 and its profiles (docs/contracts.md): a port of
-// vehicle_agent/control.py so the browser vehicle and the Python agent behave alike. Its numbers
-// (terrain, gains, standoff, wall margin, timeouts, profile names) are not written here: they
-// come from app/protocol/control.py through the page's embedded config (`config.control`).
+// The control laws and the controller that paces them (docs/contracts.md): a port of
+// vehicle_agent/control.py so the browser vehicle and the Python agent behave alike, checked
+// against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js) drives it.
+// Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not written
+// here: they come from app/protocol/control.py through the page's embedded config
+// (`config.control`).
 //
 // Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
 // its origin bottom-left with y growing upward. A goal pixel is flipped vertically when mapped
@@ -112,27 +114,43 @@ export class ControlLaw {
     return { linear: clamp(linear, -allowed, allowed), angular };
   }
 
-  /** The profile's {linear, angular} for `goal` seen from `pose`. */
-  command(goal, pose, profile) {
-    if (profile.law === 'follow') {
-      const target = this.pixelToTerrain(goal.x, goal.y, goal.w, goal.h);
-      return this.followCommand(target.x, target.y, pose, profile);
-    }
+  /** The rotate law: turn in place to face the goal's terrain point. */
+  rotate(goal, pose, profile) {
     const error = this.steeringError(goal, pose);
     // No defined heading: hold still rather than keep the last turn going.
     return { linear: 0, angular: error === null ? 0 : this.angularCommand(error, profile) };
+  }
+
+  /** The follow law: drive to the profile's standoff from the goal's terrain point. */
+  follow(goal, pose, profile) {
+    const target = this.pixelToTerrain(goal.x, goal.y, goal.w, goal.h);
+    return this.followCommand(target.x, target.y, pose, profile);
+  }
+
+  /**
+   * The control law `profile.law` names, as a function (goal, pose, profile) -> {linear,
+   * angular}: the laws of vehicle_agent/control.py's LAWS. A new law is a method here, an
+   * entry below and its Python twin.
+   */
+  lawOf(profile) {
+    const laws = { rotate: this.rotate, follow: this.follow };
+    const law = laws[profile.law];
+    if (law === undefined) throw new Error(`no control law ${profile.law}`);
+    return law.bind(this);
   }
 }
 
 export const ZERO_TWIST = Object.freeze({ linear: 0, angular: 0, seq: null, frame: null });
 
 /**
- * Turns goals into Twists with one profile. Call `goal` for each goal, `pose` for each pose
- * update and `tick` every few tens of milliseconds; each returns the Twist to publish now, or
- * null. Closed-loop profiles answer a new goal at once (rate-capped by `minIntervalS`) and pose
- * updates every `periodS`; the thesis profile publishes on its own clock. After a goal timeout
- * or `stop` exactly one zero Twist comes back, then nothing until the next goal. The follow
- * profile turns in place to search when no goal came for `searchAfterS`.
+ * Turns goals into Twists with one profile and the law it names (or `law`, a function
+ * (goal, pose, profile) -> {linear, angular}). Call `goal` for each goal, `pose` for each pose
+ * update and `tick` every few tens of milliseconds, each with the time now (seconds, one
+ * clock); each returns the Twist to publish now, or null. Closed-loop profiles answer a new
+ * goal at once (rate-capped by `minIntervalS`) and pose updates every `periodS`; the thesis
+ * profile publishes on its own clock. After a goal timeout or `stop` exactly one zero Twist
+ * comes back, then nothing until the next goal. The follow profile turns in place to search
+ * when no goal came for `searchAfterS`.
  */
 export class Controller {
   #goal = null;
@@ -142,10 +160,9 @@ export class Controller {
   #pose = null;
   #lastPublish = null;
 
-  constructor(law, profile, clock = () => performance.now() / 1000) {
-    this.law = law;
+  constructor(controlLaw, profile, law = null) {
     this.profile = profile;
-    this.clock = clock;
+    this.law = law ?? controlLaw.lawOf(profile);
   }
 
   /** True while goals are arriving. */
@@ -154,24 +171,24 @@ export class Controller {
   }
 
   /** True while the follow profile has lost its target and turns to find it. */
-  get searching() {
-    return this.#goal !== null && this.#lost(this.clock());
+  searching(now) {
+    return this.#goal !== null && this.#lost(now);
   }
 
-  goal(goal) {
+  goal(goal, now) {
     this.#goal = goal;
-    this.#goalAt = this.clock();
+    this.#goalAt = now;
     this.#unanswered = true;
-    return this.#due();
+    return this.#due(now);
   }
 
-  pose(pose) {
+  pose(pose, now) {
     this.#pose = pose;
-    return this.#checkTimeout() ?? (this.profile.onPose ? this.#due() : null);
+    return this.#checkTimeout(now) ?? (this.profile.onPose ? this.#due(now) : null);
   }
 
-  tick() {
-    return this.#checkTimeout() ?? (this.profile.onPose ? null : this.#due());
+  tick(now) {
+    return this.#checkTimeout(now) ?? (this.profile.onPose ? null : this.#due(now));
   }
 
   stop() {
@@ -190,22 +207,22 @@ export class Controller {
    * Seconds until the goal timeout stops the turtle (0 when due), null with no goal. A caller
    * that ticks on a coarse period wakes up at this moment too, so the stop goes out on time.
    */
-  untilTimeout() {
+  untilTimeout(now) {
     if (this.#goal === null) return null;
-    return Math.max(0, this.#goalAt + this.profile.goalTimeoutS - this.clock());
+    return Math.max(0, this.#goalAt + this.profile.goalTimeoutS - now);
   }
 
-  #checkTimeout() {
-    if (this.#goal !== null && this.clock() - this.#goalAt >= this.profile.goalTimeoutS)
+  #checkTimeout(now) {
+    if (this.#goal !== null && now - this.#goalAt >= this.profile.goalTimeoutS) {
       return this.stop();
+    }
     return null;
   }
 
-  #due() {
+  #due(now) {
     const goal = this.#goal;
     const pose = this.#pose;
     if (goal === null || pose === null) return null;
-    const now = this.clock();
     const last = this.#lastPublish;
     const profile = this.profile;
     if (profile.onPose) {
@@ -222,7 +239,7 @@ export class Controller {
     this.#unanswered = false;
     if (this.#lost(now))
       return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
-    const { linear, angular } = this.law.command(goal, pose, profile);
+    const { linear, angular } = this.law(goal, pose, profile);
     if (angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
     return { linear, angular, seq: goal.seq ?? null, frame: goal.frame ?? null };
   }

@@ -1,6 +1,8 @@
-// The operator's wheel at the vehicle: mode, drive commands and the dead-man (DESIGN §10). A
-// port of vehicle_agent/manual.py, checked against it (e2e/test_manual_js.py); its numbers come
-// from app/protocol/control.py through the page's embedded config (`config.control`).
+// The operator's wheel at the vehicle: mode, drive commands and the dead-man. A port of
+// vehicle_agent/manual.py, checked against it on shared sequences
+// (tests/vehicle_agent/manual_sequences.py, e2e/test_manual_js.py); its numbers, the dead-man
+// time among them, come from app/protocol/control.py through the page's embedded config
+// (`config.control`).
 import { ZERO_TWIST } from './control.js';
 
 const unit = (value) => Math.max(-1, Math.min(1, value));
@@ -8,17 +10,16 @@ const unit = (value) => Math.max(-1, Math.min(1, value));
 /**
  * While manual, goals are the caller's to ignore (`manual`) and only drive commands move the
  * turtle, scaled to the profile's manual speeds; moving on a command and hearing none for
- * `deadmanS` stops it (one zero Twist from `tick`). Times are seconds.
+ * `deadmanS` stops it (one zero Twist from `tick`). Times are seconds, given with each call.
  */
 export class ManualDrive {
   #lastSeq = 0;
   #lastAt = 0;
   #moving = false;
 
-  constructor(profile, deadmanS, clock = () => performance.now() / 1000) {
+  constructor(profile, deadmanS) {
     this.profile = profile;
     this.deadmanS = deadmanS;
-    this.clock = clock;
     this.mode = 'auto';
     this.operator = null;
   }
@@ -46,11 +47,11 @@ export class ManualDrive {
     this.#moving = false;
   }
 
-  /** A drive command's Twist, or null when not manual or not the newest command. */
-  drive(seq, linear, angular) {
+  /** A drive command's Twist at `now`, or null when not manual or not the newest command. */
+  drive(seq, linear, angular, now) {
     if (!this.manual || seq <= this.#lastSeq) return null;
     this.#lastSeq = seq;
-    this.#lastAt = this.clock();
+    this.#lastAt = now;
     const twist = {
       linear: unit(linear) * this.profile.manualLinear,
       angular: unit(angular) * this.profile.manualAngular,
@@ -62,8 +63,8 @@ export class ManualDrive {
   }
 
   /** The dead-man: the zero Twist once no command came for `deadmanS` while moving. */
-  tick() {
-    if (this.#moving && this.clock() - this.#lastAt >= this.deadmanS) {
+  tick(now) {
+    if (this.#moving && now - this.#lastAt >= this.deadmanS) {
       this.#moving = false;
       return ZERO_TWIST;
     }
@@ -71,8 +72,8 @@ export class ManualDrive {
   }
 
   /** Seconds until the dead-man stops the turtle, null while it is not moving. */
-  untilDeadman() {
+  untilDeadman(now) {
     if (!this.#moving) return null;
-    return Math.max(0, this.#lastAt + this.deadmanS - this.clock());
+    return Math.max(0, this.#lastAt + this.deadmanS - now);
   }
 }

@@ -1,9 +1,11 @@
 // The vehicle page: camera to the relay, goals from the lossy `autopilot-state` data channel
 // (latest wins) turned into Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to
-// the relay on the same channel; `stop` on the reliable `autopilot` channel.
-import { ControlLaw, Controller } from '../core/control.js';
-import { GoalGate } from '../core/freshness.js';
-import { ManualDrive } from '../core/manual.js';
+// the relay on the same channel; `stop` on the reliable `autopilot` channel. What to do with
+// goals, stops, mode changes, drive commands, poses and the clock is the pilot's to decide
+// (core/pilot.js, the twin of the agent's vehicle_agent/pilot.py): this page feeds it, with the
+// time, and acts on its records: publishes their Twists, counts and shows them.
+import { ControlLaw } from '../core/control.js';
+import { Pilot } from '../core/pilot.js';
 import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
@@ -11,34 +13,40 @@ import { pickTypes } from '../core/rosflavour.js';
 import { byTestId, fmt, Log, show } from '../view/ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
-const TICK_MS = 50;
 const ROS_RETRY_MS = 2000;
+// The pilot's latest records kept in the status (the agent's event log keeps them all).
+const RECORDS_KEPT = 200;
 
 const config = CONFIG;
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
-const profile = law.profiles[config.profile];
-const controller = new Controller(law, profile);
-const goalGate = new GoalGate(PROTOCOL.goalFreshness);
-// The operator's wheel (manual override): while manual, goals are ignored (counted).
-const manual = new ManualDrive(profile, config.control.deadmanS);
+const pilot = new Pilot(law, law.profiles[config.profile], {
+  deadmanS: config.control.deadmanS,
+  tickS: config.control.tickS,
+  freshness: PROTOCOL.goalFreshness,
+});
+/** The page's clock, in the seconds the pilot takes. */
+const now = () => performance.now() / 1000;
 
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
-  goalsReceived: 0,
+  // The pilot's records, as the agent's event log has them: counted by kind, the latest kept.
+  events: { goal: 0, goal_dropped: 0, mode: 0, drive: 0, twist: 0 },
+  records: [],
+  goalsReceived: 0, // goals applied
   lastGoal: null,
-  twistsPublished: 0,
+  twistsPublished: 0, // Twists that reached rosbridge
   lastTwist: null,
   pose: null,
   rosConnected: false,
   rosFlavour: null, // '1', '2' or 'jazzy' once connected
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
-  goalsDropped: { old: 0, stale: 0 }, // refused by the latest-wins rule
+  // Goals not applied, by why: not newer (old), too late (stale), an operator held the wheel.
+  goalsDropped: { old: 0, stale: 0, manual: 0 },
   mode: 'auto', // 'manual' while an operator holds the wheel
   operator: null,
-  goalsIgnored: 0, // goals that came while manual
   drivesApplied: 0,
 };
 window.autopilotStatus = status;
@@ -163,11 +171,9 @@ const session = {
   stateChannel: null, // the open `autopilot-state` data channel (unordered, no retransmits)
   lastPoseSent: 0,
   rosWarned: false, // a lost Twist has been reported for this outage
-  lastGoalAt: null, // performance.now() of the last goal applied on this link (link health)
 };
 
 function publish(twist, why) {
-  if (twist === null) return;
   if (!turtle.publish(twist)) {
     // Once per outage: goals keep coming at frame rate and would flood the log.
     if (!session.rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
@@ -176,7 +182,7 @@ function publish(twist, why) {
   }
   session.rosWarned = false;
   status.twistsPublished += 1;
-  status.lastTwist = { ...twist, t: Date.now() };
+  status.lastTwist = twist;
   const linear = twist.linear !== 0 ? `linear.x ${fmt(twist.linear, 2)} m/s  ` : '';
   const goal = twist.seq !== null ? ` (goal ${twist.seq})` : '';
   show('twist', `${linear}angular.z ${fmt(twist.angular, 3)} rad/s${goal}`);
@@ -184,89 +190,85 @@ function publish(twist, why) {
     log.info(`zero Twist: ${why}`);
 }
 
-function halt(reason) {
-  const stopped = controller.stop();
-  publish(setMode('auto', null, reason) ?? stopped, reason);
+/**
+ * Carry out what the pilot did, in order: count and keep each record, show the mode, publish
+ * the Twists. `why` says what a zero Twist answers, for the log.
+ */
+function act(records, why) {
+  for (const record of records) {
+    status.events[record.ev] += 1;
+    status.records.push(record);
+    if (status.records.length > RECORDS_KEPT) status.records.shift();
+    switch (record.ev) {
+      case 'goal':
+        status.goalsReceived += 1;
+        status.lastGoal = record;
+        show('goals-received', String(status.goalsReceived));
+        break;
+      case 'goal_dropped':
+        status.goalsDropped[record.why] += 1;
+        break;
+      case 'mode':
+        status.mode = record.mode;
+        status.operator = record.operator;
+        show('mode', record.mode === 'manual' ? `manual: ${record.operator}` : 'autopilot');
+        log.info(`mode ${record.mode}${record.operator ? ` by ${record.operator}` : ''} (${why})`);
+        break;
+      case 'drive':
+        if (record.applied) status.drivesApplied += 1;
+        break;
+      case 'twist':
+        publish(record, why);
+        break;
+      default:
+        log.error(`the pilot made an unknown record ${record.ev}`);
+    }
+  }
 }
 
-/** The relay's mode; a change stops the turtle first (the Twist returned, to publish). */
-function setMode(mode, operator, reason) {
-  const twist = manual.setMode(mode, operator);
-  if (twist === null) return null;
-  status.mode = manual.mode;
-  status.operator = manual.operator;
-  show('mode', manual.manual ? `manual: ${manual.operator}` : 'autopilot');
-  log.info(`mode ${mode}${operator ? ` by ${operator}` : ''} (${reason})`);
-  return twist;
+function halt(reason) {
+  act(pilot.halt(now()), reason);
 }
 
 function onMode(msg) {
-  const twist = setMode(msg.mode, msg.operator ?? null, msg.reason ?? 'relay');
-  if (twist === null) return; // no change
-  controller.stop(); // the autopilot's goal must not steer again when the wheel comes back
-  publish(twist, `mode ${msg.mode}`);
+  act(pilot.modeChange(msg.mode, msg.operator ?? null, now()), msg.reason ?? 'relay');
 }
 
 function onDrive(msg) {
-  const twist = manual.drive(msg.seq, msg.linear, msg.angular);
-  if (twist === null) return;
-  status.drivesApplied += 1;
-  publish(twist, twist.linear === 0 && twist.angular === 0 ? 'operator stopped' : 'operator');
-}
-
-/** Run one controller step; a goal timeout inside it shows up as `active` turning false. */
-function drive(step) {
-  const wasActive = controller.active;
-  const twist = step();
-  publish(twist, wasActive && !controller.active ? 'goals stopped coming' : 'goal');
+  const stopping = msg.linear === 0 && msg.angular === 0;
+  act(
+    pilot.drive(msg.seq, msg.linear, msg.angular, now()),
+    stopping ? 'operator stopped' : 'operator',
+  );
 }
 
 turtle.onPose = (pose) => {
   status.pose = pose;
   show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
-  drive(() => controller.pose(pose));
-  const now = performance.now();
-  if (now - session.lastPoseSent < POSE_FORWARD_MS) return;
-  const goalAgeMs = session.lastGoalAt === null ? null : now - session.lastGoalAt;
+  const t = now();
+  act(pilot.pose(pose, t), 'goals stopped coming');
+  if (t - session.lastPoseSent < POSE_FORWARD_MS / 1000) return;
+  const age = pilot.goalAge(t);
+  const goalAgeMs = age === null ? null : age * 1000;
   if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs }))
-    session.lastPoseSent = now;
+    session.lastPoseSent = t;
 };
 
 function tick() {
-  drive(() => controller.tick());
-  publish(manual.tick(), 'dead-man: no drive command');
-  const waits = [controller.untilTimeout(), manual.untilDeadman()].filter((s) => s !== null);
-  setTimeout(tick, Math.min(TICK_MS, ...waits.map((s) => s * 1000)));
+  const t = now();
+  // In manual mode the autopilot has no goal to time out: a stop there is the dead-man's.
+  const why = pilot.mode === 'manual' ? 'dead-man: no drive command' : 'goals stopped coming';
+  act(pilot.tick(t), why);
+  setTimeout(tick, pilot.nextTick(now()) * 1000);
 }
 tick();
 
 /** A goal, already validated against the protocol's Goal model by serveChannel. */
 function onGoal(msg) {
-  if (manual.manual) {
-    status.goalsIgnored += 1;
-    return;
-  }
-  // Validated against the goal schema by serveChannel before it gets here.
-  const goal = {
-    x: msg.x,
-    y: msg.y,
-    w: msg.w,
-    h: msg.h,
-    seq: msg.seq,
-    frame: msg.frame ?? null,
-    op: msg.op,
-  };
-  const verdict = goalGate.admit(msg.seq, msg.t, performance.now() / 1000);
-  if (verdict !== 'fresh') {
-    status.goalsDropped[verdict] += 1;
-    return;
-  }
-  if (!controller.active) log.info(`piloting: first goal (${goal.op})`);
-  status.goalsReceived += 1;
-  status.lastGoal = { ...goal, t: msg.t };
-  session.lastGoalAt = performance.now();
-  show('goals-received', String(status.goalsReceived));
-  drive(() => controller.goal(goal));
+  const wasActive = pilot.active;
+  const records = pilot.goal(msg, now());
+  if (!wasActive && records[0].ev === 'goal') log.info(`piloting: first goal (${msg.op})`);
+  act(records, 'goal');
 }
 
 function setupPeer(peer, stream) {
@@ -277,16 +279,13 @@ function setupPeer(peer, stream) {
   const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
   const handlers = {
     goal: onGoal,
-    stop: () => publish(controller.stop(), 'relay says stop'),
+    stop: () => act(pilot.stop(now()), 'relay says stop'),
     mode: onMode,
     drive: onDrive,
   };
   serveChannel(dc, handlers, log, SCHEMAS.autopilot.vehicle);
   // A new link: the relay's seq starts again, and a new relay knows of no operator.
-  goalGate.reset();
-  session.lastGoalAt = null;
-  publish(setMode('auto', null, 'a new relay link'), 'a new relay link');
-  manual.resetLink();
+  act(pilot.newLink(now()), 'a new relay link');
   const state = peer.pc.createDataChannel(CHANNELS.autopilotState, PROTOCOL.stateChannelOptions);
   serveChannel(
     state,

@@ -1,0 +1,151 @@
+// The vehicle's pilot: what a vehicle does with what its relay tells it, without any I/O. A port
+// of vehicle_agent/pilot.py; both run the shared sequences of
+// tests/vehicle_agent/pilot_sequences.py (tests/vehicle_agent/test_pilot.py in Python,
+// e2e/test_pilot_js.py here), which also state the rules themselves.
+//
+// It is fed goals, stop commands, mode changes, drive commands, poses, link resets and clock
+// ticks, each with the time it happened (seconds, one clock), and answers with the event records
+// of what it did, in order: the records of app/protocol/events.py ({ev, ...fields, t}), the same
+// the agent's event log writes. A `twist` record is a Twist to publish now. It composes the twins:
+// the manual gate (core/manual.js: while an operator holds the wheel, goals are dropped with
+// why 'manual' and drive commands steer, until the dead-man), then the freshness gate
+// (core/freshness.js: latest wins, stale goals dropped), then the controller (core/control.js,
+// with the control law the profile names). A lost link, a mode change and a stop halt the turtle.
+import { Controller } from './control.js';
+import { GoalGate } from './freshness.js';
+import { ManualDrive } from './manual.js';
+
+function twistSent(twist, now) {
+  if (twist === null) return [];
+  return [
+    {
+      ev: 'twist',
+      seq: twist.seq,
+      frame: twist.frame,
+      linear: twist.linear,
+      angular: twist.angular,
+      t: now,
+    },
+  ];
+}
+
+export class Pilot {
+  #lastGoalAt = null; // when the last goal was applied on this link (link health)
+
+  /**
+   * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
+   * @param profile one of `controlLaw.profiles`
+   * @param {{deadmanS: number, tickS: number, freshness: {maxAgeS: number, windowS: number},
+   *   law?: Function}} rules the protocol's numbers (`config.control`,
+   *   `config.protocol.goalFreshness`); `law` replaces the profile's control law
+   */
+  constructor(controlLaw, profile, { deadmanS, tickS, freshness, law = null }) {
+    this.profile = profile;
+    this.tickS = tickS;
+    this.controller = new Controller(controlLaw, profile, law);
+    this.manual = new ManualDrive(profile, deadmanS);
+    // Latest-wins on the lossy goal channel; reset for every new link.
+    this.gate = new GoalGate(freshness);
+  }
+
+  /** 'manual' while an operator holds the wheel, else 'auto'. */
+  get mode() {
+    return this.manual.mode;
+  }
+
+  /** Who holds the wheel, in manual mode. */
+  get operator() {
+    return this.manual.operator;
+  }
+
+  /** True while goals steer the turtle (between the first goal and a stop). */
+  get active() {
+    return this.controller.active;
+  }
+
+  /** Seconds since the last goal applied on this link, null before the first. */
+  goalAge(now) {
+    return this.#lastGoalAt === null ? null : now - this.#lastGoalAt;
+  }
+
+  /** A goal (validated against the protocol's Goal model): dropped, or it steers. */
+  goal(goal, now) {
+    const frame = goal.frame ?? null;
+    if (this.manual.manual)
+      return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: 'manual', t: now }];
+    const verdict = this.gate.admit(goal.seq, goal.t, now);
+    if (verdict !== 'fresh') {
+      return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: verdict, t: now }];
+    }
+    this.#lastGoalAt = now;
+    const { seq, op, x, y, w, h } = goal;
+    const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
+    return [applied, ...twistSent(this.controller.goal({ x, y, w, h, seq, frame }, now), now)];
+  }
+
+  /** The relay stopped piloting: the autopilot's turtle stops. */
+  stop(now) {
+    return twistSent(this.controller.stop(), now);
+  }
+
+  /**
+   * The relay's mode. Whichever way it changes, the turtle stops first: the autopilot's last
+   * command must not outlive its goals, nor the operator's outlive the wheel.
+   */
+  modeChange(mode, operator, now) {
+    const stopped = this.manual.setMode(mode, operator);
+    if (stopped === null) return [];
+    this.controller.stop();
+    const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
+    return [changed, ...twistSent(stopped, now)];
+  }
+
+  /** An operator's drive command: it steers in manual mode when it is the newest. */
+  drive(seq, linear, angular, now) {
+    const twist = this.manual.drive(seq, linear, angular, now);
+    const moving = twist !== null && (twist.linear !== 0 || twist.angular !== 0);
+    const received = { ev: 'drive', seq, applied: twist !== null, moving, t: now };
+    return [received, ...twistSent(twist, now)];
+  }
+
+  /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it. */
+  pose(pose, now) {
+    return twistSent(this.controller.pose(pose, now), now);
+  }
+
+  /** The clock: the goal timeout, the clock-driven profile's period, the dead-man. */
+  tick(now) {
+    return [...twistSent(this.controller.tick(now), now), ...twistSent(this.manual.tick(now), now)];
+  }
+
+  /**
+   * Seconds from `now` until `tick` is due: every `tickS`, and at once when the goal timeout or
+   * the dead-man falls due sooner, so a stop goes out on time.
+   */
+  nextTick(now) {
+    const waits = [this.controller.untilTimeout(now), this.manual.untilDeadman(now)];
+    return Math.min(this.tickS, ...waits.filter((wait) => wait !== null));
+  }
+
+  /**
+   * A new link to a relay: halted, and everything numbered per link starts again (the relay's
+   * goal and drive seq; a new relay knows of no operator).
+   */
+  newLink(now) {
+    const halted = this.halt(now);
+    this.gate.reset();
+    this.manual.resetLink();
+    this.#lastGoalAt = null;
+    return halted;
+  }
+
+  /**
+   * Stop at once, autopilot or operator: the link that carried the commands is gone (or the
+   * page is leaving). Back in auto mode.
+   */
+  halt(now) {
+    const stopped = this.controller.stop();
+    if (!this.manual.manual) return twistSent(stopped, now);
+    return this.modeChange('auto', null, now);
+  }
+}

@@ -1,0 +1,103 @@
+"""The browser vehicle's pilot (app/static/js/core/pilot.js) answers as the agent's does
+(vehicle_agent/pilot.py): the shared sequences of tests/vehicle_agent/pilot_sequences.py give the
+same event records (the agent's event-log lines, field for field), the same wake-ups and modes.
+pilot.js is built as the vehicle page builds it, from the numbers its config carries; the rules
+themselves are stated in tests/vehicle_agent/test_pilot.py, and one of them again here."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, Page
+
+from app.protocol.control import PROFILES, control_config
+from app.protocol.page import page_protocol, to_json
+from app.server.serve import RunningServer
+from e2e.helpers import module_page
+from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal, run
+
+pytestmark = [pytest.mark.browser]
+
+# The pilot as pages/vehicle.js builds it, fed one sequence: each step's records, next tick,
+# mode and operator.
+RUN_JS = """([steps, constants, freshness, profile]) => {
+  const law = new control.ControlLaw(constants);
+  const driven = new pilot.Pilot(law, law.profiles[profile], {
+    deadmanS: constants.deadmanS,
+    tickS: constants.tickS,
+    freshness,
+  });
+  const feed = (kind, t, args) => {
+    switch (kind) {
+      case 'goal': return driven.goal(args[0], t);
+      case 'stop': return driven.stop(t);
+      case 'mode': return driven.modeChange(args[0], args[1], t);
+      case 'drive': return driven.drive(args[0], args[1], args[2], t);
+      case 'pose': return driven.pose({ x: args[0], y: args[1], theta: args[2] }, t);
+      case 'tick': return driven.tick(t);
+      case 'new_link': return driven.newLink(t);
+      case 'halt': return driven.halt(t);
+      default: throw new Error(`no such input ${kind}`);
+    }
+  };
+  return steps.map(([kind, t, args]) => {
+    const records = feed(kind, t, args);
+    return [records, driven.nextTick(t), driven.mode, driven.operator];
+  });
+}"""
+
+
+def rounded(value: Any) -> Any:
+    """Floats to 9 places, through lists and records: both sides compute the same doubles up to
+    rounding, and JSON makes no difference between 100 and 100.0."""
+    if isinstance(value, list):
+        return [rounded(item) for item in value]
+    if isinstance(value, dict):
+        return {key: rounded(item) for key, item in value.items()}
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    return round(float(value), 9)
+
+
+@pytest.fixture
+def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
+    with module_page(server, browser, "core/pilot") as opened:
+        opened.evaluate(
+            "async () => { window.control = await import('/static/js/core/control.js'); }"
+        )
+        yield opened
+
+
+def run_js(page: Page, steps: list[Any], profile: str) -> Any:
+    constants = to_json(control_config())
+    freshness = to_json(page_protocol().goal_freshness)
+    return page.evaluate(RUN_JS, [steps, constants, freshness, profile])
+
+
+@pytest.mark.parametrize("profile", sorted(PROFILES))
+def test_the_shared_sequences_give_the_same_records(page: Page, profile: str) -> None:
+    for name, steps in SEQUENCES.items():
+        expected = run(steps, profile)
+        got = run_js(page, steps, profile)
+        for k, (want, have) in enumerate(zip(expected, got, strict=True)):
+            # Field for field, in the log line's order.
+            assert [list(r) for r in have[0]] == [list(r) for r in want[0]], (name, k)
+            assert rounded(have) == rounded(want), (name, k, steps[k])
+
+
+def test_goals_while_manual_are_dropped_why_manual_and_never_steer(page: Page) -> None:
+    # The rule, not only the agreement: the page records what the agent records.
+    steps = [
+        ("pose", 0.0, [5.544445, 5.544445, 0.0]),
+        ("mode", 0.1, ["manual", "ann"]),
+        goal(1, 0.2),
+        ("pose", 0.25, [5.544445, 5.544445, 0.0]),
+        ("tick", 0.3, []),
+    ]
+    answers = run_js(page, steps, "default")
+    assert answers[2][0] == [
+        {"ev": "goal_dropped", "seq": 1, "frame": 101, "why": "manual", "t": 0.2}
+    ]
+    assert not any(r["ev"] == "twist" for answer in answers[2:] for r in answer[0])
