@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from app.protocol.events import AnyEvent, DriveReceived, TwistSent
+from app.protocol.events import AnyEvent, DriveReceived, FrameSent, TwistSent
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.waiting import eventually
@@ -50,13 +50,7 @@ async def running_agent(server_url: str, **config: Any) -> AsyncIterator[Running
     events: list[AnyEvent] = []
     log = EventLog()
     log.listeners.append(events.append)
-    video = SyntheticVideo(
-        W,
-        H,
-        fps=15,
-        path=FixedPath(0.5, 0.5),
-        on_frame=lambda info: log.emit("frame_sent", frame=info.frame),
-    )
+    video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5), on_frame=log.emit)
     turtle = SimTurtle()
     agent = Agent(AgentConfig(server=server_url, **config), video, turtle, log)
     task = asyncio.create_task(agent.run())
@@ -142,7 +136,7 @@ async def test_the_relay_learns_when_each_frame_it_decodes_was_captured(
         # When the frame was handed to the encoder (its frame_sent event), on the wall clock,
         # which a client on this machine can compare with its own.
         wall_minus_monotonic = time.time() - time.monotonic()
-        sent = {e["frame"]: e["t"] for e in run.events if e["ev"] == "frame_sent"}
+        sent = {e.frame: e.t for e in run.events if isinstance(e, FrameSent)}
         for frame, t_ms in captured().items():
             assert t_ms / 1000 == pytest.approx(sent[frame] + wall_minus_monotonic, abs=0.02)
         assert captured()[relay.tags[-1]] < time.time() * 1000
