@@ -165,7 +165,7 @@ def _field(args: argparse.Namespace) -> int:
         log.error("the field bench builds network namespaces: run it as root")
         return 2
     conditions = args.condition or FIELD_CONDITIONS
-    obj = field.run(args.out, args.quick, conditions, args.seconds, args.fps)
+    obj = field.run(args.out, args.quick, conditions, args.seconds, args.fps, _provenance(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     unmeasured = [(r["condition"], k) for r in obj["field"] for k in r["problems"]]
@@ -249,6 +249,7 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
     # With --baseline: the forward as the relay does it and the fallback, in alternation.
     forwards = list(relaycost.FORWARDS) * args.rounds if args.baseline else ["as is"]
+    provenance = _provenance(args)
     runs = []
     server = start_in_thread()
     try:
@@ -268,7 +269,7 @@ async def _relay_cost(args: argparse.Namespace) -> int:
                     await client.close()
     finally:
         server.stop()
-    log.info("relay cost report: %s", relaycost.write_report(args.out, runs))
+    log.info("relay cost report: %s", relaycost.write_report(args.out, runs, provenance))
     if args.json:
         sys.stdout.write(json.dumps(relaycost.report_object(runs), allow_nan=False) + "\n")
     return 0
@@ -414,10 +415,19 @@ def _machine() -> str:
     return f"{os.cpu_count()} x {model}, Python {platform.python_version()}"
 
 
+def _provenance(args: argparse.Namespace) -> dict[str, str]:
+    """When, where and how a report's figures were measured, for its first lines."""
+    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    return {"started": started, "machine": _machine(), "command": _command(args)}
+
+
 def _command(args: argparse.Namespace) -> str:
     parts = ["autopilot bench"]
     if args.quick:
         parts.append("--quick")
+    if args.field:
+        parts.append("--field")
+        parts += [f"--condition {name}" for name in args.condition or ()]
     if args.relay_cost:
         parts.append("--relay-cost")
     if args.baseline:

@@ -16,7 +16,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -194,6 +194,7 @@ def run(
     conditions: Sequence[str] = ORDER,
     seconds: float | None = None,
     fps: float | None = None,
+    provenance: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Measure ``conditions`` (in the bench's order) and the video sender, each for ``seconds``
     if given (``--seconds``), the vehicle's camera at ``fps`` if given (``--fps``; the video
@@ -264,6 +265,7 @@ def run(
         "quick": quick,
         # Everything shares this machine's cores: the figures move with its load.
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+        "run": dict(provenance or {}),
     }
     write(out, obj)
     return obj
@@ -293,6 +295,14 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         "(see `app/tools/bench/field.py`). Null: not measured, the reason is listed below. "
         f"Load average before/after: {obj.get('load_average')}.",
         "",
+    ]
+    run = obj.get("run")
+    if run:
+        lines += [
+            f"Run {run['started']} on {run['machine']}, command `{run['command']}`.",
+            "",
+        ]
+    lines += [
         "| " + " | ".join(keys) + " |",
         "| " + " | ".join("---" for _ in keys) + " |",
     ]

@@ -97,8 +97,10 @@ def test_a_run_without_a_link_says_why(tmp_path: Path) -> None:
         "kbit_per_s": 220,
         "limited_by": "bandwidth",
     }
-    write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video]})
+    run = {"started": "2026-11-26T18:00:00+00:00", "machine": "2 x CPU", "command": "bench"}
+    write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video], "run": run})
     report = (tmp_path / "field.md").read_text()
+    assert "Run 2026-11-26T18:00:00+00:00 on 2 x CPU, command `bench`." in report
     assert "clean connect_ms: the link never came up" in report
     assert "| cap_300kbit | motion | maintain-framerate | 9.5 | 320 | 220 | bandwidth |" in report
     assert (tmp_path / "field-latency.png").stat().st_size > 0

@@ -130,7 +130,28 @@ def test_runs_are_reported_side_by_side_in_the_order_they_ran(tmp_path: Path) ->
     assert "| stage | pass-through (cores) | re-encode (cores) | pass-through (cores) |" in text
     assert "| **the relay's Chromium in all** | **0.200** | **0.300** | **0.210** |" in text
     assert "| client glass-to-glass p50 / p95 (ms) | 40.0 / 70 | 55.0 / 70 | 40.0 / 70 |" in text
+    # At 30 fps each run is judged against the 0.18 cores per room.
+    assert "| within ≤ 0.18 cores per room at 30 fps | no | no | no |" in text
     assert json.loads((tmp_path / "relay-cost.json").read_text()) == {"runs": runs}
     # One run alone keeps its figures at the top of the JSON.
     write_report(tmp_path, runs[:1])
     assert json.loads((tmp_path / "relay-cost.json").read_text()) == runs[0]
+
+
+def test_the_report_says_when_where_and_how_it_was_measured(tmp_path: Path) -> None:
+    provenance = {
+        "started": "2026-11-26T18:00:00+00:00",
+        "machine": "2 x CPU",
+        "command": "autopilot bench --relay-cost --baseline --rounds 2",
+    }
+    runs = [_found("pass-through", 0.17), _found("re-encode", 0.27)]
+    text = write_report(tmp_path, runs, provenance).read_text()
+    assert (
+        "Run 2026-11-26T18:00:00+00:00 on 2 x CPU, command "
+        "`autopilot bench --relay-cost --baseline --rounds 2`." in text
+    )
+    assert "| within ≤ 0.18 cores per room at 30 fps | yes | no |" in text
+    # Another frame rate is measured, not judged against a target set at 30 fps.
+    slower = [{**found, "fps": 10} for found in runs]
+    text = write_report(tmp_path, slower).read_text()
+    assert "within ≤" not in text and "not judged: this run's 10 fps" in text
