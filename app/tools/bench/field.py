@@ -308,14 +308,16 @@ def write(out: Path, obj: dict[str, Any]) -> None:
     ]
     for row in obj["field"]:
         lines.append("| " + " | ".join(_cell(row[k]) for k in keys) + " |")
-    drop = obj["link_drop"]
-    lines += [
-        "",
-        f"link_drop: zero Twist {_cell(drop['stop_after_s'])} s after the last goal (target "
-        f"<= 0.75 s); goals again {_cell(drop['resume_after_s'])} s after the link came back "
-        "(target <= 3 s).",
-        "",
-    ]
+    lines.append("")
+    # The outage's two figures, when link_drop was among the conditions run.
+    if any(row["condition"] == "link_drop" for row in obj["field"]):
+        drop = obj["link_drop"]
+        lines += [
+            f"link_drop: zero Twist {_cell(drop['stop_after_s'])} s after the last goal (target "
+            f"<= 0.75 s); goals again {_cell(drop['resume_after_s'])} s after the link came "
+            "back (target <= 3 s).",
+            "",
+        ]
     if obj.get("video"):
         lines += [
             "Chromium's video sender, robot uplink capped, per content hint (received at the "

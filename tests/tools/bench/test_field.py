@@ -101,6 +101,11 @@ def test_a_run_without_a_link_says_why(tmp_path: Path) -> None:
     write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video], "run": run})
     report = (tmp_path / "field.md").read_text()
     assert "Run 2026-11-26T18:00:00+00:00 on 2 x CPU, command `bench`." in report
+    # No link_drop row: no outage figures, not even as "not measured".
+    assert "link_drop:" not in report
+    dropped = figures("link_drop", [], (0.0, 1.0)).__dict__
+    write(tmp_path, {**obj, "field": [dropped], "window_s": 1.0, "quick": True, "video": []})
+    assert "link_drop: zero Twist – s after the last goal" in (tmp_path / "field.md").read_text()
     assert "clean connect_ms: the link never came up" in report
     assert "| cap_300kbit | motion | maintain-framerate | 9.5 | 320 | 220 | bandwidth |" in report
     assert (tmp_path / "field-latency.png").stat().st_size > 0
