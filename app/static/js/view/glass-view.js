@@ -74,12 +74,14 @@ export class GlassView {
 
   #show() {
     const summary = this.glass.summary();
-    let text = '–';
-    if (summary !== null)
-      text = `${fmt(summary.p50Ms, 0)} ms p50 · ${fmt(summary.p95Ms, 0)} ms p95`;
-    else if (this.tagged > 0) text = "waiting for the vehicle's capture times";
+    // Short enough to stay on one line beside its name on a phone; the title says more.
+    let [text, title] = ['–', ''];
+    if (summary !== null) text = `${fmt(summary.p50Ms, 0)} ms (p95 ${fmt(summary.p95Ms, 0)})`;
+    else if (this.tagged > 0)
+      [text, title] = ['waiting for capture times', "the vehicle's capture times have not come"];
     else if (this.presented >= UNTAGGED_AFTER)
-      text = 'not measured: the video carries no frame tag';
+      [text, title] = ['no frame tag', 'not measured: the video carries no frame tag'];
     if (this.figure.textContent !== text) this.figure.textContent = text;
+    if (this.figure.title !== title) this.figure.title = title;
   }
 }
