@@ -34,6 +34,8 @@ from app.protocol.control import ControlConfig
 from app.protocol.frametag import LAYOUT, FrameTagLayout
 from app.protocol.link_health import HEALTH, HealthLimits
 from app.protocol.lock import LockRule
+from app.protocol.opencv import RELAY_OPENCV_BUILD, OpenCvBuild
+from app.protocol.robot import Robot, TypeTable, type_table
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import RosConfig, RosSetting
 from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
@@ -137,8 +139,27 @@ class PageProtocol:
     frame_tag: FrameTagLayout
     lock: LockRule
     health: HealthLimits
+    # The OpenCV.js build the analyzer loads unless the page's ?opencv= names another.
+    opencv_build: OpenCvBuild
     # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
     schemas: Verbatim
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The robot the vehicle page drives (``?robot=NAME``): its description, what follows from
+    it, and its type names in every flavour (``core/rosflavour.js`` picks among them)."""
+
+    description: Robot
+    # A turtlesim has the spawn step and the terrain's walls.
+    turtlesim: bool
+    teleport_service: str | None
+    types: TypeTable
+
+
+def robot_config(robot: Robot) -> RobotConfig:
+    """What the vehicle page needs to know of ``robot``."""
+    return RobotConfig(robot, robot.turtlesim, robot.teleport_service, type_table(robot))
 
 
 @dataclass(frozen=True)
@@ -154,7 +175,7 @@ class PageConfig:
     profile: str
     # The control law's numbers, the world's geometry among them.
     control: ControlConfig
-    # The vehicle page's spawn step (turn to face up at start).
+    # The vehicle page's spawn step (turn to face up at start; a turtlesim's only).
     spawn_step: bool
     # The relay's own video preview.
     preview: bool
@@ -166,6 +187,9 @@ class PageConfig:
     # The fallback when the robot's rosapi cannot name its types.
     ros: RosSetting
     ros_types: RosConfig
+    robot: RobotConfig
+    # Why the robot asked for (``?robot=``) cannot be driven, or None.
+    robot_error: str | None
     protocol: PageProtocol
 
 
@@ -198,5 +222,6 @@ def page_protocol() -> PageProtocol:
         frame_tag=LAYOUT,
         lock=LockRule(),
         health=HEALTH,
+        opencv_build=RELAY_OPENCV_BUILD,
         schemas=Verbatim(channel_schemas()),
     )

@@ -130,7 +130,8 @@ def _short(type_name: str) -> str:
 def full_text(type_name: str) -> str:
     """The ``typedefs_full_text`` entry for a message type of any flavour."""
     short = _short(type_name)
-    text = _DEFINITIONS[short]
+    # A hosted topic's type (a robot's, app/turtlesim/hosted.py) is not described here.
+    text = _DEFINITIONS.get(short, "")
     for used in _USES.get(short, ()):
         text += f"\n{_SEPARATOR}\nMSG: {used}\n{_DEFINITIONS[used]}"
     return text
@@ -183,8 +184,12 @@ class RosGraph:
         sim: TurtleSim,
         flavour: RosFlavour,
         wall_clock: Callable[[], float] = time.time,
+        hosted: Callable[[], dict[str, str]] = dict,
     ) -> None:
         self.sim = sim
+        # The topics the rosbridge carries for its clients (app/turtlesim/hosted.py) and their
+        # types: on the graph while they are hosted.
+        self._hosted = hosted
         self.flavour: RosFlavour = flavour
         self.types: RosTypes = TYPES[flavour]
         self._wall_clock = wall_clock
@@ -230,7 +235,7 @@ class RosGraph:
         for turtle in self.sim.names():
             for leaf in TURTLE_TOPICS:
                 found[f"/{turtle}/{leaf}"] = kinds[leaf]
-        return dict(sorted(found.items()))
+        return dict(sorted((self._hosted() | found).items()))
 
     def services(self) -> dict[str, str]:
         """Every service and its type, sorted by name."""
@@ -260,7 +265,9 @@ class RosGraph:
 
     def node_details(self, node: str) -> Json:
         """What ``node`` publishes, subscribes to and serves; empty lists for an unknown node."""
-        topics = self.topics()
+        # The hosted topics are the clients' (through /rosbridge_websocket), not a node's here.
+        hosted = self._hosted()
+        topics = {name: kind for name, kind in self.topics().items() if name not in hosted}
         services = self.services()
         turtles = [f"/{name}/" for name in self.sim.names()]
         extra = [] if self._ros1 else ["/parameter_events"]

@@ -17,7 +17,8 @@ reason in ``values``. A request that is well formed but cannot be served gets a 
 after the client's ``set_level``, since current rosbridge_suite sends none; a frame that is no
 rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
 always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
-answered by :class:`app.turtlesim.rosapi.RosGraph`.
+answered by :class:`app.turtlesim.rosapi.RosGraph`. Besides the turtles' topics, the hub carries
+topics of the types a robot description names between its clients (:mod:`app.turtlesim.hosted`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ from pydantic import (
 from app.protocol import jsonedge
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
+from app.turtlesim.hosted import HostedTopic, HostedTopics, HostingError
+from app.turtlesim.messages import Payload as _Payload
+from app.turtlesim.messages import Twist
 from app.turtlesim.rosapi import (
     GLOBAL_SERVICES,
     TURTLE_SERVICES,
@@ -229,26 +233,6 @@ def status(level: str, text: str, op_id: object = None) -> Json:
 # -- message and service payloads ----------------------------------------------------------
 
 
-class _Payload(BaseModel):
-    # Unknown fields are an error, as in rosbridge; numbers must be finite JSON numbers.
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
-
-class Vector3(_Payload):
-    """``geometry_msgs/Vector3``; missing fields default to 0 as rosbridge fills them."""
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-
-
-class Twist(_Payload):
-    """``geometry_msgs/Twist``."""
-
-    linear: Vector3 = Field(default_factory=Vector3)
-    angular: Vector3 = Field(default_factory=Vector3)
-
-
 class SpawnArgs(_Payload):
     """``turtlesim/Spawn`` request."""
 
@@ -421,7 +405,7 @@ class _Subscription:
     """
 
     name: str
-    topic: Topic
+    topic: Topic | HostedTopic
     # The topic's version last delivered (or current when subscribed): only newer ones are due.
     seen: int
     by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
@@ -542,6 +526,11 @@ class RosbridgeSession:
 
     def close(self) -> None:
         """Forget this client's subscriptions and advertisements."""
+        for name, sub in self._subscriptions.items():
+            self._release(sub.topic, "subscribe", name)
+        for name in self._advertised:
+            if (hosted := self._hub.hosted.find(name)) is not None:
+                self._release(hosted, "advertise", name)
         self._subscriptions.clear()
         self._advertised.clear()
         self._hub.sessions.discard(self)
@@ -557,11 +546,11 @@ class RosbridgeSession:
     # -- ops ----------------------------------------------------------------------------
 
     def _advertise(self, msg: Advertise) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose":
-            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         if msg.topic not in self._advertised and len(self._advertised) >= MAX_ADVERTISEMENTS:
             raise ProtocolError(f"at most {MAX_ADVERTISEMENTS} advertisements per client")
+        topic = self._typed_topic(msg.topic, msg.type, "advertise")
+        if isinstance(topic, Topic) and topic.leaf == "pose":
+            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         self._advertised.add(msg.topic)
         return []
 
@@ -569,9 +558,19 @@ class RosbridgeSession:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
+        if (hosted := self._hub.hosted.find(msg.topic)) is not None:
+            self._release(hosted, "advertise", msg.topic)
         return []
 
     def _publish(self, msg: Publish) -> list[Json]:
+        hosted = self._hub.hosted.find(msg.topic)
+        if hosted is not None:
+            # Another robot's topic: checked against its type, then kept for its subscribers.
+            try:
+                self._hub.hosted.publish(hosted, msg.msg)
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
+            return []
         topic = resolve_topic(msg.topic)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -584,13 +583,17 @@ class RosbridgeSession:
         return []
 
     def _subscribe(self, msg: Subscribe) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose" and topic.turtle not in self._hub.sim.names():
-            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         sub = self._subscriptions.get(msg.topic)
         known = sub is not None and msg.id in sub.by_id
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
+        topic = self._typed_topic(msg.topic, msg.type, "subscribe")
+        if (
+            isinstance(topic, Topic)
+            and topic.leaf == "pose"
+            and topic.turtle not in self._hub.sim.names()
+        ):
+            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         if sub is None:
             sub = _Subscription(msg.topic, topic, seen=self._hub.version(topic))
             self._subscriptions[msg.topic] = sub
@@ -607,6 +610,7 @@ class RosbridgeSession:
             del sub.by_id[msg.id]
         if not sub.by_id:
             del self._subscriptions[msg.topic]
+            self._release(sub.topic, "subscribe", msg.topic)
         return []
 
     def _call_service(self, msg: CallService) -> list[Json]:
@@ -629,22 +633,30 @@ class RosbridgeSession:
 
     # -- helpers ------------------------------------------------------------------------
 
-    def _typed_topic(self, name: str, type_name: str | None) -> Topic:
+    def _typed_topic(self, name: str, type_name: str | None, op: str) -> Topic | HostedTopic:
         try:
             topic = resolve_topic(name)
         except ProtocolError:
             absolute = name if name.startswith("/") else f"/{name}"
-            if absolute in self._hub.graph.topics():
+            hosted = self._hub.hosted
+            if absolute in self._hub.graph.topics() and hosted.find(absolute) is None:
                 raise ProtocolError(
                     f"{name} is on a real robot's graph, but this simulator publishes nothing "
                     "on it and takes nothing from it"
                 ) from None
-            raise
+            try:
+                return hosted.claim(name, type_name, (self, op, name))
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
         types = self._hub.types
         canonical = types.twist if topic.leaf == "cmd_vel" else types.pose
         if type_name is not None and type_name not in spellings(types.flavour, canonical):
             raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
+
+    def _release(self, topic: Topic | HostedTopic, op: str, name: str) -> None:
+        if isinstance(topic, HostedTopic):
+            self._hub.hosted.release(topic, (self, op, name))
 
     def _run_service(self, msg: CallService) -> Json:
         name = service_path(msg.service)
@@ -675,7 +687,8 @@ class RosbridgeHub:
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.sim = sim
-        self.graph = RosGraph(sim, ros, wall_clock)
+        self.hosted = HostedTopics(ros, MAX_QUEUE_LENGTH)
+        self.graph = RosGraph(sim, ros, wall_clock, self.hosted.types)
         self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
         # The time of the last tick (throttles are measured in it) and how many there were:
@@ -712,13 +725,17 @@ class RosbridgeHub:
         queue = self._twists.setdefault(topic.turtle, deque(maxlen=MAX_QUEUE_LENGTH))
         queue.append((self._twist_version, msg))
 
-    def version(self, topic: Topic) -> int:
+    def version(self, topic: Topic | HostedTopic) -> int:
         """The topic's current version: a new subscription takes only what comes after it."""
+        if isinstance(topic, HostedTopic):
+            return self.hosted.version()
         return self.ticks if topic.leaf == "pose" else self._twist_version
 
-    def newer(self, topic: Topic, seen: int) -> list[Versioned]:
+    def newer(self, topic: Topic | HostedTopic, seen: int) -> list[Versioned]:
         """The topic's messages newer than version ``seen``, oldest first: a pose topic has
         only its latest (a newer pose supersedes the older ones)."""
+        if isinstance(topic, HostedTopic):
+            return self.hosted.newer(topic, seen)
         if topic.leaf == "cmd_vel":
             return [item for item in self._twists.get(topic.turtle, ()) if item[0] > seen]
         if self.ticks <= seen:

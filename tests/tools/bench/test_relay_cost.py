@@ -155,3 +155,12 @@ def test_the_report_says_when_where_and_how_it_was_measured(tmp_path: Path) -> N
     slower = [{**found, "fps": 10} for found in runs]
     text = write_report(tmp_path, slower).read_text()
     assert "within ≤" not in text and "not judged: this run's 10 fps" in text
+
+
+def test_baseline_alone_is_refused() -> None:
+    # --baseline measures the fallback beside the relay's cores: without --relay-cost it means
+    # nothing, and must not start another bench in its place.
+    argv = [sys.executable, "-m", "app.cli", "bench", "--baseline"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "--baseline goes with --relay-cost" in done.stderr
