@@ -227,16 +227,16 @@ def facing(at: tuple[float, float], towards: tuple[float, float]) -> float:
 START: Final = Pose2D(1.0, 3.0, 0.0)
 
 # The walking person: off ahead of the robot, east along the middle of the room, a pause,
-# then back west fast along a line 0.8 m to the north -- past the side of a robot that has
+# then back west at a jog along a line 0.6 m to the north -- past the side of a robot that has
 # followed it, to behind it -- another pause, and round the south half back to the start.
-# Walking pace is 0.6 m/s; the dash west, 1.4 m/s, passes a robot that followed at a metre and
-# a half faster than it can turn.
+# Passing 0.6 m from the robot at 1.6 m/s, its bearing turns at up to 2.7 rad/s: faster than a
+# law that steers in proportion to the bearing keeps it in a 60° view, so the law must search.
 WALK: Final = Walk(
     start=(2.5, 3.0),
     legs=(
         Leg((6.0, 3.0), speed=0.6, pause=2.0),
-        Leg((6.0, 3.8), speed=0.8),
-        Leg((1.5, 3.8), speed=1.4, pause=3.0),
+        Leg((6.0, 3.6), speed=0.8),
+        Leg((1.5, 3.6), speed=1.6, pause=3.0),
         Leg((1.5, 1.6), speed=0.6),
         Leg((4.5, 1.5), speed=0.6, pause=2.0),
         Leg((2.5, 3.0), speed=0.6),
