@@ -179,14 +179,56 @@ def flame_frames(flame: Flame, frames: int = FLAME_FRAMES) -> tuple[list[Image],
     """The flame picture (BGR on black) and its mask, for each of ``frames`` flickers."""
     height = FLAME_TEXTURE_PX
     width = round(height * flame.picture.width / flame.picture.height)
-    pictures, masks = [], []
+    pictures: list[Image] = []
+    masks: list[Image] = []
     for i in range(frames):
-        picture = np.zeros((height, width, 3), np.uint8)
+        picture: Image = np.zeros((height, width, 3), np.uint8)
         # The flame is about 0.8 of its full height: it stands inside the picture.
         draw_flame_bgr(picture, width / 2, height * 0.55, i, full=height * 0.8)
         pictures.append(picture)
         masks.append(np.where(picture.any(axis=2), 255, 0).astype(np.uint8))
     return pictures, masks
+
+
+@dataclass(frozen=True)
+class VisiblePart:
+    """The part of a picture in front of the camera: from ``start`` to ``end`` across it (0 is
+    its left edge as seen from the front, 1 its right edge), and the pixels of that part's
+    corners -- top left, top right, bottom right, bottom left (4×2, maybe outside the frame)."""
+
+    start: float
+    end: float
+    corners: Floats
+
+
+def visible_part(
+    camera: Pinhole, robot: RobotState, pose: Pose2D, picture: Picture
+) -> VisiblePart | None:
+    """What of ``picture`` at ``pose`` lies ahead of the camera's clipping plane, cut along the
+    plane (a picture is upright and the plane too, so the cut is a vertical line across it);
+    None when none of it does."""
+    # The picture's left and right edges as a viewer in front of it sees them.
+    rx, ry = -math.sin(pose.yaw), math.cos(pose.yaw)
+    half = picture.width / 2
+    ends = [(pose.x - half * rx, pose.y - half * ry), (pose.x + half * rx, pose.y + half * ry)]
+    ahead = [camera.to_camera(robot, x, y, 0.0)[0] for x, y in ends]
+    start, end = 0.0, 1.0
+    if ahead[0] < NEAR_M and ahead[1] < NEAR_M:
+        return None
+    if ahead[0] < NEAR_M:
+        start = (NEAR_M - ahead[0]) / (ahead[1] - ahead[0])
+    elif ahead[1] < NEAR_M:
+        end = (NEAR_M - ahead[0]) / (ahead[1] - ahead[0])
+    top, bottom = picture.bottom + picture.height, picture.bottom
+    corners = []
+    cx, cy = camera.centre
+    for s, z in ((start, top), (end, top), (end, bottom), (start, bottom)):
+        x = ends[0][0] + s * (ends[1][0] - ends[0][0])
+        y = ends[0][1] + s * (ends[1][1] - ends[0][1])
+        a, left, up = camera.to_camera(robot, x, y, z)
+        a = max(a, NEAR_M)  # a cut corner is on the plane, give or take a rounding
+        corners.append((cx - camera.focal * left / a, cy - camera.focal * up / a))
+    return VisiblePart(start, end, np.array(corners, np.float64))
 
 
 # -- the renderer --------------------------------------------------------------------------
@@ -211,8 +253,9 @@ class Renderer:
                 ]
         cx, cy = camera.centre
         # Each pixel column's ray, as its leftward slope: the ray is ahead + slope * left.
-        self._slopes: Floats = (cx - (np.arange(camera.width) + 0.5)) / camera.focal
-        self._rows: Floats = (np.arange(camera.height) + 0.5)[:, None]
+        columns = np.arange(camera.width, dtype=np.float64) + 0.5
+        self._slopes: Floats = (cx - columns) / camera.focal
+        self._rows: Floats = (np.arange(camera.height, dtype=np.float64) + 0.5)[:, None]
         self._background = self._floor_and_ceiling()
 
     # -- the whole frame ---------------------------------------------------------------
@@ -302,38 +345,6 @@ class Renderer:
             flames = self._flames[placed.billboard.name]
             self._warp(frame, robot, pose, picture, flames[round(t * cam.fps) % len(flames)])
 
-    def _quad(
-        self, robot: RobotState, pose: Pose2D, picture: Picture
-    ) -> tuple[float, float, Floats] | None:
-        """The visible part of a picture, (s0, s1) across it from its left edge to its right
-        (0..1, as seen from the front), and the pixels of that part's corners -- top left, top
-        right, bottom right, bottom left; None when none of it is ahead of the camera."""
-        cam = self.camera
-        # The picture's left and right edges as a viewer in front of it sees them.
-        rx, ry = -math.sin(pose.yaw), math.cos(pose.yaw)
-        half = picture.width / 2
-        ends = [(pose.x - half * rx, pose.y - half * ry), (pose.x + half * rx, pose.y + half * ry)]
-        ahead = [cam.to_camera(robot, x, y, 0.0)[0] for x, y in ends]
-        s0, s1 = 0.0, 1.0
-        if ahead[0] < NEAR_M and ahead[1] < NEAR_M:
-            return None
-        if ahead[0] < NEAR_M:
-            s0 = (NEAR_M - ahead[0]) / (ahead[1] - ahead[0])
-        elif ahead[1] < NEAR_M:
-            s1 = (NEAR_M - ahead[0]) / (ahead[1] - ahead[0])
-        top, bottom = picture.bottom + picture.height, picture.bottom
-        corners = []
-        for s, z in ((s0, top), (s1, top), (s1, bottom), (s0, bottom)):
-            x = ends[0][0] + s * (ends[1][0] - ends[0][0])
-            y = ends[0][1] + s * (ends[1][1] - ends[0][1])
-            # Clipped at the near plane, each corner is at least there: never None.
-            a, left, up = cam.to_camera(robot, x, y, z)
-            a = max(a, NEAR_M)
-            corners.append(
-                (cam.centre[0] - cam.focal * left / a, cam.centre[1] - cam.focal * up / a)
-            )
-        return s0, s1, np.array(corners, np.float64)
-
     def _region(self, corners: Floats) -> tuple[int, int, int, int] | None:
         """The frame's pixels the corners' bounding box covers, (x0, y0, x1, y1), or None."""
         cam = self.camera
@@ -351,20 +362,20 @@ class Renderer:
         picture: Picture,
         colour: tuple[int, int, int],
     ) -> None:
-        quad = self._quad(robot, pose, picture)
-        if quad is None or self._region(quad[2]) is None:
+        quad = visible_part(self.camera, robot, pose, picture)
+        if quad is None or self._region(quad.corners) is None:
             return
         # fillConvexPoly takes fixed-point pixel centres: shift by half a pixel, 4 bits.
-        points = np.round((quad[2] - 0.5) * 16).astype(np.int32)
+        points = np.round((quad.corners - 0.5) * 16).astype(np.int32)
         cv2.fillConvexPoly(frame, points, colour, lineType=cv2.LINE_8, shift=4)
 
     def _warp(
         self, frame: Image, robot: RobotState, pose: Pose2D, picture: Picture, texture: _Texture
     ) -> None:
-        quad = self._quad(robot, pose, picture)
+        quad = visible_part(self.camera, robot, pose, picture)
         if quad is None:
             return
-        s0, s1, corners = quad
+        s0, s1, corners = quad.start, quad.end, quad.corners
         region = self._region(corners)
         if region is None:
             return

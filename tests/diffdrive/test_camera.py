@@ -11,7 +11,15 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from app.diffdrive.camera import Image, Pinhole, Renderer, encode_jpeg, load_face
+from app.diffdrive.camera import (
+    NEAR_M,
+    Image,
+    Pinhole,
+    Renderer,
+    encode_jpeg,
+    load_face,
+    visible_part,
+)
 from app.diffdrive.robot import RobotState
 from app.diffdrive.room import (
     FACE_BOX_M,
@@ -20,6 +28,7 @@ from app.diffdrive.room import (
     Billboard,
     Face,
     FacePhoto,
+    Picture,
     Pose2D,
 )
 from app.diffdrive.sim import Placed, Scene
@@ -134,6 +143,29 @@ def test_a_billboard_behind_the_camera_is_not_drawn(renderer: Renderer) -> None:
     for bearing in (math.pi, math.radians(100), math.radians(-120)):
         frame = renderer.render(scene(facing_robot(WALKER, 1.5, bearing)))
         assert not changed(frame, empty).any()
+
+
+def test_a_picture_across_the_clipping_plane_is_cut_along_it() -> None:
+    """A picture 0.4 m wide from 0.1 m behind the camera to 0.3 m ahead: its first quarter
+    (to the clipping plane 0.05 m ahead) is cut off, and the kept part's near corners are the
+    projections of the points where the plane cuts it."""
+    picture = Picture(0.4, 0.5, 1.2)
+    pose = Pose2D(ROBOT.x + 0.1, ROBOT.y + 0.15, -math.pi / 2)  # facing south, across the path
+    part = visible_part(CAMERA, ROBOT, pose, picture)
+    assert part is not None
+    assert part.start == pytest.approx((0.1 + NEAR_M) / 0.4)
+    assert part.end == 1.0
+    cut_top = CAMERA.project(ROBOT, ROBOT.x + NEAR_M + 1e-12, ROBOT.y + 0.15, 1.7)
+    far_bottom = CAMERA.project(ROBOT, ROBOT.x + 0.3, ROBOT.y + 0.15, 1.2)
+    assert cut_top is not None and far_bottom is not None
+    assert part.corners[0] == pytest.approx(cut_top)
+    assert part.corners[2] == pytest.approx(far_bottom)
+    # Turned round, the same picture is cut at its other end; wholly behind, nothing is left.
+    turned = visible_part(CAMERA, ROBOT, Pose2D(pose.x, pose.y, math.pi / 2), picture)
+    assert turned is not None
+    assert (turned.start, turned.end) == pytest.approx((0.0, 1 - (0.1 + NEAR_M) / 0.4))
+    behind = Pose2D(ROBOT.x - 0.5, ROBOT.y, 0.0)
+    assert visible_part(CAMERA, ROBOT, behind, picture) is None
 
 
 def test_a_billboard_half_behind_the_camera_shows_its_front_half(renderer: Renderer) -> None:
