@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from app.diffdrive.robot import RobotState
+from app.diffdrive.robot import CAMERA_HEIGHT_M, CAMERA_HFOV, RobotState
 from app.diffdrive.room import Face, Flame, Picture, Pose2D, Room
 from app.diffdrive.sim import Placed, Scene
 from app.flame import draw_flame_bgr
@@ -34,11 +34,6 @@ from app.resources import FACES_DIR
 Image = npt.NDArray[np.uint8]
 Floats = npt.NDArray[np.float64]
 
-# The field of view until a robot description names one.
-DEFAULT_HFOV: Final = math.radians(60.0)
-# The camera sits on a mast this high, looking level: a face at head height is in view from
-# about a metre away (a camera at a TurtleBot's 0.2 m would see only legs up close).
-MOUNT_HEIGHT_M: Final = 1.3
 # What lies nearer the camera than this (m) is not drawn: the clipping plane's distance.
 NEAR_M: Final = 0.05
 # JPEG quality of the published frames.
@@ -79,8 +74,8 @@ class Pinhole:
 
     width: int = VIDEO_SIZE[0]
     height: int = VIDEO_SIZE[1]
-    hfov: float = DEFAULT_HFOV
-    mount_height: float = MOUNT_HEIGHT_M
+    hfov: float = CAMERA_HFOV
+    mount_height: float = CAMERA_HEIGHT_M
     fps: float = VIDEO_FPS
 
     def __post_init__(self) -> None:

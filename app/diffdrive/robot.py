@@ -18,6 +18,11 @@ from typing import Final
 
 from app.protocol.angles import wrap_angle
 
+# The robot's camera: its horizontal field of view, and the height of the mast it sits on,
+# looking level -- a face at head height is in view from about a metre away (a camera at a
+# TurtleBot's 0.2 m would see only legs up close).
+CAMERA_HFOV: Final = math.radians(60.0)
+CAMERA_HEIGHT_M: Final = 1.3
 # Below this turn rate a tick's arc is taken as a straight line (the arc's formula divides by it).
 _STRAIGHT_RAD_S: Final = 1e-9
 

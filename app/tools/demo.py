@@ -32,7 +32,14 @@ from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings, describe_settings_error
-from app.server.serve import ANY_ADDRESS, RunningServer, reachable_hosts, start_in_thread
+from app.server.serve import (
+    ANY_ADDRESS,
+    RunningServer,
+    add_robot_argument,
+    reachable_hosts,
+    settings_from,
+    start_in_thread,
+)
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
@@ -70,6 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the agent's synthetic video: a face sweeping across (synthetic, the default) or"
         " two faces drifting, to try the target lock (two-faces)",
     )
+    add_robot_argument(parser)
     tls.add_arguments(parser)
     recorder.add_arguments(parser)
     # The server's metrics (the relay's and the agent's are each their own process's).
@@ -210,10 +218,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         chromium_path()
         files = tls.from_arguments(args)
-        settings = Settings()
+        settings = settings_from(args)
         # The demo mints its own tokens: with a secret made for this run when none is set.
         if settings.secret is None:
-            settings = Settings(secret=secrets.token_urlsafe(32))
+            settings = settings.model_copy(update={"secret": secrets.token_urlsafe(32)})
         server = start_in_thread(
             settings, host=args.host, port=args.port, log_level="info", tls_files=files
         )

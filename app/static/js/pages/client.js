@@ -6,6 +6,8 @@ import { LockPanel } from '../view/lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
+import { pollRoomState } from '../net/room-state.js';
+import { RoomView } from '../view/roomview.js';
 import { TurtleView } from '../view/turtleview.js';
 import {
   button,
@@ -28,7 +30,13 @@ const video = byTestId('video');
 const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
-const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
+// The simulated room when the server has one (`autopilot serve --robot diffdrive`), else
+// turtlesim's terrain.
+const map = config.roomMap;
+const mapView =
+  map === null
+    ? new TurtleView(byTestId('turtle-view'), law.worldSize)
+    : new RoomView(byTestId('turtle-view'), map);
 // A click on the video locks the relay on the target there; Unlock releases it.
 const lockPanel = new LockPanel({
   stage: video.parentElement,
@@ -137,8 +145,9 @@ function onDetections(msg) {
   drawDetections(overlay, msg);
   session.recentMs.push(msg.ms);
   if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
-  const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
-  turtleView.setTarget(target);
+  // A goal pixel is a place on turtlesim's terrain only: the fixed camera watches it.
+  const fixed = map === null && msg.target;
+  mapView.setTarget(fixed ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null);
   showFigures();
 }
 
@@ -147,8 +156,8 @@ function onPose(msg) {
   status.pose = pose;
   if (msg.goalAgeMs !== undefined) health.goalAgeMs = msg.goalAgeMs;
   status.poses += 1;
-  turtleView.addPose(pose);
-  status.routeM = turtleView.routeLength;
+  mapView.addPose(pose);
+  status.routeM = mapView.routeLength;
   showFigures();
 }
 
@@ -252,7 +261,7 @@ function median(values) {
 
 function clearDetections() {
   drawDetections(overlay, null);
-  turtleView.setTarget(null);
+  mapView.setTarget(null);
 }
 
 // ---------------------------------------------------------------- connection to the relay
@@ -402,4 +411,15 @@ link.addEventListener('lost', () => {
 link.addEventListener('peer', showState);
 updateControls();
 showState();
+if (map !== null) {
+  byTestId('map-title').textContent = 'Room';
+  pollRoomState({
+    path: map.statePath,
+    periodMs: map.statePeriodMs,
+    room: () => room.room ?? config.room,
+    token: () => config.token,
+    onState: (state) => mapView.setBillboards(state.billboards),
+    onError: (reason) => log.error(`the room's state: ${reason}`),
+  });
+}
 if (config.auto) room.autoJoin();
