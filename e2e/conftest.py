@@ -9,9 +9,10 @@ launches its own browser for the vehicle. Every page's screenshot and console ar
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlencode
 
 import pytest
@@ -86,16 +87,23 @@ OpenRole = Callable[..., Page]
 @pytest.fixture
 def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
     """``open_role(role, browser, **query)`` opens a role page in its own browser context;
-    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say).
+    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say), and
+    ``device`` sets the context's options (a phone's viewport and touch screen, say).
 
     At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
     """
     opened: list[OpenedPage] = []
 
     def open_page(
-        role: str, browser: Browser, init_script: str | None = None, **query: str
+        role: str,
+        browser: Browser,
+        init_script: str | None = None,
+        device: Mapping[str, Any] | None = None,
+        **query: str,
     ) -> Page:
-        context = browser.new_context(viewport={"width": 1280, "height": 960})
+        context = browser.new_context(
+            **{"viewport": {"width": 1280, "height": 960}, **(device or {})}
+        )
         context.set_default_timeout(60_000)
         if init_script is not None:
             context.add_init_script(init_script)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import ssl
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -12,7 +13,7 @@ import cv2
 import httpx
 import numpy as np
 import numpy.typing as npt
-from playwright.sync_api import Browser, Page
+from playwright.sync_api import Browser, CDPSession, Page
 
 from app.protocol.angles import wrap_angle
 from app.server.serve import RunningServer
@@ -68,6 +69,22 @@ def turtle_state(
     return turtle
 
 
+def theta(server: RunningServer) -> float:
+    """The simulated turtle1's heading."""
+    return float(turtle_state(server)["theta"])
+
+
+def ccw_from(start: float, now: float) -> float:
+    """How far a heading turned counter-clockwise from ``start`` to ``now``, in (−π, π]."""
+    return math.remainder(now - start, 2 * math.pi)
+
+
+def stopped(vehicle: Page) -> bool:
+    """The vehicle page's last published Twist is the zero Twist."""
+    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
+    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
+
+
 def heading_error(theta: float, goal: float) -> float:
     """Absolute angle between two headings, in [0, π]."""
     return abs(wrap_angle(theta - goal))
@@ -121,3 +138,36 @@ def module_page(
         yield opened
     finally:
         opened.close()
+
+
+class Touches:
+    """Fingers on a touch screen page (a context with ``has_touch``), through Chromium's input
+    pipeline as a phone's are: ``Input.dispatchTouchEvent`` takes every finger down with a
+    touchStart or touchMove, the fingers lifting with a touchEnd, and none with a touchCancel
+    (which cancels them all)."""
+
+    def __init__(self, page: Page) -> None:
+        self.cdp: CDPSession = page.context.new_cdp_session(page)
+        self.down: dict[int, tuple[float, float]] = {}
+
+    def _send(self, kind: str, points: dict[int, tuple[float, float]]) -> None:
+        touch_points = [{"x": x, "y": y, "id": finger} for finger, (x, y) in points.items()]
+        self.cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": touch_points})
+
+    def press(self, finger: int, x: float, y: float) -> None:
+        self.down[finger] = (x, y)
+        self._send("touchStart", self.down)
+
+    def move(self, finger: int, x: float, y: float, steps: int = 5) -> None:
+        x0, y0 = self.down[finger]
+        for step in range(1, steps + 1):
+            self.down[finger] = (x0 + (x - x0) * step / steps, y0 + (y - y0) * step / steps)
+            self._send("touchMove", self.down)
+
+    def lift(self, finger: int) -> None:
+        self._send("touchEnd", {finger: self.down.pop(finger)})
+
+    def cancel(self) -> None:
+        """The browser cancels every touch (as when a call comes in)."""
+        self.down.clear()
+        self._send("touchCancel", {})

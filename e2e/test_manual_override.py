@@ -17,7 +17,7 @@ from playwright.sync_api import Browser, Page, expect
 from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole, open_room
-from e2e.helpers import heading_error, status, turtle_state, wait_until
+from e2e.helpers import ccw_from, heading_error, status, stopped, theta, wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
@@ -57,20 +57,6 @@ WATCH_THE_DEAD_MAN = """() => {
     },
   });
 }"""
-
-
-def theta(server: RunningServer) -> float:
-    return float(turtle_state(server)["theta"])
-
-
-def ccw_from(start: float, now: float) -> float:
-    """How far the turtle turned counter-clockwise from ``start``, in (−π, π]."""
-    return math.remainder(now - start, 2 * math.pi)
-
-
-def stopped(vehicle: Page) -> bool:
-    twist: dict[str, Any] | None = status(vehicle)["lastTwist"]
-    return twist is not None and twist["linear"] == 0 and twist["angular"] == 0
 
 
 def healthy(client: Page) -> bool:

@@ -20,6 +20,7 @@ import {
   throttle,
 } from '../view/ui.js';
 import { DriveInput } from '../view/drive-input.js';
+import { hasTouch, Joystick } from '../view/joystick.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
 
@@ -96,6 +97,10 @@ const driveInput = new DriveInput({
     sendJson(session.control, { type: 'drive', seq: session.driveSeq, ...command });
   },
 });
+// On a touch screen the on-screen joystick drives too; lifting the finger stops at once.
+const touch = hasTouch();
+const joystick = new Joystick(byTestId('joystick'), (command) => driveInput.setStick(command));
+if (touch) joystick.show();
 
 // ---------------------------------------------------------------- relay messages
 
@@ -234,6 +239,7 @@ function onMode(msg) {
   status.mode = { mode: msg.mode, operator: msg.operator ?? null, reason: msg.reason ?? null };
   const mine = msg.mode === 'manual' && msg.operator === room.name;
   driveInput.setEnabled(mine);
+  joystick.setEnabled(mine);
   show('mode', modeText());
   if (
     previous !== null &&
@@ -249,7 +255,11 @@ function modeText() {
   const mode = status.mode;
   if (mode === null) return 'unknown (no relay)';
   if (mode.mode === 'auto') return 'autopilot steers';
-  if (mode.operator === room.name) return 'you drive: arrow keys (held) or gamepad; Space stops';
+  if (mode.operator === room.name) {
+    return touch
+      ? 'you drive: drag the joystick, lift your finger to stop'
+      : 'you drive: arrow keys (held) or gamepad; Space stops';
+  }
   return `${mode.operator} is driving`;
 }
 
@@ -319,6 +329,7 @@ function askRelay(type) {
 function forgetMode() {
   status.mode = null;
   driveInput.setEnabled(false);
+  joystick.setEnabled(false);
   show('mode', modeText());
 }
 
@@ -412,7 +423,9 @@ link.addEventListener('peer', showState);
 updateControls();
 showState();
 if (map !== null) {
-  byTestId('map-title').textContent = 'Room';
+  const canvas = byTestId('turtle-view');
+  canvas.setAttribute('aria-label', 'Room map');
+  canvas.closest('section').setAttribute('aria-label', 'Room');
   pollRoomState({
     path: map.statePath,
     periodMs: map.statePeriodMs,

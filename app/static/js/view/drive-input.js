@@ -1,7 +1,8 @@
-// The operator's console on the client page (manual override, DESIGN §10): drive commands from
-// the keyboard and from a gamepad, sent to the relay, which forwards them to the vehicle. A held
-// key or stick resends its command every `repeatS` (the vehicle's dead-man stops the turtle when
-// they stop coming); letting go sends one zero command at once.
+// The operator's console on the client page (manual override, docs/contracts.md): drive commands
+// from the keyboard, the on-screen joystick and a gamepad, sent to the relay, which forwards them
+// to the vehicle. A held key, pad or stick resends its command every `repeatS` (the vehicle's
+// dead-man stops the turtle when they stop coming); letting go sends one zero command at once.
+import { stickAxis } from '../core/joystick.js';
 
 const KEYS = Object.freeze({
   ArrowUp: { linear: 1, angular: 0 },
@@ -14,7 +15,6 @@ const KEYS = Object.freeze({
 export const ENABLE_BUTTON = 4;
 export const LINEAR_AXIS = 1; // left stick, up is −1
 export const ANGULAR_AXIS = 0; // left stick, left is −1
-const STICK_DEADZONE = 0.1;
 
 const ZERO = Object.freeze({ linear: 0, angular: 0 });
 
@@ -32,21 +32,19 @@ export function keyCommand(held) {
 /** The command of a gamepad, or null unless its enable button is held. */
 export function padCommand(pad) {
   if (!pad || pad.mapping !== 'standard' || !pad.buttons[ENABLE_BUTTON]?.pressed) return null;
-  const axis = (index) => {
-    const value = -(pad.axes[index] ?? 0);
-    return Math.abs(value) < STICK_DEADZONE ? 0 : Math.max(-1, Math.min(1, value));
-  };
+  const axis = (index) => stickAxis(-(pad.axes[index] ?? 0));
   return { linear: axis(LINEAR_AXIS), angular: axis(ANGULAR_AXIS) };
 }
 
 const isZero = (command) => command.linear === 0 && command.angular === 0;
 
 /**
- * Turns keys and gamepads into drive commands while `enabled` (this client holds the wheel).
- * `send({linear, angular})` carries one to the relay.
+ * Turns keys, the joystick and gamepads into drive commands while `enabled` (this client holds
+ * the wheel), in that order of precedence. `send({linear, angular})` carries one to the relay.
  */
 export class DriveInput {
   #held = new Set();
+  #stick = null; // the joystick's command while a finger holds it
   #last = ZERO;
   #timer = null;
 
@@ -62,7 +60,7 @@ export class DriveInput {
     addEventListener('blur', () => this.#releaseAll());
   }
 
-  /** On: keys and gamepads drive; off: a zero command if one was moving, then silence. */
+  /** On: keys, joystick and gamepads drive; off: a zero command if moving, then silence. */
   setEnabled(on) {
     if (on === this.enabled) return;
     this.enabled = on;
@@ -73,6 +71,12 @@ export class DriveInput {
       this.#timer = null;
       this.#releaseAll();
     }
+  }
+
+  /** The joystick's command while a finger holds it; null when it lifts (sent at once). */
+  setStick(command) {
+    this.#stick = command;
+    this.#update(false);
   }
 
   #key(event, down) {
@@ -93,13 +97,17 @@ export class DriveInput {
 
   #releaseAll() {
     this.#held.clear();
+    this.#stick = null;
     if (!isZero(this.#last)) this.#emit(ZERO);
   }
 
-  /** The keys' command, else a gamepad's; sent when it changed, and again when `repeat`. */
+  /**
+   * The keys', else the joystick's, else a gamepad's command: sent when it changed, and again
+   * when `repeat`.
+   */
   #update(repeat) {
     if (!this.enabled) return;
-    let command = this.#held.size > 0 ? keyCommand(this.#held) : null;
+    let command = this.#held.size > 0 ? keyCommand(this.#held) : this.#stick;
     if (command === null) {
       for (const pad of this.gamepads()) {
         command = padCommand(pad);
