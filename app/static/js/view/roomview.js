@@ -28,8 +28,10 @@ export class RoomView {
   constructor(canvas, map) {
     this.canvas = canvas;
     this.map = map;
-    // The canvas keeps its width and takes the room's proportions.
+    // The canvas keeps its width and takes the room's proportions (the page's stylesheet
+    // makes the turtle's terrain square).
     canvas.height = Math.round((canvas.width * map.depth) / map.width);
+    canvas.style.aspectRatio = `${map.width} / ${map.depth}`;
     for (const b of map.billboards) this.#placed.set(b.name, { x: b.x, y: b.y, yaw: b.yaw });
     this.draw();
   }
