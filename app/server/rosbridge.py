@@ -135,8 +135,8 @@ class Simulator:
         self.policy = policy
         self.outboxes: Outboxes[Connection] = Outboxes(policy, max_sessions)
         self._task: asyncio.Task[None] | None = None
-        self._renderer: Renderer | None = None
         self._camera_thread: ThreadPoolExecutor | None = None
+        self._renderer: asyncio.Future[Renderer] | None = None
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Simulator:
@@ -262,15 +262,14 @@ class Simulator:
 
     async def _film(self, robot: RoomRobot) -> None:
         """Render and publish ``robot``'s camera at its frame rate while anyone subscribes."""
-        renderer = self._camera()
         loop = asyncio.get_running_loop()
+        thread, renderer = await self._camera()
         period = 1.0 / renderer.camera.fps
         next_at = loop.time()
         while True:
             if robot.hub.camera_wanted():
                 scene, stamp = robot.sim.scene(), time.time()
-                assert self._camera_thread is not None
-                jpeg = await loop.run_in_executor(self._camera_thread, _shoot, renderer, scene)
+                jpeg = await loop.run_in_executor(thread, _shoot, renderer, scene)
                 robot.hub.publish_frame(jpeg, stamp)
                 self._wake()
             next_at += period
@@ -279,15 +278,24 @@ class Simulator:
                 next_at = loop.time()
             await asyncio.sleep(max(delay, 0.0))
 
-    def _camera(self) -> Renderer:
-        """The renderer every room's camera shares, and its thread; made for the first room
-        (a turtlesim server never loads the photos)."""
-        if self._renderer is None:
-            from app.diffdrive.camera import Pinhole, Renderer
-
-            self._renderer = Renderer(RoomSim().room, Pinhole(hfov=CAMERA_HFOV))
+    async def _camera(self) -> tuple[ThreadPoolExecutor, Renderer]:
+        """The thread every room's camera renders in and the renderer they share, made for the
+        first room (a turtlesim server never loads the photos) -- in that thread, so that
+        loading them never holds up a tick."""
+        if self._camera_thread is None:
             self._camera_thread = ThreadPoolExecutor(1, thread_name_prefix="camera")
-        return self._renderer
+            self._renderer = asyncio.get_running_loop().run_in_executor(
+                self._camera_thread, _renderer
+            )
+        assert self._renderer is not None
+        return self._camera_thread, await self._renderer
+
+
+def _renderer() -> Renderer:
+    """The camera of the diffdrive robot over its room (in the camera thread)."""
+    from app.diffdrive.camera import Pinhole, Renderer
+
+    return Renderer(RoomSim().room, Pinhole(hfov=CAMERA_HFOV))
 
 
 def _shoot(renderer: Renderer, scene: Scene) -> bytes:
