@@ -67,6 +67,10 @@ const status = {
   get drivesSent() {
     return driveInput.sent;
   },
+  // The simulated room's billboards where the map draws them ({name: {x, y, yaw}}), or null.
+  get billboards() {
+    return map === null ? null : mapView.placed;
+  },
 };
 window.autopilotStatus = status;
 

@@ -11,7 +11,7 @@ const WALL_PX = 6;
 const ROUTE = 'rgba(40, 90, 200, 0.55)';
 const WEDGE = 'rgba(255, 230, 120, 0.35)';
 const ROBOT = '#2f6fd0';
-const FACE = '#e0a080';
+const FACE = '#b0508f';
 const FLAME = '#ff7a1a';
 // How far the camera's wedge is drawn (m): about where the face operations still find a face.
 const WEDGE_M = 4;
@@ -140,7 +140,10 @@ function drawBillboard(ctx, mark, place, scale, toCanvas) {
   ctx.fill();
   ctx.fillStyle = '#222';
   ctx.font = '11px sans-serif';
-  ctx.fillText(mark.name, x + 6, y - 6);
+  // The name beside it, on the side with room for it.
+  const label = ctx.measureText(mark.name).width;
+  const left = x + 6 + label > ctx.canvas.width;
+  ctx.fillText(mark.name, left ? x - 6 - label : x + 6, y - 6);
 }
 
 function drawRobot(ctx, pose, radius, scale, toCanvas) {
