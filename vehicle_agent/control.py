@@ -1,4 +1,4 @@
-"""The control laws and the controller that paces them (docs/contracts.md).
+"""The control laws and the controller that paces them (docs/architecture.md, "Vehicle control").
 
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks, each with the time, and
 answers with the :class:`Twist` to publish, if any; the vehicle's pilot

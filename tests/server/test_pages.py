@@ -172,7 +172,7 @@ def test_client_has_exactly_the_thesis_buttons_the_console_s_and_a_labelled_oper
     parser = Buttons()
     parser.feed(html)
     thesis = ["Connect", "Join Room", "Leave Room", "Set Operation", "Start Piloting"]
-    console = ["Take Over", "Hand Back", "Unlock"]  # the operator's console
+    console = ["Stop robot", "Take Over", "Hand Back", "Unlock"]  # the operator's console
     assert sorted(parser.labels) == sorted([*thesis, "Stop Piloting", *console])
     assert re.search(r'<label for="operation">Select Operation</label>', html)
     assert re.search(r'<select id="operation"', html)

@@ -1,4 +1,5 @@
-"""The control laws and the controller (docs/contracts.md), with the time given by the test."""
+"""The control laws and the controller (docs/architecture.md, "Vehicle control"), with the time
+given by the test."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
-// The control laws and the controller that paces them (docs/contracts.md): a port of
-// vehicle_agent/control.py so the browser vehicle and the Python agent behave alike, checked
-// against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js) drives it.
-// Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not written
-// here: they come from app/protocol/control.py through the page's embedded config
+// The control laws and the controller that paces them (docs/architecture.md, "Vehicle control"):
+// a port of vehicle_agent/control.py so the browser vehicle and the Python agent behave alike,
+// checked against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js)
+// drives it. Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not
+// written here: they come from app/protocol/control.py through the page's embedded config
 // (`config.control`).
 //
 // Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
