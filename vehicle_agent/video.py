@@ -356,12 +356,13 @@ class SyntheticVideo(PacedVideoTrack):
 
 
 class TwoFaceVideo(SyntheticVideo):
-    """The target-lock scene (docs/architecture.md, "Which target"): two faces drifting slowly, a large one on the left
-    (the default choice) and one ``small_share`` its size on the right; no flame. The large
-    face is :meth:`face_centre`, the small one :meth:`small_centre`. A third, tiny face
-    (``tiny_share`` of the large one, :meth:`tiny_centre`) drifts up between them: too small
-    for the relay's reduced-size scan to find, as a person far away is, it has no box until the
-    operator clicks it (a full-resolution search around the click, app/protocol/lock.py)."""
+    """The target-lock scene (docs/architecture.md, "Which target"): two faces drifting
+    slowly, a large one on the left (the default choice) and one ``small_share`` its size on the
+    right; no flame. The large face is :meth:`face_centre`, the small one :meth:`small_centre`.
+    A third, tiny face (``tiny_share`` of the large one, :meth:`tiny_centre`) drifts up between
+    them: too small for the relay's reduced-size scan to find, as a person far away is, it has no
+    box until the operator clicks it (a full-resolution search around the click,
+    app/protocol/lock.py)."""
 
     def __init__(
         self,
