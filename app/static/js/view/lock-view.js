@@ -1,7 +1,8 @@
-// The client page's side of the target lock (docs/architecture.md, "Which target"): a click on the video asks the
-// relay to lock on the target at or near it (frame pixels, on the control channel), Unlock
-// releases it, and the relay's lockState messages say how the lock stands and how to release
-// it. The relay owns the lock (lock.js, snapshot-loop.js); this only asks and shows.
+// The client page's side of the target lock (docs/architecture.md, "Which target"): a click
+// on the video asks the relay to lock on the target at or near it (frame pixels, on the control
+// channel), Unlock releases it, and the relay's lockState messages say how the lock stands and
+// how to release it. The relay owns the lock (lock.js, snapshot-loop.js); this only asks and
+// shows.
 
 /**
  * The frame pixel under client point (clientX, clientY) of an element whose box is `rect` and
