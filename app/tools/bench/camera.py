@@ -69,10 +69,10 @@ def _following(room: Room, fps: float, frames: int) -> Iterator[Scene]:
         yield Scene(t, robot, placed, round(t / DiffDrive.TICK_S))
 
 
-def run(out: Path, quick: bool, fps: float) -> dict[str, Any]:
-    """Measure the full room and the empty one; write camera.md and camera.json into ``out``."""
+def run(out: Path, frames: int, fps: float) -> dict[str, Any]:
+    """Measure ``frames`` frames of the full room and of the empty one; write camera.md and
+    camera.json into ``out``."""
     camera = Pinhole(fps=fps)
-    frames = QUICK_FRAMES if quick else FULL_FRAMES
     obj = {
         "frames": frames,
         "size": [camera.width, camera.height],

@@ -173,7 +173,8 @@ def _camera(args: argparse.Namespace) -> int:
     """The simulated camera's cost: no network, so no namespace."""
     from app.tools.bench import camera  # OpenCV's renderer, which no other bench needs
 
-    obj = camera.run(args.out, args.quick, args.fps)
+    frames = camera.QUICK_FRAMES if args.quick else camera.FULL_FRAMES
+    obj = camera.run(args.out, frames, args.fps)
     log.info("camera report: %s", args.out / "camera.md")
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
