@@ -5,7 +5,8 @@ The rules live in :mod:`app.rosbridge.protocol` and each robot's hub; :mod:`app.
 moves the frames with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge).
 The server simulates one kind of robot (``autopilot serve --robot``): turtlesim's turtles, one
 simulator for the whole server, or the differential-drive robot of :mod:`app.diffdrive`, one per
-signaling room, made when a connection first names the room. A connection is bound to the room
+signaling room, made when a connection first names the room (at most :data:`MAX_ROOMS` at once;
+the robots of rooms nobody is connected to make way for new ones). A connection is bound to the room
 its token names (``auth``, or the handshake's bearer token); with no access control, to the room
 its URL asks for (``/rosbridge?room=R``, else the default room). A room's tokens reach only its
 robot.
@@ -182,17 +183,30 @@ class Simulator:
 
     def hub_for(self, room: str) -> Hub[Any]:
         """The hub of ``room``'s robot (turtlesim's for every room), made when first asked
-        for; ``RoomsFull`` when :attr:`max_rooms` rooms have one already."""
+        for; ``RoomsFull`` when :attr:`max_rooms` rooms have one already and someone is
+        connected to each."""
         if self.turtle is not None:
             return self.turtle.hub
         robot = self.rooms.get(room)
         if robot is None:
+            if len(self.rooms) >= self.max_rooms:
+                self._free_unattended()
             if len(self.rooms) >= self.max_rooms:
                 raise RoomsFull(f"at most {self.max_rooms} rooms have a simulated robot")
             robot = self.rooms[room] = RoomRobot(self.ros)
             robot.filming = asyncio.create_task(self._film(robot), name=f"camera-{room}")
             robot.filming.add_done_callback(_report_crash)
         return robot.hub
+
+    def _free_unattended(self) -> None:
+        """Forget the robots of the rooms nobody is connected to: a room that comes back later
+        gets a new robot at its start, rather than rooms once used keeping out new ones."""
+        for name, robot in list(self.rooms.items()):
+            if not robot.hub.sessions:
+                if robot.filming is not None:
+                    robot.filming.cancel()
+                del self.rooms[name]
+                log.info("room %r's robot freed: nobody is connected to it", name)
 
     def open(self) -> tuple[Connection, Outbox]:
         """A new rosbridge client: its connection (not yet bound to a room) and outbox."""

@@ -216,6 +216,47 @@ def test_the_camera_delivers_jpeg_frames_of_the_room_at_its_rate(
         ros.close()
 
 
+def test_a_room_beyond_the_limit_is_told_to_come_back_and_gets_a_robot_once_one_is_free() -> None:
+    """With room for one robot: a second room's connection is refused with a status error and
+    close 1013 (try again later) while the first room is connected, and served once it left."""
+    running = start_in_thread(Settings(environment="development", robot="diffdrive"))
+    running.server.config.app.state.simulator.max_rooms = 1
+    base = rosbridge_url(running)
+    subscribe = json.dumps({"op": "subscribe", "topic": "/odom", "throttle_rate": 100})
+
+    async def attempt() -> tuple[dict[str, Any], int | None, dict[str, Any]]:
+        async with websockets.connect(f"{base}?room=first") as first:
+            await first.send(subscribe)
+            await asyncio.wait_for(first.recv(), WAIT_S)  # the first room's robot runs
+            async with websockets.connect(f"{base}?room=second") as second:
+                refusal = json.loads(await asyncio.wait_for(second.recv(), WAIT_S))
+                with pytest.raises(websockets.ConnectionClosed):
+                    await asyncio.wait_for(second.recv(), WAIT_S)
+                code = second.close_code
+        # The server forgets the first connection a moment after it closed: until then the
+        # second room is still refused.
+        deadline = time.monotonic() + WAIT_S
+        while True:
+            try:
+                async with websockets.connect(f"{base}?room=second") as second:
+                    await second.send(subscribe)
+                    reply = json.loads(await asyncio.wait_for(second.recv(), WAIT_S))
+            except websockets.ConnectionClosed:  # refused again, before it read the reason
+                reply = {"op": "closed"}
+            if reply["op"] == "publish" or time.monotonic() > deadline:
+                return refusal, code, reply
+            await asyncio.sleep(0.1)
+
+    try:
+        refusal, code, odom = asyncio.run(attempt())
+    finally:
+        running.stop()
+    assert refusal["op"] == "status" and "at most 1 rooms" in refusal["msg"]
+    assert code == 1013
+    assert odom["op"] == "publish", f"the second room is still refused: {odom}"
+    assert odom["topic"] == "/odom" and x_of(odom["msg"]) == ROOM.start.x
+
+
 def test_the_room_state_gives_the_billboards_of_the_tokens_room(guarded: RunningServer) -> None:
     headers = {"Authorization": f"Bearer {token('diff-h', 'client')}"}
     reply = httpx.get(guarded.url + "/room/state", headers=headers, timeout=WAIT_S)
