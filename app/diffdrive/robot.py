@@ -17,11 +17,16 @@ from dataclasses import dataclass
 from typing import Final
 
 from app.protocol.angles import wrap_angle
+from app.protocol.robot import PRESETS, Robot
 
+# The robot as its description tells the agent and the vehicle page of it: its topics, its
+# camera's field of view, its top speeds.
+DESCRIPTION: Final[Robot] = PRESETS["diffdrive"]
+assert DESCRIPTION.camera is not None, "the simulated robot has its camera"
 # The robot's camera: its horizontal field of view, and the height of the mast it sits on,
 # looking level -- a face at head height is in view from about a metre away (a camera at a
 # TurtleBot's 0.2 m would see only legs up close).
-CAMERA_HFOV: Final = math.radians(60.0)
+CAMERA_HFOV: Final = math.radians(DESCRIPTION.camera.hfov_deg)
 CAMERA_HEIGHT_M: Final = 1.3
 # Below this turn rate a tick's arc is taken as a straight line (the arc's formula divides by it).
 _STRAIGHT_RAD_S: Final = 1e-9
@@ -65,11 +70,14 @@ class DiffDrive:
 
     def cmd_vel(self, linear_x: float, angular_z: float) -> None:
         """Drive at ``linear_x`` m/s and ``angular_z`` rad/s until the next command or the
-        timeout; ``ValueError`` for a velocity that is not finite."""
+        timeout, each capped at the robot's top speed (as a real base's driver caps them);
+        ``ValueError`` for a velocity that is not finite."""
         for label, value in (("linear.x", linear_x), ("angular.z", angular_z)):
             if not math.isfinite(value):
                 raise ValueError(f"{label} must be finite, got {value}")
-        self.linear, self.angular = float(linear_x), float(angular_z)
+        limits = DESCRIPTION.limits
+        self.linear = min(max(float(linear_x), -limits.max_linear), limits.max_linear)
+        self.angular = min(max(float(angular_z), -limits.max_angular), limits.max_angular)
         self._last_command = self._clock()
 
     def step(self) -> None:

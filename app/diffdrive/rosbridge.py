@@ -17,14 +17,15 @@ from collections.abc import Callable
 from typing import Any, Final, Literal
 
 from app.diffdrive import messages
+from app.diffdrive.robot import DESCRIPTION
 from app.diffdrive.sim import RoomSim
 from app.protocol.ros import RosFlavour
+from app.rosbridge.hosted import Versioned
+from app.rosbridge.messages import Twist
 from app.rosbridge.protocol import (
     MAX_QUEUE_LENGTH,
     Hub,
     ProtocolError,
-    Twist,
-    Versioned,
     parse_payload,
 )
 from app.rosbridge.rosapi import RosGraph
@@ -32,11 +33,12 @@ from app.rosbridge.rosapi import RosGraph
 Json = dict[str, Any]
 Leaf = Literal["cmd_vel", "odom", "camera"]
 
-# The robot's topics by what they are, named as a TurtleBot names them.
+# The robot's topics by what they are, as its description names them (a TurtleBot's names).
+assert DESCRIPTION.camera is not None
 TOPICS: Final[dict[Leaf, str]] = {
-    "cmd_vel": "/cmd_vel",
-    "odom": "/odom",
-    "camera": "/camera/image/compressed",
+    "cmd_vel": DESCRIPTION.velocity.topic,
+    "odom": DESCRIPTION.pose.topic,
+    "camera": DESCRIPTION.camera.topic,
 }
 NODE: Final = "/diffdrive"
 

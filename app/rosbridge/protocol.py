@@ -20,7 +20,9 @@ reason in ``values``. A request that is well formed but cannot be served gets a 
 after the client's ``set_level``, since current rosbridge_suite sends none; a frame that is no
 rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
 always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
-answered by :class:`app.rosbridge.rosapi.RosGraph`.
+answered by :class:`app.rosbridge.rosapi.RosGraph`. Besides the robot's own topics, every hub
+carries topics of the types a robot description names between its clients
+(:mod:`app.rosbridge.hosted`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from pydantic import (
 from app.protocol import jsonedge
 from app.protocol.errors import describe
 from app.protocol.ros import RosTypes, spellings
+from app.rosbridge.hosted import HostedTopic, HostedTopics, HostingError, Versioned
 from app.rosbridge.rosapi import RosapiError, RosGraph
 
 log = logging.getLogger(__name__)
@@ -220,26 +223,6 @@ def status(level: str, text: str, op_id: object = None) -> Json:
 # -- message payloads ---------------------------------------------------------------------------
 
 
-class _Payload(BaseModel):
-    # Unknown fields are an error, as in rosbridge; numbers must be finite JSON numbers.
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
-
-class Vector3(_Payload):
-    """``geometry_msgs/Vector3``; missing fields default to 0 as rosbridge fills them."""
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-
-
-class Twist(_Payload):
-    """``geometry_msgs/Twist``."""
-
-    linear: Vector3 = Field(default_factory=Vector3)
-    angular: Vector3 = Field(default_factory=Vector3)
-
-
 def parse_payload(model: type[_Model], data: object, what: str = "") -> _Model:
     """Validate ``data``; a ``ProtocolError`` names every bad field, prefixed by ``what``."""
     try:
@@ -250,9 +233,6 @@ def parse_payload(model: type[_Model], data: object, what: str = "") -> _Model:
 
 
 # -- subscriptions ---------------------------------------------------------------------------
-
-
-Versioned = tuple[int, Json]  # a message with its topic's version: newer ones are larger
 
 
 @dataclass
@@ -380,7 +360,7 @@ class RosbridgeSession:
             room = int(self._allowance) - len(out)
             if room < 1:
                 break
-            sub.take(now, self._hub.newer(sub.topic, sub.seen), room, out)
+            sub.take(now, self._hub.topic_messages(sub.topic, sub.seen), room, out)
             served += 1
         self._turn = first + served
         self._allowance -= len(out)
@@ -388,6 +368,11 @@ class RosbridgeSession:
 
     def close(self) -> None:
         """Forget this client's subscriptions and advertisements."""
+        for name, sub in self._subscriptions.items():
+            self._release(sub.topic, "subscribe", name)
+        for name in self._advertised:
+            if (hosted := self._hub.hosted.find(name)) is not None:
+                self._release(hosted, "advertise", name)
         self._subscriptions.clear()
         self._advertised.clear()
         self._hub.sessions.discard(self)
@@ -407,11 +392,11 @@ class RosbridgeSession:
     # -- ops ----------------------------------------------------------------------------
 
     def _advertise(self, msg: Advertise) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        if self._hub.robot_publishes(topic):
-            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         if msg.topic not in self._advertised and len(self._advertised) >= MAX_ADVERTISEMENTS:
             raise ProtocolError(f"at most {MAX_ADVERTISEMENTS} advertisements per client")
+        topic = self._typed_topic(msg.topic, msg.type, "advertise")
+        if not isinstance(topic, HostedTopic) and self._hub.robot_publishes(topic):
+            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         self._advertised.add(msg.topic)
         return []
 
@@ -419,9 +404,19 @@ class RosbridgeSession:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
+        if (hosted := self._hub.hosted.find(msg.topic)) is not None:
+            self._release(hosted, "advertise", msg.topic)
         return []
 
     def _publish(self, msg: Publish) -> list[Json]:
+        hosted = self._hub.hosted.find(msg.topic)
+        if hosted is not None:
+            # Another robot's topic: checked against its type, then kept for its subscribers.
+            try:
+                self._hub.hosted.publish(hosted, msg.msg)
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
+            return []
         topic = self._hub.resolve(msg.topic)
         if self._hub.robot_publishes(topic):
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -429,14 +424,15 @@ class RosbridgeSession:
         return []
 
     def _subscribe(self, msg: Subscribe) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        self._hub.check_subscribe(topic, msg.topic)
         sub = self._subscriptions.get(msg.topic)
         known = sub is not None and msg.id in sub.by_id
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
+        topic = self._typed_topic(msg.topic, msg.type, "subscribe")
+        if not isinstance(topic, HostedTopic):
+            self._hub.check_subscribe(topic, msg.topic)
         if sub is None:
-            sub = _Subscription(msg.topic, topic, seen=self._hub.version(topic))
+            sub = _Subscription(msg.topic, topic, seen=self._hub.topic_version(topic))
             self._subscriptions[msg.topic] = sub
         sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
         return []
@@ -451,6 +447,7 @@ class RosbridgeSession:
             del sub.by_id[msg.id]
         if not sub.by_id:
             del self._subscriptions[msg.topic]
+            self._release(sub.topic, "subscribe", msg.topic)
         return []
 
     def _call_service(self, msg: CallService) -> list[Json]:
@@ -473,21 +470,33 @@ class RosbridgeSession:
 
     # -- helpers ------------------------------------------------------------------------
 
-    def _typed_topic(self, name: str, type_name: str | None) -> Hashable:
+    def _typed_topic(self, name: str, type_name: str | None, op: str) -> Hashable:
+        """The robot's topic ``name``, its type checked, or else a topic hosted for the clients
+        (claimed for this session's ``op`` until it lets go of it)."""
         try:
             topic: Hashable = self._hub.resolve(name)
-        except ProtocolError:
+        except ProtocolError as unknown:
             absolute = name if name.startswith("/") else f"/{name}"
-            if absolute in self._hub.graph.topics():
+            hosted = self._hub.hosted
+            if absolute in self._hub.graph.topics() and hosted.find(absolute) is None:
                 raise ProtocolError(
                     f"{name} is on a real robot's graph, but this simulator publishes nothing "
                     "on it and takes nothing from it"
                 ) from None
-            raise
+            try:
+                return hosted.claim(name, type_name, (self, op, name))
+            except HostingError as exc:
+                # Both reasons: what the robot has, and why no client's topic is there.
+                why = str(exc).removeprefix(f"unknown topic {absolute!r}: ")
+                raise ProtocolError(f"{unknown}; {why}") from None
         canonical = self._hub.topic_type(topic)
         if type_name is not None and type_name not in spellings(self._hub.types.flavour, canonical):
             raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
+
+    def _release(self, topic: Hashable, op: str, name: str) -> None:
+        if isinstance(topic, HostedTopic):
+            self._hub.hosted.release(topic, (self, op, name))
 
     def _run_service(self, msg: CallService) -> Json:
         name = service_path(msg.service)
@@ -519,6 +528,8 @@ class Hub(ABC, Generic[K]):
     def __init__(self, graph: RosGraph) -> None:
         self.graph = graph
         self.types: RosTypes = graph.types
+        self.hosted = HostedTopics(graph.flavour, MAX_QUEUE_LENGTH)
+        graph.hosted = self.hosted.types
         self.sessions: set[RosbridgeSession] = set()
         # The time of the last tick (throttles are measured in it) and how many there were.
         self.now = 0.0
@@ -538,6 +549,18 @@ class Hub(ABC, Generic[K]):
         """
         self.now = now
         self.ticks += 1
+
+    def topic_version(self, topic: K | HostedTopic) -> int:
+        """The current version of a robot's topic or a hosted one."""
+        if isinstance(topic, HostedTopic):
+            return self.hosted.version()
+        return self.version(topic)
+
+    def topic_messages(self, topic: K | HostedTopic, seen: int) -> list[Versioned]:
+        """The messages of a robot's topic or a hosted one newer than version ``seen``."""
+        if isinstance(topic, HostedTopic):
+            return self.hosted.newer(topic, seen)
+        return self.newer(topic, seen)
 
     def subscribed(self, topic: K) -> bool:
         """Whether any session subscribes to ``topic``."""

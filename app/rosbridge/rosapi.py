@@ -158,7 +158,8 @@ def full_text(type_name: str) -> str:
                 walk(used)
 
     walk(short)
-    return definitions[short] + "".join(
+    # A hosted topic's type (a robot's, app/rosbridge/hosted.py) may not be described here.
+    return definitions.get(short, "") + "".join(
         f"\n{_SEPARATOR}\nMSG: {used}\n{definitions[used]}" for used in met
     )
 
@@ -248,6 +249,9 @@ class RosGraph:
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.node = node
+        # The topics the rosbridge carries for its clients (app/rosbridge/hosted.py) and their
+        # types: on the graph while they are hosted (its hub sets this).
+        self.hosted: Callable[[], dict[str, str]] = dict
         self.flavour: RosFlavour = flavour
         self.types: RosTypes = TYPES[flavour]
         self._wall_clock = wall_clock
@@ -287,7 +291,7 @@ class RosGraph:
         else:
             found["/parameter_events"] = t.parameter_event
         found |= self.node.publishes(self) | self.node.subscribes(self)
-        return dict(sorted(found.items()))
+        return dict(sorted((self.hosted() | found).items()))
 
     def services(self) -> dict[str, str]:
         """Every service and its type, sorted by name."""

@@ -20,13 +20,12 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, StrictInt, StrictStr, field_validator
 
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
+from app.rosbridge.hosted import Versioned
+from app.rosbridge.messages import Payload, Twist
 from app.rosbridge.protocol import (
     MAX_QUEUE_LENGTH,
     Hub,
     ProtocolError,
-    Twist,
-    Versioned,
-    _Payload,
     parse_payload,
 )
 from app.rosbridge.rosapi import RosGraph
@@ -42,7 +41,7 @@ _TURTLE_SERVICE_RE = re.compile(r"/?(?P<turtle>[A-Za-z][A-Za-z0-9_]*)/(?P<leaf>[
 # -- service payloads ------------------------------------------------------------------------
 
 
-class SpawnArgs(_Payload):
+class SpawnArgs(Payload):
     """``turtlesim/Spawn`` request."""
 
     x: float = 0.0
@@ -51,17 +50,17 @@ class SpawnArgs(_Payload):
     name: StrictStr = ""
 
 
-class KillArgs(_Payload):
+class KillArgs(Payload):
     """``turtlesim/Kill`` request."""
 
     name: StrictStr = ""
 
 
-class EmptyArgs(_Payload):
+class EmptyArgs(Payload):
     """``std_srvs/Empty`` request."""
 
 
-class TeleportAbsoluteArgs(_Payload):
+class TeleportAbsoluteArgs(Payload):
     """``turtlesim/TeleportAbsolute`` request."""
 
     x: float = 0.0
@@ -69,7 +68,7 @@ class TeleportAbsoluteArgs(_Payload):
     theta: float = 0.0
 
 
-class TeleportRelativeArgs(_Payload):
+class TeleportRelativeArgs(Payload):
     """``turtlesim/TeleportRelative`` request."""
 
     linear: float = 0.0
@@ -79,7 +78,7 @@ class TeleportRelativeArgs(_Payload):
 Uint8 = Annotated[StrictInt, Field(ge=0, le=255)]
 
 
-class SetPenArgs(_Payload):
+class SetPenArgs(Payload):
     """``turtlesim/SetPen`` request (``off`` is a uint8 in the .srv; a bool is accepted too)."""
 
     r: Uint8 = 0

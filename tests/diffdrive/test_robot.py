@@ -154,3 +154,22 @@ def test_the_step_is_a_fixed_tick_whatever_the_wall_time(clock: Clock) -> None:
     clock.now += 0.5  # a late tick still moves one tick's worth
     robot.step()
     assert robot.state().x == pytest.approx(4.0 + 0.25 * TICK)
+
+
+@pytest.mark.parametrize(("linear", "angular"), [(5.0, 10.0), (-5.0, -10.0)])
+def test_speeds_are_capped_at_the_robots_top_speeds(
+    clock: Clock, linear: float, angular: float
+) -> None:
+    """The diffdrive description's top speeds: 1 m/s and 3 rad/s, either way."""
+    robot = robot_at(clock)
+    robot.cmd_vel(linear, angular)
+    state = robot.state()
+    assert (state.linear, state.angular) == (
+        math.copysign(1.0, linear),
+        math.copysign(3.0, angular),
+    )
+    robot.cmd_vel(0.0, 0.0)
+    drive(robot, clock, 0.5)
+    robot.cmd_vel(linear, 0.0)
+    drive(robot, clock, 0.48)  # 30 ticks
+    assert robot.state().x == pytest.approx(4.0 + math.copysign(0.48, linear))
