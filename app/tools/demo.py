@@ -31,7 +31,7 @@ from app.protocol import tokens
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
-from app.server.config import Settings, describe_settings_error
+from app.server.config import Settings, SimulatedRobot, describe_settings_error
 from app.server.serve import (
     ANY_ADDRESS,
     RunningServer,
@@ -103,10 +103,12 @@ def children_for(
     ca_file: Path | None = None,
     video: str = DEMO_VIDEOS[0],
     vehicle_args: Sequence[str] = (),
+    robot: SimulatedRobot = "turtlesim",
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the
-    agent as they are (the flight recorder's options)."""
+    agent as they are (the flight recorder's options). The agent drives the server's ``robot``
+    (its description's topics and limits)."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
     common = ["--server", base_url, "--room", room]
@@ -152,6 +154,8 @@ def children_for(
                 video,
                 "--rosbridge",
                 rosbridge,
+                "--robot",
+                robot,
                 *vehicle_args,
             ],
             token_env("vehicle"),
@@ -273,6 +277,7 @@ async def _main(
         ca_file,
         args.video,
         recorder.arguments_of(args),
+        settings.robot,
     )
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
     token = None
