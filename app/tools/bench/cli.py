@@ -126,6 +126,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f" {QUICK['frames']:g})",
     )
     parser.add_argument(
+        "--camera",
+        action="store_true",
+        help="measure the simulated robot's camera instead: render and JPEG encode per frame,"
+        " the room against the empty room (camera.md)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -153,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
         return fleet.run(args)
     if args.field:
         return _field(args)
+    if args.camera:
+        return _camera(args)
     if _can_enter_netns():
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
@@ -192,6 +200,18 @@ def _field(args: argparse.Namespace) -> int:
     if unmeasured:
         log.error("not all measured (reasons in %s)", args.out / "field.md")
         return 1
+    return 0
+
+
+def _camera(args: argparse.Namespace) -> int:
+    """The simulated camera's cost: no network, so no namespace."""
+    from app.tools.bench import camera  # OpenCV's renderer, which no other bench needs
+
+    frames = camera.QUICK_FRAMES if args.quick else camera.FULL_FRAMES
+    obj = camera.run(args.out, frames, args.fps)
+    log.info("camera report: %s", args.out / "camera.md")
+    if args.json:
+        sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     return 0
 
 

@@ -7,6 +7,8 @@ import { LockPanel } from '../view/lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
+import { pollRoomState } from '../net/room-state.js';
+import { RoomView } from '../view/roomview.js';
 import { TurtleView } from '../view/turtleview.js';
 import {
   button,
@@ -31,7 +33,13 @@ const video = byTestId('video');
 const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
-const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
+// The simulated room when the server has one (`autopilot serve --robot diffdrive`), else
+// turtlesim's terrain.
+const map = config.roomMap;
+const mapView =
+  map === null
+    ? new TurtleView(byTestId('turtle-view'), law.worldSize)
+    : new RoomView(byTestId('turtle-view'), map);
 // Vehicle capture → presentation here, frame by frame (view/glass-view.js).
 const glassView = new GlassView({
   video,
@@ -67,6 +75,10 @@ const status = {
   mode: null, // the relay's last mode: {mode: 'auto'|'manual', operator, reason}
   get drivesSent() {
     return driveInput.sent;
+  },
+  // The simulated room's billboards where the map draws them ({name: {x, y, yaw}}), or null.
+  get billboards() {
+    return map === null ? null : mapView.placed;
   },
 };
 window.autopilotStatus = status;
@@ -175,8 +187,9 @@ function onDetections(msg) {
   Object.assign(view, { boxes: drawDetections(overlay, msg), w: msg.w, h: msg.h });
   session.recentMs.push(msg.ms);
   if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
-  const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
-  turtleView.setTarget(target);
+  // A goal pixel is a place on turtlesim's terrain only: the fixed camera watches it.
+  const fixed = map === null && msg.target;
+  mapView.setTarget(fixed ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null);
   showFigures();
 }
 
@@ -185,8 +198,8 @@ function onPose(msg) {
   status.pose = pose;
   if (msg.goalAgeMs !== undefined) health.goalAgeMs = msg.goalAgeMs;
   status.poses += 1;
-  turtleView.addPose(pose);
-  status.routeM = turtleView.routeLength;
+  mapView.addPose(pose);
+  status.routeM = mapView.routeLength;
   showFigures();
 }
 
@@ -308,7 +321,7 @@ function median(values) {
 
 function clearDetections() {
   Object.assign(view, { boxes: drawDetections(overlay, null), w: null, h: null });
-  turtleView.setTarget(null);
+  mapView.setTarget(null);
 }
 
 // ---------------------------------------------------------------- connection to the relay
@@ -484,4 +497,17 @@ link.addEventListener('lost', () => {
 link.addEventListener('peer', showState);
 updateControls();
 showState();
+if (map !== null) {
+  const canvas = byTestId('turtle-view');
+  canvas.setAttribute('aria-label', 'Room map');
+  canvas.closest('section').setAttribute('aria-label', 'Room');
+  pollRoomState({
+    path: map.statePath,
+    periodMs: map.statePeriodMs,
+    room: () => room.room ?? config.room,
+    token: () => config.token,
+    onState: (state) => mapView.setBillboards(state.billboards),
+    onError: (reason) => log.error(`the room's state: ${reason}`),
+  });
+}
 if (config.auto) room.autoJoin();
