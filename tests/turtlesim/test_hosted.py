@@ -1,4 +1,4 @@
-"""The rosbridge hub carries other robots' topics between its clients (app/turtlesim/hosted.py):
+"""The rosbridge hub carries other robots' topics between its clients (app/rosbridge/hosted.py):
 the types of a robot description only, each message checked against its topic's type."""
 
 from __future__ import annotations
@@ -8,8 +8,9 @@ from typing import Any
 
 import pytest
 
-from app.turtlesim.hosted import MAX_HOSTED_TOPICS
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.rosbridge.hosted import MAX_HOSTED_TOPICS
+from app.rosbridge.protocol import RosbridgeSession
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import TurtleSim
 
 

@@ -1,15 +1,16 @@
 """Topics the simulator does not own, carried between the rosbridge's clients, without any I/O.
 
-A real rosbridge carries any topic of its robot's graph; this one simulates a turtlesim, and
-besides its turtles' topics it hosts the topics of the message types a robot description names
-(:mod:`app.protocol.robot`: ``Twist``, ``TwistStamped``, ``Odometry``, ``CompressedImage``,
-``Image``), so that a test or a stand-in can play a robot that is not a turtle -- publish its
-``/odom``, read the agent's ``/cmd_vel`` -- through the very endpoint a vehicle drives.
+A real rosbridge carries any topic of its robot's graph; this one simulates a robot (turtlesim,
+or the diffdrive robot in its room), and besides that robot's own topics it hosts the topics of
+the message types a robot description names (:mod:`app.protocol.robot`: ``Twist``,
+``TwistStamped``, ``Odometry``, ``CompressedImage``, ``Image``), so that a test or a stand-in can
+play another robot -- publish its ``/odom``, read the agent's ``/cmd_vel`` -- through the very
+endpoint a vehicle drives.
 
 A topic is hosted from the first ``advertise`` or typed ``subscribe`` that names it with one of
 those types (in the served flavour's spelling) until no client advertises or subscribes to it
 any more; its type is the one it was first given. Every message published on it is checked
-against that type (:mod:`app.turtlesim.messages`) and kept, the latest few of each topic with
+against that type (:mod:`app.rosbridge.messages`) and kept, the latest few of each topic with
 a version number, for its subscribers to take (the rosbridge's sessions pull what is newer than
 what they had). Any other type, or an untyped subscribe to a topic nobody hosts, is refused as
 an unknown topic.
@@ -26,7 +27,7 @@ from pydantic import ValidationError
 
 from app.protocol.errors import describe
 from app.protocol.ros import RosFlavour, canonical, spell, spellings
-from app.turtlesim.messages import MODELS
+from app.rosbridge.messages import MODELS
 
 # At most this many hosted topics at once (each costs a dict entry, its kept messages and its
 # subscribers' work).
