@@ -347,17 +347,22 @@ def figures(
         found["standoff_err_m_p50"] = round(signed.p50, 3)
         found["standoff_abs_err_m_p50"] = round(unsigned.p50, 3)
     back = reacquisitions(track, hfov)
-    missed = [r for r in back if r.after_s is None]
+    longest = max((r.after_s for r in back if r.after_s is not None), default=None)
+    # A departure the run ended on lasted at least until the end: it changes the longest only
+    # when it had already lasted longer.
+    missed = [
+        r for r in back if r.after_s is None and (longest is None or end - r.left_at > longest)
+    ]
     if not back:
         problems["reacquire_s"] = "the walker never left the view while measuring"
     elif missed:
         problems["reacquire_s"] = (
             f"the walker left the view by the {missed[0].side} at"
             f" {missed[0].left_at - start:.1f} s and was not back within {ACQUIRED_DEG:g}°"
-            " before the run ended"
+            f" in the {end - missed[0].left_at:.1f} s before the run ended"
         )
     else:
-        found["reacquire_s"] = round(max(r.after_s or 0.0 for r in back), 2)
+        found["reacquire_s"] = round(longest or 0.0, 2)
     latency = summarize(glass_to_command_ms(frames, commands))
     if latency is None:
         problems["frame_to_twist_ms_p50"] = "no Twist named a frame the camera tagged"

@@ -50,6 +50,22 @@ def test_the_figures_of_a_hand_made_run(tmp_path: Path) -> None:
     assert found["searches"] == [[2.3, "searching left"], [4.5, "search found"]]
 
 
+def test_a_departure_the_run_ended_on_counts_only_when_it_outlasted_the_longest(
+    tmp_path: Path,
+) -> None:
+    # Out of view from 1.0 to 3.0 (back after 2 s), and again from 4.5 to the end at 5.0:
+    # at least 0.5 s, shorter than 2 s, so the longest is 2 s.
+    def walker(t: float) -> tuple[float, float]:
+        return (1.0, 1.0) if 1.0 <= t < 3.0 or t >= 4.5 else (2.5, 3.0)
+
+    log = [ev.PoseReport(x=1.0, y=3.0, theta=0.0, sent=True, t=k / 10) for k in range(51)]
+    path = tmp_path / "events.jsonl"
+    path.write_text("".join(event_line(e) + "\n" for e in log))
+    found = onboard.figures(path, (0.0, 5.0), walker, math.radians(60))
+    assert found["reacquire_s"] == pytest.approx(2.0)
+    assert [r["after_s"] for r in found["reacquisitions"]] == [pytest.approx(2.0), None]
+
+
 def test_a_walker_never_back_leaves_reacquire_missing_with_the_reason(tmp_path: Path) -> None:
     log = [ev.PoseReport(x=1.0, y=3.0, theta=0.0, sent=True, t=k / 10) for k in range(31)]
     path = tmp_path / "events.jsonl"
@@ -59,7 +75,7 @@ def test_a_walker_never_back_leaves_reacquire_missing_with_the_reason(tmp_path: 
     )
     assert "reacquire_s" not in found
     assert found["problems"]["reacquire_s"] == (
-        "the walker left the view by the right at 1.0 s and was not back within 5° before the"
-        " run ended"
+        "the walker left the view by the right at 1.0 s and was not back within 5° in the 2.0 s"
+        " before the run ended"
     )
     assert "no Twist" in found["problems"]["frame_to_twist_ms_p50"]
