@@ -10,7 +10,7 @@ import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from aiortc import RTCIceServer
+from aiortc import MediaStreamTrack, RTCIceServer
 
 from app.arguments import (
     add_token_option,
@@ -28,6 +28,8 @@ from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.metrics import serve_agent_metrics
+from vehicle_agent.rosbridge_client import CBOR, NONE
+from vehicle_agent.roscamera import CameraError, RosCamera, topic_of
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
@@ -62,13 +64,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="synthetic",
         metavar="SOURCE",
         help="'synthetic' (a moving face with frame tags), 'two-faces' (two faces drifting, to"
-        " try the target lock), a video file (looped) or /dev/videoN",
+        " try the target lock), a video file (looped), /dev/videoN, or ros:TOPIC (the robot's"
+        " camera topic through --rosbridge: sensor_msgs/CompressedImage or Image)",
     )
     parser.add_argument(
         "--size",
         type=_size,
         metavar="WxH",
-        help="frame size (synthetic: {}x{}; files, devices: their own)".format(*VIDEO_SIZE),
+        help="frame size (synthetic, ros: {}x{}; files, devices: their own)".format(*VIDEO_SIZE),
     )
     parser.add_argument(
         "--fps", type=positive_number, help=f"frame rate (default {VIDEO_FPS:g}, or the file's)"
@@ -84,6 +87,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--rosbridge",
         metavar="URL",
         help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
+    )
+    parser.add_argument(
+        "--camera-compression",
+        choices=(CBOR, NONE),
+        default=CBOR,
+        help="ros: ask rosbridge for the camera's messages in CBOR (binary frames; the default,"
+        " JSON where the server has no CBOR) or none (JSON with the image in base64)",
     )
     parser.add_argument(
         "--ros",
@@ -161,13 +171,31 @@ def run(args: argparse.Namespace) -> int:
 async def _main(args: argparse.Namespace) -> int:
     ws_url(args.server)  # a malformed URL is reported before anything starts
     events = EventLog(args.events)
-    video = open_source(
-        args.video,
-        args.size,
-        args.fps,
-        on_frame=events.emit,
-        sweep_s=args.sweep_s,
-    )
+    camera_topic = topic_of(args.video)
+    video: MediaStreamTrack
+    if camera_topic is None:
+        video = open_source(
+            args.video,
+            args.size,
+            args.fps,
+            on_frame=events.emit,
+            sweep_s=args.sweep_s,
+        )
+    else:
+        if not args.rosbridge:
+            raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
+        ros_camera = RosCamera(
+            args.rosbridge,
+            camera_topic,
+            size=args.size or VIDEO_SIZE,
+            fps=args.fps or VIDEO_FPS,
+            token=args.token if same_server(args.server, args.rosbridge) else None,
+            tls=tls_context(args.ca_file),
+            compression=args.camera_compression,
+            on_frame=events.emit,
+        )
+        await ros_camera.start()
+        video = ros_camera
     turtle: Turtle = SimTurtle()
     if args.rosbridge:
         token = args.token if same_server(args.server, args.rosbridge) else None
