@@ -87,8 +87,9 @@ OpenRole = Callable[..., Page]
 @pytest.fixture
 def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator[OpenRole]:
     """``open_role(role, browser, **query)`` opens a role page in its own browser context;
-    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say), and
-    ``device`` sets the context's options (a phone's viewport and touch screen, say).
+    ``init_script`` runs in it before the page's own scripts (a stubbed browser API, say),
+    ``device`` sets the context's options (a phone's viewport and touch screen, say), and
+    ``token`` goes in the URL's fragment (``#token=...``), as ``autopilot token`` prints it.
 
     At teardown each page's screenshot and console log go to ``artifacts/<test>/``.
     """
@@ -99,6 +100,7 @@ def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator
         browser: Browser,
         init_script: str | None = None,
         device: Mapping[str, Any] | None = None,
+        token: str | None = None,
         **query: str,
     ) -> Page:
         context = browser.new_context(
@@ -119,7 +121,8 @@ def open_role(request: pytest.FixtureRequest, server: RunningServer) -> Iterator
         page.on("worker", lambda worker: worker.on("console", keep))
         page.on("pageerror", lambda error: entry.console.append(f"pageerror: {error}"))
         opened.append(entry)
-        page.goto(f"{server.url}/{role}?{urlencode(query)}")
+        fragment = "" if token is None else f"#token={token}"
+        page.goto(f"{server.url}/{role}?{urlencode(query)}{fragment}")
         return page
 
     yield open_page

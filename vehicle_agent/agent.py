@@ -3,7 +3,9 @@
 One :class:`Agent` runs until cancelled. It logs in as a vehicle, waits for a relay in the room,
 offers to it and keeps that link alive: when the relay leaves, the link fails or the signaling
 server goes away, the turtle gets a zero Twist and the agent reconnects with backoff, without
-restarting. Everything that happens is dispatched from one queue, one handler per event kind.
+restarting. With a token it renews its session when the server says (``renew``), before the
+token expires, and uses the fresh token from then on: for a later login, and on the server's
+``/rosbridge``. Everything that happens is dispatched from one queue, one handler per event kind.
 
 What to do with the relay's goals, stops, mode changes and drive commands, the turtle's poses
 and the clock is the :class:`~vehicle_agent.pilot.Pilot`'s to decide; the agent feeds it (with
@@ -23,13 +25,16 @@ from typing import Any
 
 from aiortc import MediaStreamTrack, RTCIceServer
 from aiortc.contrib.media import MediaRelay
+from pydantic import ValidationError
 
 from app.protocol import channels, jsonedge
 from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
 from app.protocol.control import with_standoff
+from app.protocol.errors import describe
 from app.protocol.events import PilotEvent
 from app.protocol.rooms import DEFAULT_ROOM
+from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
@@ -95,6 +100,9 @@ class Agent:
         self._link: RelayLink | None = None
         self._relay: str | None = None
         self._client: SignalingClient | None = None
+        # The session's token as last renewed (the next login uses it), and the renewal's timer.
+        self.token = config.token
+        self._renewal: asyncio.TimerHandle | None = None
         self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
@@ -106,6 +114,7 @@ class Agent:
             "answer": self._on_answer,
             "candidate": self._on_candidate,
             "leave": self._on_leave,
+            "renewed": self._on_renewed,
             "error": self._on_server_error,
         }
         # What the session loop's queue carries (besides "closed", which ends the session).
@@ -113,6 +122,7 @@ class Agent:
             "signal": self._on_signal,
             "link_down": self._on_link_event,
             "retry": self._on_retry,
+            "renew": self._on_renew,
         }
         # One handler per message the vehicle accepts on `autopilot` (channels.RECEIVERS).
         self._channel_handlers: dict[type[channels.ChannelMessage], ChannelHandler] = {
@@ -162,7 +172,7 @@ class Agent:
                 self.config.server,
                 self.config.name,
                 self.config.room,
-                token=self.config.token,
+                token=self.token,
                 tls=self.config.tls,
             )
             try:
@@ -198,6 +208,7 @@ class Agent:
     async def _session(self, client: SignalingClient, peers: list[dict[str, Any]]) -> None:
         self._queue = asyncio.Queue()
         reader = asyncio.create_task(self._read(client), name="signaling-reader")
+        self._renew_after(client.renew_in)
         try:
             await self._on_peers({"peers": peers})
             while True:
@@ -211,6 +222,33 @@ class Agent:
             if self._retry is not None:
                 self._retry.cancel()
                 self._retry = None
+            if self._renewal is not None:
+                self._renewal.cancel()
+                self._renewal = None
+
+    def _renew_after(self, seconds: float | None) -> None:
+        """Ask for a fresh token in ``seconds`` (None: the server asks for no tokens)."""
+        if seconds is None:
+            return
+        queue = self._queue
+        loop = asyncio.get_running_loop()
+        self._renewal = loop.call_later(seconds, queue.put_nowait, ("renew", None))
+
+    async def _on_renew(self, payload: None) -> None:
+        self._renewal = None
+        if self._client is not None:
+            await self._client.send(Renew(type="renew").model_dump(exclude_none=True))
+
+    async def _on_renewed(self, message: dict[str, Any]) -> None:
+        try:
+            renewed = Renewed.model_validate(message)
+        except ValidationError as exc:
+            log.warning("malformed renewal from the server: %s", describe(exc))
+            return
+        self.token = renewed.token
+        self.turtle.renew(renewed.token)
+        log.debug("token renewed; next renewal in %.0f s", renewed.renewIn)
+        self._renew_after(renewed.renewIn)
 
     async def _on_signal(self, message: dict[str, Any]) -> None:
         handler = self._handlers.get(message["type"])

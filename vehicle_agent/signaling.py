@@ -1,4 +1,8 @@
-"""WebSocket client for the signaling server (DESIGN §2), as a vehicle."""
+"""WebSocket client for the signaling server (docs/contracts.md), as a vehicle.
+
+The login reply says when to renew the session's token (``renew_in``); the agent sends ``renew``
+then and takes the fresh token from the ``renewed`` answer (:mod:`vehicle_agent.agent`).
+"""
 
 from __future__ import annotations
 
@@ -62,9 +66,11 @@ class SignalingClient:
         self.tls = tls if self.url.startswith("wss:") else None
         self._ws: ClientConnection | None = None
         # From the login reply: the ICE servers (TURN credentials minted for this login) and
-        # the transport policy every new peer connection uses.
+        # the transport policy every new peer connection uses ...
         self.ice_servers: list[IceServer] = []
         self.ice_transport_policy: IceTransportPolicy = "all"
+        # ... and how soon to renew the token (None: the server asks for no tokens).
+        self.renew_in: float | None = None
 
     async def connect(self) -> list[Message]:
         """Open the socket and log in; returns the room's roster (``[{name, role}]``)."""
@@ -103,6 +109,7 @@ class SignalingClient:
             raise SignalingError(f"malformed login answer from {self.url}: {exc}") from exc
         self.ice_servers = parsed.iceServers or []
         self.ice_transport_policy = parsed.iceTransportPolicy or "all"
+        self.renew_in = parsed.renewIn
         return [p.model_dump() for p in parsed.peers]
 
     async def send(self, message: Message) -> None:

@@ -62,6 +62,9 @@ class Turtle(Protocol):
     async def close(self) -> None:
         """Disconnect and stop calling ``on_pose``."""
 
+    def renew(self, token: str) -> None:
+        """The session's token was renewed: prove the fresh one where the old one was sent."""
+
 
 def twist_message(twist: Twist) -> dict[str, Any]:
     """``geometry_msgs/Twist`` as rosbridge JSON."""
@@ -105,6 +108,9 @@ class SimTurtle:
     async def teleport(self, x: float, y: float, theta: float) -> None:
         """Teleport the simulated turtle."""
         self.sim.teleport_absolute(self.name, x, y, theta)
+
+    def renew(self, token: str) -> None:
+        """Nothing to prove: the simulated turtle is in this process."""
 
     async def close(self) -> None:
         """Stop ticking."""
@@ -238,6 +244,17 @@ class RosbridgeTurtle:
             error = f"no answer within {CONNECT_TIMEOUT_S:g} s"
         if error is not None:
             raise TurtleError(f"/{self.name}/teleport_absolute failed: {error}")
+
+    def renew(self, token: str) -> None:
+        """Send the rosbridge ``auth`` op with the fresh token, if this rosbridge was given one
+        (the server's own ``/rosbridge`` ends a session whose token expires)."""
+        if self.headers is None:
+            return
+        self.headers = {"Authorization": f"Bearer {token}"}
+        if self._ros is not None:
+            self._ros.send_on_ready(roslibpy.Message({"op": "auth", "token": token}))
+            # A reconnection (roslibpy's own, after a drop) shakes hands with the fresh one.
+            self._ros.factory.headers = dict(self.headers)
 
     async def close(self) -> None:
         """Unsubscribe and disconnect (the roslibpy thread itself lives on with the process)."""

@@ -17,12 +17,12 @@ goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
+from app.protocol import jsonedge
 from app.protocol.errors import describe
 from app.protocol.rooms import Role
 
@@ -324,13 +324,12 @@ class Refused:
 
 
 def parse(text: str | bytes, label: str, role: Role) -> ChannelMessage | Refused:
-    """Parse one data-channel message received by ``role`` on channel ``label``."""
+    """Parse one data-channel message received by ``role`` on channel ``label``; whatever the
+    text holds (a 5000-digit number, NaN, deep nesting), a :class:`Refused` says why not."""
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        return Refused(f"malformed JSON: {exc.msg} at position {exc.pos}", None)
-    except (RecursionError, UnicodeDecodeError) as exc:
-        return Refused(f"malformed JSON: {exc}", None)
+        data = jsonedge.loads(text)
+    except jsonedge.JsonEdgeError as exc:
+        return Refused(str(exc), None)
     return validate(data, label, role)
 
 

@@ -7,8 +7,9 @@ the sender's name on everything it relays, whatever the peer wrote there.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, get_args
+from typing import Annotated, Any, Final, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -101,8 +102,16 @@ class GetOps(_Incoming):
     type: Literal["getOps"]
 
 
+class Renew(_Incoming):
+    """A peer keeps its session past its token's expiry: with a fresh ``token`` of its room and
+    role, or with none to be given one (:class:`Renewed`) while its current token is valid."""
+
+    type: Literal["renew"]
+    token: str | None = None
+
+
 Incoming = Annotated[
-    Login | Offer | Answer | Candidate | Leave | Start | Stop | GetOps,
+    Login | Offer | Answer | Candidate | Leave | Start | Stop | GetOps | Renew,
     Field(discriminator="type"),
 ]
 INCOMING_TYPES: frozenset[str] = frozenset(
@@ -145,6 +154,19 @@ class LoginReply(BaseModel):
     reason: str | None = None
     iceServers: list[IceServer] | None = None  # noqa: N815 (the WebRTC spelling)
     iceTransportPolicy: IceTransportPolicy | None = None  # noqa: N815
+    # Seconds until the peer should send ``renew``; None when the server asks for no tokens.
+    renewIn: float | None = None  # noqa: N815 (the pages' spelling)
+
+
+class Renewed(BaseModel):
+    """The server's answer to ``renew``: the session's token now, and when to renew it next.
+
+    The session ends when its token expires (``error`` "token expired", then close 1008).
+    """
+
+    type: Literal["renewed"] = "renewed"
+    token: str
+    renewIn: float  # noqa: N815
 
 
 class Peers(BaseModel):
@@ -171,6 +193,20 @@ class ParseError:
     ref: str | None
 
 
+# The largest frame of these types, in bytes of UTF-8: a trickled candidate is one line of a few
+# hundred bytes and the rest carry next to nothing. Peers may add fields to any message (they are
+# relayed as sent), so the frame is bounded, not only the fields the models know. Offers and
+# answers carry an SDP of tens of KB and get the socket's own limit.
+MAX_FRAME_BYTES: Final[Mapping[str, int]] = {
+    "candidate": 4096,
+    "renew": 2048,
+    "leave": 1024,
+    "start": 1024,
+    "stop": 1024,
+    "getOps": 1024,
+}
+
+
 def parse(text: str) -> Incoming | ParseError:
     """Parse one text frame into its message model, or say precisely why it is not one."""
     try:
@@ -184,6 +220,10 @@ def parse(text: str) -> Incoming | ParseError:
         return ParseError("missing or non-string field 'type'", None)
     if kind not in INCOMING_TYPES:
         return ParseError(f"unknown message type {kind!r}", kind)
+    if kind in MAX_FRAME_BYTES:
+        size, limit = len(text.encode("utf-8")), MAX_FRAME_BYTES[kind]
+        if size > limit:
+            return ParseError(f"{kind} message of {size} bytes exceeds its limit of {limit}", kind)
     try:
         return _incoming_adapter.validate_python(data)
     except ValidationError as exc:

@@ -1,31 +1,72 @@
 """Who may do what on ``/rosbridge`` and ``/turtlesim/state``, decided by room/role tokens.
 
 Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bearer`` header) and
-each text frame, and gets back whether to pass the frame on to the rosbridge session, a reply to
-send, and whether to close. A connection proves itself with its first message: the rosbridge
-``auth`` op (``{"op": "auth", "token": T}``; roslib.js's ``authenticate()`` puts it in ``mac``) or
-any op carrying a ``token`` field. A vehicle token may drive the simulator; a relay or client
-token of any room may only read (subscribe, and the ``/rosapi`` services). With no secret
-configured (development) every connection is let through.
+each frame, parsed once (:func:`app.turtlesim.rosbridge.parse_frame`), and gets back whether to
+pass the frame on to the rosbridge session, a reply to send, and whether to close. A connection
+proves itself with its first message: the rosbridge ``auth`` op (``{"op": "auth", "token": T}``;
+roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field. The
+connection ends when its token expires (status error, close 1008 "token expired") unless it sends
+``auth`` again with a fresh token before then.
+
+What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token (of any room:
+the simulator is one for the whole server) drives; a relay or client token only reads -- it may
+subscribe and call rosapi's reading services, and nothing that publishes, changes the simulator
+or sets a parameter. With no secret configured (development) every connection is let through.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
-from app.protocol.rooms import Role
-from app.protocol.tokens import Claims, TokenError
+from app.protocol.tokens import Claims, TokenError, TokenRole
+from app.turtlesim.rosapi import ROSAPI_READS
+from app.turtlesim.rosbridge import (
+    OPS,
+    Auth,
+    CallService,
+    Operation,
+    Refused,
+    service_path,
+    status,
+)
 
-# Ops that only read the simulator; everything else (publish, advertise, services) changes it.
-READ_ONLY_OPS = frozenset({"subscribe", "unsubscribe", "set_level"})
-READ_ONLY_SERVICE_PREFIX = "/rosapi/"
-DRIVING_ROLES: tuple[Role, ...] = ("vehicle",)
+
+@dataclass(frozen=True)
+class Rights:
+    """What a token's role may do on ``/rosbridge``: these ops, and ``call_service`` on these
+    services (named as :func:`~app.turtlesim.rosbridge.service_path` names them; None: any)."""
+
+    ops: frozenset[str]
+    services: frozenset[str] | None
+
+    def allows(self, operation: Operation) -> bool:
+        """True when ``operation`` is among these rights."""
+        if operation.op not in self.ops:
+            return False
+        if isinstance(operation, CallService) and self.services is not None:
+            return service_path(operation.service) in self.services
+        return True
+
+
+DRIVE = Rights(ops=OPS, services=None)
+READ = Rights(
+    ops=frozenset({"auth", "subscribe", "unsubscribe", "set_level", "call_service"}),
+    services=frozenset(f"rosapi/{name}" for name in ROSAPI_READS),
+)
+# A fleet token is for the fleet view alone: verify() refuses it here, and it has no rights.
+NOTHING = Rights(ops=frozenset(), services=frozenset())
+ROSBRIDGE_RIGHTS: Final[Mapping[TokenRole, Rights]] = {
+    "vehicle": DRIVE,
+    "relay": READ,
+    "client": READ,
+    "fleet": NOTHING,
+}
 AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autopilot token>"}'
+EXPIRED = 'token expired: send {"op": "auth", "token": "<a fresh token>"} before it does'
 
 
 def bearer_token(headers: Mapping[str, str]) -> str | None:
@@ -61,53 +102,75 @@ class RosbridgeGate:
             return str(exc)
         return None
 
-    def check(self, text: str, now: float) -> Decision:
-        """The decision on one text frame from the client."""
+    @property
+    def expires_at(self) -> float | None:
+        """When the connection's token expires (Unix seconds); None while it has none."""
+        return None if self.claims is None else float(self.claims.exp)
+
+    def expiry(self, now: float) -> Decision | None:
+        """The close of a connection whose token has expired by ``now`` (its token forgotten);
+        else None."""
+        if self.claims is None or self.claims.exp > now:
+            return None
+        self.claims = None
+        return _refuse(EXPIRED, None, "token expired")
+
+    def check(self, frame: Operation | Refused, now: float) -> Decision:
+        """The decision on one parsed frame from the client (a malformed one included: the
+        session explains it, once the connection has proved a token).
+
+        An ``auth`` op on a connection that has proved a token renews it: the session goes on
+        past the first token's expiry with the rights of the new one.
+        """
         if self.secret is None:
-            return Decision(forward=not _is_auth(_parse(text)))
-        if self.claims is not None and self.claims.role in DRIVING_ROLES:
-            return Decision(forward=True)  # a vehicle may do anything: no need to look inside
-        message = _parse(text)
+            return Decision(forward=not isinstance(frame, Auth))
+        if (expired := self.expiry(now)) is not None:
+            return expired
         if self.claims is None:
-            refused = self._authenticate(message, now)
+            refused = self._authenticate(frame, now)
             if refused is not None:
                 return refused
-        return self._permit(message)
-
-    def _permit(self, message: dict[str, Any] | None) -> Decision:
-        if _is_auth(message):
-            return Decision(forward=False)  # already authenticated; nothing for the session
-        refusal = self._refusal(message)
+        elif isinstance(frame, Auth):
+            return self._renew(frame, now)
+        if isinstance(frame, Auth):
+            return Decision(forward=False)  # authenticated; nothing for the session
+        refusal = None if isinstance(frame, Refused) else self._refusal(frame)
         if refusal is None:
             return Decision(forward=True)
-        return Decision(forward=False, reply=_status(refusal, message))
+        return Decision(forward=False, reply=status("error", refusal, frame.id))
 
-    def _authenticate(self, message: dict[str, Any] | None, now: float) -> Decision | None:
-        """None once the message's token is accepted; else the refusal that ends the connection."""
+    def _authenticate(self, frame: Operation | Refused, now: float) -> Decision | None:
+        """None once the frame's token is accepted; else the refusal that ends the connection."""
         assert self.secret is not None
-        token = None if message is None else message.get("token", message.get("mac"))
-        if not isinstance(token, str):
-            return _refuse(AUTH_HINT, message)
+        token = _token_of(frame)
+        if token is None:
+            return _refuse(AUTH_HINT, frame)
         try:
             self.claims = tokens.verify(self.secret, token, now=now)
         except TokenError as exc:
-            return _refuse(str(exc), message)
+            return _refuse(str(exc), frame)
         return None
 
-    def _refusal(self, message: dict[str, Any] | None) -> str | None:
+    def _renew(self, auth: Auth, now: float) -> Decision:
+        """A new token for a connection that has one: kept if valid, else refused (the
+        connection goes on with the token it has, until that expires)."""
+        assert self.secret is not None
+        try:
+            self.claims = tokens.verify(self.secret, auth.proof or "", now=now)
+        except TokenError as exc:
+            return Decision(forward=False, reply=status("error", f"auth: {exc}", auth.id))
+        return Decision(forward=False)
+
+    def _refusal(self, operation: Operation) -> str | None:
         assert self.claims is not None
-        if self.claims.role in DRIVING_ROLES or message is None:
-            return None  # a vehicle; or not JSON, which the session itself explains
-        op = message.get("op")
-        if op in READ_ONLY_OPS:
+        role = self.claims.role
+        if ROSBRIDGE_RIGHTS[role].allows(operation):
             return None
-        service = message.get("service")
-        if op == "call_service" and str(service).startswith(READ_ONLY_SERVICE_PREFIX):
-            return None
-        return (
-            f"{op!r} changes the simulator and needs a vehicle token; "
-            f"this connection has a {self.claims.role} token"
-        )
+        if isinstance(operation, CallService):
+            what = f"call_service {operation.service!r}"
+        else:
+            what = repr(operation.op)
+        return f"{what} needs a vehicle token: a {role} token may only read"
 
 
 def state_refusal(secret: str | None, token: str | None, now: float) -> str | None:
@@ -123,29 +186,22 @@ def state_refusal(secret: str | None, token: str | None, now: float) -> str | No
     return None
 
 
-def _parse(text: str) -> dict[str, Any] | None:
-    try:
-        message = json.loads(text)
-    except (ValueError, RecursionError):
+def _token_of(frame: Operation | Refused) -> str | None:
+    """The token a frame offers: the ``auth`` op's, or a ``token`` field on any other op."""
+    if isinstance(frame, Refused):
         return None
-    return message if isinstance(message, dict) else None
+    if isinstance(frame, Auth):
+        return frame.proof
+    token = (frame.model_extra or {}).get("token")
+    return token if isinstance(token, str) else None
 
 
-def _is_auth(message: dict[str, Any] | None) -> bool:
-    return message is not None and message.get("op") == "auth"
-
-
-def _status(text: str, message: dict[str, Any] | None) -> dict[str, Any]:
-    status: dict[str, Any] = {"op": "status", "level": "error", "msg": text}
-    op_id = None if message is None else message.get("id")
-    if isinstance(op_id, str | int) and not isinstance(op_id, bool):
-        status["id"] = op_id
-    return status
-
-
-def _refuse(text: str, message: dict[str, Any] | None) -> Decision:
+def _refuse(
+    text: str, frame: Operation | Refused | None, reason: str = "token refused"
+) -> Decision:
+    """A refusal that ends the connection: ``text`` for the client, then the close."""
     return Decision(
         forward=False,
-        reply=_status(text, message),
-        close=(CloseCode.POLICY_VIOLATION, "token refused"),
+        reply=status("error", text, None if frame is None else frame.id),
+        close=(CloseCode.POLICY_VIOLATION, reason),
     )

@@ -58,12 +58,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         sampler = asyncio.create_task(
             metrics.run(app.state.signaling.hub, app.state.simulator), name="metrics-sampler"
         )
+        expiry = asyncio.create_task(app.state.signaling.expire_sessions(), name="signaling-expiry")
         try:
             yield
         finally:
-            sampler.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sampler
+            for task in (sampler, expiry):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             if fleet is not None:
                 await fleet.stop()
             await app.state.simulator.stop()

@@ -2,8 +2,9 @@
 
 The rules live in :mod:`app.turtlesim.rosbridge`; :mod:`app.server.websocket` moves the frames
 with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge). Every tick the
-simulator steps, the hub offers each turtle's pose to the subscribers, and each connection's
-publications go to its outbox, so one slow client never holds up the tick or the other clients.
+simulator steps and each connection's writer is woken; a writer that is free then takes its
+session's publications (the latest of each subscription), so the tick costs the same whatever
+the clients subscribe to, and a client that does not read is sent nothing and slows no one.
 The tick is fixed at :attr:`TurtleSim.TICK_S` (16 ms, turtlesim's own): the simulator advances
 that much per step, so pacing the loop any other way would only change the turtle's speed.
 """
@@ -25,7 +26,7 @@ from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.turtlesim.rosbridge import Refused, RosbridgeHub, RosbridgeSession, parse_frame
 from app.turtlesim.sim import TurtleSim
 
 log = logging.getLogger(__name__)
@@ -75,7 +76,7 @@ class Simulator:
     def open(self) -> tuple[RosbridgeSession, Outbox]:
         """A new rosbridge client: its session and outbox."""
         session = self.hub.open_session()
-        return session, self.outboxes.open(session)
+        return session, self.outboxes.open(session, pull=session.take_publications)
 
     def forget(self, session: RosbridgeSession) -> None:
         """The client is gone: its subscriptions go with it."""
@@ -100,15 +101,11 @@ class Simulator:
         }
 
     def tick(self) -> None:
-        """One step: the simulator, then the publications it causes."""
+        """One step: the simulator, then a word to every writer that new poses are there."""
         self.sim.step()
         self.hub.tick(time.monotonic())
-        for session, outbox in self.outboxes.items():
-            # Publications are superseded by the next tick's: a slow reader misses some
-            # rather than being closed (replies to its own requests do close it).
-            dropped = sum(not outbox.offer(p) for p in session.take_publications())
-            if dropped:
-                log.debug("rosbridge client too slow: %d publications dropped", dropped)
+        for _, outbox in self.outboxes.items():
+            outbox.wake()
 
     async def _run(self) -> None:
         next_at = time.monotonic()
@@ -158,8 +155,11 @@ async def rosbridge(websocket: WebSocket) -> None:
             metrics.refused("invalid")
             replies = session.error(reason)
         else:
-            decision = gate.check(text, time.time())
-            replies = session.receive(text) if decision.forward else []
+            frame = parse_frame(text)
+            decision = gate.check(frame, time.time())
+            if decision.forward and isinstance(frame, Refused):
+                metrics.refused("invalid")
+            replies = session.handle(frame) if decision.forward else []
             if decision.reply is not None:  # the gate replies only to refuse: no token, or a
                 metrics.refused("auth")  # role that may not do this
                 replies.append(decision.reply)
@@ -174,9 +174,26 @@ async def rosbridge(websocket: WebSocket) -> None:
         for reply in session.error("binary frames are not supported: send JSON text"):
             outbox.send(reply)
 
+    async def end_at_expiry() -> None:
+        """Close the connection once its token has expired (a renewal moves the time on)."""
+        while True:
+            expires_at = gate.expires_at
+            await asyncio.sleep(1.0 if expires_at is None else max(0.0, expires_at - time.time()))
+            if (expired := gate.expiry(time.time())) is not None:
+                metrics.refused("auth")
+                assert expired.reply is not None and expired.close is not None
+                outbox.send(expired.reply)
+                outbox.close(*expired.close)
+                return
+
+    watchdog = None
+    if gate.secret is not None:
+        watchdog = asyncio.create_task(end_at_expiry(), name="rosbridge-expiry")
     try:
         await serve(websocket, outbox, on_text, on_binary, name="rosbridge")
     finally:
+        if watchdog is not None:
+            watchdog.cancel()
         simulator.forget(session)
 
 

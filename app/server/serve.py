@@ -152,11 +152,29 @@ class _QuietInvalidUtf8(logging.Filter):
         return True
 
 
+# What each WebSocket connection may hold unsent below the app: the kernel's send buffer (Linux
+# gives twice this) and asyncio's write buffer above it. Left to itself Linux grows the first to
+# 4 MiB, so a peer that never reads took megabytes before the writer ever waited: until then the
+# server went on making and sending it messages, and only then did its outbox fill. With small
+# buffers a peer that does not read is seen as one within a few dozen KB.
+SEND_BUFFER_BYTES: Final = 16 * 1024
+
+
 class _SansIOWebSocket(WebSocketsSansIOProtocol):
-    """uvicorn's sans-I/O WebSocket protocol without one crash: a text frame that is not UTF-8
-    makes it close with 1007, and a second such frame read in the same chunk made it try to close
-    again ("Fatal error: protocol.data_received() call failed", InvalidState). Frames that arrive
-    once the closing handshake has begun are dropped, as RFC 6455 allows."""
+    """uvicorn's sans-I/O WebSocket protocol with a bounded send buffer and without one crash: a
+    text frame that is not UTF-8 makes it close with 1007, and a second such frame read in the
+    same chunk made it try to close again ("Fatal error: protocol.data_received() call failed",
+    InvalidState). Frames that arrive once the closing handshake has begun are dropped, as
+    RFC 6455 allows."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """Bound what the connection holds unsent (:data:`SEND_BUFFER_BYTES`)."""
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        if isinstance(transport, asyncio.WriteTransport):
+            transport.set_write_buffer_limits(high=SEND_BUFFER_BYTES)
+        super().connection_made(transport)
 
     def send_receive_event_to_app(self) -> None:
         """Hand a whole message to the app, unless the connection is already closing."""

@@ -2,11 +2,13 @@
 
 All rules live in the hub; :mod:`app.server.websocket` moves the frames, with the policy it
 shares with ``/rosbridge`` (size limit, bounded outbox, JSON edge). This module adds what is
-particular to signaling: the cap on connections and the login deadline.
+particular to signaling: the cap on connections, the login deadline and the clock that ends
+sessions whose token has expired.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 from collections.abc import Callable
@@ -25,6 +27,9 @@ log = logging.getLogger(__name__)
 
 router = APIRouter()
 
+# How often sessions are checked for an expired token: a session ends at most this late.
+EXPIRY_CHECK_S = 0.5
+
 
 class HubPort(Protocol):
     """What the route needs of a hub: :class:`Hub`, or the fleet's Redis-backed one, which
@@ -37,6 +42,7 @@ class HubPort(Protocol):
     def receive(self, conn: ConnId, text: str) -> list[Action]: ...
     def receive_binary(self, conn: ConnId) -> list[Action]: ...
     def disconnect(self, conn: ConnId) -> list[Action]: ...
+    def expire(self) -> list[Action]: ...
     def census(self) -> Census: ...
 
 
@@ -88,6 +94,13 @@ class Switchboard:
         """The connection is gone: tell the hub and deliver what that causes."""
         self.outboxes.forget(conn)
         self.dispatch(self.hub.disconnect(conn))
+
+    async def expire_sessions(self) -> None:
+        """Run until cancelled: every :data:`EXPIRY_CHECK_S`, end the sessions whose token
+        has expired (the hub also ends one at its first frame after expiry)."""
+        while True:
+            await asyncio.sleep(EXPIRY_CHECK_S)
+            self.dispatch(self.hub.expire())
 
     def dispatch(self, actions: list[Action]) -> None:
         """Queue each action on its connection's outbox."""

@@ -9,9 +9,11 @@ moves frames between a socket and a core, the same way for both:
   refused here with an error reply.
 * **Outbox.** Each connection has an :class:`Outbox` bounded in messages and bytes, drained by
   its own writer task, so a slow peer never holds up the others. A peer that leaves more than
-  that unread is closed with 1013; droppable messages (rosbridge publications, superseded every
-  tick) are dropped instead while the outbox is full. Each route keeps its connections' outboxes
-  in an :class:`Outboxes`, which also caps how many connections it accepts (1013 beyond that).
+  that unread is closed with 1013. Messages that newer ones supersede (rosbridge publications)
+  are not queued at all: the writer pulls them from the core when it has sent everything else,
+  so a peer that does not read is given none and costs nothing. Each route keeps its
+  connections' outboxes in an :class:`Outboxes`, which also caps how many connections it
+  accepts (1013 beyond that).
 * **JSON.** Replies are written with :func:`app.protocol.jsonedge.dumps`: never NaN or Infinity.
   Incoming text is parsed by the cores with :func:`app.protocol.jsonedge.loads`.
 * **Deadline.** A connection may be given a deadline (the login on ``/ws``); if the core does not
@@ -64,16 +66,28 @@ class Shut:
     reason: str
 
 
+Pull = Callable[[], list[dict[str, Any]]]
+
+
 class Outbox:
     """Frames waiting for one peer, bounded in count and bytes; overflowing closes the peer
-    (and calls ``on_slow_reader``, for the metrics)."""
+    (and calls ``on_slow_reader``, for the metrics).
+
+    ``pull`` gives the messages a newer one supersedes (publications): asked for only when every
+    queued frame has been sent and :meth:`wake` has said there may be some.
+    """
 
     def __init__(
-        self, max_messages: int, max_bytes: int, on_slow_reader: Callable[[], None] | None = None
+        self,
+        max_messages: int,
+        max_bytes: int,
+        on_slow_reader: Callable[[], None] | None = None,
+        pull: Pull | None = None,
     ) -> None:
         self.max_messages = max_messages
         self.max_bytes = max_bytes
         self.on_slow_reader = on_slow_reader
+        self._pull = pull
         self._frames: deque[str] = deque()
         self._bytes = 0
         self._shut: Shut | None = None
@@ -104,13 +118,10 @@ class Outbox:
             return
         self._push(frame)
 
-    def offer(self, message: dict[str, Any]) -> bool:
-        """Queue a message that a newer one supersedes; dropped (False) while the outbox is full."""
-        frame = self._encode(message)
-        if frame is None or self._shut is not None or not self._fits(frame):
-            return False
-        self._push(frame)
-        return True
+    def wake(self) -> None:
+        """There may be messages to pull: the writer asks for them once it is free."""
+        if self._pull is not None:
+            self._ready.set()
 
     def close(self, code: int, reason: str) -> None:
         """Close the peer once the frames queued so far are sent; nothing is queued after it."""
@@ -124,11 +135,22 @@ class Outbox:
         while not self._frames:
             if self._shut is not None:
                 return self._shut
+            if self._pull is not None and self._pulled():
+                break
             self._ready.clear()
             await self._ready.wait()
         frame = self._frames.popleft()
         self._bytes -= len(frame)
         return frame
+
+    def _pulled(self) -> bool:
+        """Queue what ``pull`` gives, as far as it fits; True when anything was queued."""
+        assert self._pull is not None
+        for message in self._pull():
+            frame = self._encode(message)
+            if frame is not None and self._fits(frame):
+                self._push(frame)
+        return bool(self._frames)
 
     def _fits(self, frame: str) -> bool:
         return len(self._frames) < self.max_messages and self._bytes + len(frame) <= self.max_bytes
@@ -171,9 +193,11 @@ class Outboxes(Generic[K]):
         """True when no more connections are accepted."""
         return len(self._by_key) >= self.limit
 
-    def open(self, key: K) -> Outbox:
-        """A new connection: its outbox."""
-        outbox = Outbox(self.policy.outbox_messages, self.policy.outbox_bytes, self._slow_reader)
+    def open(self, key: K, pull: Pull | None = None) -> Outbox:
+        """A new connection: its outbox (``pull``: see :class:`Outbox`)."""
+        outbox = Outbox(
+            self.policy.outbox_messages, self.policy.outbox_bytes, self._slow_reader, pull
+        )
         self._by_key[key] = outbox
         return outbox
 

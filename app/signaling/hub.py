@@ -12,7 +12,7 @@ import itertools
 import logging
 import shlex
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal, Protocol, assert_never
 
@@ -36,6 +36,8 @@ from app.protocol.signaling import (
     ParseError,
     PeerInfo,
     Peers,
+    Renew,
+    Renewed,
     Start,
     Stop,
     parse,
@@ -45,14 +47,25 @@ log = logging.getLogger(__name__)
 
 ConnId = str
 
-# Peers per room: a vehicle, a relay and clients. Also bounds each roster update, which every
-# join and leave sends to everyone in the room (N messages of N entries).
-MAX_ROOM_PEERS: Final = 32
-# Per-sender rate limit (a token bucket): a burst of this many messages, refilled at this rate.
+# Places in a room, by role: each role has its own, so clients never take the relay's or the
+# vehicle's. One relay and one vehicle (a second of either is refused by name, see _login).
+ROOM_PLACES: Final[Mapping[Role, int]] = {"vehicle": 1, "relay": 1, "client": 30}
+# Peers per room. Also bounds each roster update, which every join and leave sends to everyone
+# in the room (N messages of N entries).
+MAX_ROOM_PEERS: Final = sum(ROOM_PLACES.values())
+# Sessions one token may hold in its room at once (a person's few tabs), so one token handed
+# around or stolen cannot take every client place.
+MAX_TOKEN_SESSIONS: Final = 4
+# Per-sender rate limits (token buckets): a burst of this many messages, refilled at this rate ...
 # Trickled ICE candidates come in bursts of a few dozen; a client flooding ``stop`` is refused
 # (and, after ``max_errors_in_a_row``, closed) before the relay it targets falls behind.
 RATE_BURST: Final = 100
 RATE_PER_S: Final = 50.0
+# ... and a burst of this many bytes, refilled at this rate. A relay answering every client of a
+# full room at once sends a few hundred KB; a sender's burst stays well inside one receiver's
+# outbox (Settings.outbox_bytes, 1 MiB), so no one sender can make its receiver a slow reader.
+BYTES_BURST: Final = 256 * 1024
+BYTES_PER_S: Final = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -113,28 +126,46 @@ class _Peer:
     name: str
     role: Role
     room: str
+    # The grant of the token it logged in with (None without a secret): each grant's sessions
+    # in a room are counted, renewed tokens included.
+    grant: str | None = field(default=None, repr=False)
 
     def info(self) -> PeerInfo:
         return PeerInfo(name=self.name, role=self.role)
 
 
 @dataclass
+class _Bucket:
+    """A token bucket: holds at most ``burst``, refilled at ``per_s``."""
+
+    burst: float
+    per_s: float
+    checked_at: float
+    level: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.level = self.burst
+
+    def take(self, amount: float, now: float) -> bool:
+        """Take ``amount`` out at time ``now``; False (and nothing taken) when it is short."""
+        self.level = min(self.burst, self.level + (now - self.checked_at) * self.per_s)
+        self.checked_at = now
+        if self.level < amount:
+            return False
+        self.level -= amount
+        return True
+
+
+@dataclass
 class _Connection:
     id: ConnId
-    allowance: float
-    checked_at: float
+    messages: _Bucket
+    bytes: _Bucket
     peer: _Peer | None = None
+    # What the peer's token grants, while it is logged in with one; it ends with ``exp``.
+    claims: tokens.Claims | None = None
     errors_in_a_row: int = 0
     closing: bool = False
-
-    def spend(self, now: float) -> bool:
-        """Take one message from the sender's token bucket; False when it is empty."""
-        self.allowance = min(RATE_BURST, self.allowance + (now - self.checked_at) * RATE_PER_S)
-        self.checked_at = now
-        if self.allowance < 1.0:
-            return False
-        self.allowance -= 1.0
-        return True
 
 
 @dataclass
@@ -162,8 +193,10 @@ class Hub:
 
     def connect(self) -> ConnId:
         """Register a new connection and return its opaque id."""
-        conn = f"c{next(self._ids)}"
-        self._connections[conn] = _Connection(conn, RATE_BURST, self.clock())
+        conn, now = f"c{next(self._ids)}", self.clock()
+        self._connections[conn] = _Connection(
+            conn, _Bucket(RATE_BURST, RATE_PER_S, now), _Bucket(BYTES_BURST, BYTES_PER_S, now)
+        )
         return conn
 
     def logged_in(self, conn: ConnId) -> bool:
@@ -190,11 +223,14 @@ class Hub:
     def receive(self, conn: ConnId, text: str) -> list[Action]:
         """Handle one text frame from ``conn``."""
         connection = self._connections[conn]
-        if (turned_away := self._turn_away(connection)) is not None:
+        size = len(text.encode("utf-8"))
+        if (turned_away := self._turn_away(connection, size)) is not None:
             return turned_away
         if (too_large := oversize(text, self.max_message_bytes)) is not None:
             self._count("other")
             return self._refuse(connection, too_large, None)
+        if _expired(connection, self.clock()):
+            return self._expire(connection)
         message = parse(text)
         if isinstance(message, ParseError):
             self._count(message.ref if message.ref in INCOMING_TYPES else "other")
@@ -204,10 +240,33 @@ class Hub:
         self._count(message.type)
         return self._dispatch(connection, message)
 
+    def expire(self) -> list[Action]:
+        """End every session whose token has expired: call it every second or so.
+
+        Each gets an ``error`` saying so and is closed (1008 "token expired"); the others in
+        its room are told it left.
+        """
+        now = self.clock()
+        actions: list[Action] = []
+        for connection in list(self._connections.values()):
+            if _expired(connection, now):
+                actions += self._expire(connection)
+        return actions
+
+    def claims_of(self, conn: ConnId) -> tokens.Claims | None:
+        """What the token of ``conn``'s session grants (None: no token asked, or not logged in)."""
+        connection = self._connections.get(conn)
+        return None if connection is None else connection.claims
+
+    def restore(self, conn: ConnId, claims: tokens.Claims) -> None:
+        """Give a session rebuilt without its token (a room taken over) the claims it had, so
+        that it still ends when they expire."""
+        self._connections[conn].claims = claims
+
     def receive_binary(self, conn: ConnId) -> list[Action]:
         """Handle one binary frame from ``conn``: always refused, signaling is JSON text."""
         connection = self._connections[conn]
-        if (turned_away := self._turn_away(connection)) is not None:
+        if (turned_away := self._turn_away(connection, 0)) is not None:
             return turned_away
         self._count("other")
         return self._refuse(connection, "binary frames are not accepted; send JSON text", None)
@@ -221,22 +280,22 @@ class Hub:
 
     # -- dispatch -------------------------------------------------------------------------------
 
-    def _turn_away(self, connection: _Connection) -> list[Action] | None:
-        """What a frame gets before it is read: nothing while closing, a refusal over the rate.
+    def _turn_away(self, connection: _Connection, size: int) -> list[Action] | None:
+        """What a frame of ``size`` bytes gets before it is read: nothing while closing, a
+        refusal over the sender's message or byte rate. None when the frame may be read.
 
-        None when the frame may be read.
+        Refused before parsing: a flood costs its sender, never the peer it targets.
         """
         if connection.closing:
             return []
-        if not connection.spend(self.clock()):
-            # Refused before parsing: the flood costs its sender, not the peer it targets.
-            return self._refuse(
-                connection,
-                f"rate limit: more than {RATE_PER_S:g} messages per second",
-                None,
-                why="rate_limit",
-            )
-        return None
+        now = self.clock()
+        if not connection.messages.take(1, now):
+            limit = f"more than {RATE_PER_S:g} messages per second"
+        elif not connection.bytes.take(size, now):
+            limit = f"more than {BYTES_PER_S // 1024} KiB per second"
+        else:
+            return None
+        return self._refuse(connection, f"rate limit: {limit}", None, why="rate_limit")
 
     def _dispatch(self, connection: _Connection, message: Incoming) -> list[Action]:
         peer = connection.peer
@@ -261,6 +320,8 @@ class Hub:
                 actions = self._to_relay(peer, message)
             case Leave():
                 actions = self._leave(connection, peer)
+            case Renew():
+                actions = self._renew(connection, peer, message)
             case _:
                 assert_never(message)
         if isinstance(actions, str):
@@ -269,19 +330,17 @@ class Hub:
         return actions
 
     def _login(self, connection: _Connection, login: Login) -> list[Action]:
+        claims: tokens.Claims | None = None
         if self.secret is not None:
-            refusal = _token_refusal(self.secret, login, self.clock())
-            if refusal is not None:
-                return self._refuse_login(connection, refusal, why="auth")
+            checked = _login_claims(self.secret, login, self.clock())
+            if isinstance(checked, str):
+                return self._refuse_login(connection, checked, why="auth")
+            claims = checked
         # Only a successful login creates a room: refused ones must not leave empty rooms behind.
         room = self._rooms.get(login.room, {})
         if login.name in room:
             return self._refuse_login(
                 connection, f"name {login.name!r} is already taken in room {login.room!r}"
-            )
-        if len(room) >= MAX_ROOM_PEERS:
-            return self._refuse_login(
-                connection, f"room {login.room!r} is full ({MAX_ROOM_PEERS} peers)", why="caps"
             )
         # One relay and one vehicle per room: the relay pilots one vehicle and forwards one
         # video. A second of either is told at the door which one the room has, rather than
@@ -293,10 +352,14 @@ class Hub:
                     connection,
                     f"room {login.room!r} already has a {login.role} ({holder.name!r})",
                 )
+        grant = None if claims is None else claims.grant
+        if (no_place := _no_place(room, login, grant)) is not None:
+            return self._refuse_login(connection, no_place, why="caps")
         others = list(room.values())
-        peer = _Peer(connection.id, login.name, login.role, login.room)
+        peer = _Peer(connection.id, login.name, login.role, login.room, grant)
         self._rooms.setdefault(login.room, room)[peer.name] = peer
         connection.peer = peer
+        connection.claims = claims
         connection.errors_in_a_row = 0
         log.info("%s %r joined room %r", peer.role, peer.name, peer.room)
         ice_servers, policy = self.ice(peer.name) if self.ice is not None else ([], "all")
@@ -306,6 +369,7 @@ class Hub:
             peers=[p.info() for p in others],
             iceServers=ice_servers,
             iceTransportPolicy=policy,
+            renewIn=None if claims is None else claims.renew_in(self.clock()),
         )
         # The others learn about the newcomer from their roster update.
         return [
@@ -338,6 +402,42 @@ class Hub:
             return f"no relay in room {sender.room!r}"
         log.debug("relaying %s from %r to relay %r", message.type, sender.name, relay.name)
         return [Outgoing(relay.conn, _stamped(message, sender))]
+
+    def _renew(self, connection: _Connection, peer: _Peer, renew: Renew) -> list[Action] | str:
+        """Extend the session: with the token the peer brings, else with one minted here."""
+        if self.secret is None or connection.claims is None:
+            return "this server asks for no tokens: there is nothing to renew"
+        now = self.clock()
+        token = renew.token
+        try:
+            if token is None:
+                token = tokens.renewal(self.secret, connection.claims, now=now)
+            claims = tokens.verify(self.secret, token, now=now, room=peer.room, roles=(peer.role,))
+        except (tokens.TokenError, ValueError) as exc:
+            return f"cannot renew: {exc}; {_remedy(peer.room, peer.role, 'get a new one')}"
+        connection.claims = claims
+        log.debug("%s %r renewed its token until %d", peer.role, peer.name, claims.exp)
+        reply = Renewed(token=token, renewIn=claims.renew_in(now))
+        return [Outgoing(connection.id, reply.model_dump())]
+
+    def _expire(self, connection: _Connection) -> list[Action]:
+        """End a session whose token has expired: the reason, the others told, the close."""
+        peer = connection.peer
+        assert peer is not None
+        if self.metrics is not None:
+            self.metrics.refused("auth")
+        log.info("%s %r in room %r: token expired", peer.role, peer.name, peer.room)
+        reason = (
+            "token expired: renew before it does (send renew); "
+            f"{_remedy(peer.room, peer.role, 'get a new one')}"
+        )
+        connection.closing = True
+        connection.peer = connection.claims = None
+        return [
+            Outgoing(connection.id, Error(reason=reason, ref=None).model_dump()),
+            *self._remove(peer),
+            Close(connection.id, CloseCode.POLICY_VIOLATION, "token expired"),
+        ]
 
     def _leave(self, connection: _Connection, peer: _Peer) -> list[Action]:
         connection.closing = True
@@ -420,6 +520,31 @@ class Hub:
         return [Outgoing(connection.id, reply), *self._refuse(connection, reason, "login", why)]
 
 
+def _expired(connection: _Connection, now: float) -> bool:
+    """True when ``connection``'s session holds a token that has expired by ``now``."""
+    return (
+        connection.peer is not None
+        and connection.claims is not None
+        and connection.claims.exp <= now
+    )
+
+
+def _no_place(room: dict[str, _Peer], login: Login, grant: str | None) -> str | None:
+    """Why ``login`` finds no place in ``room`` (its role's places are taken, or its token's
+    grant's sessions), in words; None when it may join."""
+    places = ROOM_PLACES[login.role]
+    if sum(peer.role == login.role for peer in room.values()) >= places:
+        return f"room {login.room!r} has no place for another {login.role} ({places})"
+    if grant is not None:
+        sessions = sum(peer.grant == grant for peer in room.values())
+        if sessions >= MAX_TOKEN_SESSIONS:
+            return (
+                f"this token already has {sessions} sessions in room {login.room!r}, the most "
+                "one token may hold: close one, or get a token of your own"
+            )
+    return None
+
+
 def _one_of(room: dict[str, _Peer], role: Role) -> _Peer | None:
     return next((peer for peer in room.values() if peer.role == role), None)
 
@@ -433,15 +558,21 @@ def _stamped(message: Incoming, sender: _Peer) -> dict[str, Any]:
     return {**message.model_dump(), "from": sender.name}
 
 
-def _token_refusal(secret: str, login: Login, now: float) -> str | None:
-    """Why ``login`` may not join (no token, or one not for its room and role) and how to get
-    one that will; else None."""
-    # Whoever runs the server mints tokens: the reason names the command, for a page or a log.
-    remedy = f"get one with: autopilot token --room {shlex.quote(login.room)} --role {login.role}"
+def _remedy(room: str, role: Role, what: str = "get one") -> str:
+    """How to get a token for ``role`` in ``room``: whoever runs the server mints them, so the
+    words name the command, for a page or a log."""
+    return f"{what} with: autopilot token --room {shlex.quote(room)} --role {role}"
+
+
+def _login_claims(secret: str, login: Login, now: float) -> tokens.Claims | str:
+    """What ``login``'s token grants; or why it may not join (no token, or one not for its
+    room and role) and how to get one that will."""
     if login.token is None:
-        return f"missing token: a {login.role} token for room {login.room!r} is required; {remedy}"
+        return (
+            f"missing token: a {login.role} token for room {login.room!r} is required; "
+            f"{_remedy(login.room, login.role)}"
+        )
     try:
-        tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
+        return tokens.verify(secret, login.token, now=now, room=login.room, roles=(login.role,))
     except tokens.TokenError as exc:
-        return f"{exc}; {remedy.replace('get one', 'get a new one')}"
-    return None
+        return f"{exc}; {_remedy(login.room, login.role, 'get a new one')}"

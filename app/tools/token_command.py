@@ -19,7 +19,6 @@ from pydantic import ValidationError
 
 from app.arguments import positive_number
 from app.protocol import tokens
-from app.protocol.rooms import Role
 from app.protocol.urls import ServerUrlError, page_url, reachable_host, server_base
 
 log = logging.getLogger(__name__)
@@ -31,8 +30,15 @@ MAKE_SECRET = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``autopilot token``."""
-    parser.add_argument("--room", required=True, help="the room the token admits to")
-    parser.add_argument("--role", required=True, choices=tokens.ROLES, help="the role it grants")
+    parser.add_argument(
+        "--room", help="the room the token admits to (every room, and only so, for --role fleet)"
+    )
+    parser.add_argument(
+        "--role",
+        required=True,
+        choices=tokens.TOKEN_ROLES,
+        help="the role it grants; fleet: the fleet view (/fleet) of every room, and nothing else",
+    )
     parser.add_argument(
         "--ttl",
         type=positive_number,
@@ -47,13 +53,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def token_url(server: str, room: str, role: Role, token: str) -> str:
-    """The role page for ``room`` on ``server``, with the token in the fragment."""
+def token_url(server: str, room: str, role: tokens.TokenRole, token: str) -> str:
+    """The role page for ``room`` on ``server`` (a fleet token's: ``/fleet``), with the token
+    in the fragment."""
+    if role == "fleet":
+        return f"{server_base(server)}/fleet#token={token}"
     return f"{page_url(server, role, room)}#token={token}"
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the token and URL as JSON on the last line; 1 with a reason on bad input."""
+    if args.role == "fleet":
+        if args.room not in (None, tokens.ALL_ROOMS):
+            log.error("a fleet token is for every room: leave out --room")
+            return 1
+        args.room = tokens.ALL_ROOMS
+    elif args.room is None:
+        log.error("--room is required for a %s token", args.role)
+        return 1
     secret = os.environ.get(tokens.SECRET_ENV, "")
     if not secret:
         log.error(
@@ -89,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
         log.error("cannot mint a token: %s", exc)
         return 1
     expires = datetime.fromtimestamp(now + args.ttl, UTC).isoformat(timespec="seconds")
-    log.info("%s token for room %r, valid until %s", args.role, args.room, expires)
+    scope = "every room's fleet view" if args.role == "fleet" else f"room {args.room!r}"
+    log.info("%s token for %s, valid until %s", args.role, scope, expires)
     sys.stdout.write(
         json.dumps({"token": token, "url": token_url(args.server, args.room, args.role, token)})
         + "\n"

@@ -53,6 +53,20 @@ ROSAPI_SERVICES = {
     "get_param_names": "GetParamNames",
     "get_time": "GetTime",
 }
+# The rosapi services that change nothing: they read the graph, the parameters or the clock.
+ROSAPI_READS = (
+    "topics",
+    "topics_and_raw_types",
+    "topic_type",
+    "services",
+    "service_type",
+    "nodes",
+    "node_details",
+    "get_param",
+    "get_param_names",
+    "get_time",
+)
+assert set(ROSAPI_READS) < set(ROSAPI_SERVICES), "reads are rosapi services, and not all of them"
 
 # Message definitions as rosapi's typedefs_full_text gives them: the type's own fields, then
 # each type it uses after a separator line and "MSG: <type>".

@@ -1,11 +1,11 @@
 """The rosbridge v2 protocol over a :class:`TurtleSim`, without any I/O.
 
 A :class:`RosbridgeHub` holds the simulator and every open :class:`RosbridgeSession` (one per
-WebSocket connection). The adapter hands each received text frame to
-:meth:`RosbridgeSession.receive`, which returns the direct replies (``service_response``, and
-``status`` for a client that asked for them); after each simulator step it calls
-:meth:`RosbridgeHub.tick` and sends what :meth:`RosbridgeSession.take_publications` returns
-(``publish`` messages for subscribed topics).
+WebSocket connection). The adapter parses each text frame once (:func:`parse_frame`: a typed
+operation, or a :class:`Refused` saying why it is none) and hands it to
+:meth:`RosbridgeSession.handle`, which returns the direct replies (``service_response`` and
+``status``); after each simulator step it calls :meth:`RosbridgeHub.tick` and sends what
+:meth:`RosbridgeSession.take_publications` returns (``publish`` messages for subscribed topics).
 
 Behaviour follows ``rosbridge_server``: topic and service names with or without the leading
 slash, replies that echo the client's spelling and ``id``, subscriptions with ``throttle_rate``
@@ -13,9 +13,11 @@ slash, replies that echo the client's spelling and ``id``, subscriptions with ``
 names in rosapi's answers, and only its spellings accepted in ``advertise`` and ``subscribe``
 (``type`` is checked when given, never required; ``call_service``'s ``type`` is not checked, as
 rosbridge does not). A failed call gets ``service_response`` with ``result: false`` and the
-reason in ``values``; ``status`` messages are sent only after the client's ``set_level``, since
-current rosbridge_suite sends none. rosapi's services are answered by
-:class:`app.turtlesim.rosapi.RosGraph`.
+reason in ``values``. A request that is well formed but cannot be served gets a ``status`` only
+after the client's ``set_level``, since current rosbridge_suite sends none; a frame that is no
+rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
+always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
+answered by :class:`app.turtlesim.rosapi.RosGraph`.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Annotated, Any, Final, Literal, TypeVar
+from typing import Annotated, Any, Final, Literal, TypeVar, get_args
 
 from pydantic import (
     BaseModel,
@@ -35,6 +37,7 @@ from pydantic import (
     Field,
     StrictInt,
     StrictStr,
+    TypeAdapter,
     ValidationError,
     field_validator,
 )
@@ -48,7 +51,7 @@ from app.turtlesim.rosapi import (
     RosapiError,
     RosGraph,
 )
-from app.turtlesim.sim import TurtleSim, float32
+from app.turtlesim.sim import MAX_TURTLES, TurtleSim, float32
 
 log = logging.getLogger(__name__)
 
@@ -60,12 +63,15 @@ _Model = TypeVar("_Model", bound=BaseModel)
 # "none" silences them all. Before set_level it receives none.
 _LEVELS = {"info": 0, "warning": 1, "error": 2, "none": 3}
 
-# Per-session caps, so one client cannot make every tick slower or its memory grow without bound:
+# Per-session caps, so one client cannot make the server's work or memory grow without bound:
 # subscriptions (topic and id pairs) and advertisements, each subscription's queue, and its
 # throttle (one minute between messages is already far slower than any real subscriber wants).
-# Each pose subscription costs a message every 16 ms tick: with 64, one hostile client spawning
-# 2000 turtles pushed /healthz p50 to 77 ms on a loaded 2-core machine; with 16, 19 ms.
+# Each pose subscription of a client that reads costs a message every 16 ms tick.
 MAX_SUBSCRIPTIONS: Final = 16
+# Publications one client is sent per second at most, across its subscriptions (two topics at
+# turtlesim's full rate); more subscriptions take turns at it, each given the latest of its topic.
+# So what the clients subscribe to cannot add up to more than the server can send beside its tick.
+MAX_PUBLICATIONS_PER_S: Final = 125.0
 MAX_ADVERTISEMENTS: Final = 64
 MAX_QUEUE_LENGTH: Final = 100
 MAX_THROTTLE_RATE_MS: Final = 60_000
@@ -85,13 +91,13 @@ class _Op(BaseModel):
     # rosbridge messages carry optional fields we do not use (fragment_size, latch, ...).
     model_config = ConfigDict(extra="allow")
 
-    op: StrictStr
     id: MessageId = None
 
 
 class Advertise(_Op):
     """``advertise``: the client will publish on ``topic``."""
 
+    op: Literal["advertise"]
     topic: StrictStr
     type: StrictStr | None = None
 
@@ -99,12 +105,14 @@ class Advertise(_Op):
 class Unadvertise(_Op):
     """``unadvertise``: the client stops publishing on ``topic``."""
 
+    op: Literal["unadvertise"]
     topic: StrictStr
 
 
 class Publish(_Op):
     """``publish``: one message on ``topic``."""
 
+    op: Literal["publish"]
     topic: StrictStr
     msg: dict[str, Any]
 
@@ -112,6 +120,7 @@ class Publish(_Op):
 class Subscribe(_Op):
     """``subscribe``: send ``topic``'s messages, at most one per ``throttle_rate`` ms."""
 
+    op: Literal["subscribe"]
     topic: StrictStr
     type: StrictStr | None = None
     throttle_rate: float = Field(
@@ -124,12 +133,14 @@ class Subscribe(_Op):
 class Unsubscribe(_Op):
     """``unsubscribe``: drop the subscription with this ``id``, or all on ``topic``."""
 
+    op: Literal["unsubscribe"]
     topic: StrictStr
 
 
 class CallService(_Op):
     """``call_service``: call ``service`` with ``args``; answered by ``service_response``."""
 
+    op: Literal["call_service"]
     service: StrictStr
     args: dict[str, Any] = Field(default_factory=dict)
     type: StrictStr | None = None
@@ -138,7 +149,81 @@ class CallService(_Op):
 class SetLevel(_Op):
     """``set_level``: which ``status`` messages this client receives."""
 
+    op: Literal["set_level"]
     level: Literal["info", "warning", "error", "none"]
+
+
+class Auth(_Op):
+    """``auth``: the client proves a token (``token``; roslib.js's ``authenticate()`` sends it
+    as ``mac``). Checked by the server's gate (``app/server/access.py``), not by the session."""
+
+    op: Literal["auth"]
+    token: StrictStr | None = None
+    mac: StrictStr | None = None
+
+    @property
+    def proof(self) -> str | None:
+        """The token this message carries, whichever field holds it."""
+        return self.token if self.token is not None else self.mac
+
+
+Operation = Annotated[
+    Advertise | Unadvertise | Publish | Subscribe | Unsubscribe | CallService | SetLevel | Auth,
+    Field(discriminator="op"),
+]
+OPS: frozenset[str] = frozenset(
+    get_args(model.model_fields["op"].annotation)[0]  # each model's one Literal value
+    for model in get_args(get_args(Operation)[0])
+)
+_operation_adapter: TypeAdapter[Operation] = TypeAdapter(Operation)
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A frame that is not a rosbridge message this server serves; ``id`` is its id, if any."""
+
+    reason: str
+    id: MessageId = None
+
+
+def parse_frame(text: str) -> Operation | Refused:
+    """Parse and validate one text frame; whatever it holds, a :class:`Refused` says why not.
+
+    The one parse of a ``/rosbridge`` frame: the server's gate and the session both read the
+    operation it returns.
+    """
+    try:
+        message = jsonedge.loads(text)
+    except jsonedge.JsonEdgeError as exc:
+        return Refused(str(exc))
+    if not isinstance(message, dict):
+        return Refused("a rosbridge message must be a JSON object")
+    raw_id = message.get("id")
+    op_id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
+    op = message.get("op")
+    if not isinstance(op, str):
+        return Refused("message has no string 'op' field", op_id)
+    if op not in OPS:
+        return Refused(f"unknown op {op!r}", op_id)
+    try:
+        return _operation_adapter.validate_python(message)
+    except ValidationError as exc:
+        # The first element of loc is the union tag (the op); the rest is the field.
+        return Refused(f"{op}: {describe(exc, skip=1)}", op_id)
+
+
+def service_path(service: str) -> str:
+    """A service's name as this server looks it up: ``/rosapi/topics`` and ``rosapi/topics``
+    are both ``rosapi/topics``, as rosbridge accepts either."""
+    return service[1:] if service.startswith("/") else service
+
+
+def status(level: str, text: str, op_id: object = None) -> Json:
+    """A rosbridge ``status`` message (``id`` echoed when there is one)."""
+    message: Json = {"op": "status", "level": level, "msg": text}
+    if op_id is not None:
+        message["id"] = op_id
+    return message
 
 
 # -- message and service payloads ----------------------------------------------------------
@@ -321,20 +406,25 @@ def pose_message(sim: TurtleSim, turtle: str) -> Json:
 # -- subscriptions ---------------------------------------------------------------------------
 
 
+Versioned = tuple[int, Json]  # a message with its topic's version: newer ones are larger
+
+
 @dataclass
 class _Subscription:
     """A client's stream of one topic (by its spelling), shared by every subscribe ``id``.
 
     As in rosbridge, several ids on one topic give one stream: the smallest throttle and the
-    largest queue win. With a throttle and no queue a message is sent when the throttle allows
-    and dropped otherwise; with a queue the latest ``queue_length`` messages wait and one leaves
-    per throttle period.
+    largest queue win. The stream is pulled, not pushed: when the client's socket is ready for
+    more, it takes the messages of its topic it has not had -- the latest ``queue_length`` of
+    them (at least the latest one), all at once, or with a throttle the oldest of them once per
+    throttle period. A client that reads slowly misses what newer messages supersede.
     """
 
     name: str
     topic: Topic
+    # The topic's version last delivered (or current when subscribed): only newer ones are due.
+    seen: int
     by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
-    queue: deque[Json] = field(default_factory=deque)
     last_sent: float = -math.inf
 
     @property
@@ -345,27 +435,22 @@ class _Subscription:
     def queue_length(self) -> int:
         return max(q for _, q in self.by_id.values())
 
-    def offer(self, now: float, msg: Json, out: list[Json]) -> None:
-        """A new message on the topic at time ``now``."""
-        throttle = self.throttle_s
-        if throttle == 0:
-            self._send(now, msg, out)
-        elif self.queue_length == 0:
-            if now - self.last_sent >= throttle:
-                self._send(now, msg, out)
+    def take(self, now: float, newer: list[Versioned], room: int, out: list[Json]) -> None:
+        """Send what is due at time ``now`` of ``newer`` (the topic's messages since ``seen``),
+        at most ``room`` messages, oldest first."""
+        kept = newer[-max(1, self.queue_length) :]
+        if not kept or room < 1:
+            return
+        if self.throttle_s == 0:
+            due = kept[:room]
+        elif now - self.last_sent >= self.throttle_s:
+            due = kept[:1]
         else:
-            self.queue.append(msg)
-            while len(self.queue) > self.queue_length:
-                self.queue.popleft()
-
-    def drain(self, now: float, out: list[Json]) -> None:
-        """Send a queued message if the throttle period is over."""
-        if self.queue and now - self.last_sent >= self.throttle_s:
-            self._send(now, self.queue.popleft(), out)
-
-    def _send(self, now: float, msg: Json, out: list[Json]) -> None:
+            return
+        for _, msg in due:
+            out.append({"op": "publish", "topic": self.name, "msg": msg})
+        self.seen = due[-1][0]
         self.last_sent = now
-        out.append({"op": "publish", "topic": self.name, "msg": msg})
 
 
 # -- sessions --------------------------------------------------------------------------------
@@ -380,8 +465,12 @@ class RosbridgeSession:
         self._advertised: set[str] = set()
         # No status messages until the client asks for them with set_level.
         self._level: int | None = None
-        self._outbox: list[Json] = []
-        self._handlers: dict[str, Callable[[Json], list[Json]]] = {
+        # The publications it may still be sent (a token bucket refilled in the hub's time),
+        # and the subscription whose turn it is to be served first.
+        self._allowance = float(MAX_SUBSCRIPTIONS)
+        self._allowance_at = hub.now
+        self._turn = 0
+        self._handlers: dict[str, Callable[[Any], list[Json]]] = {
             "advertise": self._advertise,
             "unadvertise": self._unadvertise,
             "publish": self._publish,
@@ -389,38 +478,66 @@ class RosbridgeSession:
             "unsubscribe": self._unsubscribe,
             "call_service": self._call_service,
             "set_level": self._set_level,
+            # The gate in front of the session checks tokens; a session alone has none to check.
+            "auth": lambda _auth: [],
         }
+        assert set(self._handlers) == OPS, "one handler per op"
 
     # -- the adapter's side -------------------------------------------------------------
 
     def receive(self, text: str) -> list[Json]:
         """Handle one text frame; returns the replies to send back, in order."""
+        return self.handle(parse_frame(text))
+
+    def handle(self, frame: Operation | Refused) -> list[Json]:
+        """Serve one parsed frame (:func:`parse_frame`); returns the replies, in order."""
+        if isinstance(frame, Refused):
+            return self.refuse(frame)
         try:
-            message = jsonedge.loads(text)
-        except jsonedge.JsonEdgeError as exc:
-            return self._status("error", str(exc), None)
-        if not isinstance(message, dict):
-            return self._status("error", "a rosbridge message must be a JSON object", None)
-        raw_id = message.get("id")
-        op_id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
-        op = message.get("op")
-        if not isinstance(op, str):
-            return self._status("error", "message has no string 'op' field", op_id)
-        handler = self._handlers.get(op)
-        if handler is None:
-            return self._status("error", f"unknown op {op!r}", op_id)
-        try:
-            return handler(message)
+            return self._handlers[frame.op](frame)
         except ProtocolError as exc:
-            return self._status("error", f"{op}: {exc}", op_id)
+            return self._status("error", f"{frame.op}: {exc}", frame.id)
+
+    def refuse(self, refused: Refused) -> list[Json]:
+        """The ``status`` error a malformed frame gets: sent unless the client asked for none.
+
+        rosbridge_suite sends no statuses at all; a frame that is not a rosbridge message comes
+        from no rosbridge client, so it is told why rather than met with silence.
+        """
+        log.debug("rosbridge frame refused: %r", refused.reason)
+        if self._level == _LEVELS["none"]:
+            return []
+        return [status("error", refused.reason, refused.id)]
 
     def error(self, text: str) -> list[Json]:
-        """A ``status`` error for a problem the adapter found (binary or oversize frame)."""
-        return self._status("error", text, None)
+        """A ``status`` error for a frame the adapter refused (binary or oversize)."""
+        return self.refuse(Refused(text))
 
     def take_publications(self) -> list[Json]:
-        """Publications gathered since the last call (from ticks and other clients' messages)."""
-        out, self._outbox = self._outbox, []
+        """What the subscriptions have to send now (``publish`` messages): call it when the
+        client's socket is ready for more. Nothing waits for a client that does not call it,
+        so one that never reads costs the tick nothing; one that reads is sent at most
+        :data:`MAX_PUBLICATIONS_PER_S`, its subscriptions served in turn."""
+        now = self._hub.now
+        elapsed = max(0.0, now - self._allowance_at)
+        self._allowance = min(
+            float(MAX_SUBSCRIPTIONS), self._allowance + elapsed * MAX_PUBLICATIONS_PER_S
+        )
+        self._allowance_at = now
+        subs = list(self._subscriptions.values())
+        if not subs:
+            return []
+        first = self._turn % len(subs)
+        out: list[Json] = []
+        served = 0
+        for sub in subs[first:] + subs[:first]:
+            room = int(self._allowance) - len(out)
+            if room < 1:
+                break
+            sub.take(now, self._hub.newer(sub.topic, sub.seen), room, out)
+            served += 1
+        self._turn = first + served
+        self._allowance -= len(out)
         return out
 
     def close(self) -> None:
@@ -437,30 +554,9 @@ class RosbridgeSession:
         """Subscriptions held, counting each (topic, id) pair."""
         return sum(len(sub.by_id) for sub in self._subscriptions.values())
 
-    # -- hub's side ---------------------------------------------------------------------
-
-    def deliver(self, now: float, topic: Topic, msg: Json) -> None:
-        """Offer a message on ``topic`` to every matching subscription of this session."""
-        for sub in self._subscriptions.values():
-            if sub.topic == topic:
-                sub.offer(now, msg, self._outbox)
-
-    def deliver_poses(self, now: float, pose_of: Callable[[str], Json | None]) -> None:
-        """Offer each subscribed turtle's pose: work per tick grows with the subscriptions,
-        not with turtles times subscriptions."""
-        for sub in self._subscriptions.values():
-            if sub.topic.leaf == "pose" and (msg := pose_of(sub.topic.turtle)) is not None:
-                sub.offer(now, msg, self._outbox)
-
-    def drain(self, now: float) -> None:
-        """Release queued messages whose throttle period is over."""
-        for sub in self._subscriptions.values():
-            sub.drain(now, self._outbox)
-
     # -- ops ----------------------------------------------------------------------------
 
-    def _advertise(self, message: Json) -> list[Json]:
-        msg = _parse(Advertise, message)
+    def _advertise(self, msg: Advertise) -> list[Json]:
         topic = self._typed_topic(msg.topic, msg.type)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -469,15 +565,13 @@ class RosbridgeSession:
         self._advertised.add(msg.topic)
         return []
 
-    def _unadvertise(self, message: Json) -> list[Json]:
-        msg = _parse(Unadvertise, message)
+    def _unadvertise(self, msg: Unadvertise) -> list[Json]:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
         return []
 
-    def _publish(self, message: Json) -> list[Json]:
-        msg = _parse(Publish, message)
+    def _publish(self, msg: Publish) -> list[Json]:
         topic = resolve_topic(msg.topic)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
@@ -489,8 +583,7 @@ class RosbridgeSession:
         self._hub.broadcast(topic, twist.model_dump())
         return []
 
-    def _subscribe(self, message: Json) -> list[Json]:
-        msg = _parse(Subscribe, message)
+    def _subscribe(self, msg: Subscribe) -> list[Json]:
         topic = self._typed_topic(msg.topic, msg.type)
         if topic.leaf == "pose" and topic.turtle not in self._hub.sim.names():
             raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
@@ -499,12 +592,12 @@ class RosbridgeSession:
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
         if sub is None:
-            sub = self._subscriptions[msg.topic] = _Subscription(msg.topic, topic)
+            sub = _Subscription(msg.topic, topic, seen=self._hub.version(topic))
+            self._subscriptions[msg.topic] = sub
         sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
         return []
 
-    def _unsubscribe(self, message: Json) -> list[Json]:
-        msg = _parse(Unsubscribe, message)
+    def _unsubscribe(self, msg: Unsubscribe) -> list[Json]:
         sub = self._subscriptions.get(msg.topic)
         if sub is None or (msg.id is not None and msg.id not in sub.by_id):
             return self._status("warning", f"unsubscribe: not subscribed to {msg.topic}", msg.id)
@@ -516,8 +609,7 @@ class RosbridgeSession:
             del self._subscriptions[msg.topic]
         return []
 
-    def _call_service(self, message: Json) -> list[Json]:
-        msg = _parse(CallService, message)
+    def _call_service(self, msg: CallService) -> list[Json]:
         reply: Json = {"op": "service_response", "service": msg.service}
         if msg.id is not None:
             reply["id"] = msg.id
@@ -531,8 +623,8 @@ class RosbridgeSession:
             return [*self._status("error", f"call_service {msg.service}: {text}", msg.id), failure]
         return [{**reply, "values": values, "result": True}]
 
-    def _set_level(self, message: Json) -> list[Json]:
-        self._level = _LEVELS[_parse(SetLevel, message).level]
+    def _set_level(self, msg: SetLevel) -> list[Json]:
+        self._level = _LEVELS[msg.level]
         return []
 
     # -- helpers ------------------------------------------------------------------------
@@ -555,7 +647,7 @@ class RosbridgeSession:
         return topic
 
     def _run_service(self, msg: CallService) -> Json:
-        name = msg.service[1:] if msg.service.startswith("/") else msg.service
+        name = service_path(msg.service)
         if name.startswith("rosapi/"):
             return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args)
         if name in GLOBAL_SERVICES:
@@ -569,14 +661,12 @@ class RosbridgeSession:
         log.debug("rosbridge status %s: %s", level, text)
         if self._level is None or _LEVELS[level] < self._level:
             return []
-        status: Json = {"op": "status", "level": level, "msg": text}
-        if op_id is not None:
-            status["id"] = op_id
-        return [status]
+        return [status(level, text, op_id)]
 
 
 class RosbridgeHub:
-    """The simulator and every session talking to it; fans messages out to subscribers."""
+    """The simulator and every session talking to it; keeps the latest messages of each topic,
+    which each session takes when its client is ready for them."""
 
     def __init__(
         self,
@@ -588,7 +678,14 @@ class RosbridgeHub:
         self.graph = RosGraph(sim, ros, wall_clock)
         self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
-        self._now = -math.inf
+        # The time of the last tick (throttles are measured in it) and how many there were:
+        # every tick is a new version of every pose topic.
+        self.now = 0.0
+        self.ticks = 0
+        self._poses: dict[str, Json] = {}  # this tick's, made when first asked for
+        # Each turtle's latest Twists as published, with the version each was given.
+        self._twists: dict[str, deque[Versioned]] = {}
+        self._twist_version = 0
 
     def open_session(self) -> RosbridgeSession:
         """A new client connection."""
@@ -597,23 +694,39 @@ class RosbridgeHub:
         return session
 
     def tick(self, now: float) -> None:
-        """Call after each simulator step: offers every turtle's pose to its subscribers."""
-        self._now = now
-        living = set(self.sim.names())
-        poses: dict[str, Json] = {}
+        """Call after each simulator step: a new pose of every turtle, as of ``now``.
 
-        def pose_of(name: str) -> Json | None:
-            if name not in living:
-                return None
-            if name not in poses:
-                poses[name] = pose_message(self.sim, name)
-            return poses[name]
-
-        for session in self.sessions:
-            session.deliver_poses(now, pose_of)
-            session.drain(now)
+        Nothing is sent from here: whatever the sessions and their subscriptions, a tick costs
+        the same.
+        """
+        self.now = now
+        self.ticks += 1
+        self._poses.clear()
 
     def broadcast(self, topic: Topic, msg: Json) -> None:
-        """A client published ``msg``: every session subscribed to ``topic`` gets it."""
-        for session in self.sessions:
-            session.deliver(self._now, topic, msg)
+        """A client published ``msg`` on a ``cmd_vel`` topic: its subscribers take it next."""
+        if topic.turtle not in self._twists and len(self._twists) >= MAX_TURTLES:
+            living = set(self.sim.names())  # forget the Twists of turtles killed since
+            self._twists = {name: q for name, q in self._twists.items() if name in living}
+        self._twist_version += 1
+        queue = self._twists.setdefault(topic.turtle, deque(maxlen=MAX_QUEUE_LENGTH))
+        queue.append((self._twist_version, msg))
+
+    def version(self, topic: Topic) -> int:
+        """The topic's current version: a new subscription takes only what comes after it."""
+        return self.ticks if topic.leaf == "pose" else self._twist_version
+
+    def newer(self, topic: Topic, seen: int) -> list[Versioned]:
+        """The topic's messages newer than version ``seen``, oldest first: a pose topic has
+        only its latest (a newer pose supersedes the older ones)."""
+        if topic.leaf == "cmd_vel":
+            return [item for item in self._twists.get(topic.turtle, ()) if item[0] > seen]
+        if self.ticks <= seen:
+            return []
+        pose = self._poses.get(topic.turtle)
+        if pose is None:
+            try:
+                pose = self._poses[topic.turtle] = pose_message(self.sim, topic.turtle)
+            except KeyError:  # killed: its subscribers get nothing until one is spawned again
+                return []
+        return [(self.ticks, pose)]

@@ -2,13 +2,15 @@
 
 With ``AUTOPILOT_SECRET`` set, every instance checks each login's token in the room owner's hub;
 a socket logged in through another instance is not closed by its own instance's login deadline;
-and an owner that takes a room over keeps members whose (checked, expiring) tokens have expired
-since they logged in.
+and an owner that takes a room over keeps what each member's token grants, as renewed: a member
+whose token expires is ended by whichever instance owns the room then.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import json
 import signal
 import time
 from collections.abc import Callable
@@ -16,19 +18,20 @@ from contextlib import AsyncExitStack
 from typing import Any
 
 import httpx
+import pytest
 from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
 
 from app.protocol import tokens
 from app.relay.pool import RelayPool
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from tests.fleet.conftest import ServeProcess
-from tests.fleet.test_fleet_signaling import _until_roster
 from tests.server.test_signaling_ws import Peer
 
 SECRET = "fleet-test-secret-0123456789abcdef"
-# Short enough that the tokens of the first logins have expired when the room is taken over.
-SHORT_TTL_S = 2.0
+# Long enough to outlive the logins and the kill, short enough to expire soon after a takeover.
+SHORT_TTL_S = 6.0
 LOGIN_TIMEOUT_S = 1.0
 RELAY: tuple[tokens.Role, ...] = ("relay",)
 
@@ -47,7 +50,16 @@ async def login(
     return await peer.recv()
 
 
-async def test_tokens_deadline_and_takeover_with_expired_tokens(
+async def _until_closed(peer: Peer) -> list[dict[str, Any]]:
+    """What the server sends ``peer`` until it closes the connection."""
+    seen: list[dict[str, Any]] = []
+    with contextlib.suppress(ConnectionClosed):
+        while True:
+            seen.append(json.loads(await asyncio.wait_for(peer.ws.recv(), SHORT_TTL_S + 15)))
+    return seen
+
+
+async def test_tokens_deadline_and_takeover_keep_what_each_token_grants(
     serve_process: ServeProcess,
 ) -> None:
     env = {"AUTOPILOT_SECRET": SECRET, "AUTOPILOT_LOGIN_TIMEOUT_S": str(LOGIN_TIMEOUT_S)}
@@ -61,7 +73,7 @@ async def test_tokens_deadline_and_takeover_with_expired_tokens(
 
         # Room "a" is created through the instance that dies, so that one owns it.
         vehicle = await peer_on(first_url)
-        reply = await login(vehicle, "v", "vehicle", "a", token("a", "vehicle", SHORT_TTL_S))
+        reply = await login(vehicle, "v", "vehicle", "a", token("a", "vehicle"))
         assert reply["success"] is True, reply
         # The owner checks logins coming through the other instance: no token, wrong room.
         stranger = await peer_on(second_url)
@@ -70,54 +82,79 @@ async def test_tokens_deadline_and_takeover_with_expired_tokens(
             assert refused["success"] is False and why in refused["reason"], refused
             # Every refused message also gets an ``error``, as on one instance.
             assert (await stranger.recv())["type"] == "error"
-        client = stranger
-        reply = await login(client, "c", "client", "a", token("a", "client", SHORT_TTL_S))
+        lapsing = stranger
+        reply = await login(lapsing, "c", "client", "a", token("a", "client", SHORT_TTL_S))
         assert reply["success"] is True, reply
         assert (await vehicle.recv())["peers"] == [{"name": "c", "role": "client"}]
+        # A second client renews through the instance that is not the owner, with a token of
+        # its own that lasts: the owner keeps that in the room's member list.
+        renewing = await peer_on(second_url)
+        reply = await login(renewing, "d", "client", "a", token("a", "client", SHORT_TTL_S))
+        assert reply["success"] is True, reply
+        lasting = token("a", "client")
+        await renewing.send({"type": "renew", "token": lasting})
+        assert await renewing.recv() == {
+            "type": "renewed",
+            "token": lasting,
+            "renewIn": pytest.approx(300, abs=2),
+        }
 
-        # A socket that never logs in is closed by the deadline; the client, logged in through
-        # the owner on the other instance, is not.
+        # A socket that never logs in is closed by the deadline; the clients, logged in through
+        # the owner on the other instance, are not.
         idle = await peer_on(second_url)
         assert await idle.closed() == 1008
 
-        await asyncio.sleep(SHORT_TTL_S + 0.5)  # both members' tokens have expired now
         first.send_signal(signal.SIGKILL)
         first.wait(timeout=10)
-        # The survivor takes room "a" over, replaying the client's login despite its token.
-        assert await _until_roster(client, []) == {"type": "leave", "from": "v"}
-
+        # The survivor takes room "a" over with each member's claims: the client whose token
+        # expires is ended (the instance that admitted it is dead), the renewed one stays.
+        last = await _until_closed(lapsing)
+        assert lapsing.ws.close_code == 1008 and lapsing.ws.close_reason == "token expired"
+        assert "token expired" in last[-1]["reason"]
+        seen = [await renewing.recv() for _ in range(4)]
+        assert {"type": "leave", "from": "v"} in seen and {"type": "leave", "from": "c"} in seen
         again = await peer_on(second_url)
         reply = await login(again, "v", "vehicle", "a", token("a", "vehicle"))
         assert reply["success"] is True, reply
-        assert reply["peers"] == [{"name": "c", "role": "client"}]
-        assert (await client.recv())["peers"] == [{"name": "v", "role": "vehicle"}]
-        await client.send({"type": "candidate", "to": "v", "candidate": None})
+        assert reply["peers"] == [{"name": "d", "role": "client"}]
+        assert (await renewing.recv())["peers"] == [{"name": "v", "role": "vehicle"}]
+        await renewing.send({"type": "candidate", "to": "v", "candidate": None})
         assert await again.recv() == {
             "type": "candidate",
             "to": "v",
             "candidate": None,
-            "from": "c",
+            "from": "d",
         }
 
 
-async def test_fleet_rooms_need_a_client_token_when_a_secret_is_set(
+async def test_fleet_rooms_show_a_room_token_its_room_and_a_fleet_token_every_room(
     redis_url: str, start_server: Callable[[Settings], RunningServer]
 ) -> None:
     server = start_server(Settings(environment="development", secret=SECRET, redis_url=redis_url))
-    async with connect(server.ws_url) as ws:
-        vehicle = Peer(ws)
-        assert (await login(vehicle, "v", "vehicle", "r1", token("r1", "vehicle")))["success"]
+    async with connect(server.ws_url) as one, connect(server.ws_url) as two:
+        for ws, name, room in ((one, "v1", "r1"), (two, "v2", "r2")):
+            reply = await login(Peer(ws), name, "vehicle", room, token(room, "vehicle"))
+            assert reply["success"], reply
         url = f"{server.url}/fleet/rooms"
+
+        async def seen(tok: str | None) -> tuple[int, Any]:
+            headers = {} if tok is None else {"Authorization": f"Bearer {tok}"}
+            response = await http.get(url, headers=headers)
+            return response.status_code, response.json()
+
         async with httpx.AsyncClient(timeout=10) as http:
-            assert (await http.get(url)).status_code == 401
-            for refused in (token("r1", "vehicle"), "not.a-token"):
-                response = await http.get(url, headers={"Authorization": f"Bearer {refused}"})
-                assert response.status_code == 401, response.text
-            # A client token of any room, not only of the rooms listed.
-            good = {"Authorization": f"Bearer {token('elsewhere', 'client')}"}
-            response = await http.get(url, headers=good)
-            assert response.status_code == 200, response.text
-            assert [row["room"] for row in response.json()] == ["r1"]
+            assert (await seen(None))[0] == 401
+            assert (await seen("not.a-token"))[0] == 401
+            # A room's token, of any role, sees that room alone (issue 37.7).
+            for role in ("vehicle", "relay", "client"):
+                status, rows = await seen(token("r2", role))  # type: ignore[arg-type]
+                assert status == 200 and [(r["room"], r["vehicles"]) for r in rows] == [
+                    ("r2", ["v2"])
+                ]
+            assert await seen(token("elsewhere", "client")) == (200, [])
+            fleet = tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60)
+            status, rows = await seen(fleet)
+            assert status == 200 and [r["room"] for r in rows] == ["r1", "r2"]
             # The page holds no data: it loads, and asks for its rows with the fragment's token.
             assert (await http.get(f"{server.url}/fleet")).status_code == 200
 

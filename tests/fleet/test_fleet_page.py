@@ -92,31 +92,38 @@ async def test_without_redis_the_fleet_is_this_process_s_rooms(server: RunningSe
     ]
 
 
-async def test_with_a_secret_the_page_sends_the_client_token_of_its_fragment(
+async def test_with_a_secret_the_page_sends_the_token_of_its_fragment(
     redis_url: str, start_server: Callable[[Settings], RunningServer]
 ) -> None:
     secret = "fleet-page-secret-0123456789abcdef"
     server = start_server(Settings(environment="development", secret=secret, redis_url=redis_url))
 
-    def token(room: str, role: tokens.Role) -> str:
+    def token(room: str, role: tokens.TokenRole) -> str:
         return tokens.sign(secret, room, role, now=time.time())
 
     async with AsyncExitStack() as stack:
-        ws = await stack.enter_async_context(connect(server.ws_url))
-        vehicle = Peer(ws)
-        await vehicle.send(
-            {"type": "login", "name": "robot", "role": "vehicle", "room": "lab"}
-            | {"token": token("lab", "vehicle")}
-        )
-        assert (await vehicle.recv())["success"] is True
+        for name, room in (("robot", "lab"), ("mower", "yard")):
+            vehicle = Peer(await stack.enter_async_context(connect(server.ws_url)))
+            await vehicle.send(
+                {"type": "login", "name": name, "role": "vehicle", "room": room}
+                | {"token": token(room, "vehicle")}
+            )
+            assert (await vehicle.recv())["success"] is True
         browser = await launch(stack)
         page = await browser.new_page()
         # Without a token the page loads but gets no rows, and says why.
         await page.goto(f"{server.url}/fleet")
         state = page.get_by_test_id("fleet-state")
-        await state.filter(has_text="a client token is needed").wait_for(timeout=20_000)
+        await state.filter(has_text="a token is needed").wait_for(timeout=20_000)
         assert await rows(page) == []
-        # With a client token of another room, the fragment's token is sent and rows come.
-        other = await browser.new_page()
-        await other.goto(f"{server.url}/fleet#token={token('elsewhere', 'client')}")
-        await until_rows(other, [["lab", "robot", "–", "–", "–"]], "rows with the token")
+        # A room's token shows that room; a fleet token every room.
+        mine = await browser.new_page()
+        await mine.goto(f"{server.url}/fleet#token={token('yard', 'client')}")
+        await until_rows(mine, [["yard", "mower", "–", "–", "–"]], "the room of the token")
+        every = await browser.new_page()
+        await every.goto(f"{server.url}/fleet#token={token(tokens.ALL_ROOMS, 'fleet')}")
+        await until_rows(
+            every,
+            [["lab", "robot", "–", "–", "–"], ["yard", "mower", "–", "–", "–"]],
+            "every room with the fleet token",
+        )

@@ -1,9 +1,13 @@
-"""A seeded fuzz run (issue 9 item 5): over 10,000 frames across ``/ws``, ``/rosbridge`` and the
-agent's data-channel handler -- valid messages mutated, random bytes, big numbers, deep nesting,
-invalid UTF-8, slow readers. Afterwards the server has logged no traceback, its memory grew by a
-bounded amount, and a legitimate login, relay and rosbridge session still work.
+"""Seeded fuzz runs against a server with tokens on (issue 9 item 5, issue 37): frames across
+``/ws`` and ``/rosbridge``, the agent's data-channel handler and the relay's ``control`` channel
+parser -- valid messages mutated (logins and renewals with tokens, rosbridge ``auth``, drive,
+lock, take-over), random bytes, big numbers, deep nesting, invalid UTF-8, slow readers.
+Afterwards the server has logged no traceback, its memory stayed flat over the second half of
+the run, and a legitimate login, relay and rosbridge session still work.
 
-The seed is fixed so a failure replays exactly; set ``AUTOPILOT_FUZZ_SEED`` to explore others.
+The fast lane's run is a fifth of the full one (``slow``: 10,000 frames across ``/ws`` and
+``/rosbridge``). The seed is fixed so a failure replays exactly; set ``AUTOPILOT_FUZZ_SEED`` to
+explore others.
 """
 
 from __future__ import annotations
@@ -15,77 +19,102 @@ import logging
 import math
 import os
 import random
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.frames import Frame, Opcode
 from websockets.protocol import State
 
+from app.protocol import channels, tokens
+from app.protocol.channels import CONTROL_CHANNEL
+from app.server.config import Settings
 from app.server.serve import RunningServer
 from tests.helpers.agent import Vehicle
-from tests.helpers.sockets import Records, StuckClient, login, recv, rosbridge_url
+from tests.helpers.sockets import Records, StuckClient, recv, rosbridge_url
 
 SEED = int(os.environ.get("AUTOPILOT_FUZZ_SEED", "20261122"))
-WS_FRAMES = 4000
-ROSBRIDGE_FRAMES = 4000
-CHANNEL_FRAMES = 2500
-# The server runs in this process; everything it may keep (outboxes, strokes, turtles) is
-# capped far below this.
-MAX_RSS_GROWTH_BYTES = 64 * 1024 * 1024
+SECRET = "fuzz-test-secret-0123456789"
+ROOM = "fz"
+# The second half of a run may grow the server by no more than this: what it keeps (outboxes,
+# strokes, turtles, sessions) is capped, so after the first half it has what it will have.
+MAX_SECOND_HALF_GROWTH_BYTES = 16 * 1024 * 1024
 
-VALID_SIGNALING: list[dict[str, Any]] = [
-    {"type": "login", "name": "fz", "role": "client", "room": "fuzz"},
-    {"type": "offer", "to": "r", "sdp": "v=0"},
-    {"type": "answer", "to": "c", "sdp": "v=0"},
-    {
-        "type": "candidate",
-        "to": "r",
-        "candidate": {"candidate": "candidate:1 1 udp 1 1.2.3.4 5 typ host"},
-    },
-    {"type": "start"},
-    {"type": "stop"},
-    {"type": "getOps"},
-    {"type": "leave"},
-]
-VALID_ROSBRIDGE: list[dict[str, Any]] = [
-    {
-        "op": "publish",
-        "topic": "/turtle1/cmd_vel",
-        "msg": {"linear": {"x": 1.0}, "angular": {"z": 0.5}},
-    },
-    {
-        "op": "subscribe",
-        "id": "s",
-        "topic": "/turtle1/pose",
-        "throttle_rate": 100,
-        "queue_length": 2,
-    },
-    {"op": "unsubscribe", "id": "s", "topic": "/turtle1/pose"},
-    {"op": "advertise", "topic": "/turtle1/cmd_vel", "type": "geometry_msgs/Twist"},
-    {"op": "call_service", "service": "/spawn", "args": {"x": 1.0, "y": 2.0, "theta": 0.5}},
-    {"op": "call_service", "service": "/kill", "args": {"name": "turtle2"}},
-    {
-        "op": "call_service",
-        "service": "/turtle1/teleport_absolute",
-        "args": {"x": 1, "y": 1, "theta": 3},
-    },
-    {
-        "op": "call_service",
-        "service": "/turtle1/teleport_relative",
-        "args": {"linear": 1, "angular": 1},
-    },
-    {
-        "op": "call_service",
-        "service": "/turtle1/set_pen",
-        "args": {"r": 1, "g": 2, "b": 3, "width": 4},
-    },
-    {"op": "call_service", "service": "/rosapi/services", "args": {}},
-    {"op": "call_service", "service": "/clear", "args": {}},
-    {"op": "set_level", "level": "info"},
-]
+
+def token(role: tokens.Role, room: str = ROOM) -> str:
+    return tokens.sign(SECRET, room, role, now=time.time(), ttl_s=3600)
+
+
+def valid_signaling() -> list[dict[str, Any]]:
+    return [
+        {"type": "login", "name": "fz", "role": "client", "room": ROOM, "token": token("client")},
+        {"type": "offer", "to": "r", "sdp": "v=0"},
+        {"type": "answer", "to": "c", "sdp": "v=0"},
+        {
+            "type": "candidate",
+            "to": "r",
+            "candidate": {"candidate": "candidate:1 1 udp 1 1.2.3.4 5 typ host"},
+        },
+        {"type": "start"},
+        {"type": "stop"},
+        {"type": "getOps"},
+        {"type": "renew"},
+        {"type": "renew", "token": token("client")},
+        {"type": "leave"},
+    ]
+
+
+def valid_rosbridge() -> list[dict[str, Any]]:
+    return [
+        {"op": "auth", "token": token("vehicle")},
+        {"op": "auth", "mac": token("client")},
+        {
+            "op": "publish",
+            "topic": "/turtle1/cmd_vel",
+            "msg": {"linear": {"x": 1.0}, "angular": {"z": 0.5}},
+        },
+        {
+            "op": "subscribe",
+            "id": "s",
+            "topic": "/turtle1/pose",
+            "throttle_rate": 100,
+            "queue_length": 2,
+        },
+        {"op": "unsubscribe", "id": "s", "topic": "/turtle1/pose"},
+        {"op": "advertise", "topic": "/turtle1/cmd_vel", "type": "geometry_msgs/Twist"},
+        {"op": "call_service", "service": "/spawn", "args": {"x": 1.0, "y": 2.0, "theta": 0.5}},
+        {"op": "call_service", "service": "/kill", "args": {"name": "turtle2"}},
+        {
+            "op": "call_service",
+            "service": "/turtle1/teleport_absolute",
+            "args": {"x": 1, "y": 1, "theta": 3},
+        },
+        {
+            "op": "call_service",
+            "service": "/turtle1/teleport_relative",
+            "args": {"linear": 1, "angular": 1},
+        },
+        {
+            "op": "call_service",
+            "service": "/turtle1/set_pen",
+            "args": {"r": 1, "g": 2, "b": 3, "width": 4},
+        },
+        {"op": "call_service", "service": "/rosapi/services", "args": {}},
+        {
+            "op": "call_service",
+            "service": "/rosapi/set_param",
+            "args": {"name": "/turtlesim:background_r", "value": "7"},
+        },
+        {"op": "call_service", "service": "/clear", "args": {}},
+        {"op": "set_level", "level": "info"},
+    ]
+
+
 VALID_CHANNEL: list[dict[str, Any]] = [
     {
         "type": "goal",
@@ -99,7 +128,21 @@ VALID_CHANNEL: list[dict[str, Any]] = [
         "frame": 3,
     },
     {"type": "stop"},
+    {"type": "mode", "mode": "manual", "operator": "c", "reason": "take over"},
+    {"type": "drive", "seq": 1, "linear": 0.5, "angular": -0.25},
+    {"type": "mode", "mode": "auto"},
     {"type": "error", "reason": "x", "ref": "goal"},
+]
+# What a client sends the relay on ``control``: the relay page validates it against the schema
+# of these models; here the models themselves take the fuzz.
+VALID_CONTROL: list[dict[str, Any]] = [
+    {"type": "lock", "x": 120.5, "y": 80},
+    {"type": "unlock"},
+    {"type": "takeOver"},
+    {"type": "drive", "seq": 7, "linear": 1, "angular": 0},
+    {"type": "handBack"},
+    {"type": "setOp", "op": "face"},
+    {"type": "start"},
 ]
 
 
@@ -173,18 +216,25 @@ async def drain(ws: ClientConnection) -> None:
 
 
 async def fuzz_endpoint(
-    url: str, fuzzer: Fuzzer, valid: list[dict[str, Any]], frames: int, prelude: list[str]
+    url: str,
+    fuzzer: Fuzzer,
+    valid: list[dict[str, Any]],
+    frames: int,
+    prelude: Callable[[int], list[str]],
 ) -> int:
     """Send ``frames`` fuzzed frames, reconnecting whenever the server closes the connection
-    (abusive, oversize, invalid UTF-8 ...); returns how many connections were used."""
+    (abusive, oversize, invalid UTF-8, a refused token ...); each connection first sends
+    ``prelude(n)``; returns how many connections were used."""
     sent = connections = 0
     while sent < frames:
         try:
-            async with connect(url, max_size=None) as ws:
+            # max_queue=None: messages that arrive once ``drain`` is cancelled must not pause the
+            # client's reading, or it never reads the server's close and waits 10 s for it.
+            async with connect(url, max_size=None, max_queue=None) as ws:
                 connections += 1
                 reader = asyncio.create_task(drain(ws))
                 try:
-                    for text in prelude:
+                    for text in prelude(connections):
                         await ws.send(text)
                     while sent < frames and not reader.done():
                         frame = fuzzer.frame(valid)
@@ -218,68 +268,102 @@ def fuzz_channel(fuzzer: Fuzzer, vehicles: list[Vehicle], frames: int) -> None:
         assert all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta))
 
 
-async def stuck_clients(url: str, count: int, frame: Callable[[], str]) -> None:
-    """Clients that send and never read a byte."""
+def fuzz_control(fuzzer: Fuzzer, frames: int) -> None:
+    """Frames through the relay's ``control`` channel models: a message or a refusal, always."""
+    for _ in range(frames):
+        result = channels.parse(fuzzer.frame(VALID_CONTROL), CONTROL_CHANNEL, "relay")
+        if isinstance(result, channels.Refused):
+            assert result.reason
+        else:
+            assert channels.type_of(type(result)) in {m["type"] for m in VALID_CONTROL}
+
+
+async def stuck_clients(url: str, count: int, first: str, frame: str) -> None:
+    """Clients that send ``first``, then ``frame`` again and again, and never read a byte."""
     stuck = [await asyncio.to_thread(StuckClient, url) for _ in range(count)]
     try:
+        for client in stuck:
+            await asyncio.to_thread(client.send, first)
         for _ in range(40):
             for client in stuck:
-                await asyncio.to_thread(client.send, frame())
+                await asyncio.to_thread(client.send, frame)
     finally:
         for client in stuck:
             client.close()
 
 
-async def test_fuzz_ten_thousand_frames_then_everything_still_works(
-    server: RunningServer,
-    server_log: Records,
-) -> None:
-    rng = random.Random(SEED)
+@dataclass(frozen=True)
+class Run:
+    """How many frames of each kind one half of a run sends."""
+
+    ws: int
+    rosbridge: int
+    channel: int
+    control: int
+
+
+@pytest.fixture
+def guarded(start_server: Callable[[Settings], RunningServer]) -> RunningServer:
+    return start_server(Settings(environment="development", secret=SECRET))
+
+
+async def fuzz_half(
+    server: RunningServer, rng: random.Random, run: Run, half: int, vehicles: list[Vehicle]
+) -> tuple[int, int]:
+    """One half of a run; the /ws and /rosbridge connections it used."""
     fuzzer = Fuzzer(rng)
-    # Built first: the agent's imports and video source are not server memory.
-    vehicles = [Vehicle("default"), Vehicle("thesis")]
-    rss_before = rss_bytes()
     ros = rosbridge_url(server)
     big_services = json.dumps({"op": "call_service", "service": "/rosapi/services", "id": "s"})
 
+    def ws_prelude(n: int) -> list[str]:
+        login = {"type": "login", "name": f"fz{half}-{n}", "role": "client", "room": ROOM}
+        return [json.dumps(login | {"token": token("client")})]
+
+    def ros_prelude(n: int) -> list[str]:
+        # Readers and drivers in turn: the gate's two paths both take the fuzz.
+        return [json.dumps({"op": "auth", "token": token("vehicle" if n % 2 else "client")})]
+
     ws_connections, ros_connections, *_ = await asyncio.gather(
-        fuzz_endpoint(
-            server.ws_url,
-            fuzzer,
-            VALID_SIGNALING,
-            WS_FRAMES,
-            [
-                json.dumps(
-                    {
-                        "type": "login",
-                        "name": f"fz{rng.randrange(10**6)}",
-                        "role": "client",
-                        "room": "fz",
-                    }
-                )
-            ],
-        ),
-        fuzz_endpoint(ros, fuzzer, VALID_ROSBRIDGE, ROSBRIDGE_FRAMES, []),
-        stuck_clients(ros, 3, lambda: big_services),
-        stuck_clients(server.ws_url, 3, lambda: '{"type": "login", "name": 1}'),
-        asyncio.to_thread(fuzz_channel, Fuzzer(random.Random(SEED + 1)), vehicles, CHANNEL_FRAMES),
+        fuzz_endpoint(server.ws_url, fuzzer, valid_signaling(), run.ws, ws_prelude),
+        fuzz_endpoint(ros, fuzzer, valid_rosbridge(), run.rosbridge, ros_prelude),
+        stuck_clients(ros, 3, json.dumps({"op": "auth", "token": token("client")}), big_services),
+        stuck_clients(server.ws_url, 3, ws_prelude(0)[0], '{"type": "getOps", "pad": 1}'),
+        asyncio.to_thread(fuzz_channel, Fuzzer(random.Random(rng.random())), vehicles, run.channel),
+        asyncio.to_thread(fuzz_control, Fuzzer(random.Random(rng.random())), run.control),
     )
-    assert WS_FRAMES + ROSBRIDGE_FRAMES + CHANNEL_FRAMES >= 10_000
-    assert ws_connections >= 1 and ros_connections >= 1
+    return ws_connections, ros_connections
+
+
+async def fuzz_then_everything_still_works(
+    server: RunningServer, server_log: Records, run: Run
+) -> None:
+    """Two halves of ``run``; memory measured after the first (the server's caches and the
+    agents' imports are there by then) and after the second."""
+    rng = random.Random(SEED)
+    vehicles = [Vehicle("default"), Vehicle("thesis")]  # not server memory: made once
+    first = await fuzz_half(server, rng, run, 1, vehicles)
+    rss_mid = rss_bytes()
+    second = await fuzz_half(server, rng, run, 2, vehicles)
+    growth = rss_bytes() - rss_mid
 
     # Nothing escaped: no traceback, no "Exception in ASGI application".
     assert server_log.tracebacks() == []
     assert not [r for r in server_log.records if "Exception in ASGI" in r.getMessage()]
-    growth = rss_bytes() - rss_before
     logging.getLogger(__name__).info(
-        "fuzz seed %d: %d frames, %d /ws and %d /rosbridge connections, RSS growth %.1f MiB",
+        "fuzz seed %d, tokens on: %d /ws and %d /rosbridge frames (%d and %d connections), "
+        "%d channel and %d control frames; RSS %.1f MiB after the first half, %+.1f MiB over "
+        "the second",
         SEED,
-        WS_FRAMES + ROSBRIDGE_FRAMES + CHANNEL_FRAMES,
-        ws_connections,
-        ros_connections,
+        2 * run.ws,
+        2 * run.rosbridge,
+        first[0] + second[0],
+        first[1] + second[1],
+        2 * run.channel,
+        2 * run.control,
+        rss_mid / 2**20,
         growth / 2**20,
     )
-    assert growth < MAX_RSS_GROWTH_BYTES, f"server grew by {growth / 2**20:.0f} MiB"
+    assert growth < MAX_SECOND_HALF_GROWTH_BYTES, f"grew by {growth / 2**20:.1f} MiB"
 
     # A legitimate session of each kind still works.
     async with (
@@ -287,16 +371,38 @@ async def test_fuzz_ten_thousand_frames_then_everything_still_works(
         connect(server.ws_url) as vehicle,
         connect(server.ws_url) as client,
     ):
-        await login(relay, "r", "relay")
-        await login(vehicle, "v", "vehicle")
-        await login(client, "c", "client")
+        peers: list[tuple[ClientConnection, str, tokens.Role]] = [
+            (relay, "r", "relay"),
+            (vehicle, "v", "vehicle"),
+            (client, "c", "client"),
+        ]
+        for ws, name, role in peers:
+            login = {"type": "login", "name": name, "role": role, "room": "after"}
+            await ws.send(json.dumps(login | {"token": token(role, "after")}))
+            assert (await recv(ws))["success"] is True
         await vehicle.send(json.dumps({"type": "offer", "to": "r", "sdp": "v=0 offer"}))
         await client.send(json.dumps({"type": "start"}))
         seen = [(await recv(relay))["type"] for _ in range(4)]
         assert seen == ["peers", "peers", "offer", "start"]
-    async with connect(ros) as ws:
+        await client.send(json.dumps({"type": "renew"}))
+        assert (await recv(client))["type"] == "renewed"
+    async with connect(rosbridge_url(server)) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": token("vehicle")}))
         await ws.send(json.dumps({"op": "call_service", "service": "/reset", "id": "r"}))
         assert (await recv(ws))["result"] is True
         await ws.send(json.dumps({"op": "subscribe", "topic": "/turtle1/pose"}))
         publication = await recv(ws)
         assert publication["op"] == "publish" and publication["topic"] == "/turtle1/pose"
+
+
+async def test_fuzz_with_tokens_then_everything_still_works(
+    guarded: RunningServer, server_log: Records
+) -> None:
+    await fuzz_then_everything_still_works(guarded, server_log, Run(500, 500, 500, 500))
+
+
+@pytest.mark.slow
+async def test_fuzz_ten_thousand_socket_frames_with_tokens_then_everything_still_works(
+    guarded: RunningServer, server_log: Records
+) -> None:
+    await fuzz_then_everything_still_works(guarded, server_log, Run(2500, 2500, 1250, 1250))

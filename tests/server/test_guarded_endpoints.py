@@ -19,6 +19,7 @@ from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from app.server.tls import ROSBRIDGE_TLS_FIX
+from tests.helpers.sockets import Records
 from tests.server.test_pages import embedded_config
 
 SECRET = "guarded-endpoints-test-secret"
@@ -135,6 +136,100 @@ async def test_a_bad_header_token_is_refused_before_accept(guarded: RunningServe
         ):
             pass
     assert refused.value.response.status_code == 403
+
+
+BACKGROUND_R = "/turtlesim:background_r"  # turtlesim's parameter, as ROS 2 names it (69)
+
+
+@pytest.mark.parametrize("role", ["client", "relay"])
+async def test_a_reader_token_of_another_room_sets_no_parameter(
+    guarded: RunningServer, role: tokens.Role
+) -> None:
+    # Issue 37.3: /rosapi/set_param succeeded with a client token of another room.
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": _token(role, room="elsewhere")}))
+        for service in ("/rosapi/set_param", "rosapi/set_param"):
+            reply = await _call(ws, service, name=BACKGROUND_R, value="7")
+            assert reply["op"] == "status" and "needs a vehicle token" in reply["msg"]
+        reply = await _call(ws, "/rosapi/get_param", name=BACKGROUND_R)
+        assert reply["result"] is True and json.loads(reply["values"]["value"]) == 69
+    async with connect(_ws(guarded, "/rosbridge")) as ws:  # a vehicle token still may
+        await ws.send(json.dumps({"op": "auth", "token": _token("vehicle")}))
+        reply = await _call(ws, "/rosapi/set_param", name=BACKGROUND_R, value="7")
+        assert reply["result"] is True and reply["values"]["successful"] is True
+        reply = await _call(ws, "/rosapi/get_param", name=BACKGROUND_R)
+        assert json.loads(reply["values"]["value"]) == 7
+
+
+@pytest.mark.parametrize("role", ["client", "relay", "vehicle"])
+async def test_frames_whose_op_is_not_a_string_get_a_status_and_the_connection_lives(
+    guarded: RunningServer, server_log: Records, role: tokens.Role
+) -> None:
+    # Issue 37.2: with a client token, 200 frames whose op was a list or an object gave 200
+    # tracebacks and each killed its connection's reader.
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": _token(role)}))
+        for op in [["publish"], {"op": "publish"}, [], {}, 7, None, True]:
+            await ws.send(json.dumps({"op": op, "id": "bad", "topic": "/turtle1/cmd_vel"}))
+            reply = await _recv(ws)
+            assert reply == {
+                "op": "status",
+                "level": "error",
+                "msg": "message has no string 'op' field",
+                "id": "bad",
+            }
+        reply = await _call(ws, "/rosapi/topics")
+        assert reply["op"] == "service_response" and reply["result"] is True
+    assert server_log.tracebacks() == []
+
+
+async def test_a_room_token_sees_its_own_room_and_only_a_fleet_token_sees_them_all(
+    guarded: RunningServer,
+) -> None:
+    # Issue 37.7: /fleet/rooms with a client token for room B listed room A's vehicle name.
+    async with connect(_ws(guarded, "/ws")) as a, connect(_ws(guarded, "/ws")) as b:
+        for ws, name, role, room in ((a, "robot-of-a", "vehicle", "a"), (b, "bob", "client", "b")):
+            token = _token(role, room=room)  # type: ignore[arg-type]
+            await ws.send(
+                json.dumps(
+                    {"type": "login", "name": name, "role": role, "room": room, "token": token}
+                )
+            )
+            assert (await _recv(ws))["success"] is True
+
+        def rooms(token: str) -> httpx.Response:
+            headers = {"Authorization": f"Bearer {token}"}
+            return httpx.get(guarded.url + "/fleet/rooms", headers=headers, timeout=10)
+
+        for role in ("client", "relay", "vehicle"):
+            seen = rooms(_token(role, room="b"))  # type: ignore[arg-type]
+            assert seen.status_code == 200, seen.text
+            assert [row["room"] for row in seen.json()] == ["b"]
+            assert "robot-of-a" not in seen.text
+        assert rooms(_token("client", room="nowhere")).json() == []
+        fleet = rooms(tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60))
+        assert [(row["room"], row["vehicles"]) for row in fleet.json()] == [
+            ("a", ["robot-of-a"]),
+            ("b", []),
+        ]
+        assert rooms("not.a-token").status_code == 401
+
+
+async def test_a_fleet_token_opens_nothing_but_the_fleet_view(guarded: RunningServer) -> None:
+    fleet = tokens.sign(SECRET, tokens.ALL_ROOMS, "fleet", now=time.time(), ttl_s=60)
+    async with connect(_ws(guarded, "/ws")) as ws:
+        login = {"type": "login", "name": "f", "role": "client", "room": "*", "token": fleet}
+        await ws.send(json.dumps(login))
+        reply = await _recv(ws)
+        assert reply["success"] is False and "wrong role" in reply["reason"]
+    async with connect(_ws(guarded, "/rosbridge")) as ws:
+        await ws.send(json.dumps({"op": "auth", "token": fleet}))
+        assert "wrong role" in (await _recv(ws))["msg"]
+        with pytest.raises(ConnectionClosed):
+            await _recv(ws)
+    headers = {"Authorization": f"Bearer {fleet}"}
+    state = httpx.get(guarded.url + "/turtlesim/state", headers=headers, timeout=10)
+    assert state.status_code == 401
 
 
 def _state(server: RunningServer) -> dict[str, Any]:

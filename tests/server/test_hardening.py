@@ -8,6 +8,7 @@ import contextlib
 import json
 import time
 from collections.abc import AsyncIterator, Callable
+from typing import Any
 
 import httpx
 import pytest
@@ -154,6 +155,48 @@ async def test_a_flooding_client_is_closed_and_the_slow_relay_is_not(server: Run
         assert "client" in (await recv(relay))["reason"]
 
 
+@pytest.mark.parametrize("kind", ["candidate", "offer"])
+async def test_a_client_s_flood_of_big_messages_costs_the_client_and_never_the_relay(
+    server: RunningServer, server_log: Records, kind: str
+) -> None:
+    # Issue 37.6: 100 candidates of 60 KB each from a client to a relay reading at a normal pace,
+    # and the server closed the relay as a slow reader.
+    async with connect(server.ws_url) as relay, connect(server.ws_url) as client:
+        await login(relay, "r", "relay")
+        await login(client, "c", "client")
+        received: list[dict[str, Any]] = []
+
+        async def read() -> None:  # as a page does: every message as it comes
+            with contextlib.suppress(ConnectionClosed):
+                async for text in relay:
+                    received.append(json.loads(text))
+
+        reader = asyncio.create_task(read())
+        padding = "x" * 60_000
+        if kind == "candidate":
+            candidate = {"candidate": f"candidate:1 1 udp 1 10.0.0.1 9 typ host {padding}"}
+            message = {"type": "candidate", "to": "r", "candidate": candidate}
+        else:  # an SDP may be large, but not 100 of them at once
+            message = {"type": "offer", "to": "r", "sdp": f"v=0 {padding}"}
+        for _ in range(100):
+            try:
+                await client.send(json.dumps(message))
+            except ConnectionClosed:
+                break
+        code, _ = await closed(client)  # the flooding client pays ...
+        assert code == 1008
+        await asyncio.sleep(0.5)
+        assert relay.close_code is None  # ... and the relay is still here, still served
+        await relay.send('{"type": "getOps"}')
+        async with asyncio.timeout(TIMEOUT_S):
+            while not any(m.get("ref") == "getOps" for m in received):
+                await asyncio.sleep(0.05)
+        reader.cancel()
+        relayed = sum(len(json.dumps(m)) for m in received if m["type"] == kind)
+        assert relayed < Settings().outbox_bytes / 2
+    assert server_log.tracebacks() == []
+
+
 async def test_a_socket_that_never_logs_in_is_closed_at_the_deadline(
     start_server: Callable[[Settings], RunningServer],
 ) -> None:
@@ -231,3 +274,59 @@ async def test_2000_spawn_attempts_hold_the_cap_and_the_server_keeps_answering(
         assert (await http.get(f"{server.url}/healthz", timeout=TIMEOUT_S)).status_code == 200
         state = (await http.get(f"{server.url}/turtlesim/state", timeout=TIMEOUT_S)).json()
         assert len(state["turtles"]) == MAX_TURTLES
+
+
+@pytest.mark.slow
+async def test_the_tick_holds_its_rate_while_63_sessions_never_read_16_subscriptions(
+    server: RunningServer,
+) -> None:
+    """Issue 37.8: 63 read-only sessions x 16 pose subscriptions that never read dropped the
+    simulator from 62.5 ticks/s to 26.5. The ticks are counted over equal stretches of time
+    before those sessions, with them and after them: the failure is a starvation by half or
+    worse, for as long as they stay; the bound is half of the slower stretch without them. The
+    machine is shared: a stretch with them is counted again (three at most) when another
+    process took the cores meanwhile, which a starvation they cause would outlast."""
+    url = rosbridge_url(server)
+    async with connect(url) as ws:
+        await ws.send(json.dumps({"op": "set_level", "level": "none"}))
+        for n in range(15):
+            spawn = {"op": "call_service", "service": "/spawn", "args": {"x": 1.0 + n / 2}}
+            await ws.send(json.dumps(spawn))
+        names = ["turtle1"] + [(await recv(ws))["values"]["name"] for _ in range(15)]
+    subscriptions = [
+        json.dumps({"op": "subscribe", "id": f"s{n}", "topic": f"/{name}/pose"})
+        for n, name in enumerate(names)
+    ]
+
+    def stuck() -> StuckClient:
+        client = StuckClient(url)
+        for subscription in subscriptions:
+            client.send(subscription)
+        return client
+
+    async with httpx.AsyncClient(timeout=TIMEOUT_S) as http:
+        state = f"{server.url}/turtlesim/state"
+
+        async def ticks_in(seconds: float) -> int:
+            first = (await http.get(state)).json()["tick"]
+            await asyncio.sleep(seconds)
+            last: int = (await http.get(state)).json()["tick"]
+            return last - first
+
+        before = await ticks_in(2.0)
+        readers = [await asyncio.to_thread(stuck) for _ in range(63)]
+        try:
+            # Each session is sent what fills its socket, at most 125 publications a second:
+            # a few seconds, and then nothing more while it does not read.
+            await asyncio.sleep(3.0)
+            beside_them = [await ticks_in(2.0)]
+            while len(beside_them) < 3 and max(beside_them) <= before / 2:
+                beside_them.append(await ticks_in(2.0))
+            assert (await http.get(f"{server.url}/healthz")).status_code == 200
+        finally:
+            for client in readers:
+                client.close()
+        await asyncio.sleep(0.5)
+        after = await ticks_in(2.0)
+    alone = min(before, after)
+    assert max(beside_them) > alone / 2, f"{beside_them} ticks in 2 s beside them, {alone} alone"

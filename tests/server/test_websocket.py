@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 from app.server.websocket import Outbox, Shut
@@ -16,21 +17,35 @@ async def test_an_outbox_over_its_byte_bound_closes_the_slow_reader() -> None:
     assert isinstance(shut, Shut) and shut.code == 1013 and "unread" in shut.reason
 
 
-async def test_droppable_messages_are_dropped_not_fatal_while_full() -> None:
-    outbox = Outbox(max_messages=2, max_bytes=10_000)
-    assert outbox.offer({"op": "publish", "n": 1}) and outbox.offer({"op": "publish", "n": 2})
-    assert outbox.offer({"op": "publish", "n": 3}) is False
-    assert outbox.shut is None
+async def test_pulled_messages_are_asked_for_only_when_the_writer_is_free_and_woken() -> None:
+    pulls: list[int] = []
+    ready: list[dict[str, object]] = [{"op": "publish", "n": 1}, {"op": "publish", "n": 2}]
+
+    def pull() -> list[dict[str, object]]:
+        pulls.append(len(ready))
+        taken = ready[:]
+        ready.clear()
+        return taken
+
+    outbox = Outbox(max_messages=10, max_bytes=10_000, pull=pull)
+    outbox.send({"op": "status"})  # what was queued goes first; nothing is pulled meanwhile
+    assert await outbox.get() == '{"op":"status"}' and pulls == []
     assert await outbox.get() == '{"op":"publish","n":1}'
-    outbox.send({"op": "status"})  # there is room again: a reply fits
-    assert len(outbox) == 2
+    assert await outbox.get() == '{"op":"publish","n":2}'
+    waiting = asyncio.create_task(outbox.get())
+    await asyncio.sleep(0)
+    assert not waiting.done() and pulls == [2, 0]  # nothing more to pull: it waits
+    ready.append({"op": "publish", "n": 3})
+    outbox.wake()
+    assert await waiting == '{"op":"publish","n":3}'
 
 
 async def test_nan_is_never_queued() -> None:
-    outbox = Outbox(max_messages=10, max_bytes=10_000)
+    pulled = [{"msg": {"x": math.inf}}, {"msg": {"x": 1.0}}]
+    outbox = Outbox(max_messages=10, max_bytes=10_000, pull=lambda: pulled)
     outbox.send({"type": "pose", "x": math.nan})
-    assert outbox.offer({"op": "publish", "msg": {"x": math.inf}}) is False
-    assert len(outbox) == 0 and outbox.shut is None
+    assert len(outbox) == 0
+    assert await outbox.get() == '{"msg":{"x":1.0}}'  # the infinite one was not queued
 
 
 async def test_the_close_comes_after_what_was_queued_before_it() -> None:

@@ -55,3 +55,23 @@ def test_unknown_role_is_refused_by_the_parser() -> None:
     result = _token("--room", "lab", "--role", "admin")
     assert result.returncode == 2
     assert "invalid choice" in result.stderr
+
+
+def test_a_fleet_token_is_for_the_fleet_page_of_every_room_and_nothing_else() -> None:
+    result = _token("--role", "fleet", "--server", "http://10.0.0.5:8000")
+    assert result.returncode == 0, result.stderr
+    last = json.loads(result.stdout.strip().splitlines()[-1])
+    assert last["url"] == f"http://10.0.0.5:8000/fleet#token={last['token']}"
+    claims = tokens.verify(SECRET, last["token"], now=time.time(), roles=("fleet",))
+    assert claims.room == tokens.ALL_ROOMS
+    # A room's roles only, unless fleet is asked for: it logs in nowhere, drives nothing.
+    refused = None
+    try:
+        tokens.verify(SECRET, last["token"], now=time.time())
+    except tokens.TokenError as exc:
+        refused = exc.reason
+    assert refused == "wrong role"
+    both = _token("--role", "fleet", "--room", "lab")
+    assert both.returncode == 1 and "leave out --room" in both.stderr
+    neither = _token("--role", "client")
+    assert neither.returncode == 1 and "--room is required" in neither.stderr

@@ -30,6 +30,11 @@ class World:
             self.sim.step()
             self.hub.tick(self.now)
 
+    def tick_and_take(self, session: RosbridgeSession) -> list[dict[str, Any]]:
+        """One tick, then what ``session`` is sent, as to a client that reads every tick."""
+        self.tick()
+        return session.take_publications()
+
 
 @pytest.fixture
 def world() -> World:
@@ -150,8 +155,10 @@ def test_missing_and_mistyped_fields_are_named(
 
 def test_subscribed_pose_arrives_every_tick(world: World, session: RosbridgeSession) -> None:
     assert send(session, op="subscribe", id="s1", topic="/turtle1/pose") == []
-    world.tick(3)
-    msgs = poses(session.take_publications(), "/turtle1/pose")
+    msgs = []
+    for _ in range(3):  # a client that reads: its socket is free after every tick
+        world.tick()
+        msgs += poses(session.take_publications(), "/turtle1/pose")
     assert len(msgs) == 3
     assert msgs[0] == {
         "x": pytest.approx(CENTRE),
@@ -180,15 +187,18 @@ def test_topic_spelling_is_echoed_and_types_of_ros1_and_ros2_accepted(
 
 def test_throttle_rate_spaces_publications(world: World, session: RosbridgeSession) -> None:
     send(session, op="subscribe", topic="/turtle1/pose", throttle_rate=100)
-    world.tick(63)  # about one second
-    count = len(session.take_publications())
+    count = 0
+    for _ in range(63):  # about one second
+        world.tick()
+        count += len(session.take_publications())
     # One per 100 ms, rounded up to whole 16 ms ticks (112 ms): 9 to 10 in a second.
     assert 8 <= count <= 11
 
 
-def test_throttle_with_queue_sends_the_queued_messages_oldest_first(
+def test_throttle_with_queue_sends_the_latest_pose_when_the_period_is_over(
     world: World, session: RosbridgeSession
 ) -> None:
+    # A newer pose supersedes the older ones: what waits out the throttle is the latest.
     send(session, op="call_service", service="/turtle1/teleport_absolute", args={"x": 1.0})
     send(session, op="publish", topic="/turtle1/cmd_vel", msg={"linear": {"x": 2.0}})
     send(session, op="subscribe", topic="/turtle1/pose", throttle_rate=1000, queue_length=3)
@@ -200,8 +210,8 @@ def test_throttle_with_queue_sends_the_queued_messages_oldest_first(
     world.tick(45)  # past one second: the oldest queued message leaves
     (second,) = poses(session.take_publications(), "/turtle1/pose")
     assert first[0]["x"] < second["x"]
-    # Only the last 3 of the ticks were kept, so the one sent is from the end of the first
-    # second, not from the tick right after the first publication.
+    # The one sent is from the end of the first second, not from the tick right after the
+    # first publication.
     assert second["x"] > first[0]["x"] + 2.0 * TurtleSim.TICK_S * 50
 
 
@@ -210,11 +220,9 @@ def test_several_ids_on_one_topic_share_one_stream_with_the_smallest_throttle(
 ) -> None:
     send(session, op="subscribe", id="slow", topic="/turtle1/pose", throttle_rate=1000)
     send(session, op="subscribe", id="fast", topic="/turtle1/pose")
-    world.tick(4)
-    assert len(session.take_publications()) == 4
+    assert sum(len(world.tick_and_take(session)) for _ in range(4)) == 4
     assert send(session, op="unsubscribe", id="fast", topic="/turtle1/pose") == []
-    world.tick(4)
-    assert len(session.take_publications()) <= 1
+    assert sum(len(world.tick_and_take(session)) for _ in range(4)) <= 1
 
 
 def test_unsubscribe_stops_publications(world: World, session: RosbridgeSession) -> None:
@@ -525,12 +533,68 @@ def test_adapter_errors_respect_the_level(session: RosbridgeSession) -> None:
     assert session.error("too big") == []
 
 
+def test_a_client_that_does_not_read_is_owed_only_the_latest_of_each_topic(
+    world: World, session: RosbridgeSession
+) -> None:
+    # Issue 37.8: nothing piles up for a client that never reads; when it does read, each
+    # subscription gives the newest message of its topic (latest wins).
+    for n in range(2, 17):
+        service_call(session, "/spawn", x=float(n) / 2, y=1.0)
+    names = world.sim.names()
+    for name in names:
+        send(session, op="subscribe", topic=f"/{name}/pose")
+    world.tick(1000)
+    publications = session.take_publications()
+    assert sorted(p["topic"] for p in publications) == sorted(f"/{n}/pose" for n in names)
+    latest = world.sim.pose("turtle1").x
+    (turtle1,) = poses(publications, "/turtle1/pose")
+    assert turtle1["x"] == pytest.approx(latest, abs=1e-6)
+
+
+def test_cmd_vel_subscribers_get_the_latest_queue_length_twists_they_have_not_had(
+    world: World,
+) -> None:
+    driver, watcher, latest = (world.hub.open_session() for _ in range(3))
+    send(watcher, op="subscribe", topic="/turtle1/cmd_vel", queue_length=3)
+    send(latest, op="subscribe", topic="/turtle1/cmd_vel")
+    for z in range(1, 6):
+        send(driver, op="publish", topic="/turtle1/cmd_vel", msg={"angular": {"z": float(z)}})
+    world.tick()
+    got = [t["angular"]["z"] for t in poses(watcher.take_publications(), "/turtle1/cmd_vel")]
+    assert got == [3.0, 4.0, 5.0]  # the latest 3, oldest first
+    assert [t["angular"]["z"] for t in poses(latest.take_publications(), "/turtle1/cmd_vel")] == [
+        5.0
+    ]
+    world.tick()
+    assert watcher.take_publications() == []  # nothing new
+
+
+def test_a_client_is_sent_at_most_125_publications_a_second_its_subscriptions_in_turn(
+    world: World, session: RosbridgeSession
+) -> None:
+    for n in range(2, 17):
+        service_call(session, "/spawn", x=float(n) / 2, y=1.0)
+    for name in world.sim.names():
+        send(session, op="subscribe", topic=f"/{name}/pose")
+    per_topic: dict[str, int] = {}
+    for _ in range(630):  # about ten seconds, read after every tick
+        for publication in world.tick_and_take(session):
+            per_topic[publication["topic"]] = per_topic.get(publication["topic"], 0) + 1
+    # 16 topics at 62.5 poses a second would be 10,000; a client is sent 125 a second (and its
+    # first 16 at once), and every subscription has its turn.
+    assert sum(per_topic.values()) <= 16 + 125 * 630 * TurtleSim.TICK_S
+    assert len(per_topic) == 16
+    assert max(per_topic.values()) - min(per_topic.values()) <= 1
+
+
 def test_many_sessions_with_their_own_subscriptions(world: World) -> None:
     sessions = [world.hub.open_session() for _ in range(20)]
     for i, s in enumerate(sessions):
         if i % 2 == 0:
             send(s, op="subscribe", topic="/turtle1/pose")
-    world.tick(2)
-    counts = [len(s.take_publications()) for s in sessions]
+    counts = [0] * 20
+    for _ in range(2):
+        world.tick()
+        counts = [n + len(s.take_publications()) for n, s in zip(counts, sessions, strict=True)]
     assert counts == [2 if i % 2 == 0 else 0 for i in range(20)]
     assert math.isfinite(world.sim.pose("turtle1").x)

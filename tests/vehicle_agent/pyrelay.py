@@ -27,8 +27,12 @@ log = logging.getLogger(__name__)
 class PyRelay:
     """The room's relay, minus the image analysis: tests send goals by hand."""
 
-    def __init__(self, ws_url: str, room: str = "default", name: str = "relay") -> None:
-        self.ws_url, self.room, self.name = ws_url, room, name
+    def __init__(
+        self, ws_url: str, room: str = "default", name: str = "relay", token: str | None = None
+    ) -> None:
+        self.ws_url, self.room, self.name, self.token = ws_url, room, name, token
+        # Every signaling message received after the login, in order.
+        self.signals: list[dict[str, Any]] = []
         self.pc: RTCPeerConnection | None = None
         self.channel: Any = None
         self.tags: list[int] = []
@@ -40,9 +44,10 @@ class PyRelay:
 
     async def start(self) -> None:
         self._ws = await connect(self.ws_url)
-        await self._ws.send(
-            json.dumps({"type": "login", "name": self.name, "role": "relay", "room": self.room})
-        )
+        login = {"type": "login", "name": self.name, "role": "relay", "room": self.room}
+        if self.token is not None:
+            login["token"] = self.token
+        await self._ws.send(json.dumps(login))
         reply = json.loads(await self._ws.recv())
         assert reply["success"], reply
         self._spawn(self._read(self._ws))
@@ -59,6 +64,7 @@ class PyRelay:
         with contextlib.suppress(ConnectionClosed):
             async for text in ws:
                 message = json.loads(text)
+                self.signals.append(message)
                 if message["type"] == "offer":
                     await self._answer(ws, message)
 

@@ -16,13 +16,15 @@ from typing import Any
 
 import pytest
 
+from app.protocol import tokens
 from app.protocol.events import AnyEvent, DriveReceived, TwistSent
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
+from tests.helpers.sockets import rosbridge_url
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
-from vehicle_agent.turtle import SimTurtle
+from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 from .pyrelay import PyRelay
@@ -265,3 +267,46 @@ async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None
                 await asyncio.to_thread(second.stop)
     finally:
         first.stop()
+
+
+@pytest.mark.slow
+async def test_a_renewing_agent_keeps_its_session_and_media_past_several_token_lifetimes(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    """Issue 37.4: the agent renews before its vehicle token expires, on ``/ws`` and on the
+    server's ``/rosbridge``, without dropping its link: the same peer connection carries video
+    and goals through several lifetimes of its tokens, and goals still drive the turtle."""
+    secret = "agent-renewal-test-secret"
+    server = start_server(Settings(environment="development", secret=secret))
+    lifetime = 6.0  # long enough for the turtle to connect on a loaded machine
+    first = tokens.sign(secret, "default", "vehicle", now=time.time(), ttl_s=lifetime)
+    turtle = RosbridgeTurtle(rosbridge_url(server), token=first)
+    video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5))
+    agent = Agent(AgentConfig(server=server.url, token=first), video, turtle, EventLog())
+    task = asyncio.create_task(agent.run())
+    relay = PyRelay(
+        server.ws_url, token=tokens.sign(secret, "default", "relay", now=time.time(), ttl_s=600)
+    )
+    try:
+        async with asyncio.timeout(10):
+            await agent.logged_in.wait()
+        await relay.start()
+        await connected(relay)
+        await asyncio.sleep(3 * lifetime)
+        frames = len(relay.tags)
+        await asyncio.sleep(lifetime)
+        assert len(relay.tags) > frames  # video still arrives, a fourth lifetime on
+        assert agent.token is not None
+        renewed = tokens.verify(secret, agent.token, now=time.time())
+        assert renewed.exp > tokens.verify(secret, first, now=0).exp + 3 * lifetime - 1
+        # One login, one offer, one peer connection: nothing was dropped and joined again.
+        assert relay.offers == 1
+        assert not [m for m in relay.signals if m["type"] == "leave"]
+        # The rosbridge session that drives the turtle lives on too: a goal turns it.
+        assert agent.pose is not None
+        await pilot_until(relay, LEFT, lambda: agent.pose is not None and agent.pose.theta > 2.0)
+    finally:
+        await relay.leave()
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task

@@ -35,7 +35,7 @@ import json
 import logging
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import redis.asyncio as aioredis
@@ -43,6 +43,7 @@ from redis.asyncio.client import Pipeline, PubSub
 
 from app.protocol.rooms import Role
 from app.protocol.signaling import IceServer, IceTransportPolicy, Login, ParseError, parse
+from app.protocol.tokens import Claims
 from app.server.config import Settings
 from app.server.fleet import keys
 from app.server.signaling import login_ice
@@ -92,6 +93,7 @@ class _Room:
     global_ids: dict[ConnId, str] = field(default_factory=dict)  # hub -> global
     members: set[str] = field(default_factory=set)  # global ids logged in
     seq: int = 0  # join order, kept in the member list
+    entries: dict[str, dict[str, Any]] = field(default_factory=dict)  # global id -> its entry
 
     def hub_id(self, conn: str) -> ConnId:
         hub_conn = self.hub_ids.get(conn)
@@ -104,6 +106,7 @@ class _Room:
     def forget(self, conn: str) -> list[Action]:
         hub_conn = self.hub_ids.pop(conn, None)
         self.members.discard(conn)
+        self.entries.pop(conn, None)
         if hub_conn is None:
             return []
         del self.global_ids[hub_conn]
@@ -250,6 +253,15 @@ class FleetHub:
         local.queue.put_nowait({"room": local.room, "binary": True})
         return []
 
+    def expire(self) -> list[Action]:
+        """End the sessions whose token has expired in the rooms this instance owns; what that
+        sends goes out through ``deliver``, like everything an owner sends."""
+        for owned in list(self._owned.values()):
+            actions = owned.hub.expire()
+            if actions:
+                self._settle(owned, actions, None, None)
+        return []
+
     def disconnect(self, conn: ConnId) -> list[Action]:
         """The socket is gone: its room's owner hears it as a closed socket."""
         local = self._locals.pop(conn, None)
@@ -347,14 +359,19 @@ class FleetHub:
             key=lambda item: int(item[1]["seq"]),
         )
         # Replay the logins in join order; the survivors already know each other, so the
-        # replies are dropped. Their tokens were checked when they logged in (and are neither
-        # stored nor still valid, perhaps): the replay runs with no secret, then it is back.
-        # Nor are they counted again as frames.
+        # replies are dropped. Their tokens were checked when they logged in (and are not
+        # stored): the replay runs with no secret, then it is back, and each session is given
+        # the claims it had, so that it still ends when they expire. Nor are the logins
+        # counted again as frames.
         owned.hub.secret, owned.hub.metrics = None, None
         try:
             for conn, entry in members:
-                owned.hub.receive(owned.hub_id(conn), json.dumps(entry["login"]))
+                hub_conn = owned.hub_id(conn)
+                owned.hub.receive(hub_conn, json.dumps(entry["login"]))
+                if entry.get("claims") is not None:
+                    owned.hub.restore(hub_conn, Claims(**entry["claims"]))
                 owned.members.add(conn)
+                owned.entries[conn] = entry
                 owned.seq = max(owned.seq, int(entry["seq"]) + 1)
         finally:
             owned.hub.secret, owned.hub.metrics = self.secret, self._metrics
@@ -411,6 +428,8 @@ class FleetHub:
                 login = parse(text or "")
                 if conn == sender and isinstance(login, Login):
                     self._joined(owned, conn, login)
+            elif action.message.get("type") == "renewed" and conn in owned.entries:
+                self._renewed(owned, conn)
         for conn in closed:
             owned.forget(conn)  # the hub has already taken it out of the room
             self._left(owned, conn)
@@ -424,13 +443,27 @@ class FleetHub:
 
     def _joined(self, owned: _Room, conn: str, login: Login) -> None:
         owned.members.add(conn)
-        # What a replay needs: the token was checked now and expires, so it is not stored.
+        # What a replay needs: the token was checked now, so it is not stored; what it grants
+        # is, for the session to end when it expires.
         entry = {
             "seq": owned.seq,
             "login": {"type": "login", "name": login.name, "role": login.role, "room": login.room},
+            "claims": self._claims_of(owned, conn),
         }
         owned.seq += 1
+        owned.entries[conn] = entry
         self._outbound.put_nowait(("member", (owned.name, conn, json.dumps(entry))))
+
+    def _renewed(self, owned: _Room, conn: str) -> None:
+        """``conn`` renewed its token: its entry holds the claims of the new one."""
+        entry = {**owned.entries[conn], "claims": self._claims_of(owned, conn)}
+        owned.entries[conn] = entry
+        self._outbound.put_nowait(("member", (owned.name, conn, json.dumps(entry))))
+
+    @staticmethod
+    def _claims_of(owned: _Room, conn: str) -> dict[str, Any] | None:
+        claims = owned.hub.claims_of(owned.hub_ids[conn])
+        return None if claims is None else asdict(claims)
 
     def _left(self, owned: _Room, conn: str) -> None:
         owned.members.discard(conn)

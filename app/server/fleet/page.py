@@ -4,17 +4,18 @@ Rows come from Redis when this instance is part of a fleet (every room of every 
 rooms set, each room's member list, its relay lease and the status its pool publishes), else
 from the embedded hub (rooms of this process; no pool, so no piloting figures).
 
-Access: with a secret configured, the rows (``/fleet/rooms``) need a client token of any room
-as ``Authorization: Bearer`` (:func:`require_fleet_access`); the page sends the one in its URL
-fragment (``/fleet#token=...``, from ``autopilot token --role client``). The page itself holds
-no data and is served to anyone, like the role pages.
+Access: with a secret configured, the rows (``/fleet/rooms``) need a token as ``Authorization:
+Bearer`` (:func:`fleet_scope`): a token of a room (any role) sees that room's row alone; the whole
+fleet needs a token made for it, ``autopilot token --role fleet``. The page sends the token in its
+URL fragment (``/fleet#token=...``). The page itself holds no data and is served to anyone, like
+the role pages.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, HTTPException, Request, status
@@ -34,28 +35,33 @@ if TYPE_CHECKING:  # the fleet extra: imported only where Redis is configured
     from app.server.fleet.bus import FleetHub
 
 
-# Who may see every room: anyone who may watch one (a vehicle or relay token is a machine's).
-FLEET_ROLES: tuple[tokens.Role, ...] = ("client",)
+# Who may see the rows: a room's peers (their own room) and fleet tokens (every room).
+FLEET_VIEW_ROLES: tuple[tokens.TokenRole, ...] = (*tokens.ROLES, "fleet")
 
 
-def require_fleet_access(request: Request) -> None:
-    """Refuse (401) a request without a client token of any room when a secret is configured.
+def fleet_scope(request: Request) -> str | None:
+    """The one room whose row the request may see, or None for every room; 401 without a token
+    when a secret is configured.
 
-    The fleet table lists every room of the service, its peers and links, so it asks for the
-    credential a person watching a room has. Without a secret (development) all may see it.
+    The fleet table lists every room of the service, its peers and links: a room's token shows
+    its own room, and only a fleet token (or no secret: development) shows them all.
     """
     secret: str | None = request.app.state.settings.secret
     if secret is None:
-        return
+        return None
     token = bearer_token(request.headers)
     if token is None:
-        refusal = "send a client token of any room: Authorization: Bearer <token>"
+        refusal = (
+            "send a token: Authorization: Bearer <token> (a room's token shows that room; "
+            "autopilot token --role fleet makes one for every room)"
+        )
     else:
         try:
-            tokens.verify(secret, token, now=time.time(), roles=FLEET_ROLES)
-            return
+            claims = tokens.verify(secret, token, now=time.time(), roles=FLEET_VIEW_ROLES)
         except TokenError as exc:
             refusal = str(exc)
+        else:
+            return None if claims.role == "fleet" else claims.room
     raise HTTPException(status.HTTP_401_UNAUTHORIZED, refusal, {"WWW-Authenticate": "Bearer"})
 
 
@@ -97,10 +103,14 @@ def _row(room: str, members: list[dict[str, str]], status: dict[str, Any] | None
     )
 
 
-async def fleet_rows(redis: aioredis.Redis) -> list[RoomRow]:
-    """Every room of the fleet, sorted by name, from Redis."""
+async def fleet_rows(redis: aioredis.Redis, only: str | None = None) -> list[RoomRow]:
+    """Every room of the fleet (or the room ``only``, if it has anyone), by name, from Redis."""
     rows = []
-    for room in sorted(str(r) for r in await redis.smembers(keys.ROOMS)):
+    if only is None:
+        names = sorted(str(r) for r in await redis.smembers(keys.ROOMS))
+    else:
+        names = [only] if await redis.sismember(keys.ROOMS, only) else []
+    for room in names:
         stored = await redis.hgetall(keys.room_members(room))
         entries = sorted((json.loads(v) for v in stored.values()), key=lambda e: int(e["seq"]))
         members = [{"name": e["login"]["name"], "role": e["login"]["role"]} for e in entries]
@@ -111,20 +121,21 @@ async def fleet_rows(redis: aioredis.Redis) -> list[RoomRow]:
     return rows
 
 
-def hub_rows(hub: Hub) -> list[RoomRow]:
-    """Every room of the embedded hub, sorted by name."""
-    return [
-        _row(room, [p.model_dump() for p in hub.roster(room)], None) for room in sorted(hub.rooms())
-    ]
+def hub_rows(hub: Hub, only: str | None = None) -> list[RoomRow]:
+    """Every room of the embedded hub (or the room ``only``, if it has anyone), by name."""
+    names = sorted(hub.rooms()) if only is None else [r for r in hub.rooms() if r == only]
+    return [_row(room, [p.model_dump() for p in hub.roster(room)], None) for room in names]
 
 
-@router.get("/fleet/rooms", dependencies=[Depends(require_fleet_access)])
-async def fleet_rooms(request: Request) -> list[RoomRow]:
-    """The fleet table as JSON."""
+@router.get("/fleet/rooms")
+async def fleet_rooms(
+    request: Request, only: Annotated[str | None, Depends(fleet_scope)]
+) -> list[RoomRow]:
+    """The fleet table as JSON: the rooms the request's token may see."""
     hub: Hub | FleetHub = request.app.state.signaling.hub
     if isinstance(hub, Hub):
-        return hub_rows(hub)
-    return await fleet_rows(hub.redis)
+        return hub_rows(hub, only)
+    return await fleet_rows(hub.redis, only)
 
 
 @router.get("/fleet", response_class=HTMLResponse)

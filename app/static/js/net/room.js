@@ -1,6 +1,7 @@
 // One page's membership of a signaling room: Connect / Join Room / Leave Room, the roster of
-// the other peers, and the unattended mode (?auto=1) that joins by itself and rejoins after
-// the server goes away.
+// the other peers, the unattended mode (?auto=1) that joins by itself and rejoins after the
+// server goes away, and the token's renewal: the server ends a session when its token expires,
+// so the page asks for a fresh one (`renew`) when the server said to (`renewIn`), and keeps it.
 import { PROTOCOL } from '../config.js';
 import { LoginRefused, Signaling } from './signaling.js';
 import { button, byTestId } from '../view/ui.js';
@@ -11,11 +12,13 @@ const RETRY_MAX_MS = 5000;
 /**
  * Events: `phase` (disconnected → connected → joined), `roster` (detail: the other peers),
  * `problem` (detail: why this page cannot join, also in `describe()`),
- * `peerleft` (detail: name), `signal` (detail: any other message from the server, e.g. offer).
+ * `peerleft` (detail: name), `renewed` (detail: the fresh token, now `token`),
+ * `signal` (detail: any other message from the server, e.g. offer).
  */
 export class RoomSession extends EventTarget {
   #retryMs = RETRY_MIN_MS;
   #autoRunning = false;
+  #renewal = null; // the timer of the next renewal
 
   constructor(config, log) {
     super();
@@ -28,6 +31,9 @@ export class RoomSession extends EventTarget {
     this.room = null;
     this.roster = [];
     this.auto = false;
+    // The token from the URL's fragment, then each renewal's: what the next login sends.
+    this.token = config.token;
+    this.renewals = 0; // tokens renewed since the page opened
     // Why this page cannot join, in words for the state line (a refused login, a misplaced
     // token); cleared by a successful join.
     this.problem = null;
@@ -68,7 +74,7 @@ export class RoomSession extends EventTarget {
   async join(name, room) {
     let reply;
     try {
-      reply = await this.signaling.login({ name, role: this.role, room, token: this.config.token });
+      reply = await this.signaling.login({ name, role: this.role, room, token: this.token });
     } catch (err) {
       if (err instanceof LoginRefused)
         this.#setProblem(`login refused: ${err.message}`, { log: false });
@@ -83,6 +89,7 @@ export class RoomSession extends EventTarget {
       iceTransportPolicy: reply.iceTransportPolicy || 'all',
     };
     this.log.info(`joined room ${this.room} as ${this.role} ${name}`);
+    this.#renewAfter(reply.renewIn);
     // Roster first, so that listeners of the `joined` phase already see who is there.
     this.#setRoster(reply.peers || []);
     this.#setPhase('joined');
@@ -176,6 +183,9 @@ export class RoomSession extends EventTarget {
         this.log.info(`${msg.from} left the room`);
         this.#setRoster(this.roster.filter((peer) => peer.name !== msg.from));
         break;
+      case 'renewed':
+        this.#onRenewed(msg);
+        break;
       case 'error':
         if (msg.ref === 'login') break; // the refused login's own error, reported by join()
         this.log.error(`signaling server: ${msg.reason}${msg.ref ? ` (about ${msg.ref})` : ''}`);
@@ -194,7 +204,37 @@ export class RoomSession extends EventTarget {
     if (this.auto) setTimeout(() => this.autoJoin(), this.#retryMs);
   }
 
+  /** Ask for a fresh token in `seconds` (none: the server asks for no tokens). */
+  #renewAfter(seconds) {
+    clearTimeout(this.#renewal);
+    this.#renewal = null;
+    if (typeof seconds !== 'number') return;
+    this.#renewal = setTimeout(() => {
+      this.#renewal = null;
+      if (this.phase !== 'joined') return;
+      try {
+        this.signaling.send({ type: 'renew' });
+      } catch (err) {
+        this.log.warn(`cannot renew the token: ${err.message}`);
+      }
+    }, seconds * 1000);
+  }
+
+  #onRenewed(msg) {
+    if (typeof msg.token !== 'string' || typeof msg.renewIn !== 'number') {
+      this.log.error('signaling server: a renewal without a token or a time');
+      return;
+    }
+    // The next login (a rejoin after the server went away) uses the fresh token too.
+    this.token = msg.token;
+    this.renewals += 1;
+    this.log.info(`token renewed; next renewal in ${Math.round(msg.renewIn)} s`);
+    this.dispatchEvent(new CustomEvent('renewed', { detail: msg.token }));
+    this.#renewAfter(msg.renewIn);
+  }
+
   #reset() {
+    this.#renewAfter(null);
     const others = this.roster;
     this.roster = [];
     this.#setPhase('disconnected');

@@ -4,8 +4,9 @@ import { byTestId, fmt, show } from '../view/ui.js';
 const table = byTestId('fleet-table');
 const rows = byTestId('fleet-rows');
 const REFRESH_MS = Number(table.dataset.refreshMs);
-// A client token of any room (`/fleet#token=…`, from `autopilot token --role client`): the
-// server asks for one when access control is on. The fragment never reaches the server's log.
+// The token of the URL's fragment (`/fleet#token=…`): a fleet token (`autopilot token --role
+// fleet`) shows every room, a room's token that room alone; the server asks for one when access
+// control is on. The fragment never reaches the server's log.
 const TOKEN = new URLSearchParams(location.hash.slice(1)).get('token');
 const HEADERS = TOKEN ? { Authorization: `Bearer ${TOKEN}` } : {};
 
@@ -54,8 +55,10 @@ function render(rooms) {
 async function refresh() {
   try {
     const response = await fetch('/fleet/rooms', { cache: 'no-store', headers: HEADERS });
-    if (response.status === 401)
-      throw new Error('a client token is needed: open /fleet#token=<token>');
+    if (response.status === 401) {
+      const how = 'open /fleet#token=<token> (autopilot token --role fleet)';
+      throw new Error(`a token is needed: ${how}`);
+    }
     if (!response.ok) throw new Error(`HTTP ${response.status}`);
     status.rooms = await response.json();
     status.refreshes += 1;

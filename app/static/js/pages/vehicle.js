@@ -67,6 +67,14 @@ class Turtle {
     this.onPose = () => {};
   }
 
+  /** The page's token was renewed: prove the fresh one to rosbridge, which ends a session whose
+   *  token expires (only where the old one was sent: this server's own /rosbridge). */
+  renew(token) {
+    if (!this.token) return;
+    this.token = token;
+    this.ros?.callOnConnection({ op: 'auth', token });
+  }
+
   connect() {
     const ros = new ROSLIB.Ros({ url: this.url });
     this.ros = ros;
@@ -357,6 +365,7 @@ async function startCamera() {
   }
 }
 
+room.addEventListener('renewed', (event) => turtle.renew(event.detail));
 room.bindControls();
 room.addEventListener('phase', showState);
 room.addEventListener('roster', showState);
