@@ -171,35 +171,16 @@ def run(args: argparse.Namespace) -> int:
 async def _main(args: argparse.Namespace) -> int:
     ws_url(args.server)  # a malformed URL is reported before anything starts
     events = EventLog(args.events)
-    camera_topic = topic_of(args.video)
-    video: MediaStreamTrack
-    if camera_topic is None:
-        video = open_source(
-            args.video,
-            args.size,
-            args.fps,
-            on_frame=events.emit,
-            sweep_s=args.sweep_s,
-        )
-    else:
-        if not args.rosbridge:
-            raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
-        ros_camera = RosCamera(
-            args.rosbridge,
-            camera_topic,
-            size=args.size or VIDEO_SIZE,
-            fps=args.fps or VIDEO_FPS,
-            token=args.token if same_server(args.server, args.rosbridge) else None,
-            tls=tls_context(args.ca_file),
-            compression=args.camera_compression,
-            on_frame=events.emit,
-        )
-        await ros_camera.start()
-        video = ros_camera
+    # The token goes only to the server's own /rosbridge.
+    rosbridge_token = (
+        args.token if args.rosbridge and same_server(args.server, args.rosbridge) else None
+    )
+    video = await _open_video(args, events, rosbridge_token)
     turtle: Turtle = SimTurtle()
     if args.rosbridge:
-        token = args.token if same_server(args.server, args.rosbridge) else None
-        turtle = RosbridgeTurtle(args.rosbridge, args.ros, token=token, ca_file=args.ca_file)
+        turtle = RosbridgeTurtle(
+            args.rosbridge, args.ros, token=rosbridge_token, ca_file=args.ca_file
+        )
     config = AgentConfig(
         server=args.server,
         room=args.room,
@@ -215,6 +196,8 @@ async def _main(args: argparse.Namespace) -> int:
     record = recorder.settings_from(args, args.room)
     flight = None if record is None else recorder.FlightRecorder(record)
     agent = Agent(config, video, turtle, events)
+    if isinstance(video, RosCamera):
+        agent.token_renewed.append(video.renew)
     camera = None
     if flight is not None:
         events.listeners.append(flight.on_event)
@@ -248,3 +231,28 @@ async def _main(args: argparse.Namespace) -> int:
             metrics.close()
     log.info("vehicle agent stopped")
     return 0
+
+
+async def _open_video(
+    args: argparse.Namespace, events: EventLog, rosbridge_token: str | None
+) -> MediaStreamTrack:
+    """The ``--video`` track; a camera topic is connected to before anything else starts."""
+    topic = topic_of(args.video)
+    if topic is None:
+        return open_source(
+            args.video, args.size, args.fps, on_frame=events.emit, sweep_s=args.sweep_s
+        )
+    if not args.rosbridge:
+        raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
+    camera = RosCamera(
+        args.rosbridge,
+        topic,
+        size=args.size or VIDEO_SIZE,
+        fps=args.fps or VIDEO_FPS,
+        token=rosbridge_token,
+        tls=tls_context(args.ca_file),
+        compression=args.camera_compression,
+        on_frame=events.emit,
+    )
+    await camera.start()
+    return camera

@@ -127,6 +127,11 @@ class LatestSlot(Generic[T]):
         self._item = item
         self.received += 1
 
+    @property
+    def waiting(self) -> T | None:
+        """The item a take would give now, left where it is."""
+        return self._item
+
     def take(self) -> T | None:
         """The newest item, once (None when nothing came since the last take)."""
         item, self._item = self._item, None

@@ -29,6 +29,7 @@ from pydantic import (
 )
 
 from app.protocol.errors import describe
+from app.protocol.ros import RosFlavour, type_name
 
 CameraType = Literal["sensor_msgs/CompressedImage", "sensor_msgs/Image"]
 CAMERA_TYPES: Final[tuple[CameraType, ...]] = get_args(CameraType)
@@ -130,11 +131,17 @@ class Stamp(_Msg):
         return self
 
     @property
-    def seconds(self) -> float:
-        """The stamp as seconds (since the epoch, on a robot that uses wall time)."""
+    def parts(self) -> tuple[int, int]:
+        """Whole seconds and nanoseconds, whichever spelling held them."""
         whole = self.sec if self.sec is not None else self.secs
         fraction = self.nanosec if self.nanosec is not None else self.nsecs
-        return (whole or 0) + (fraction or 0) / 1e9
+        return whole or 0, fraction or 0
+
+    @property
+    def seconds(self) -> float:
+        """The stamp as seconds (since the epoch, on a robot that uses wall time)."""
+        whole, fraction = self.parts
+        return whole + fraction / 1e9
 
 
 class Header(_Msg):
@@ -170,6 +177,30 @@ MODELS: Final[dict[CameraType, type[CompressedImage] | type[Image]]] = {
     COMPRESSED_IMAGE: CompressedImage,
     IMAGE: Image,
 }
+
+
+def type_spelled(kind: CameraType, flavour: RosFlavour) -> str:
+    """How a rosbridge of ``flavour`` names ``kind`` (``sensor_msgs/msg/Image`` in ROS 2)."""
+    package, name = kind.split("/")
+    return type_name(flavour, package, "msg", name)
+
+
+def wire(image: CameraImage, flavour: RosFlavour) -> dict[str, Any]:
+    """``image`` as a rosbridge of ``flavour`` sends it: every field, the header's stamp in the
+    flavour's spelling (ROS 1 with its ``seq``), ``data`` as bytes (base64 in JSON, a byte string
+    in CBOR)."""
+    header = image.header
+    whole, fraction = header.stamp.parts
+    out_header: dict[str, Any]
+    if flavour == "1":
+        out_header = {
+            "seq": header.seq or 0,
+            "stamp": {"secs": whole, "nsecs": fraction},
+            "frame_id": header.frame_id,
+        }
+    else:
+        out_header = {"stamp": {"sec": whole, "nanosec": fraction}, "frame_id": header.frame_id}
+    return {"header": out_header, **image.model_dump(exclude={"header"})}
 
 
 class CameraMessageError(ValueError):

@@ -26,7 +26,13 @@ from app.server.access import RosbridgeGate, bearer_token, state_refusal
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
-from app.turtlesim.rosbridge import Refused, RosbridgeHub, RosbridgeSession, parse_frame
+from app.turtlesim.rosbridge import (
+    Publish,
+    Refused,
+    RosbridgeHub,
+    RosbridgeSession,
+    parse_frame,
+)
 from app.turtlesim.sim import TurtleSim
 
 log = logging.getLogger(__name__)
@@ -76,7 +82,7 @@ class Simulator:
     def open(self) -> tuple[RosbridgeSession, Outbox]:
         """A new rosbridge client: its session and outbox."""
         session = self.hub.open_session()
-        return session, self.outboxes.open(session, pull=session.take_publications)
+        return session, self.outboxes.open(session, pull=session.take_frames)
 
     def forget(self, session: RosbridgeSession) -> None:
         """The client is gone: its subscriptions go with it."""
@@ -104,6 +110,10 @@ class Simulator:
         """One step: the simulator, then a word to every writer that new poses are there."""
         self.sim.step()
         self.hub.tick(time.monotonic())
+        self.wake()
+
+    def wake(self) -> None:
+        """Tell every writer there may be something new to send (a tick, a publication)."""
         for _, outbox in self.outboxes.items():
             outbox.wake()
 
@@ -134,7 +144,8 @@ async def turtlesim_state(request: Request) -> dict[str, Any]:
 
 @router.websocket("/rosbridge")
 async def rosbridge(websocket: WebSocket) -> None:
-    """One rosbridge v2 client (roslibpy, roslib.js): JSON text frames both ways."""
+    """One rosbridge v2 client (roslibpy, roslib.js): JSON text frames from it; JSON text, or
+    CBOR binary frames for a subscription that asks, to it."""
     simulator: Simulator = websocket.app.state.simulator
     metrics: ServerMetrics = websocket.app.state.metrics
     gate = RosbridgeGate(websocket.app.state.settings.secret)
@@ -159,7 +170,11 @@ async def rosbridge(websocket: WebSocket) -> None:
             decision = gate.check(frame, time.time())
             if decision.forward and isinstance(frame, Refused):
                 metrics.refused("invalid")
+            if session.room is None and gate.claims is not None:
+                session.room = gate.claims.room  # its camera topics are its room's
             replies = session.handle(frame) if decision.forward else []
+            if decision.forward and isinstance(frame, Publish):
+                simulator.wake()  # a camera image goes out now, not at the next tick
             if decision.reply is not None:  # the gate replies only to refuse: no token, or a
                 metrics.refused("auth")  # role that may not do this
                 replies.append(decision.reply)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, StrictStr, ValidationError
@@ -100,6 +100,11 @@ _DEFINITIONS: dict[str, str] = {
         "rcl_interfaces/Parameter[] deleted_parameters"
     ),
     "rcl_interfaces/Parameter": "string name\nrcl_interfaces/ParameterValue value",
+    "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
+    "sensor_msgs/Image": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
+        "uint8 is_bigendian\nuint32 step\nuint8[] data"
+    ),
     "rcl_interfaces/ParameterValue": (
         "uint8 type\nbool bool_value\nint64 integer_value\nfloat64 double_value\n"
         "string string_value\nbyte[] byte_array_value\nbool[] bool_array_value\n"
@@ -117,7 +122,14 @@ _USES: dict[str, tuple[str, ...]] = {
         "rcl_interfaces/Parameter",
         "rcl_interfaces/ParameterValue",
     ),
+    "sensor_msgs/CompressedImage": ("std_msgs/Header",),
+    "sensor_msgs/Image": ("std_msgs/Header",),
 }
+# ROS 2's std_msgs/Header has no seq, and its stamp is a message of its own.
+_ROS2_DEFINITIONS: dict[str, str] = {
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+}
+_ROS2_USES: dict[str, tuple[str, ...]] = {"std_msgs/Header": ("builtin_interfaces/Time",)}
 
 
 def _short(type_name: str) -> str:
@@ -128,11 +140,22 @@ def _short(type_name: str) -> str:
 
 
 def full_text(type_name: str) -> str:
-    """The ``typedefs_full_text`` entry for a message type of any flavour."""
+    """The ``typedefs_full_text`` entry for a message type of any flavour (a ROS 2 one is
+    spelled ``pkg/msg/Name``): its definition, then every type it uses, depth first."""
     short = _short(type_name)
-    text = _DEFINITIONS[short]
-    for used in _USES.get(short, ()):
-        text += f"\n{_SEPARATOR}\nMSG: {used}\n{_DEFINITIONS[used]}"
+    ros2 = "/msg/" in type_name
+    definitions = {**_DEFINITIONS, **_ROS2_DEFINITIONS} if ros2 else _DEFINITIONS
+    uses = {**_USES, **_ROS2_USES} if ros2 else _USES
+    text = definitions[short]
+    seen = {short}
+    pending = list(reversed(uses.get(short, ())))
+    while pending:
+        used = pending.pop()
+        if used in seen:
+            continue
+        seen.add(used)
+        text += f"\n{_SEPARATOR}\nMSG: {used}\n{definitions[used]}"
+        pending.extend(reversed(uses.get(used, ())))
     return text
 
 
@@ -198,10 +221,13 @@ class RosGraph:
             # The turtlesim_msgs-era node moves sideways only with this parameter set.
             self.params[self._param("holonomic")] = False
         self.sim.holonomic = flavour != "jazzy"
-        self._handlers: dict[str, Callable[[Json], Json]] = {
+        # The calls about topics are answered from the topics listed for the caller.
+        self._topic_handlers: dict[str, Callable[[Json, dict[str, str]], Json]] = {
             "topics": self._topics,
             "topics_and_raw_types": self._topics_and_raw_types,
             "topic_type": self._topic_type,
+        }
+        self._handlers: dict[str, Callable[[Json], Json]] = {
             "services": self._services,
             "service_type": self._service_type,
             "nodes": self._nodes,
@@ -289,27 +315,32 @@ class RosGraph:
 
     # -- rosapi calls ------------------------------------------------------------------------
 
-    def call(self, service: str, args: Json) -> Json:
-        """Answer rosapi's ``service`` (``topics``, ``get_param``, ...) called with ``args``."""
+    def call(self, service: str, args: Json, cameras: Mapping[str, str] | None = None) -> Json:
+        """Answer rosapi's ``service`` (``topics``, ``get_param``, ...) called with ``args``;
+        ``cameras`` are the caller's camera topics and their types, listed beside the graph's
+        (:mod:`app.turtlesim.rosbridge`: they depend on the caller's room)."""
+        about_topics = self._topic_handlers.get(service)
+        if about_topics is not None:
+            listed = dict(sorted({**self.topics(), **(cameras or {})}.items()))
+            return about_topics(args, listed)
         try:
             handler = self._handlers[service]
         except KeyError:
             raise RosapiError(f"rosapi has no service {service!r} here") from None
         return handler(args)
 
-    def _topics(self, args: Json) -> Json:
+    def _topics(self, args: Json, listed: dict[str, str]) -> Json:
         _parse(_Empty, args)
-        topics = self.topics()
-        return {"topics": list(topics), "types": list(topics.values())}
+        return {"topics": list(listed), "types": list(listed.values())}
 
-    def _topics_and_raw_types(self, args: Json) -> Json:
-        reply = self._topics(args)
+    def _topics_and_raw_types(self, args: Json, listed: dict[str, str]) -> Json:
+        reply = self._topics(args, listed)
         reply["typedefs_full_text"] = [full_text(kind) for kind in reply["types"]]
         return reply
 
-    def _topic_type(self, args: Json) -> Json:
+    def _topic_type(self, args: Json, listed: dict[str, str]) -> Json:
         name = _absolute(_parse(_TopicRequest, args).topic)
-        return {"type": self.topics().get(name, "")}  # rosapi's answer for an unknown topic
+        return {"type": listed.get(name, "")}  # rosapi's answer for an unknown topic
 
     def _services(self, args: Json) -> Json:
         _parse(_Empty, args)

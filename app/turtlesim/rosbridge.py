@@ -18,6 +18,16 @@ after the client's ``set_level``, since current rosbridge_suite sends none; a fr
 rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
 always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
 answered by :class:`app.turtlesim.rosapi.RosGraph`.
+
+Beside the turtles' topics, a client may advertise a camera topic (``sensor_msgs/CompressedImage``
+or ``sensor_msgs/Image``, :mod:`app.protocol.camera`) and publish on it; the others subscribe to
+it as to any topic (rosapi lists it). A camera topic belongs to the room of the token that opened
+the connection (:attr:`RosbridgeSession.room`, set by the server's gate): another room's clients
+neither see it nor reach it. Like a pose topic, it keeps only its latest message.
+
+A subscription asking for ``compression: "cbor"`` gets its messages as CBOR, in binary frames,
+a ``uint8[]`` (an image's data) as a byte string; otherwise as JSON text, a ``uint8[]`` in
+base64 (:meth:`RosbridgeSession.take_frames`), as rosbridge_server sends them.
 """
 
 from __future__ import annotations
@@ -31,6 +41,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Final, Literal, TypeVar, get_args
 
+import cbor2
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -43,6 +54,14 @@ from pydantic import (
 )
 
 from app.protocol import jsonedge
+from app.protocol.camera import (
+    CAMERA_TYPES,
+    CameraMessageError,
+    CameraType,
+    type_spelled,
+    wire,
+)
+from app.protocol.camera import parse as parse_image
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
 from app.turtlesim.rosapi import (
@@ -57,6 +76,8 @@ log = logging.getLogger(__name__)
 
 Json = dict[str, Any]
 MessageId = StrictStr | StrictInt | None
+# One WebSocket frame as sent: JSON text, or CBOR bytes.
+Frame = str | bytes
 _Model = TypeVar("_Model", bound=BaseModel)
 
 # Status levels by rank: after set_level a session receives statuses at or above its level;
@@ -73,6 +94,11 @@ MAX_SUBSCRIPTIONS: Final = 16
 # So what the clients subscribe to cannot add up to more than the server can send beside its tick.
 MAX_PUBLICATIONS_PER_S: Final = 125.0
 MAX_ADVERTISEMENTS: Final = 64
+# Camera topics at once, in one room and in all: each holds its latest image, so this bounds
+# their memory (the server's frame limit bounds each image), and one room's clients cannot take
+# another room's places.
+MAX_CAMERA_TOPICS_PER_ROOM: Final = 8
+MAX_CAMERA_TOPICS: Final = 64
 MAX_QUEUE_LENGTH: Final = 100
 MAX_THROTTLE_RATE_MS: Final = 60_000
 
@@ -127,7 +153,7 @@ class Subscribe(_Op):
         default=0, ge=0, le=MAX_THROTTLE_RATE_MS, strict=True, allow_inf_nan=False
     )
     queue_length: StrictInt = Field(default=0, ge=0, le=MAX_QUEUE_LENGTH)
-    compression: Literal["none"] | None = None
+    compression: Literal["none", "cbor"] | None = None
 
 
 class Unsubscribe(_Op):
@@ -391,6 +417,42 @@ def resolve_topic(name: str) -> Topic:
     return Topic(match["turtle"], leaf)
 
 
+@dataclass(frozen=True)
+class CameraTopic:
+    """A camera topic clients publish on: the room it belongs to (None without tokens: one
+    space) and its name, with the leading slash."""
+
+    room: str | None
+    name: str
+
+
+AnyTopic = Topic | CameraTopic
+
+
+@dataclass
+class _CameraStream:
+    """A camera topic's type and latest message (the wire form of :func:`camera.wire`), with
+    the version it was given."""
+
+    kind: CameraType
+    version: int = 0
+    latest: Json | None = None
+
+
+def encode(message: Json, cbor: bool) -> Frame | None:
+    """``message`` as one frame: CBOR bytes, or JSON text (``bytes`` in base64); None (logged)
+    for a message that cannot be sent (NaN or Infinity in JSON)."""
+    try:
+        return cbor2.dumps(message) if cbor else jsonedge.dumps(message)
+    except ValueError as exc:  # a bug upstream: never sent
+        log.error("not sending a %r message: %s", message.get("op"), exc)
+        return None
+
+
+def _absolute(name: str) -> str:
+    return name if name.startswith("/") else f"/{name}"
+
+
 def pose_message(sim: TurtleSim, turtle: str) -> Json:
     """A ``turtlesim/Pose`` message for one turtle; its fields are float32, as on the wire."""
     p = sim.pose(turtle)
@@ -421,21 +483,29 @@ class _Subscription:
     """
 
     name: str
-    topic: Topic
+    topic: AnyTopic
     # The topic's version last delivered (or current when subscribed): only newer ones are due.
     seen: int
-    by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
+    # Each id's throttle (ms), queue length and whether it asked for CBOR.
+    by_id: dict[MessageId, tuple[float, int, bool]] = field(default_factory=dict)
     last_sent: float = -math.inf
 
     @property
     def throttle_s(self) -> float:
-        return min(t for t, _ in self.by_id.values()) / 1000.0
+        return min(t for t, _, _ in self.by_id.values()) / 1000.0
 
     @property
     def queue_length(self) -> int:
-        return max(q for _, q in self.by_id.values())
+        return max(q for _, q, _ in self.by_id.values())
 
-    def take(self, now: float, newer: list[Versioned], room: int, out: list[Json]) -> None:
+    @property
+    def cbor(self) -> bool:
+        """CBOR when any id asked for it, as rosbridge_server picks one compression a topic."""
+        return any(c for _, _, c in self.by_id.values())
+
+    def take(
+        self, now: float, newer: list[Versioned], room: int, out: list[tuple[Json, bool]]
+    ) -> None:
         """Send what is due at time ``now`` of ``newer`` (the topic's messages since ``seen``),
         at most ``room`` messages, oldest first."""
         kept = newer[-max(1, self.queue_length) :]
@@ -448,7 +518,7 @@ class _Subscription:
         else:
             return
         for _, msg in due:
-            out.append({"op": "publish", "topic": self.name, "msg": msg})
+            out.append(({"op": "publish", "topic": self.name, "msg": msg}, self.cbor))
         self.seen = due[-1][0]
         self.last_sent = now
 
@@ -461,8 +531,13 @@ class RosbridgeSession:
 
     def __init__(self, hub: RosbridgeHub) -> None:
         self._hub = hub
+        # The room of the token that opened the connection (None without tokens): its camera
+        # topics are the only ones this session sees. Set by the server's gate.
+        self.room: str | None = None
         self._subscriptions: dict[str, _Subscription] = {}
         self._advertised: set[str] = set()
+        # The camera topics among the advertised, by the client's spelling.
+        self._cameras: dict[str, CameraTopic] = {}
         # No status messages until the client asks for them with set_level.
         self._level: int | None = None
         # The publications it may still be sent (a token bucket refilled in the hub's time),
@@ -513,11 +588,20 @@ class RosbridgeSession:
         """A ``status`` error for a frame the adapter refused (binary or oversize)."""
         return self.refuse(Refused(text))
 
+    def take_frames(self) -> list[Frame]:
+        """What the subscriptions have to send now, as frames (``publish`` messages in JSON, or
+        CBOR where the subscription asked): call it when the client's socket is ready for
+        more. Nothing waits for a client that does not call it, so one that never reads costs
+        the tick nothing; one that reads is sent at most :data:`MAX_PUBLICATIONS_PER_S`, its
+        subscriptions served in turn."""
+        frames = (encode(message, cbor) for message, cbor in self._take())
+        return [frame for frame in frames if frame is not None]
+
     def take_publications(self) -> list[Json]:
-        """What the subscriptions have to send now (``publish`` messages): call it when the
-        client's socket is ready for more. Nothing waits for a client that does not call it,
-        so one that never reads costs the tick nothing; one that reads is sent at most
-        :data:`MAX_PUBLICATIONS_PER_S`, its subscriptions served in turn."""
+        """The ``publish`` messages :meth:`take_frames` would send now, as messages."""
+        return [message for message, _ in self._take()]
+
+    def _take(self) -> list[tuple[Json, bool]]:
         now = self._hub.now
         elapsed = max(0.0, now - self._allowance_at)
         self._allowance = min(
@@ -528,7 +612,7 @@ class RosbridgeSession:
         if not subs:
             return []
         first = self._turn % len(subs)
-        out: list[Json] = []
+        out: list[tuple[Json, bool]] = []
         served = 0
         for sub in subs[first:] + subs[:first]:
             room = int(self._allowance) - len(out)
@@ -544,7 +628,14 @@ class RosbridgeSession:
         """Forget this client's subscriptions and advertisements."""
         self._subscriptions.clear()
         self._advertised.clear()
+        self._cameras.clear()
         self._hub.sessions.discard(self)
+        self._hub.prune_cameras()
+
+    def camera_topics(self) -> set[CameraTopic]:
+        """The camera topics this session advertises or subscribes to."""
+        subscribed = {s.topic for s in self._subscriptions.values()}
+        return {t for t in subscribed if isinstance(t, CameraTopic)} | set(self._cameras.values())
 
     def subscribed_topics(self) -> list[str]:
         """Topic names (as the client spelled them) this session receives."""
@@ -557,22 +648,29 @@ class RosbridgeSession:
     # -- ops ----------------------------------------------------------------------------
 
     def _advertise(self, msg: Advertise) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose":
-            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         if msg.topic not in self._advertised and len(self._advertised) >= MAX_ADVERTISEMENTS:
             raise ProtocolError(f"at most {MAX_ADVERTISEMENTS} advertisements per client")
+        topic = self._typed_topic(msg.topic, msg.type)
+        if isinstance(topic, Topic) and topic.leaf == "pose":
+            raise ProtocolError(f"{msg.topic} is published by the simulator only")
         self._advertised.add(msg.topic)
+        if isinstance(topic, CameraTopic):
+            self._cameras[msg.topic] = topic
         return []
 
     def _unadvertise(self, msg: Unadvertise) -> list[Json]:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
+        if self._cameras.pop(msg.topic, None) is not None:
+            self._hub.prune_cameras()
         return []
 
     def _publish(self, msg: Publish) -> list[Json]:
-        topic = resolve_topic(msg.topic)
+        try:
+            topic = resolve_topic(msg.topic)
+        except ProtocolError:
+            return self._publish_image(msg)
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
         twist = _parse(Twist, msg.msg, f"{msg.topic} (geometry_msgs/Twist)")
@@ -583,18 +681,37 @@ class RosbridgeSession:
         self._hub.broadcast(topic, twist.model_dump())
         return []
 
+    def _publish_image(self, msg: Publish) -> list[Json]:
+        camera = CameraTopic(self.room, _absolute(msg.topic))
+        stream = self._hub.camera(camera)
+        if stream is None:
+            raise ProtocolError(
+                f"unknown topic {msg.topic!r}: advertise a camera topic with its type "
+                f"({' or '.join(CAMERA_TYPES)}) before publishing on it"
+            )
+        try:
+            image = parse_image(stream.kind, msg.msg)
+        except CameraMessageError as exc:
+            raise ProtocolError(f"{msg.topic}: {exc}") from None
+        self._hub.publish_camera(camera, wire(image, self._hub.types.flavour))
+        return []
+
     def _subscribe(self, msg: Subscribe) -> list[Json]:
-        topic = self._typed_topic(msg.topic, msg.type)
-        if topic.leaf == "pose" and topic.turtle not in self._hub.sim.names():
-            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         sub = self._subscriptions.get(msg.topic)
         known = sub is not None and msg.id in sub.by_id
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
+        topic = self._typed_topic(msg.topic, msg.type)
+        if (
+            isinstance(topic, Topic)
+            and topic.leaf == "pose"
+            and topic.turtle not in self._hub.sim.names()
+        ):
+            raise ProtocolError(f"unknown topic {msg.topic!r}: no turtle named {topic.turtle!r}")
         if sub is None:
             sub = _Subscription(msg.topic, topic, seen=self._hub.version(topic))
             self._subscriptions[msg.topic] = sub
-        sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
+        sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length, msg.compression == "cbor")
         return []
 
     def _unsubscribe(self, msg: Unsubscribe) -> list[Json]:
@@ -607,6 +724,8 @@ class RosbridgeSession:
             del sub.by_id[msg.id]
         if not sub.by_id:
             del self._subscriptions[msg.topic]
+            if isinstance(sub.topic, CameraTopic):
+                self._hub.prune_cameras()
         return []
 
     def _call_service(self, msg: CallService) -> list[Json]:
@@ -629,27 +748,51 @@ class RosbridgeSession:
 
     # -- helpers ------------------------------------------------------------------------
 
-    def _typed_topic(self, name: str, type_name: str | None) -> Topic:
+    def _typed_topic(self, name: str, type_name: str | None) -> AnyTopic:
         try:
             topic = resolve_topic(name)
         except ProtocolError:
-            absolute = name if name.startswith("/") else f"/{name}"
-            if absolute in self._hub.graph.topics():
-                raise ProtocolError(
-                    f"{name} is on a real robot's graph, but this simulator publishes nothing "
-                    "on it and takes nothing from it"
-                ) from None
-            raise
+            return self._camera_topic(name, type_name)
         types = self._hub.types
         canonical = types.twist if topic.leaf == "cmd_vel" else types.pose
         if type_name is not None and type_name not in spellings(types.flavour, canonical):
             raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
 
+    def _camera_topic(self, name: str, type_name: str | None) -> CameraTopic:
+        """The camera topic ``name`` of this session's room: one a client declared (``type``,
+        when given, must be its type), or a new one when ``type`` names a camera type."""
+        absolute = _absolute(name)
+        if absolute in self._hub.graph.topics():
+            raise ProtocolError(
+                f"{name} is on a real robot's graph, but this simulator publishes nothing "
+                "on it and takes nothing from it"
+            )
+        camera = CameraTopic(self.room, absolute)
+        flavour = self._hub.types.flavour
+        stream = self._hub.camera(camera)
+        if stream is not None:
+            spelled = type_spelled(stream.kind, flavour)
+            if type_name is not None and type_name not in spellings(flavour, spelled):
+                raise ProtocolError(f"{name} has type {spelled}, not {type_name!r}")
+            return camera
+        kinds = [
+            k for k in CAMERA_TYPES if type_name in spellings(flavour, type_spelled(k, flavour))
+        ]
+        if not kinds:
+            raise ProtocolError(
+                f"unknown topic {name!r}: this simulator has /<turtle>/cmd_vel and "
+                f"/<turtle>/pose, and the camera topics its clients advertise with their type "
+                f"({' or '.join(CAMERA_TYPES)})"
+            )
+        self._hub.declare_camera(camera, kinds[0])
+        return camera
+
     def _run_service(self, msg: CallService) -> Json:
         name = service_path(msg.service)
         if name.startswith("rosapi/"):
-            return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args)
+            cameras = self._hub.camera_topics(self.room)
+            return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args, cameras)
         if name in GLOBAL_SERVICES:
             return SERVICES[name](self._hub.sim, "", msg.args)
         match = _TURTLE_SERVICE_RE.match(name)
@@ -686,6 +829,9 @@ class RosbridgeHub:
         # Each turtle's latest Twists as published, with the version each was given.
         self._twists: dict[str, deque[Versioned]] = {}
         self._twist_version = 0
+        # The camera topics clients declared, and the last version any of them was given.
+        self._cameras: dict[CameraTopic, _CameraStream] = {}
+        self._camera_version = 0
 
     def open_session(self) -> RosbridgeSession:
         """A new client connection."""
@@ -712,13 +858,56 @@ class RosbridgeHub:
         queue = self._twists.setdefault(topic.turtle, deque(maxlen=MAX_QUEUE_LENGTH))
         queue.append((self._twist_version, msg))
 
-    def version(self, topic: Topic) -> int:
+    def camera(self, topic: CameraTopic) -> _CameraStream | None:
+        """The camera topic's stream, if a client declared it."""
+        return self._cameras.get(topic)
+
+    def declare_camera(self, topic: CameraTopic, kind: CameraType) -> None:
+        """A client advertised (or subscribed to) a new camera topic of type ``kind``;
+        ``ProtocolError`` when its room, or the server, has as many as it holds."""
+        in_room = sum(1 for t in self._cameras if t.room == topic.room)
+        if in_room >= MAX_CAMERA_TOPICS_PER_ROOM or len(self._cameras) >= MAX_CAMERA_TOPICS:
+            raise ProtocolError(
+                f"no room for camera topic {topic.name}: at most {MAX_CAMERA_TOPICS_PER_ROOM} a "
+                f"room and {MAX_CAMERA_TOPICS} in all"
+            )
+        self._cameras[topic] = _CameraStream(kind)
+
+    def publish_camera(self, topic: CameraTopic, msg: Json) -> None:
+        """A client published ``msg`` on a declared camera topic: it supersedes the last."""
+        stream = self._cameras[topic]
+        self._camera_version += 1
+        stream.version, stream.latest = self._camera_version, msg
+
+    def camera_topics(self, room: str | None) -> dict[str, str]:
+        """The camera topics of ``room`` and their types, spelled in the hub's flavour."""
+        flavour = self.types.flavour
+        return {
+            topic.name: type_spelled(stream.kind, flavour)
+            for topic, stream in self._cameras.items()
+            if topic.room == room
+        }
+
+    def prune_cameras(self) -> None:
+        """Forget the camera topics no session advertises or subscribes to any more."""
+        used = set().union(*(session.camera_topics() for session in self.sessions))
+        self._cameras = {t: s for t, s in self._cameras.items() if t in used}
+
+    def version(self, topic: AnyTopic) -> int:
         """The topic's current version: a new subscription takes only what comes after it."""
+        if isinstance(topic, CameraTopic):
+            stream = self._cameras.get(topic)
+            return 0 if stream is None else stream.version
         return self.ticks if topic.leaf == "pose" else self._twist_version
 
-    def newer(self, topic: Topic, seen: int) -> list[Versioned]:
-        """The topic's messages newer than version ``seen``, oldest first: a pose topic has
-        only its latest (a newer pose supersedes the older ones)."""
+    def newer(self, topic: AnyTopic, seen: int) -> list[Versioned]:
+        """The topic's messages newer than version ``seen``, oldest first: a pose or camera
+        topic has only its latest (a newer one supersedes the older ones)."""
+        if isinstance(topic, CameraTopic):
+            stream = self._cameras.get(topic)
+            if stream is None or stream.latest is None or stream.version <= seen:
+                return []
+            return [(stream.version, stream.latest)]
         if topic.leaf == "cmd_vel":
             return [item for item in self._twists.get(topic.turtle, ()) if item[0] > seen]
         if self.ticks <= seen:

@@ -48,12 +48,17 @@ def colours(picture: Pixels) -> list[tuple[int, int, int]]:
     ]
 
 
-def pattern_error(picture: Pixels) -> int:
-    """How far (0..255) the worst quadrant sample of ``picture`` is from its colour: 0 for the
-    pattern itself, a few units after a JPEG's loss, ~100 or more for another picture."""
+def pattern_error(picture: Pixels, grey: bool = False) -> int:
+    """How far (0..255) the worst quadrant sample of ``picture`` is from its colour (``grey``:
+    from its grey, as a mono8 camera sees it): 0 for the pattern itself, a few units after a
+    JPEG's loss, ~100 or more for another picture."""
+    expected = [tuple(c) for c in QUADRANTS]
+    if grey:
+        levels = cv2.cvtColor(np.array([QUADRANTS], np.uint8), cv2.COLOR_RGB2GRAY)[0]
+        expected = [(int(v),) * 3 for v in levels]
     return max(
         abs(seen - want)
-        for sample, colour in zip(colours(picture), QUADRANTS, strict=True)
+        for sample, colour in zip(colours(picture), expected, strict=True)
         for seen, want in zip(sample, colour, strict=True)
     )
 
@@ -76,13 +81,13 @@ def stamp(seconds: float) -> dict[str, int]:
 
 
 def compressed(
-    rgb: Pixels, codec: str, seconds: float, format_: str | None = None
+    rgb: Pixels, codec: str, seconds: float, format_: str | None = None, frame_id: str = "camera"
 ) -> dict[str, Any]:
     """A ``sensor_msgs/CompressedImage`` of ``rgb`` (``data`` as bytes)."""
     ok, encoded = cv2.imencode(f".{codec}", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     assert ok
     return {
-        "header": {"stamp": stamp(seconds), "frame_id": "camera"},
+        "header": {"stamp": stamp(seconds), "frame_id": frame_id},
         "format": format_ or codec,
         "data": encoded.tobytes(),
     }
