@@ -2,9 +2,10 @@
 
 ``float()`` accepts ``nan`` and ``inf``, and ``int()`` any size: a goal timeout of ``nan`` would
 never expire and a port of 70000 fails deep inside the server. These types turn such a value
-into argparse's one-line usage error instead. The ``--profile`` and ``--token`` options are
-declared here too, so that every command lists the same profiles with the same default and reads
-its token the same way. Imports only the protocol core, so the agent and the tools can all use it.
+into argparse's one-line usage error instead. The ``--profile``, ``--robot`` and ``--token``
+options are declared here too, so that every command lists the same profiles and robots with
+the same defaults and reads its token the same way. Imports only the protocol core, so the agent
+and the tools can all use it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import argparse
 import math
 import os
 
-from app.protocol import control, relay_profiles, tokens
+from app.protocol import control, relay_profiles, robot, tokens
 from app.protocol.rooms import Role
 
 
@@ -71,6 +72,27 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
         help="vehicle profile: default (turn in place), thesis"
         f" ({control.PROFILES['thesis'].period_s * 1000:.0f} ms pacing), follow (drive to the"
         " target and keep a standoff)",
+    )
+
+
+def robot_argument(text: str) -> robot.Robot:
+    """A robot preset's name or a description file: the robot, or argparse's one-line error
+    naming the file's bad key (exit status 2, before anything starts)."""
+    try:
+        return robot.robot_named(text)
+    except robot.RobotError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_robot_option(parser: argparse.ArgumentParser, purpose: str) -> None:
+    """``--robot NAME|FILE``: a preset of :data:`app.protocol.robot.PRESETS` or a TOML file."""
+    parser.add_argument(
+        "--robot",
+        type=robot_argument,
+        default=robot.PRESETS[robot.DEFAULT_ROBOT],
+        metavar="NAME|FILE",
+        help=f"{purpose}: {', '.join(robot.PRESETS)} or a TOML description file"
+        f" (docs/robots.md; default {robot.DEFAULT_ROBOT})",
     )
 
 

@@ -24,8 +24,8 @@ CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-st
 # - mDNS host candidates, so that aiortc and other Chromium instances can reach a page's host
 #   candidate;
 # - the omnibox popup drawn as a web page, which Chromium 156 preloads in a renderer of its own
-#   at every start even headless, where nothing can open it: 0.7 of the 1.3 CPU-seconds a
-#   launch costs (the suite launches about 80).
+#   at every start even headless, where nothing can open it: the larger part of what a launch
+#   costs, and the suite launches Chromium many times (docs/testing.md).
 DISABLED_FEATURES = (
     "AvoidUnnecessaryBeforeUnloadCheckSync",
     "DestroyProfileOnBrowserClose",
@@ -46,7 +46,7 @@ DISABLED_FEATURES = (
     "WebUIOmniboxFullPopup",
 )
 
-# Flags that work headless as root on these machines (DESIGN §8).
+# Flags that work headless as root on these machines (docs/architecture.md, "Pinned facts").
 BASE_FLAGS = [
     "--headless=new",
     "--no-sandbox",

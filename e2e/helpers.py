@@ -140,6 +140,44 @@ def module_page(
         opened.close()
 
 
+# A minimal relay: logs in, answers the vehicle's offer with a plain RTCPeerConnection, sends
+# what it is told on the `autopilot` channel and keeps the vehicle's error replies.
+FAKE_RELAY = """
+async ({wsUrl, room}) => {
+  const ws = new WebSocket(wsUrl);
+  await new Promise((resolve) => { ws.onopen = resolve; });
+  const pc = new RTCPeerConnection();
+  const relay = { errors: [], channel: null, ws, timer: null };
+  window.fakeRelay = relay;
+  let vehicle = null;
+  pc.ondatachannel = ({ channel }) => {
+    channel.onmessage = (event) => {
+      const msg = JSON.parse(event.data);
+      if (msg.type === 'error') relay.errors.push(msg);
+    };
+    // Bad messages and goals go on the reliable channel (the vehicle serves goals on both).
+    if (channel.label === 'autopilot') channel.onopen = () => { relay.channel = channel; };
+  };
+  pc.onicecandidate = ({ candidate }) => {
+    if (!candidate) return;
+    ws.send(JSON.stringify({ type: 'candidate', to: vehicle, candidate: candidate.toJSON() }));
+  };
+  ws.onmessage = async (event) => {
+    const msg = JSON.parse(event.data);
+    if (msg.type === 'offer') {
+      vehicle = msg.from;
+      await pc.setRemoteDescription({ type: 'offer', sdp: msg.sdp });
+      await pc.setLocalDescription();
+      ws.send(JSON.stringify({ type: 'answer', to: vehicle, sdp: pc.localDescription.sdp }));
+    } else if (msg.type === 'candidate' && msg.candidate) {
+      await pc.addIceCandidate(msg.candidate);
+    }
+  };
+  ws.send(JSON.stringify({ type: 'login', name: 'fake-relay', role: 'relay', room }));
+}
+"""
+
+
 class Touches:
     """Fingers on a touch screen page (a context with ``has_touch``), through Chromium's input
     pipeline as a phone's are: ``Input.dispatchTouchEvent`` takes every finger down with a

@@ -14,8 +14,9 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import control_config
+from app.protocol.control import control_config, for_robot
 from app.protocol.page import to_json
+from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
 from vehicle_agent import control
 
@@ -28,6 +29,9 @@ POSES = [
     for theta in (-math.pi, -2.0, -math.pi / 2, 0.0, 0.5, math.pi / 2, 3.0, math.pi)
 ] + [(1.0, 9.0, 0.3), (10.5, 0.5, -2.9), (0.3, 5.0, math.pi), (10.9, 10.9, 0.8), (6.0, 2.0, -1.2)]
 PROFILE_NAMES = sorted(control.PROFILES)
+# The follow profile as a robot other than a turtlesim gets it: no terrain walls to keep from.
+ROVER_FOLLOW = for_robot(control.PROFILES["follow"], PRESETS["diffdrive"])
+PROFILES_AND_A_ROVERS_FOLLOW = {**control.PROFILES, "roverFollow": ROVER_FOLLOW}
 
 
 @pytest.fixture
@@ -39,7 +43,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
              window.control = await import('/static/js/core/control.js');
              window.law = new control.ControlLaw(constants);
            }""",
-        to_json(control_config()),
+        to_json(control_config(PROFILES_AND_A_ROVERS_FOLLOW)),
     )
     yield opened
     opened.close()
@@ -59,6 +63,7 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
                default: e === null ? null : law.angularCommand(e, law.profiles.default),
                thesis: e === null ? null : law.angularCommand(e, law.profiles.thesis),
                follow: law.follow(goal, pose, law.profiles.follow),
+               roverFollow: law.follow(goal, pose, law.profiles.roverFollow),
                ahead: law.wallClearance(pose, true),
                behind: law.wallClearance(pose, false),
              };
@@ -74,6 +79,10 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
         linear, angular = control.follow_command(tx, ty, pose, control.PROFILES["follow"])
         assert got["follow"]["linear"] == pytest.approx(linear, abs=1e-12), case
         assert got["follow"]["angular"] == pytest.approx(angular, abs=1e-12), case
+        rover = control.follow_command(tx, ty, pose, ROVER_FOLLOW)
+        assert [got["roverFollow"]["linear"], got["roverFollow"]["angular"]] == pytest.approx(
+            list(rover), abs=1e-12
+        ), case
         assert got["ahead"] == pytest.approx(control.wall_clearance(pose, True), abs=1e-12)
         assert got["behind"] == pytest.approx(control.wall_clearance(pose, False), abs=1e-12)
         error = control.steering_error(goal, pose)

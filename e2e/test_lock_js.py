@@ -36,6 +36,8 @@ def page_rule(rule: dict[str, float]) -> lock.LockRule:
         release_after_s=rule["releaseAfterS"],
         max_scale=rule["maxScale"],
         reach=rule["reach"],
+        near=rule["near"],
+        click_search=rule["clickSearch"],
     )
 
 
@@ -125,7 +127,11 @@ def test_pick_overlap_and_association_on_a_grid(page: Page) -> None:
              associate: cases.map(([l, boxes]) => [false, true].map(
                (anywhere) => lock.associate(l, boxes, anywhere, rule))),
              overlap: cases.flatMap(([l, boxes]) => boxes.map((b) => lock.overlap(l, b))),
-             pick: points.flatMap(([x, y]) => sets.map((boxes) => lock.pick(x, y, boxes))),
+             pick: points.flatMap(([x, y]) =>
+               sets.map((boxes) => lock.pick(x, y, boxes, rule.near))),
+             gap: points.flatMap(([x, y]) => sets.flat().map((b) => lock.gap(b, x, y))),
+             lockable: cases.map(([l, boxes]) => lock.lockable([l], boxes)),
+             window: points.map(([x, y]) => lock.clickWindow(x, y, 640, 480, rule.clickSearch)),
            })""",
         [cases, sets, points, PAGE_RULE],
     )
@@ -143,5 +149,98 @@ def test_pick_overlap_and_association_on_a_grid(page: Page) -> None:
     want_overlap = [lock.overlap(locked, b) for locked, boxes in cases for b in boxes]
     assert js["overlap"] == pytest.approx(want_overlap, abs=1e-15)
     assert any(v > 0 for v in want_overlap)
-    want_pick = [listed(lock.pick(x, y, boxes)) for x, y in points for boxes in sets]
+    want_pick = [listed(lock.pick(x, y, boxes, RULE.near)) for x, y in points for boxes in sets]
     assert js["pick"] == want_pick and any(p is not None for p in want_pick)
+    # Some of the picks are near a box, not in it.
+    assert any(
+        p is not None and not lock.contains(tuple(p), x, y)  # type: ignore[arg-type]
+        for (x, y), p in zip([(x, y) for x, y in points for _ in sets], want_pick, strict=True)
+    )
+    want_gap = [lock.gap(b, x, y) for x, y in points for boxes in sets for b in boxes]
+    assert js["gap"] == pytest.approx(want_gap, abs=1e-15)
+    want_lockable = [[list(b) for b in lock.lockable([locked], boxes)] for locked, boxes in cases]
+    assert js["lockable"] == want_lockable
+    assert {len(v) for v in want_lockable} > {1}  # some candidates kept, and some dropped
+    want_window = [listed(lock.click_window(x, y, 640, 480, RULE.click_search)) for x, y in points]
+    assert js["window"] == want_window
+
+
+def test_near_clicks_and_click_windows_follow_the_rule(page: Page) -> None:
+    # The rule itself, as written out in lock_sequences (not lock.py's answers).
+    got = page.evaluate(
+        """([clicks, windows, rule]) => [
+             clicks.map(([x, y, boxes]) => lock.pick(x, y, boxes, rule.near)),
+             windows.map(([x, y, w, h]) => lock.clickWindow(x, y, w, h, rule.clickSearch)),
+           ]""",
+        [lock_sequences.NEAR_CLICKS, lock_sequences.CLICK_WINDOWS, PAGE_RULE],
+    )
+    assert got == [
+        [want for *_, want in lock_sequences.NEAR_CLICKS],
+        [want for *_, want in lock_sequences.CLICK_WINDOWS],
+    ]
+
+
+# A click at the tiny face's centre beside two faces, the search answering with the boxes given
+# (recording the windows it was asked); then clicks on the same and on another target.
+LOCK_AT_JS = """([rule, large, small, tiny]) => {
+  const target = new lock.TargetLock(rule);
+  const windows = [];
+  const search = (found) => (window) => { windows.push(window); return found; };
+  const seen = [];
+  const step = (how) => seen.push([how, target.state, target.box, target.fine]);
+  step(lock.lockAt(target, 405, 238, [large, small], search([]), 640, 480, 0));
+  step(lock.lockAt(target, 409, 88, [large, small], search([small, tiny]), 640, 480, 0.1));
+  step(lock.lockAt(target, 409, 88, [tiny], null, 640, 480, 0.3));
+  const query = target.query(0.35);
+  step(lock.lockAt(target, 470, 230, [small], null, 640, 480, 0.4));
+  step(lock.lockAt(target, 600, 400, [large], search([small]), 640, 480, 0.5));
+  return { seen, windows, fineQuery: query.fine };
+}"""
+
+
+def test_a_click_near_no_box_searches_its_window_as_lock_py_does(page: Page) -> None:
+    large, small, tiny = [100, 100, 130, 130], [440, 200, 76, 76], [389, 68, 40, 40]
+    got = page.evaluate(LOCK_AT_JS, [PAGE_RULE, large, small, tiny])
+    assert got["seen"] == [
+        ["picked", "locked", small, False],  # near SMALL: no search
+        ["searched", "locked", tiny, True],  # near nothing: the click's window searched
+        ["picked", "locked", tiny, True],  # the same target: still followed at full resolution
+        ["picked", "locked", small, False],
+        [None, "none", None, False],  # nothing found near the click: released
+    ]
+    # (600, 400): 600 - 144 would leave the frame, 640 - 288 keeps it inside.
+    assert got["windows"] == [[265, 0, 288, 288], [352, 192, 288, 288]]
+    assert got["fineQuery"] is True
+
+
+def test_the_boxes_shown_are_the_followed_one_and_the_candidates(
+    server: RunningServer, browser: Browser
+) -> None:
+    # What the client draws (core/shown-boxes.js): the target the autopilot follows (the largest
+    # box, or the locked one), and every other box a click may lock -- the snapshot's others and
+    # those of the last full scan that are not the same face seen earlier.
+    large, moved, small = [100, 100, 130, 130], [104, 102, 132, 132], [440, 200, 76, 76]
+    cases = [
+        # Between full scans: the window found the tracked face, the full scan had both.
+        {"boxes": [moved], "target": {"x": 170, "y": 168}, "candidates": [large, small]},
+        # A full scan: both faces, the larger tracked.
+        {"boxes": [large, small], "target": {"x": 165, "y": 165}, "candidates": [large, small]},
+        # The small face locked, found in its window.
+        {"boxes": [small], "target": {"x": 478, "y": 238}, "locked": small, "candidates": [large]},
+        # The locked face not found on this snapshot: nothing is followed.
+        {"boxes": [large], "target": None, "locked": None, "candidates": [large, small]},
+        None,
+    ]
+    with module_page(server, browser, "core/shown-boxes", "shown") as page:
+        got = page.evaluate("(cases) => cases.map((d) => shown.shownBoxes(d))", cases)
+
+    def kinds(boxes: list[dict[str, Any]]) -> list[tuple[list[int], str]]:
+        return [([b["x"], b["y"], b["w"], b["h"]], b["kind"]) for b in boxes]
+
+    assert [kinds(boxes) for boxes in got] == [
+        [(moved, "tracked"), (small, "candidate")],
+        [(large, "tracked"), (small, "candidate")],
+        [(small, "locked"), (large, "candidate")],
+        [(large, "candidate"), (small, "candidate")],
+        [],
+    ]

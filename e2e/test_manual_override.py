@@ -62,7 +62,8 @@ WATCH_THE_DEAD_MAN = """() => {
 def healthy(client: Page) -> bool:
     """Both links measured with plausible figures, and a recent goal at the vehicle."""
     health = client.evaluate("() => structuredClone(window.autopilotHealth)")
-    # The relay forwards the client the video at a reduced size (DESIGN §10, relay cost).
+    # The relay forwards the client the video at a reduced size (docs/architecture.md, "What a
+    # room costs").
     forward = (int(640 / CLIENT_FORWARD_SCALE_DOWN), int(480 / CLIENT_FORWARD_SCALE_DOWN))
     for link, size in ((health["vehicleToRelay"], (640, 480)), (health["relayToClient"], forward)):
         if link is None or link["fps"] is None or link["fps"] <= 0 or link["rttMs"] is None:

@@ -12,22 +12,24 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import PROFILES, control_config
+from app.protocol.control import PROFILES, control_config, for_robot
 from app.protocol.page import page_protocol, to_json
+from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
-from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal, run
+from tests.vehicle_agent.pilot_sequences import ROBOTS, SEQUENCES, goal, run
 
 pytestmark = [pytest.mark.browser]
 
 # The pilot as pages/vehicle.js builds it, fed one sequence: each step's records, next tick,
 # mode and operator.
-RUN_JS = """([steps, constants, freshness, profile]) => {
+RUN_JS = """([steps, constants, freshness, limits, profile]) => {
   const law = new control.ControlLaw(constants);
   const driven = new pilot.Pilot(law, law.profiles[profile], {
     deadmanS: constants.deadmanS,
     tickS: constants.tickS,
     freshness,
+    limits,
   });
   const feed = (kind, t, args) => {
     switch (kind) {
@@ -70,21 +72,40 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
         yield opened
 
 
-def run_js(page: Page, steps: list[Any], profile: str) -> Any:
-    constants = to_json(control_config())
+def run_js(page: Page, steps: list[Any], profile: str, robot: str = "turtlesim") -> Any:
+    """The sequence run by pilot.js with the config a vehicle page for ``robot`` gets."""
+    described = PRESETS[robot]
+    constants = to_json(control_config({n: for_robot(p, described) for n, p in PROFILES.items()}))
     freshness = to_json(page_protocol().goal_freshness)
-    return page.evaluate(RUN_JS, [steps, constants, freshness, profile])
+    limits = to_json(described.limits)
+    return page.evaluate(RUN_JS, [steps, constants, freshness, limits, profile])
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
 @pytest.mark.parametrize("profile", sorted(PROFILES))
-def test_the_shared_sequences_give_the_same_records(page: Page, profile: str) -> None:
+def test_the_shared_sequences_give_the_same_records(page: Page, profile: str, robot: str) -> None:
     for name, steps in SEQUENCES.items():
-        expected = run(steps, profile)
-        got = run_js(page, steps, profile)
+        expected = run(steps, profile, robot)
+        got = run_js(page, steps, profile, robot)
         for k, (want, have) in enumerate(zip(expected, got, strict=True)):
             # Field for field, in the log line's order.
             assert [list(r) for r in have[0]] == [list(r) for r in want[0]], (name, k)
             assert rounded(have) == rounded(want), (name, k, steps[k])
+
+
+def test_a_burger_is_held_to_its_limits(page: Page) -> None:
+    # The rule, not only the agreement: full stick on a TurtleBot3 Burger ramps at 2.5 m/s²
+    # to 0.22 m/s, and the released stick stops it at once.
+    steps = [
+        ("mode", 0.0, ["manual", "ann"]),
+        ("drive", 0.1, [1, 1.0, 0.0]),
+        ("tick", 0.15, []),
+        ("tick", 0.2, []),
+        ("drive", 0.25, [2, 0.0, 0.0]),
+    ]
+    answers = run_js(page, steps, "default", "turtlebot3")
+    speeds = [r["linear"] for answer in answers for r in answer[0] if r["ev"] == "twist"]
+    assert speeds == pytest.approx([0.0, 2.5 * 0.05, 0.22, 0.0])
 
 
 def test_goals_while_manual_are_dropped_why_manual_and_never_steer(page: Page) -> None:

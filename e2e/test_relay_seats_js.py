@@ -89,3 +89,63 @@ def test_one_client_drives_at_a_time_and_each_operator_numbers_from_one(page: Pa
     assert manual == {"type": "mode", "mode": "manual", "operator": "c1", "reason": "because"}
     assert handed is None and taken2 == {"changed": True}
     assert renumbered == {"drive": {**drive, "seq": 1}}
+
+
+def test_a_stop_takes_the_wheel_back_and_the_next_operator_numbers_from_one(page: Page) -> None:
+    got: list[Any] = page.evaluate(
+        """() => {
+          const wheel = new seats.OperatorSeat();
+          const cmd = { linear: 1, angular: 0 };
+          const seen = [wheel.takeBack()];
+          wheel.takeOver('c1');
+          wheel.drive('c1', cmd);
+          seen.push(wheel.takeBack(), wheel.holder, wheel.drive('c1', cmd));
+          seen.push(wheel.takeOver('c1'), wheel.drive('c1', cmd));
+          return seen;
+        }"""
+    )
+    nobody, taken_from, holder, refused, again, drive = got
+    assert nobody is None and taken_from == "c1" and holder is None
+    assert "take over" in refused["refused"]
+    assert again == {"changed": True} and drive["drive"]["seq"] == 1
+
+
+def test_nobody_watching_is_said_once_when_the_last_watching_client_goes(page: Page) -> None:
+    # The rule: a client watches while it is in the room and its link has not dropped; each
+    # change answers true only when it left nobody watching where somebody was.
+    got: list[Any] = page.evaluate(
+        """() => {
+          const w = new seats.Watchers();
+          const seen = [];
+          const step = (what, answer) => seen.push([what, answer, w.names]);
+          step('c1 and c2 join', w.room(['c1', 'c2']));
+          step('c1 link up', w.linkUp('c1'));
+          step('c1 link drops', w.linkDown('c1'));
+          step('c2 leaves', w.room(['c1']));
+          step('again: nobody left to go', w.room(['c1']));
+          step('c1 link back', w.linkUp('c1'));
+          step('c1 leaves', w.room([]));
+          step('c3 joins', w.room(['c3']));
+          step('c4 drops before joining', w.linkDown('c4'));
+          step('c3 link drops', w.linkDown('c3'));
+          step('c3 link drops again', w.linkDown('c3'));
+          step('c3 leaves, c5 joins', w.room(['c5']));
+          step('c3 link back, not in the room', w.linkUp('c3'));
+          return seen;
+        }"""
+    )
+    assert got == [
+        ["c1 and c2 join", False, ["c1", "c2"]],
+        ["c1 link up", None, ["c1", "c2"]],
+        ["c1 link drops", False, ["c2"]],
+        ["c2 leaves", True, []],  # c1 is in the room, but its link dropped
+        ["again: nobody left to go", False, []],
+        ["c1 link back", None, ["c1"]],
+        ["c1 leaves", True, []],
+        ["c3 joins", False, ["c3"]],
+        ["c4 drops before joining", False, ["c3"]],
+        ["c3 link drops", True, []],
+        ["c3 link drops again", False, []],
+        ["c3 leaves, c5 joins", False, ["c5"]],
+        ["c3 link back, not in the room", None, ["c5"]],
+    ]

@@ -74,6 +74,64 @@ def test_vehicle_unreadable_video_file(tmp_path: Path) -> None:
     )
 
 
+ROBOT_FILE = """
+[velocity]
+topic = "/cmd_vel"
+type = "geometry_msgs/TwistStamped"
+
+[pose]
+topic = "/odom"
+type = "nav_msgs/Odometry"
+
+[limits]
+max_linear = 0.5
+max_angular = 1.0
+linear_accel = 1.0
+angular_accel = 2.0
+"""
+
+
+@pytest.mark.parametrize(
+    ("change", "needles"),
+    [
+        (("max_angular = 1.0", "max_angular = -1.0"), ["limits.max_angular", ">= 0", "-1.0"]),
+        (("[pose]", "wheels = 2\n[pose]"), ["velocity.wheels", "unknown key"]),
+        (('"nav_msgs/Odometry"', '"nav_msgs/Odometr"'), ["pose.type", "unknown message type"]),
+        (('topic = "/cmd_vel"', ""), ["velocity.topic", "missing"]),
+        (("linear_accel = 1.0", 'linear_accel = "quick"'), ["limits.linear_accel", "number"]),
+    ],
+)
+def test_vehicle_bad_robot_file_is_one_line_and_exit_2(
+    tmp_path: Path, change: tuple[str, str], needles: list[str]
+) -> None:
+    # Against a server that is not there: the file is refused before anything starts.
+    path = tmp_path / "rover.toml"
+    path.write_text(ROBOT_FILE.replace(*change), encoding="utf-8")
+    result = autopilot(
+        "vehicle",
+        "--robot",
+        str(path),
+        "--rosbridge",
+        "ws://127.0.0.1:9",
+        "--server",
+        "http://127.0.0.1:9",
+    )
+    assert result.returncode == 2
+    assert_one_line_error(result, "--robot", str(path), *needles)
+
+
+def test_vehicle_robot_that_is_neither_a_preset_nor_a_file() -> None:
+    result = autopilot("vehicle", "--robot", "turtlebot4")
+    assert result.returncode == 2
+    assert_one_line_error(result, "turtlebot4", "turtlesim, diffdrive, turtlebot3")
+
+
+def test_vehicle_robot_other_than_a_turtlesim_needs_a_rosbridge() -> None:
+    result = autopilot("vehicle", "--robot", "turtlebot3")
+    assert result.returncode == 2
+    assert_one_line_error(result, "--robot turtlebot3", "--rosbridge")
+
+
 def test_vehicle_refused_login_names_the_reason(server: RunningServer) -> None:
     # A second vehicle with a name already taken in the room: the server's reason is shown.
     with subprocess.Popen(

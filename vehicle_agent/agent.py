@@ -30,9 +30,10 @@ from pydantic import ValidationError
 from app.protocol import channels, jsonedge
 from app.protocol import events as ev
 from app.protocol.channels import AUTOPILOT_CHANNEL
-from app.protocol.control import with_standoff
+from app.protocol.control import for_robot, with_standoff
 from app.protocol.errors import describe
 from app.protocol.events import PilotEvent
+from app.protocol.robot import TURTLESIM, Robot
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
@@ -64,8 +65,11 @@ class AgentConfig:
     goal_timeout_s: float | None = None
     # The follow profile's distance from the target (None: the profile's own).
     standoff_m: float | None = None
-    # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does.
+    # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does (a
+    # turtlesim only: no other robot has teleport_absolute).
     spawn_step: bool = True
+    # The robot driven: its limits, and whether it is a turtlesim (``--robot``).
+    robot: Robot = TURTLESIM
     ice_servers: list[RTCIceServer] = field(default_factory=list)
     # A vehicle token for the room (``autopilot token``), when the server asks for one.
     token: str | None = None
@@ -88,12 +92,12 @@ class Agent:
         profile = PROFILES[config.profile]
         if config.goal_timeout_s is not None:
             profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
-        profile = with_standoff(profile, config.standoff_m)
+        profile = for_robot(with_standoff(profile, config.standoff_m), config.robot)
         self.config = config
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
-        self.pilot = Pilot(profile)
+        self.pilot = Pilot(profile, limits=config.robot.limits)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
         self._media = MediaRelay()
@@ -152,7 +156,7 @@ class Agent:
         ticker = asyncio.create_task(self._tick(), name="control-tick")
         spawn = (
             asyncio.create_task(self._spawn_step(), name="spawn-step")
-            if self.config.spawn_step
+            if self.config.spawn_step and self.config.robot.turtlesim
             else None
         )
         try:

@@ -13,6 +13,7 @@ from urllib.parse import urlsplit
 from aiortc import MediaStreamTrack, RTCIceServer
 
 from app.arguments import (
+    add_robot_option,
     add_token_option,
     add_vehicle_profile,
     non_negative_number,
@@ -86,8 +87,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rosbridge",
         metavar="URL",
-        help="drive turtle1 through this rosbridge (ws://host:9090); default: in-process simulator",
+        help="drive the robot through this rosbridge (ws://host:9090); default: an in-process"
+        " turtlesim",
     )
+    add_robot_option(parser, "the robot driven: its topics, types and limits")
     parser.add_argument(
         "--camera-compression",
         choices=(CBOR, NONE),
@@ -113,7 +116,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--no-spawn-step",
         dest="spawn_step",
         action="store_false",
-        help="do not turn the turtle to face up (θ = π/2) at start",
+        help="do not turn the turtle to face up (θ = π/2) at start (a turtlesim's only step)",
     )
     parser.add_argument(
         "--goal-timeout",
@@ -161,6 +164,12 @@ def run(args: argparse.Namespace) -> int:
     """Run the agent until interrupted; a setup problem is one line and exit status 1."""
     # Twisted (under roslibpy) narrates every reconnection attempt at INFO.
     logging.getLogger("twisted").setLevel(logging.WARNING)
+    if not args.robot.turtlesim and not args.rosbridge:
+        log.error(
+            "--robot %s needs --rosbridge URL: the in-process simulator is a turtlesim",
+            args.robot.name,
+        )
+        return 2
     try:
         return asyncio.run(_main(args))
     except (SignalingError, TurtleError, VideoSourceError, OSError) as exc:
@@ -170,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _main(args: argparse.Namespace) -> int:
     ws_url(args.server)  # a malformed URL is reported before anything starts
+    robot = args.robot
     events = EventLog(args.events)
     # The token goes only to the server's own /rosbridge.
     rosbridge_token = (
@@ -179,7 +189,7 @@ async def _main(args: argparse.Namespace) -> int:
     turtle: Turtle = SimTurtle()
     if args.rosbridge:
         turtle = RosbridgeTurtle(
-            args.rosbridge, args.ros, token=rosbridge_token, ca_file=args.ca_file
+            args.rosbridge, args.ros, robot, token=rosbridge_token, ca_file=args.ca_file
         )
     config = AgentConfig(
         server=args.server,
@@ -189,6 +199,7 @@ async def _main(args: argparse.Namespace) -> int:
         goal_timeout_s=args.goal_timeout,
         standoff_m=args.standoff,
         spawn_step=args.spawn_step,
+        robot=robot,
         ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
         token=args.token,
         tls=tls_context(args.ca_file),

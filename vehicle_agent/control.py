@@ -1,4 +1,4 @@
-"""The control laws and the controller that paces them (docs/contracts.md).
+"""The control laws and the controller that paces them (docs/architecture.md, "Vehicle control").
 
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks, each with the time, and
 answers with the :class:`Twist` to publish, if any; the vehicle's pilot
@@ -144,11 +144,13 @@ def wall_clearance(pose: Pose, forward: bool) -> float:
 
 def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[float, float]:
     """(linear, angular) that take the turtle to ``profile.standoff_m`` from terrain point
-    (``tx``, ``ty``): turn towards it, drive as much as it faces it, slow near walls."""
+    (``tx``, ``ty``): turn towards it, drive as much as it faces it, slow near walls (when the
+    profile knows of them: a turtlesim's)."""
     margin = profile.wall_margin_m
-    # A target at the edge of the frame would lead the turtle into the wall; aim inside.
-    tx = _clamp(tx, margin, WORLD_SIZE - margin)
-    ty = _clamp(ty, margin, WORLD_SIZE - margin)
+    if profile.walls:
+        # A target at the edge of the frame would lead the turtle into the wall; aim inside.
+        tx = _clamp(tx, margin, WORLD_SIZE - margin)
+        ty = _clamp(ty, margin, WORLD_SIZE - margin)
     error = _heading_error(tx, ty, pose)
     if error is None:
         return 0.0, 0.0
@@ -159,6 +161,8 @@ def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[
     # Only the part of the heading that points at the target is worth driving along; facing
     # away, the turtle turns first.
     linear *= max(0.0, math.cos(error))
+    if not profile.walls:
+        return linear, angular
     # The speed allowed shrinks with the clearance ahead (behind, when backing off) and is zero
     # at the wall margin: the turtle never drives into a wall, and can always turn away.
     allowed = max(0.0, profile.wall_gain * (wall_clearance(pose, linear >= 0) - margin))

@@ -1,4 +1,4 @@
-"""Latest-wins for goals on the lossy channel (DESIGN §9 "Lossy links").
+"""Latest-wins for goals on the lossy channel (docs/architecture.md, "Lossy links").
 
 Goals ride an unordered channel that never retransmits, so they may arrive out of order, or late
 in a burst after an outage. A goal is *state*: only the newest matters. :class:`GoalGate` admits a

@@ -1,5 +1,7 @@
 """The operator's wheel at the vehicle: mode, drive commands and the dead-man.
 
+The rules are those of docs/architecture.md, "Who holds the wheel".
+
 Sans-I/O, like :mod:`vehicle_agent.control`: a :class:`ManualDrive` is told the mode the relay
 set, each drive command and the clock (the time given with each), and answers with the
 :class:`Twist` to publish, if any. While manual, goals are the caller's to ignore

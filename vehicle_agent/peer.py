@@ -1,10 +1,10 @@
 """The vehicle's RTCPeerConnection to the room's relay (aiortc).
 
-The vehicle is always the offerer (DESIGN §2): it adds its video track, opens the reliable
-``autopilot`` and the lossy ``autopilot-state`` data channels (``app.protocol.channels``) and
-sends an offer; the relay answers and trickles its candidates. aiortc gathers
-its own candidates before the offer goes out, so they ride inside the SDP. A link is used once:
-when it fails or the relay goes away the agent closes it and makes a new one.
+The vehicle is always the offerer (docs/architecture.md, "Signaling protocol"): it adds its
+video track, opens the reliable ``autopilot`` and the lossy ``autopilot-state`` data channels
+(``app.protocol.channels``) and sends an offer; the relay answers and trickles its candidates.
+aiortc gathers its own candidates before the offer goes out, so they ride inside the SDP. A link
+is used once: when it fails or the relay goes away the agent closes it and makes a new one.
 """
 
 from __future__ import annotations

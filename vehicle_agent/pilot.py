@@ -8,7 +8,9 @@ twins: the manual gate (:class:`~vehicle_agent.manual.ManualDrive`: while an ope
 wheel, goals are dropped with ``why="manual"`` and drive commands steer, until the dead-man),
 then the freshness gate (:class:`~vehicle_agent.freshness.GoalGate`: latest wins, stale goals
 dropped), then the controller (:class:`~vehicle_agent.control.Controller`, with the control law
-its profile names). A lost link, a mode change and a stop command halt the turtle.
+its profile names); every Twist, the operator's too, then passes the robot's limiter
+(:class:`~vehicle_agent.limits.Limiter`: clamped to its top speeds, ramped within its
+accelerations, a stop at once). A lost link, a mode change and a stop command halt the turtle.
 
 The adapters only move bytes: ``vehicle_agent/agent.py`` (aiortc, rosbridge or the in-process
 simulator, the event log) and the browser vehicle page (``app/static/js/pages/vehicle.js``)
@@ -31,19 +33,26 @@ from app.protocol.events import (
     PilotEvent,
     TwistSent,
 )
+from app.protocol.robot import TURTLESIM, Limits
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
 from vehicle_agent.freshness import FreshnessRule, GoalGate
+from vehicle_agent.limits import Limiter
 from vehicle_agent.manual import ManualDrive
 
 
 class Pilot:
     """One vehicle's pilot with one profile; every input answers with the records of what it
-    did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish)."""
+    did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish).
+
+    ``profile`` is the profile as fitted to the robot (:func:`app.protocol.control.for_robot`),
+    ``limits`` the robot's (default: turtlesim's, which nothing the profiles command exceeds).
+    """
 
     def __init__(
         self,
         profile: Profile,
         *,
+        limits: Limits = TURTLESIM.limits,
         deadman_s: float = DEADMAN_S,
         tick_s: float = TICK_S,
         freshness: FreshnessRule | None = None,
@@ -53,6 +62,8 @@ class Pilot:
         self.tick_s = tick_s
         self.controller = Controller(profile, law)
         self.manual = ManualDrive(profile, deadman_s)
+        # Between every command and the robot: its top speeds and accelerations.
+        self.limiter = Limiter(limits, tick_s)
         # Latest-wins on the lossy goal channel; reset for every new link.
         self.gate = GoalGate() if freshness is None else GoalGate(freshness)
         # When the last goal was applied on this link (its age rides the pose: link health).
@@ -98,11 +109,11 @@ class Pilot:
             t=now,
         )
         target = Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame)
-        return [applied, *_sent(self.controller.goal(target, now), now)]
+        return [applied, *self._sent(self.controller.goal(target, now), now)]
 
     def stop(self, now: float) -> list[PilotEvent]:
         """The relay stopped piloting: the autopilot's turtle stops."""
-        return _sent(self.controller.stop(), now)
+        return self._sent(self.controller.stop(), now)
 
     def mode_change(self, mode: Mode, operator: str | None, now: float) -> list[PilotEvent]:
         """The relay's mode. Whichever way it changes, the turtle stops first: the autopilot's
@@ -112,27 +123,29 @@ class Pilot:
             return []
         self.controller.stop()
         changed = ModeChanged(mode=mode, operator=self.manual.operator, t=now)
-        return [changed, *_sent(stopped, now)]
+        return [changed, *self._sent(stopped, now)]
 
     def drive(self, seq: int, linear: float, angular: float, now: float) -> list[PilotEvent]:
         """An operator's drive command: it steers in manual mode when it is the newest."""
         twist = self.manual.drive(seq, linear, angular, now)
         moving = twist is not None and not twist.is_zero
         received = DriveReceived(seq=seq, applied=twist is not None, moving=moving, t=now)
-        return [received, *_sent(twist, now)]
+        return [received, *self._sent(twist, now)]
 
     # --- what the vehicle itself sees --------------------------------------------------------
 
     def pose(self, pose: Pose, now: float) -> list[PilotEvent]:
         """The turtle's pose: closed-loop profiles answer it."""
-        return _sent(self.controller.pose(pose, now), now)
+        return self._sent(self.controller.pose(pose, now), now)
 
     def tick(self, now: float) -> list[PilotEvent]:
-        """The clock: the goal timeout, the clock-driven profile's period, the dead-man."""
-        return [
-            *_sent(self.controller.tick(now), now),
-            *_sent(self.manual.tick(now), now),
+        """The clock: the goal timeout, the clock-driven profile's period, the dead-man, and the
+        next step of a ramp under way."""
+        done = [
+            *self._sent(self.controller.tick(now), now),
+            *self._sent(self.manual.tick(now), now),
         ]
+        return done or _record(self.limiter.tick(now), now)
 
     def next_tick(self, now: float) -> float:
         """Seconds from ``now`` until :meth:`tick` is due: every ``tick_s``, and at once when
@@ -156,11 +169,15 @@ class Pilot:
         the vehicle is stopping). Back in auto mode."""
         stopped = self.controller.stop()
         if not self.manual.manual:
-            return _sent(stopped, now)
+            return self._sent(stopped, now)
         return self.mode_change("auto", None, now)
 
+    def _sent(self, twist: Twist | None, now: float) -> list[PilotEvent]:
+        """The record of publishing ``twist`` (None: nothing to publish) within the limits."""
+        return [] if twist is None else _record(self.limiter.command(twist, now), now)
 
-def _sent(twist: Twist | None, now: float) -> list[PilotEvent]:
+
+def _record(twist: Twist | None, now: float) -> list[PilotEvent]:
     if twist is None:
         return []
     return [

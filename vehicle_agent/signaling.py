@@ -1,4 +1,5 @@
-"""WebSocket client for the signaling server (docs/contracts.md), as a vehicle.
+"""WebSocket client for the signaling server, as a vehicle (docs/architecture.md, "Signaling
+protocol").
 
 The login reply says when to renew the session's token (``renew_in``); the agent sends ``renew``
 then and takes the fresh token from the ``renewed`` answer (:mod:`vehicle_agent.agent`).

@@ -3,9 +3,11 @@
 * :class:`SimTurtle` -- an in-process :class:`app.turtlesim.sim.TurtleSim` stepped by an asyncio
   task on turtlesim's fixed 16 ms tick (the agent's default: no server, no ROS).
 * :class:`RosbridgeTurtle` -- any rosbridge v2 server through roslibpy: this project's
-  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server``. The pose and cmd_vel types
-  are learnt from the robot's rosapi ``topic_type``, falling back to the ``--ros`` setting
-  (:mod:`app.protocol.ros`), so ROS 1, ROS 2 up to Iron and Jazzy+ robots all work.
+  ``/rosbridge`` endpoint or a real robot's ``rosbridge_server``, driving the robot a
+  description names (:mod:`app.protocol.robot`: its velocity topic and type, its pose source).
+  The types are learnt from the robot's rosapi ``topic_type``, falling back to the ``--ros``
+  setting (:func:`app.protocol.robot.detect`), so ROS 1, ROS 2 up to Iron and Jazzy+ robots
+  all work.
 """
 
 from __future__ import annotations
@@ -24,15 +26,8 @@ from twisted.internet import error as twisted_error
 from twisted.internet import reactor
 from twisted.internet import ssl as twisted_ssl
 
-from app.protocol.ros import (
-    AUTO,
-    DETECT_TIMEOUT_S,
-    ROS_SETTINGS,
-    TYPES,
-    Detected,
-    RosSetting,
-    detect,
-)
+from app.protocol.robot import TURTLESIM, Robot, RobotTypes, detect, pose_of, velocity_message
+from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, TYPES, RosSetting
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import Pose, Twist
 
@@ -64,14 +59,6 @@ class Turtle(Protocol):
 
     def renew(self, token: str) -> None:
         """The session's token was renewed: prove the fresh one where the old one was sent."""
-
-
-def twist_message(twist: Twist) -> dict[str, Any]:
-    """``geometry_msgs/Twist`` as rosbridge JSON."""
-    return {
-        "linear": {"x": twist.linear_x, "y": 0.0, "z": 0.0},
-        "angular": {"x": 0.0, "y": 0.0, "z": twist.angular_z},
-    }
 
 
 class SimTurtle:
@@ -121,7 +108,8 @@ class SimTurtle:
 
 
 class RosbridgeTurtle:
-    """A turtle behind a rosbridge v2 server, driven with roslibpy.
+    """A robot behind a rosbridge v2 server, driven with roslibpy: the robot ``robot``
+    describes (default: turtlesim's turtle1).
 
     roslibpy runs its own network thread; pose callbacks are handed to the asyncio loop.
     """
@@ -130,28 +118,32 @@ class RosbridgeTurtle:
         self,
         url: str,
         ros: RosSetting = AUTO,
-        name: str = "turtle1",
+        robot: Robot = TURTLESIM,
         token: str | None = None,
         ca_file: Path | None = None,
+        wall_clock: Callable[[], float] = time.time,
     ) -> None:
         if not url.startswith(("ws://", "wss://")):
             raise TurtleError(f"rosbridge URL must start with ws:// or wss://, not {url!r}")
         if ros not in ROS_SETTINGS:
             raise TurtleError(f"--ros must be one of {', '.join(ROS_SETTINGS)}, not {ros!r}")
         self.url = url
-        self.name = name
+        self.robot = robot
         self.setting: RosSetting = ros
         # Known once connected: the types in use and whether the robot named them.
-        self.types: Detected | None = None
+        self.types: RobotTypes | None = None
         # Sent as a bearer header on the handshake; the server's /rosbridge checks it.
         self.headers = {"Authorization": f"Bearer {token}"} if token else None
         self.ca_file = ca_file
+        # A TwistStamped's stamp: ROS time is the wall clock's seconds since the epoch.
+        self.wall_clock = wall_clock
         self._ros: roslibpy.Ros | None = None
         self._cmd_vel: roslibpy.Topic | None = None
         self._pose: roslibpy.Topic | None = None
+        self._bad_pose_logged = False
 
     async def start(self, on_pose: PoseCallback) -> None:
-        """Connect, advertise ``cmd_vel`` and subscribe to ``pose``."""
+        """Connect, advertise the velocity topic and subscribe to the pose source."""
         loop = asyncio.get_running_loop()
         if self.url.startswith("wss:"):
             ros: roslibpy.Ros = _VerifiedRos(self.url, self.headers, _tls_options(self))
@@ -165,36 +157,57 @@ class RosbridgeTurtle:
         self._ros = ros
         ros.on("close", lambda *_: log.warning("rosbridge connection to %s lost", self.url))
         types = self.types = await self._detect(ros)
-        self._cmd_vel = roslibpy.Topic(ros, f"/{self.name}/cmd_vel", types.twist)
+        robot = self.robot
+        self._cmd_vel = roslibpy.Topic(ros, robot.velocity.topic, types.velocity)
         self._cmd_vel.advertise()
 
         def received(message: dict[str, Any]) -> None:
-            pose = Pose(float(message["x"]), float(message["y"]), float(message["theta"]))
-            loop.call_soon_threadsafe(on_pose, pose)
+            read = pose_of(robot.pose.type, message)
+            if read is None:
+                if not self._bad_pose_logged:
+                    log.warning("%s: a message without a pose; ignored", robot.pose.topic)
+                    self._bad_pose_logged = True
+                return
+            loop.call_soon_threadsafe(on_pose, Pose(*read))
 
-        self._pose = roslibpy.Topic(ros, f"/{self.name}/pose", types.pose)
+        self._pose = roslibpy.Topic(ros, robot.pose.topic, types.pose)
         self._pose.subscribe(received)
-        log.info("driving /%s through rosbridge at %s", self.name, self.url)
+        log.info(
+            "driving %s (%s, %s) through rosbridge at %s",
+            robot.name,
+            robot.velocity.topic,
+            robot.pose.topic,
+            self.url,
+        )
 
-    async def _detect(self, ros: roslibpy.Ros) -> Detected:
-        """Ask rosapi for the pose and cmd_vel types; the setting decides what it cannot."""
-        reported = [
-            await asyncio.to_thread(self._topic_type, ros, f"/{self.name}/{leaf}")
-            for leaf in ("pose", "cmd_vel")
+    async def _detect(self, ros: roslibpy.Ros) -> RobotTypes:
+        """Ask rosapi for the pose and velocity types; the setting decides what it cannot."""
+        robot = self.robot
+        pose, velocity = [
+            await asyncio.to_thread(self._topic_type, ros, topic)
+            for topic in (robot.pose.topic, robot.velocity.topic)
         ]
-        types = detect(reported[0], reported[1], self.setting)
+        types = detect(robot, pose, velocity, self.setting)
         if types.from_robot:
-            log.info("the robot speaks ROS %s: %s, %s", types.flavour, types.pose, types.twist)
+            log.info("the robot speaks ROS %s: %s, %s", types.flavour, types.pose, types.velocity)
             if self.setting not in (AUTO, types.flavour):
                 log.warning(
                     "--ros %s ignored: the robot reports ROS %s types", self.setting, types.flavour
                 )
         else:
             log.warning(
-                "rosapi did not name /%s/pose's type; using ROS %s names (--ros %s)",
-                self.name,
+                "rosapi did not name %s's type as a %s; using ROS %s names (--ros %s)",
+                robot.pose.topic,
+                robot.pose.type,
                 types.flavour,
                 self.setting,
+            )
+        if types.velocity_kind != robot.velocity.type:
+            log.warning(
+                "%s is a %s on the robot, not a %s as described: publishing what the robot takes",
+                robot.velocity.topic,
+                types.velocity_kind,
+                robot.velocity.type,
             )
         return types
 
@@ -215,13 +228,25 @@ class RosbridgeTurtle:
         return kind if isinstance(kind, str) and kind else None
 
     def publish(self, twist: Twist) -> None:
-        """Publish on ``/turtleN/cmd_vel`` (roslibpy hands it to its network thread)."""
-        if self._cmd_vel is not None:
-            self._cmd_vel.publish(roslibpy.Message(twist_message(twist)))
+        """Publish on the velocity topic in its type (roslibpy hands it to its network thread)."""
+        types = self.types
+        if self._cmd_vel is None or types is None:
+            return
+        message = velocity_message(
+            types.velocity_kind,
+            types.flavour,
+            twist.linear_x,
+            twist.angular_z,
+            self.wall_clock(),
+            self.robot.velocity.frame_id,
+        )
+        self._cmd_vel.publish(roslibpy.Message(message))
 
     async def teleport(self, x: float, y: float, theta: float) -> None:
-        """Call ``/turtleN/teleport_absolute`` and wait for the robot's answer."""
-        ros, types = self._ros, self.types
+        """Call the turtle's ``teleport_absolute`` and wait for the robot's answer."""
+        ros, types, service_name = self._ros, self.types, self.robot.teleport_service
+        if service_name is None:
+            raise TurtleError(f"{self.robot.name} is no turtlesim: it has no teleport_absolute")
         if ros is None or types is None:
             raise TurtleError(f"not connected to rosbridge at {self.url}")
         loop = asyncio.get_running_loop()
@@ -232,7 +257,7 @@ class RosbridgeTurtle:
                 answered.set_result(error)
 
         teleport = TYPES[types.flavour].teleport_absolute
-        service = roslibpy.Service(ros, f"/{self.name}/teleport_absolute", teleport)
+        service = roslibpy.Service(ros, service_name, teleport)
         service.call(
             roslibpy.ServiceRequest({"x": x, "y": y, "theta": theta}),
             lambda _response: loop.call_soon_threadsafe(settle, None),
@@ -243,7 +268,7 @@ class RosbridgeTurtle:
         except TimeoutError:
             error = f"no answer within {CONNECT_TIMEOUT_S:g} s"
         if error is not None:
-            raise TurtleError(f"/{self.name}/teleport_absolute failed: {error}")
+            raise TurtleError(f"{service_name} failed: {error}")
 
     def renew(self, token: str) -> None:
         """Send the rosbridge ``auth`` op with the fresh token, if this rosbridge was given one

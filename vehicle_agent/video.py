@@ -395,9 +395,13 @@ class SyntheticVideo(PacedVideoTrack):
 
 
 class TwoFaceVideo(SyntheticVideo):
-    """The target-lock scene (DESIGN §10): two faces drifting slowly, a large one on the left
-    (the default choice) and one ``small_share`` its size on the right; no flame. The large
-    face is :meth:`face_centre`, the small one :meth:`small_centre`."""
+    """The target-lock scene (docs/architecture.md, "Which target"): two faces drifting
+    slowly, a large one on the left (the default choice) and one ``small_share`` its size on the
+    right; no flame. The large face is :meth:`face_centre`, the small one :meth:`small_centre`.
+    A third, tiny face (``tiny_share`` of the large one, :meth:`tiny_centre`) drifts up between
+    them: too small for the relay's reduced-size scan to find, as a person far away is, it has no
+    box until the operator clicks it (a full-resolution search around the click,
+    app/protocol/lock.py)."""
 
     def __init__(
         self,
@@ -406,6 +410,7 @@ class TwoFaceVideo(SyntheticVideo):
         fps: float = VIDEO_FPS,
         on_frame: Callable[[FrameSent], None] | None = None,
         small_share: float = 0.65,
+        tiny_share: float = 1 / 3,
     ) -> None:
         super().__init__(
             width, height, fps, DriftPath(0.3, 0.45, 0.06, 0.04, 9.0), on_frame=on_frame, flame=None
@@ -413,16 +418,25 @@ class TwoFaceVideo(SyntheticVideo):
         self.small_path = DriftPath(0.72, 0.5, 0.05, 0.05, 7.0, phase=1.0)
         self.small_px = max(24, round(height // 4 * small_share))
         self._small = _FaceSprite(SMALL_FACE, face_px=self.small_px)
+        self.tiny_path = DriftPath(0.62, 0.19, 0.02, 0.01, 11.0, phase=2.0)
+        self.tiny_px = max(12, round(height // 4 * tiny_share))
+        self._tiny = _FaceSprite(DEFAULT_FACE, face_px=self.tiny_px)
 
     def small_centre(self, frame: int) -> tuple[float, float]:
         """True centre (pixels) of the small face's box in frame number ``frame``."""
         fx, fy = self.small_path(frame / self.fps)
         return fx * self.width, fy * self.height
 
+    def tiny_centre(self, frame: int) -> tuple[float, float]:
+        """True centre (pixels) of the tiny face's box in frame number ``frame``."""
+        fx, fy = self.tiny_path(frame / self.fps)
+        return fx * self.width, fy * self.height
+
     def render(self, frame: int) -> Image:
-        """Frame number ``frame``: the scene with both faces, and the tag on top."""
+        """Frame number ``frame``: the scene with its three faces, and the tag on top."""
         img = super().render(frame)
         self._paste(img, self._small, self.small_centre(frame))
+        self._paste(img, self._tiny, self.tiny_centre(frame))
         frametag.stamp(img, frame)
         return img
 

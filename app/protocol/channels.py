@@ -1,4 +1,4 @@
-"""The data-channel messages of DESIGN §3 (and docs/contracts.md) as pydantic models.
+"""The data-channel messages as pydantic models (docs/architecture.md, "Data-channel messages").
 
 One model per message ``type``; each direction of each channel accepts a tagged union of them
 (:data:`RECEIVERS`). Numbers must be finite: JSON has no NaN or Infinity, and Python's ``json``
@@ -6,13 +6,14 @@ module would otherwise let them through. Models are strict (a string is not a nu
 extra fields, so a newer peer may add one without breaking an older one. The browser validates
 against JSON Schemas generated from these same models (:func:`channel_schemas`).
 
-The vehicle opens two channels to the relay (DESIGN §9 "Lossy links"). ``autopilot`` is reliable
-and ordered: mode commands (``stop``) and error reports, which must arrive. ``autopilot-state`` is
-unordered and never retransmits: goals (relay -> vehicle) and pose (vehicle -> relay) are state,
-only the newest matters, and a lost one is better skipped than waited for (no head-of-line
-blocking on a lossy link). The vehicle applies a goal only if its ``seq`` is newer than every
-goal applied on this link and it is not stale (``vehicle_agent/freshness.py``,
-``app/static/js/core/freshness.js``). The client's ``control`` channel is reliable.
+The vehicle opens two channels to the relay (docs/architecture.md, "Lossy links").
+``autopilot`` is reliable and ordered: mode commands (``stop``) and error reports, which must
+arrive. ``autopilot-state`` is unordered and never retransmits: goals (relay -> vehicle) and pose
+(vehicle -> relay) are state, only the newest matters, and a lost one is better skipped than
+waited for (no head-of-line blocking on a lossy link). The vehicle applies a goal only if its
+``seq`` is newer than every goal applied on this link and it is not stale
+(``vehicle_agent/freshness.py``, ``app/static/js/core/freshness.js``). The client's ``control``
+channel is reliable.
 """
 
 from __future__ import annotations
@@ -153,6 +154,9 @@ class Detections(_Message):
     goalsPerS: NonNegative  # noqa: N815 -- the wire name
     # The locked target's box, when a lock holds and this snapshot found it.
     locked: Box | None = None
+    # The last full scan's boxes: between full scans ``boxes`` holds only what the tracker's
+    # window found, and these are the other targets a click can lock (app/protocol/lock.py).
+    candidates: list[Box] | None = None
 
 
 # Of the relay's target lock (app/protocol/lock.py): none: the largest box is the target; locked:
@@ -162,8 +166,8 @@ LockState = Literal["none", "locked", "lost", "searching"]
 
 
 class Lock(_Message):
-    """client→relay: lock on the target whose box contains pixel (x, y) of the analysed frame;
-    a point on no box releases the lock."""
+    """client→relay: lock on the target at or near pixel (x, y) of the analysed frame (the rule:
+    app/protocol/lock.py); a point where nothing is found releases the lock."""
 
     type: Literal["lock"] = "lock"
     x: Finite
@@ -188,7 +192,8 @@ class LockStatus(_Message):
 
 # Manual override: "auto", the relay's goals steer; "manual", the operator's drive commands do.
 Mode = Literal["auto", "manual"]
-# A drive command's share of the vehicle profile's manual speed (DESIGN §10).
+# A drive command's share of the vehicle profile's manual speed (docs/architecture.md, "Who
+# holds the wheel").
 Axis = Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
 PeerName = Annotated[str, Field(min_length=1, max_length=64)]
 
@@ -225,6 +230,23 @@ class ModeChange(_Message):
     mode: Mode
     operator: PeerName | None = None
     reason: str | None = None
+
+
+class StopRobot(_Message):
+    """client→relay: stop the robot at once, whoever holds the wheel: piloting stops and an
+    operator's wheel goes back to the autopilot (any client may send it)."""
+
+    type: Literal["stopRobot"] = "stopRobot"
+
+
+class RobotStopped(_Message):
+    """relay→clients: the robot was stopped; ``by`` the client who pressed Stop robot, or None
+    when the relay stopped piloting because no client was watching; ``reason`` in words. Sent
+    to every client, and to a client that connects while the stop still stands."""
+
+    type: Literal["robotStopped"] = "robotStopped"
+    by: PeerName | None = None
+    reason: str
 
 
 CandidateType = Literal["host", "srflx", "prflx", "relay"]
@@ -274,6 +296,8 @@ ChannelMessage = (
     | HandBack
     | Drive
     | ModeChange
+    | StopRobot
+    | RobotStopped
     | Health
     | Error
 )
@@ -296,8 +320,30 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
     },
     AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Drive, Error), "relay": (Pose, Error)},
     CONTROL_CHANNEL: {
-        "relay": (GetOps, SetOp, Start, Stop, Lock, Unlock, TakeOver, HandBack, Drive, Error),
-        "client": (Ops, State, Detections, Pose, LockStatus, ModeChange, Health, Error),
+        "relay": (
+            GetOps,
+            SetOp,
+            Start,
+            Stop,
+            StopRobot,
+            Lock,
+            Unlock,
+            TakeOver,
+            HandBack,
+            Drive,
+            Error,
+        ),
+        "client": (
+            Ops,
+            State,
+            Detections,
+            Pose,
+            LockStatus,
+            ModeChange,
+            RobotStopped,
+            Health,
+            Error,
+        ),
     },
 }
 

@@ -14,6 +14,7 @@ from typing import Literal
 
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.protocol.relay_profiles import Profile as RelayProfile
+from app.protocol.robot import Robot
 from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
@@ -70,6 +71,9 @@ class Profile:
     wall_margin_m: float = 0.0
     # Speed allowed per metre of clearance beyond the margin (1/s): the vehicle slows near walls.
     wall_gain: float = 0.0
+    # Whether the walls are known: turtlesim's terrain has them; any other robot's surroundings
+    # are not the terrain, so the follow law neither aims inside it nor slows near its walls.
+    walls: bool = True
     # No goal for this long: the target counts as lost and the vehicle turns in place to search.
     search_after_s: float = math.inf
     search_angular: float = 0.0
@@ -139,6 +143,7 @@ __all__ = [
     "ControlConfig",
     "Profile",
     "control_config",
+    "for_robot",
     "with_standoff",
 ]
 
@@ -150,6 +155,20 @@ def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
     if not math.isfinite(standoff_m) or standoff_m < 0:
         raise ValueError(f"standoff must be a finite distance >= 0 m, not {standoff_m}")
     return replace(profile, standoff_m=standoff_m)
+
+
+def for_robot(profile: Profile, robot: Robot) -> Profile:
+    """``profile`` fitted to ``robot``: an operator's full deflection is at most the robot's top
+    speed (so the stick spans the robot's range rather than saturating early), and the follow
+    law knows of walls on a turtlesim only. Every command is clamped to the limits as well, by
+    the pilot's limiter."""
+    limits = robot.limits
+    return replace(
+        profile,
+        manual_linear=min(profile.manual_linear, limits.max_linear),
+        manual_angular=min(profile.manual_angular, limits.max_angular),
+        walls=robot.turtlesim,
+    )
 
 
 @dataclass(frozen=True)

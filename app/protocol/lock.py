@@ -1,15 +1,24 @@
 """Target lock: follow the object a person clicked, not the largest one. The rule, written once.
 
-The relay owns the lock. A click (a point in frame pixels) locks the box that contains it, the
-smallest of several (a small box inside a large one can only be meant by a click on it); a click
-on no box releases the lock. On each later snapshot the box that continues the locked track is
-chosen among the boxes found (the tracker's window first): of the boxes of a similar size --
-neither side more than ``max_scale`` times the locked box's, nor less than its ``1 / max_scale``
--- the one that overlaps it most; when none overlaps, the one whose centre is nearest to its
-centre, within ``reach`` times its longer side. Ties go to the first box found. A locked target
-not seen for ``search_after_s`` is searched for in the whole frame (any similar box, nearest
-first); not seen for ``release_after_s``, the lock is released and the largest box is the target
-again. Switching the operation releases the lock.
+The relay owns the lock. A click (a point in frame pixels) picks among the boxes the operator sees:
+the last snapshot's and, between full scans, the last full scan's that overlap none of them (the
+candidates). The box that contains the click is picked, the smallest of several (a small box inside
+a large one can only be meant by a click on it); else the box the click is nearest to, measured in
+that box's own size -- the larger of the horizontal gap over the box's width and the vertical gap
+over its height -- when that is at most ``near`` (a click on a face's hair or chin is meant for
+that face). A click near no box searches the frame at full resolution in a square ``click_search``
+of the frame's shorter side, centred on the click (a face the reduced-size scan is too coarse to
+find is still one the operator sees), and the same pick among what that search finds is locked; a
+target so found is followed at full resolution (the tracker's window around it, and when neither
+that window nor a full scan finds it, the window around where it was last seen). A click where
+nothing is found releases the lock. On each later snapshot the box that continues the locked track
+is chosen among the boxes found (the tracker's window first): of the boxes of a similar size --
+neither side more than ``max_scale`` times the locked box's, nor less than its ``1 / max_scale`` --
+the one that overlaps it most; when none overlaps, the one whose centre is nearest to its centre,
+within ``reach`` times its longer side. Ties go to the first box found. A locked target not seen
+for ``search_after_s`` is searched for in the whole frame (any similar box, nearest first); not
+seen for ``release_after_s``, the lock is released and the largest box is the target again.
+Switching the operation releases the lock.
 
 Python applies the rule in :mod:`app.vision.lock`, the relay page in ``js/core/lock.js``, which gets
 these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py and
@@ -30,3 +39,5 @@ class LockRule:
     release_after_s: float = 3.0
     max_scale: float = 1.4
     reach: float = 1.0
+    near: float = 0.5
+    click_search: float = 0.6

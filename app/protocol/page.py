@@ -34,6 +34,7 @@ from app.protocol.control import ControlConfig
 from app.protocol.frametag import LAYOUT, FrameTagLayout
 from app.protocol.link_health import HEALTH, HealthLimits
 from app.protocol.lock import LockRule
+from app.protocol.robot import Robot, TypeTable, type_table
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import RosConfig, RosSetting
 from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
@@ -142,6 +143,23 @@ class PageProtocol:
 
 
 @dataclass(frozen=True)
+class RobotConfig:
+    """The robot the vehicle page drives (``?robot=NAME``): its description, what follows from
+    it, and its type names in every flavour (``core/rosflavour.js`` picks among them)."""
+
+    description: Robot
+    # A turtlesim has the spawn step and the terrain's walls.
+    turtlesim: bool
+    teleport_service: str | None
+    types: TypeTable
+
+
+def robot_config(robot: Robot) -> RobotConfig:
+    """What the vehicle page needs to know of ``robot``."""
+    return RobotConfig(robot, robot.turtlesim, robot.teleport_service, type_table(robot))
+
+
+@dataclass(frozen=True)
 class PageConfig:
     """A role page's whole config: what it needs to run on its own, ``?auto=1`` included."""
 
@@ -154,7 +172,7 @@ class PageConfig:
     profile: str
     # The control law's numbers, the world's geometry among them.
     control: ControlConfig
-    # The vehicle page's spawn step (turn to face up at start).
+    # The vehicle page's spawn step (turn to face up at start; a turtlesim's only).
     spawn_step: bool
     # The relay's own video preview.
     preview: bool
@@ -166,6 +184,9 @@ class PageConfig:
     # The fallback when the robot's rosapi cannot name its types.
     ros: RosSetting
     ros_types: RosConfig
+    robot: RobotConfig
+    # Why the robot asked for (``?robot=``) cannot be driven, or None.
+    robot_error: str | None
     protocol: PageProtocol
 
 

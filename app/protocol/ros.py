@@ -12,13 +12,15 @@ rosbridge accepts only ``package/Name``. :func:`spellings` says which spellings 
 flavour accepts for a type.
 
 The simulator serves one flavour (``autopilot serve --ros``), the agent and the vehicle page
-learn a robot's flavour from rosapi ``topic_type`` and fall back to a setting.
+learn a robot's flavour from rosapi ``topic_type`` and fall back to a setting
+(:func:`app.protocol.robot.detect`). A robot description names its message types the short way,
+``package/Name`` (:func:`spell` gives a flavour's spelling, :func:`canonical` reads one back).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final, Literal, cast, get_args
+from typing import Final, Literal, get_args
 
 RosFlavour = Literal["1", "2", "jazzy"]
 ROS_FLAVOURS: Final[tuple[RosFlavour, ...]] = get_args(RosFlavour)
@@ -42,6 +44,24 @@ def type_name(flavour: RosFlavour, package: str, kind: Kind, name: str) -> str:
     if flavour == "1":
         return f"{package}/{name}"
     return f"{package}/{kind}/{name}"
+
+
+def spell(flavour: RosFlavour, canonical: str) -> str:
+    """How ``flavour`` spells the message type ``canonical`` (``package/Name``)."""
+    package, name = canonical.split("/")
+    return type_name(flavour, package, "msg", name)
+
+
+def canonical(spelled: str) -> str | None:
+    """The short name ``package/Name`` of a message type in any flavour's spelling
+    (``geometry_msgs/msg/Twist``, ``turtlesim_msgs/msg/Pose``), None if it is not one."""
+    parts = spelled.split("/")
+    if len(parts) == 3 and parts[1] == "msg":
+        parts = [parts[0], parts[2]]
+    if len(parts) != 2 or not all(parts):
+        return None
+    package, name = parts
+    return f"{'turtlesim' if package == 'turtlesim_msgs' else package}/{name}"
 
 
 def spellings(flavour: RosFlavour, canonical: str) -> frozenset[str]:
@@ -111,42 +131,6 @@ def _types(flavour: RosFlavour) -> RosTypes:
 
 
 TYPES: Final[dict[RosFlavour, RosTypes]] = {flavour: _types(flavour) for flavour in ROS_FLAVOURS}
-
-
-def flavour_of_pose_type(reported: str) -> RosFlavour | None:
-    """The flavour whose turtlesim ``Pose`` type is ``reported`` (what rosapi ``topic_type``
-    answered for ``/turtleN/pose``), or None for an unknown or empty answer."""
-    for flavour, types in TYPES.items():
-        if reported == types.pose:
-            return flavour
-    return None
-
-
-@dataclass(frozen=True)
-class Detected:
-    """The type names a client uses on one robot, and where they came from."""
-
-    flavour: RosFlavour
-    pose: str
-    twist: str
-    # True when the robot's rosapi named the pose type; False when the setting was used.
-    from_robot: bool
-
-
-def detect(pose_reported: str | None, twist_reported: str | None, setting: RosSetting) -> Detected:
-    """Pick the types from what rosapi ``topic_type`` answered for ``/turtleN/pose`` and
-    ``/turtleN/cmd_vel`` (None: no answer), falling back to ``setting`` (``auto``: the default
-    flavour). A reported cmd_vel type is used as reported, whatever the flavour."""
-    reported = flavour_of_pose_type(pose_reported or "")
-    flavour: RosFlavour
-    if reported is not None:
-        flavour = reported
-    elif setting == AUTO:
-        flavour = DEFAULT_FLAVOUR
-    else:
-        flavour = cast(RosFlavour, setting)  # every setting but auto is a flavour
-    types = TYPES[flavour]
-    return Detected(flavour, types.pose, twist_reported or types.twist, reported is not None)
 
 
 @dataclass(frozen=True)

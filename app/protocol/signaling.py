@@ -1,4 +1,5 @@
-"""The signaling messages of DESIGN §2 as pydantic models, parsed once at the edge.
+"""The signaling messages as pydantic models, parsed once at the edge (docs/architecture.md,
+"Signaling protocol").
 
 Peers may add fields of their own (they are relayed as sent), except ``from``: the server stamps
 the sender's name on everything it relays, whatever the peer wrote there.

@@ -23,9 +23,11 @@ from app.protocol.control import (
     PROFILES,
     ControlConfig,
     control_config,
+    for_robot,
     with_standoff,
 )
-from app.protocol.page import BaseConfig, PageConfig, page_protocol, to_json
+from app.protocol.page import BaseConfig, PageConfig, page_protocol, robot_config, to_json
+from app.protocol.robot import DEFAULT_ROBOT, PRESETS, Robot
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import AUTO, ROS_CONFIG, ROS_SETTINGS
 from app.resources import TEMPLATES_DIR
@@ -47,6 +49,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     asked = query.get("profile", DEFAULT_PROFILE)
     # An unknown profile falls back to the default rather than breaking the page.
     profile = PROFILES[asked if asked in PROFILES else DEFAULT_PROFILE]
+    robot, robot_error = _robot(query.get("robot"))
     own_rosbridge = f"{_ws_base(request)}/rosbridge"
     rosbridge = query.get("rosbridge") or own_rosbridge
     ros = query.get("ros", AUTO)
@@ -58,9 +61,10 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         auto=query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
         profile=profile.relay_profile if role == "relay" else profile.name,
-        control=_control(query.get("standoff")),
-        # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended).
-        spawn_step=query.get("spawn") not in ("0", "false", "no"),
+        control=_control(query.get("standoff"), robot),
+        # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended);
+        # no robot but a turtlesim has the step.
+        spawn_step=robot.turtlesim and query.get("spawn") not in ("0", "false", "no"),
         preview=query.get("preview") not in ("0", "false", "no"),
         rosbridge=rosbridge,
         # The page's token (read from the URL fragment) goes only to this server's rosbridge.
@@ -68,6 +72,8 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         rosbridge_error=insecure_rosbridge(rosbridge, request.url.scheme),
         ros=ros if ros in ROS_SETTINGS else AUTO,
         ros_types=ROS_CONFIG,
+        robot=robot_config(robot),
+        robot_error=robot_error,
         protocol=page_protocol(),
     )
     converted: dict[str, Any] = to_json(config)
@@ -92,10 +98,20 @@ def _standoff(text: str | None) -> float | None:
     return value if math.isfinite(value) and value >= 0 else None
 
 
-def _control(standoff: str | None) -> ControlConfig:
-    """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance."""
+def _robot(name: str | None) -> tuple[Robot, str | None]:
+    """``?robot=NAME``: a preset (default turtlesim). An unknown name is not guessed at: the
+    page says so and drives nothing (the description stays turtlesim's, unused)."""
+    if name is None or name in PRESETS:
+        return PRESETS[name or DEFAULT_ROBOT], None
+    known = ", ".join(PRESETS)
+    return PRESETS[DEFAULT_ROBOT], f"no robot preset named {name!r} (robot= is one of {known})"
+
+
+def _control(standoff: str | None, robot: Robot) -> ControlConfig:
+    """The control law's numbers for ``control.js``, each profile fitted to ``robot``;
+    ``?standoff=M`` sets the follow distance."""
     profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
-    return control_config(profiles)
+    return control_config({name: for_robot(p, robot) for name, p in profiles.items()})
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:

@@ -16,6 +16,7 @@ import hashlib
 import ipaddress
 import logging
 import os
+import shlex
 import socket
 from dataclasses import dataclass
 from pathlib import Path
@@ -132,8 +133,8 @@ def trust_instructions(ca_file: Path) -> str:
     return (
         f"To trust this server, import its CA certificate {ca_file} "
         f"(SHA-256 {fingerprint}) on each machine that opens a page:\n"
-        f"  Chromium/Chrome on Linux: certutil -d sql:$HOME/.pki/nssdb -A -t C,, "
-        f"-n webrtc-autopilot -i {ca_file}  (certutil: Debian's libnss3-tools)\n"
+        f"  Chromium/Chrome on Linux (certutil: Debian's libnss3-tools):\n"
+        f"    {chromium_trust_command(ca_file)}\n"
         f"  headless Chromium (chromium --headless, Playwright's launch args): "
         f"--ignore-certificate-errors-spki-list={spki_sha256(ca_file)}\n"
         f"  Firefox: Settings > Privacy & Security > Certificates > View Certificates > "
@@ -144,6 +145,21 @@ def trust_instructions(ca_file: Path) -> str:
         f"-k /Library/Keychains/System.keychain {ca_file}\n"
         f"  Android/iOS: copy the file to the device and install it as a CA certificate\n"
         f"  autopilot vehicle / autopilot relay: --ca-file {ca_file}"
+    )
+
+
+def chromium_trust_command(ca_file: Path | str) -> str:
+    """The shell line that makes Chromium on Linux trust ``ca_file`` for this user.
+
+    Chromium reads its CAs from the NSS database in ``~/.pki/nssdb``, which it creates on its
+    first run: on a machine where it never ran, ``certutil -A`` alone fails with
+    ``SEC_ERROR_BAD_DATABASE``, so the line creates an empty database first. Only when there is
+    none: ``certutil -N`` on an existing one asks for its password again and again.
+    """
+    db = "$HOME/.pki/nssdb"
+    return (
+        f"mkdir -p {db} && (test -e {db}/cert9.db || certutil -d sql:{db} -N --empty-password) "
+        f"&& certutil -d sql:{db} -A -t C,, -n {APP_DIR_NAME} -i {shlex.quote(str(ca_file))}"
     )
 
 

@@ -1,1 +1,1 @@
-"""Signaling server (DESIGN §2): typed messages, a sans-I/O hub of rooms, and the /ws route."""
+"""Signaling: the sans-I/O hub of rooms (docs/architecture.md, "Signaling protocol")."""

@@ -1,4 +1,6 @@
-"""Sans-I/O signaling hub: rooms, roles and relay rules of DESIGN §2, with no sockets in it.
+"""Sans-I/O signaling hub: rooms, roles and relay rules, with no sockets in it.
+
+The rules are those of docs/architecture.md, "Signaling protocol".
 
 The transport calls :meth:`Hub.connect` for each new connection, :meth:`Hub.receive` for each
 text frame and :meth:`Hub.disconnect` when the socket goes away. Each returns the actions to

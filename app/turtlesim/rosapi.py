@@ -101,6 +101,16 @@ _DEFINITIONS: dict[str, str] = {
     ),
     "rcl_interfaces/Parameter": "string name\nrcl_interfaces/ParameterValue value",
     "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
+    "geometry_msgs/TwistStamped": "std_msgs/Header header\ngeometry_msgs/Twist twist",
+    "nav_msgs/Odometry": (
+        "std_msgs/Header header\nstring child_frame_id\n"
+        "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist"
+    ),
+    "geometry_msgs/PoseWithCovariance": "geometry_msgs/Pose pose\nfloat64[36] covariance",
+    "geometry_msgs/TwistWithCovariance": "geometry_msgs/Twist twist\nfloat64[36] covariance",
+    "geometry_msgs/Pose": "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z",
+    "geometry_msgs/Quaternion": "float64 x\nfloat64 y\nfloat64 z\nfloat64 w",
     "sensor_msgs/Image": (
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
         "uint8 is_bigendian\nuint32 step\nuint8[] data"
@@ -124,6 +134,15 @@ _USES: dict[str, tuple[str, ...]] = {
     ),
     "sensor_msgs/CompressedImage": ("std_msgs/Header",),
     "sensor_msgs/Image": ("std_msgs/Header",),
+    "geometry_msgs/TwistStamped": ("std_msgs/Header", "geometry_msgs/Twist"),
+    "nav_msgs/Odometry": (
+        "std_msgs/Header",
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/TwistWithCovariance",
+    ),
+    "geometry_msgs/PoseWithCovariance": ("geometry_msgs/Pose",),
+    "geometry_msgs/TwistWithCovariance": ("geometry_msgs/Twist",),
+    "geometry_msgs/Pose": ("geometry_msgs/Point", "geometry_msgs/Quaternion"),
 }
 # ROS 2's std_msgs/Header has no seq, and its stamp is a message of its own.
 _ROS2_DEFINITIONS: dict[str, str] = {
@@ -315,13 +334,14 @@ class RosGraph:
 
     # -- rosapi calls ------------------------------------------------------------------------
 
-    def call(self, service: str, args: Json, cameras: Mapping[str, str] | None = None) -> Json:
+    def call(self, service: str, args: Json, hosted: Mapping[str, str] | None = None) -> Json:
         """Answer rosapi's ``service`` (``topics``, ``get_param``, ...) called with ``args``;
-        ``cameras`` are the caller's camera topics and their types, listed beside the graph's
-        (:mod:`app.turtlesim.rosbridge`: they depend on the caller's room)."""
+        ``hosted`` are the topics the rosbridge carries for the caller's room and their types
+        (:mod:`app.turtlesim.hosted`), listed beside the graph's: the clients' (through
+        ``/rosbridge_websocket``), not a node's here."""
         about_topics = self._topic_handlers.get(service)
         if about_topics is not None:
-            listed = dict(sorted({**self.topics(), **(cameras or {})}.items()))
+            listed = dict(sorted({**self.topics(), **(hosted or {})}.items()))
             return about_topics(args, listed)
         try:
             handler = self._handlers[service]

@@ -19,11 +19,11 @@ rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of 
 always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
 answered by :class:`app.turtlesim.rosapi.RosGraph`.
 
-Beside the turtles' topics, a client may advertise a camera topic (``sensor_msgs/CompressedImage``
-or ``sensor_msgs/Image``, :mod:`app.protocol.camera`) and publish on it; the others subscribe to
-it as to any topic (rosapi lists it). A camera topic belongs to the room of the token that opened
-the connection (:attr:`RosbridgeSession.room`, set by the server's gate): another room's clients
-neither see it nor reach it. Like a pose topic, it keeps only its latest message.
+Beside the turtles' topics, the hub carries topics of the types a robot description names
+(its velocity, its odometry, its camera) between its clients (:mod:`app.turtlesim.hosted`). A
+hosted topic belongs to the room of the token that opened the connection
+(:attr:`RosbridgeSession.room`, set by the server's gate): another room's clients neither see it
+nor reach it. A camera topic keeps only its latest image.
 
 A subscription asking for ``compression: "cbor"`` gets its messages as CBOR, in binary frames,
 a ``uint8[]`` (an image's data) as a byte string; otherwise as JSON text, a ``uint8[]`` in
@@ -54,16 +54,11 @@ from pydantic import (
 )
 
 from app.protocol import jsonedge
-from app.protocol.camera import (
-    CAMERA_TYPES,
-    CameraMessageError,
-    CameraType,
-    type_spelled,
-    wire,
-)
-from app.protocol.camera import parse as parse_image
 from app.protocol.errors import describe
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour, RosTypes, spellings
+from app.turtlesim.hosted import HostedTopic, HostedTopics, HostingError
+from app.turtlesim.messages import Payload as _Payload
+from app.turtlesim.messages import Twist
 from app.turtlesim.rosapi import (
     GLOBAL_SERVICES,
     TURTLE_SERVICES,
@@ -94,11 +89,6 @@ MAX_SUBSCRIPTIONS: Final = 16
 # So what the clients subscribe to cannot add up to more than the server can send beside its tick.
 MAX_PUBLICATIONS_PER_S: Final = 125.0
 MAX_ADVERTISEMENTS: Final = 64
-# Camera topics at once, in one room and in all: each holds its latest image, so this bounds
-# their memory (the server's frame limit bounds each image), and one room's clients cannot take
-# another room's places.
-MAX_CAMERA_TOPICS_PER_ROOM: Final = 8
-MAX_CAMERA_TOPICS: Final = 64
 MAX_QUEUE_LENGTH: Final = 100
 MAX_THROTTLE_RATE_MS: Final = 60_000
 
@@ -255,26 +245,6 @@ def status(level: str, text: str, op_id: object = None) -> Json:
 # -- message and service payloads ----------------------------------------------------------
 
 
-class _Payload(BaseModel):
-    # Unknown fields are an error, as in rosbridge; numbers must be finite JSON numbers.
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
-
-class Vector3(_Payload):
-    """``geometry_msgs/Vector3``; missing fields default to 0 as rosbridge fills them."""
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-
-
-class Twist(_Payload):
-    """``geometry_msgs/Twist``."""
-
-    linear: Vector3 = Field(default_factory=Vector3)
-    angular: Vector3 = Field(default_factory=Vector3)
-
-
 class SpawnArgs(_Payload):
     """``turtlesim/Spawn`` request."""
 
@@ -417,28 +387,6 @@ def resolve_topic(name: str) -> Topic:
     return Topic(match["turtle"], leaf)
 
 
-@dataclass(frozen=True)
-class CameraTopic:
-    """A camera topic clients publish on: the room it belongs to (None without tokens: one
-    space) and its name, with the leading slash."""
-
-    room: str | None
-    name: str
-
-
-AnyTopic = Topic | CameraTopic
-
-
-@dataclass
-class _CameraStream:
-    """A camera topic's type and latest message (the wire form of :func:`camera.wire`), with
-    the version it was given."""
-
-    kind: CameraType
-    version: int = 0
-    latest: Json | None = None
-
-
 def encode(message: Json, cbor: bool) -> Frame | None:
     """``message`` as one frame: CBOR bytes, or JSON text (``bytes`` in base64); None (logged)
     for a message that cannot be sent (NaN or Infinity in JSON)."""
@@ -447,10 +395,6 @@ def encode(message: Json, cbor: bool) -> Frame | None:
     except ValueError as exc:  # a bug upstream: never sent
         log.error("not sending a %r message: %s", message.get("op"), exc)
         return None
-
-
-def _absolute(name: str) -> str:
-    return name if name.startswith("/") else f"/{name}"
 
 
 def pose_message(sim: TurtleSim, turtle: str) -> Json:
@@ -483,7 +427,7 @@ class _Subscription:
     """
 
     name: str
-    topic: AnyTopic
+    topic: Topic | HostedTopic
     # The topic's version last delivered (or current when subscribed): only newer ones are due.
     seen: int
     # Each id's throttle (ms), queue length and whether it asked for CBOR.
@@ -531,13 +475,11 @@ class RosbridgeSession:
 
     def __init__(self, hub: RosbridgeHub) -> None:
         self._hub = hub
-        # The room of the token that opened the connection (None without tokens): its camera
+        # The room of the token that opened the connection (None without tokens): its hosted
         # topics are the only ones this session sees. Set by the server's gate.
         self.room: str | None = None
         self._subscriptions: dict[str, _Subscription] = {}
         self._advertised: set[str] = set()
-        # The camera topics among the advertised, by the client's spelling.
-        self._cameras: dict[str, CameraTopic] = {}
         # No status messages until the client asks for them with set_level.
         self._level: int | None = None
         # The publications it may still be sent (a token bucket refilled in the hub's time),
@@ -626,16 +568,14 @@ class RosbridgeSession:
 
     def close(self) -> None:
         """Forget this client's subscriptions and advertisements."""
+        for name, sub in self._subscriptions.items():
+            self._release(sub.topic, "subscribe", name)
+        for name in self._advertised:
+            if (hosted := self._hub.hosted.find(self.room, name)) is not None:
+                self._release(hosted, "advertise", name)
         self._subscriptions.clear()
         self._advertised.clear()
-        self._cameras.clear()
         self._hub.sessions.discard(self)
-        self._hub.prune_cameras()
-
-    def camera_topics(self) -> set[CameraTopic]:
-        """The camera topics this session advertises or subscribes to."""
-        subscribed = {s.topic for s in self._subscriptions.values()}
-        return {t for t in subscribed if isinstance(t, CameraTopic)} | set(self._cameras.values())
 
     def subscribed_topics(self) -> list[str]:
         """Topic names (as the client spelled them) this session receives."""
@@ -650,27 +590,36 @@ class RosbridgeSession:
     def _advertise(self, msg: Advertise) -> list[Json]:
         if msg.topic not in self._advertised and len(self._advertised) >= MAX_ADVERTISEMENTS:
             raise ProtocolError(f"at most {MAX_ADVERTISEMENTS} advertisements per client")
-        topic = self._typed_topic(msg.topic, msg.type)
+        topic = self._typed_topic(msg.topic, msg.type, "advertise")
         if isinstance(topic, Topic) and topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
         self._advertised.add(msg.topic)
-        if isinstance(topic, CameraTopic):
-            self._cameras[msg.topic] = topic
         return []
 
     def _unadvertise(self, msg: Unadvertise) -> list[Json]:
         if msg.topic not in self._advertised:
             return self._status("warning", f"unadvertise: {msg.topic} was not advertised", msg.id)
         self._advertised.discard(msg.topic)
-        if self._cameras.pop(msg.topic, None) is not None:
-            self._hub.prune_cameras()
+        if (hosted := self._hub.hosted.find(self.room, msg.topic)) is not None:
+            self._release(hosted, "advertise", msg.topic)
         return []
 
     def _publish(self, msg: Publish) -> list[Json]:
+        hosted = self._hub.hosted.find(self.room, msg.topic)
+        if hosted is not None:
+            # Another robot's topic: checked against its type, then kept for its subscribers.
+            try:
+                self._hub.hosted.publish(hosted, msg.msg)
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
+            return []
         try:
             topic = resolve_topic(msg.topic)
         except ProtocolError:
-            return self._publish_image(msg)
+            raise ProtocolError(
+                f"unknown topic {msg.topic!r}: nobody advertises it; advertise it with its type "
+                "before publishing on it"
+            ) from None
         if topic.leaf == "pose":
             raise ProtocolError(f"{msg.topic} is published by the simulator only")
         twist = _parse(Twist, msg.msg, f"{msg.topic} (geometry_msgs/Twist)")
@@ -681,27 +630,12 @@ class RosbridgeSession:
         self._hub.broadcast(topic, twist.model_dump())
         return []
 
-    def _publish_image(self, msg: Publish) -> list[Json]:
-        camera = CameraTopic(self.room, _absolute(msg.topic))
-        stream = self._hub.camera(camera)
-        if stream is None:
-            raise ProtocolError(
-                f"unknown topic {msg.topic!r}: advertise a camera topic with its type "
-                f"({' or '.join(CAMERA_TYPES)}) before publishing on it"
-            )
-        try:
-            image = parse_image(stream.kind, msg.msg)
-        except CameraMessageError as exc:
-            raise ProtocolError(f"{msg.topic}: {exc}") from None
-        self._hub.publish_camera(camera, wire(image, self._hub.types.flavour))
-        return []
-
     def _subscribe(self, msg: Subscribe) -> list[Json]:
         sub = self._subscriptions.get(msg.topic)
         known = sub is not None and msg.id in sub.by_id
         if not known and self.subscription_count() >= MAX_SUBSCRIPTIONS:
             raise ProtocolError(f"at most {MAX_SUBSCRIPTIONS} subscriptions per client")
-        topic = self._typed_topic(msg.topic, msg.type)
+        topic = self._typed_topic(msg.topic, msg.type, "subscribe")
         if (
             isinstance(topic, Topic)
             and topic.leaf == "pose"
@@ -724,8 +658,7 @@ class RosbridgeSession:
             del sub.by_id[msg.id]
         if not sub.by_id:
             del self._subscriptions[msg.topic]
-            if isinstance(sub.topic, CameraTopic):
-                self._hub.prune_cameras()
+            self._release(sub.topic, "subscribe", msg.topic)
         return []
 
     def _call_service(self, msg: CallService) -> list[Json]:
@@ -748,51 +681,35 @@ class RosbridgeSession:
 
     # -- helpers ------------------------------------------------------------------------
 
-    def _typed_topic(self, name: str, type_name: str | None) -> AnyTopic:
+    def _typed_topic(self, name: str, type_name: str | None, op: str) -> Topic | HostedTopic:
         try:
             topic = resolve_topic(name)
         except ProtocolError:
-            return self._camera_topic(name, type_name)
+            absolute = name if name.startswith("/") else f"/{name}"
+            if absolute in self._hub.graph.topics():
+                raise ProtocolError(
+                    f"{name} is on a real robot's graph, but this simulator publishes nothing "
+                    "on it and takes nothing from it"
+                ) from None
+            try:
+                return self._hub.hosted.claim(self.room, name, type_name, (self, op, name))
+            except HostingError as exc:
+                raise ProtocolError(str(exc)) from None
         types = self._hub.types
         canonical = types.twist if topic.leaf == "cmd_vel" else types.pose
         if type_name is not None and type_name not in spellings(types.flavour, canonical):
             raise ProtocolError(f"{name} has type {canonical}, not {type_name!r}")
         return topic
 
-    def _camera_topic(self, name: str, type_name: str | None) -> CameraTopic:
-        """The camera topic ``name`` of this session's room: one a client declared (``type``,
-        when given, must be its type), or a new one when ``type`` names a camera type."""
-        absolute = _absolute(name)
-        if absolute in self._hub.graph.topics():
-            raise ProtocolError(
-                f"{name} is on a real robot's graph, but this simulator publishes nothing "
-                "on it and takes nothing from it"
-            )
-        camera = CameraTopic(self.room, absolute)
-        flavour = self._hub.types.flavour
-        stream = self._hub.camera(camera)
-        if stream is not None:
-            spelled = type_spelled(stream.kind, flavour)
-            if type_name is not None and type_name not in spellings(flavour, spelled):
-                raise ProtocolError(f"{name} has type {spelled}, not {type_name!r}")
-            return camera
-        kinds = [
-            k for k in CAMERA_TYPES if type_name in spellings(flavour, type_spelled(k, flavour))
-        ]
-        if not kinds:
-            raise ProtocolError(
-                f"unknown topic {name!r}: this simulator has /<turtle>/cmd_vel and "
-                f"/<turtle>/pose, and the camera topics its clients advertise with their type "
-                f"({' or '.join(CAMERA_TYPES)})"
-            )
-        self._hub.declare_camera(camera, kinds[0])
-        return camera
+    def _release(self, topic: Topic | HostedTopic, op: str, name: str) -> None:
+        if isinstance(topic, HostedTopic):
+            self._hub.hosted.release(topic, (self, op, name))
 
     def _run_service(self, msg: CallService) -> Json:
         name = service_path(msg.service)
         if name.startswith("rosapi/"):
-            cameras = self._hub.camera_topics(self.room)
-            return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args, cameras)
+            hosted = self._hub.hosted.types(self.room)
+            return self._hub.graph.call(name.removeprefix("rosapi/"), msg.args, hosted)
         if name in GLOBAL_SERVICES:
             return SERVICES[name](self._hub.sim, "", msg.args)
         match = _TURTLE_SERVICE_RE.match(name)
@@ -818,6 +735,7 @@ class RosbridgeHub:
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.sim = sim
+        self.hosted = HostedTopics(ros, MAX_QUEUE_LENGTH)
         self.graph = RosGraph(sim, ros, wall_clock)
         self.types: RosTypes = self.graph.types
         self.sessions: set[RosbridgeSession] = set()
@@ -829,9 +747,6 @@ class RosbridgeHub:
         # Each turtle's latest Twists as published, with the version each was given.
         self._twists: dict[str, deque[Versioned]] = {}
         self._twist_version = 0
-        # The camera topics clients declared, and the last version any of them was given.
-        self._cameras: dict[CameraTopic, _CameraStream] = {}
-        self._camera_version = 0
 
     def open_session(self) -> RosbridgeSession:
         """A new client connection."""
@@ -858,56 +773,17 @@ class RosbridgeHub:
         queue = self._twists.setdefault(topic.turtle, deque(maxlen=MAX_QUEUE_LENGTH))
         queue.append((self._twist_version, msg))
 
-    def camera(self, topic: CameraTopic) -> _CameraStream | None:
-        """The camera topic's stream, if a client declared it."""
-        return self._cameras.get(topic)
-
-    def declare_camera(self, topic: CameraTopic, kind: CameraType) -> None:
-        """A client advertised (or subscribed to) a new camera topic of type ``kind``;
-        ``ProtocolError`` when its room, or the server, has as many as it holds."""
-        in_room = sum(1 for t in self._cameras if t.room == topic.room)
-        if in_room >= MAX_CAMERA_TOPICS_PER_ROOM or len(self._cameras) >= MAX_CAMERA_TOPICS:
-            raise ProtocolError(
-                f"no room for camera topic {topic.name}: at most {MAX_CAMERA_TOPICS_PER_ROOM} a "
-                f"room and {MAX_CAMERA_TOPICS} in all"
-            )
-        self._cameras[topic] = _CameraStream(kind)
-
-    def publish_camera(self, topic: CameraTopic, msg: Json) -> None:
-        """A client published ``msg`` on a declared camera topic: it supersedes the last."""
-        stream = self._cameras[topic]
-        self._camera_version += 1
-        stream.version, stream.latest = self._camera_version, msg
-
-    def camera_topics(self, room: str | None) -> dict[str, str]:
-        """The camera topics of ``room`` and their types, spelled in the hub's flavour."""
-        flavour = self.types.flavour
-        return {
-            topic.name: type_spelled(stream.kind, flavour)
-            for topic, stream in self._cameras.items()
-            if topic.room == room
-        }
-
-    def prune_cameras(self) -> None:
-        """Forget the camera topics no session advertises or subscribes to any more."""
-        used = set().union(*(session.camera_topics() for session in self.sessions))
-        self._cameras = {t: s for t, s in self._cameras.items() if t in used}
-
-    def version(self, topic: AnyTopic) -> int:
+    def version(self, topic: Topic | HostedTopic) -> int:
         """The topic's current version: a new subscription takes only what comes after it."""
-        if isinstance(topic, CameraTopic):
-            stream = self._cameras.get(topic)
-            return 0 if stream is None else stream.version
+        if isinstance(topic, HostedTopic):
+            return self.hosted.version()
         return self.ticks if topic.leaf == "pose" else self._twist_version
 
-    def newer(self, topic: AnyTopic, seen: int) -> list[Versioned]:
+    def newer(self, topic: Topic | HostedTopic, seen: int) -> list[Versioned]:
         """The topic's messages newer than version ``seen``, oldest first: a pose or camera
         topic has only its latest (a newer one supersedes the older ones)."""
-        if isinstance(topic, CameraTopic):
-            stream = self._cameras.get(topic)
-            if stream is None or stream.latest is None or stream.version <= seen:
-                return []
-            return [(stream.version, stream.latest)]
+        if isinstance(topic, HostedTopic):
+            return self.hosted.newer(topic, seen)
         if topic.leaf == "cmd_vel":
             return [item for item in self._twists.get(topic.turtle, ()) if item[0] > seen]
         if self.ticks <= seen:

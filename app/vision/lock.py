@@ -7,8 +7,9 @@ doubles, checked on the same sequences (``e2e/test_lock_js.py``). Pure, no I/O, 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 from app.protocol.channels import LockState
 from app.protocol.lock import LockRule
@@ -21,14 +22,56 @@ def contains(box: Box, x: float, y: float) -> bool:
     return bx <= x <= bx + bw and by <= y <= by + bh
 
 
-def pick(x: float, y: float, boxes: Sequence[Box]) -> Box | None:
+def gap(box: Box, x: float, y: float) -> float:
+    """How far pixel (x, y) is from ``box`` in the box's own size: the larger of the horizontal
+    gap over its width and the vertical gap over its height (0 inside, edges included)."""
+    bx, by, bw, bh = box
+    dx = max(bx - x, 0.0, x - (bx + bw))
+    dy = max(by - y, 0.0, y - (by + bh))
+    return max(dx / bw, dy / bh)
+
+
+def centre(box: Box) -> tuple[float, float]:
+    """The centre of ``box``."""
+    return box[0] + box[2] / 2, box[1] + box[3] / 2
+
+
+def pick(x: float, y: float, boxes: Sequence[Box], near: float) -> Box | None:
     """The box clicked at (x, y): of the boxes containing it the smallest (the first of equal
-    areas), since a small box inside a large one can only be meant by a click on it."""
+    areas), since a small box inside a large one can only be meant by a click on it; else the
+    box it is nearest to in that box's own size (:func:`gap`, the first of equal gaps), when at
+    most ``near``."""
     best: Box | None = None
     for box in boxes:
         if contains(box, x, y) and (best is None or box[2] * box[3] < best[2] * best[3]):
             best = box
+    if best is not None:
+        return best
+    best_gap = near
+    for box in boxes:
+        g = gap(box, x, y)
+        if g <= best_gap and (best is None or g < best_gap):
+            best, best_gap = box, g
     return best
+
+
+def lockable(boxes: Sequence[Box], candidates: Sequence[Box]) -> list[Box]:
+    """The boxes the operator sees and may click: a snapshot's ``boxes``, then those of the
+    last full scan's ``candidates`` that overlap none of them (the others are the same targets,
+    seen earlier)."""
+    return [*boxes, *(c for c in candidates if all(overlap(c, b) == 0 for b in boxes))]
+
+
+def click_window(x: float, y: float, width: int, height: int, share: float) -> Box | None:
+    """Where a click near no box is searched at full resolution: a square ``share`` of the
+    ``width`` × ``height`` frame's shorter side centred on (x, y), moved inside the frame; None
+    for a click outside the frame."""
+    if not (0 <= x <= width and 0 <= y <= height):
+        return None
+    side = math.floor(share * min(width, height))
+    x0 = min(max(0, math.floor(x - side / 2)), width - side)
+    y0 = min(max(0, math.floor(y - side / 2)), height - side)
+    return x0, y0, side, side
 
 
 def overlap(a: Box, b: Box) -> float:
@@ -63,12 +106,13 @@ def associate(locked: Box, boxes: Sequence[Box], anywhere: bool, rule: LockRule)
             best, best_overlap = box, iou
     if best is not None:
         return best
-    lx, ly = locked[0] + locked[2] / 2, locked[1] + locked[3] / 2
+    lx, ly = centre(locked)
     reach = rule.reach * max(locked[2], locked[3])
     limit = math.inf if anywhere else reach * reach
     best_d2 = math.inf
     for box in candidates:
-        dx, dy = box[0] + box[2] / 2 - lx, box[1] + box[3] / 2 - ly
+        cx, cy = centre(box)
+        dx, dy = cx - lx, cy - ly
         d2 = dx * dx + dy * dy
         if d2 <= limit and (best is None or d2 < best_d2):
             best, best_d2 = box, d2
@@ -78,11 +122,13 @@ def associate(locked: Box, boxes: Sequence[Box], anywhere: bool, rule: LockRule)
 @dataclass(frozen=True)
 class Query:
     """What one snapshot is asked to follow: the locked box, whether to accept it anywhere in
-    the frame, and the lock's ``epoch`` then (an answer to an older lock is not news)."""
+    the frame, the lock's ``epoch`` then (an answer to an older lock is not news), and whether
+    the target was found at full resolution (``fine``: it is followed at full resolution)."""
 
     box: Box
     anywhere: bool
     epoch: int
+    fine: bool = False
 
 
 def chooser(query: Query | None, rule: LockRule) -> Choose:
@@ -102,28 +148,36 @@ class TargetLock:
     seen_at: float = 0.0
     state: LockState = "none"
     epoch: int = 0  # bumped by every lock and release
+    fine: bool = False  # found by a full-resolution search: followed at full resolution
 
     def lock(self, x: float, y: float, boxes: Sequence[Box], now: float) -> bool:
-        """A click at (x, y) on a snapshot that found ``boxes``: lock the box clicked, or
-        release when the click hit none. True when locked."""
-        box = pick(x, y, boxes)
+        """A click at (x, y) on a snapshot that found ``boxes``: lock the box clicked (or near
+        the click), or release when there is none. True when locked. A click on the target
+        locked already keeps it followed as it was (at full resolution or not)."""
+        box = pick(x, y, boxes, self.rule.near)
         if box is None:
             self.release()
             return False
-        self.box, self.seen_at, self.state = box, now, "locked"
-        self.epoch += 1
+        same = self.box is not None and overlap(box, self.box) > 0
+        self.hold(box, now, fine=self.fine and same)
         return True
+
+    def hold(self, box: Box, now: float, fine: bool = False) -> None:
+        """Lock on ``box``, seen at ``now``; ``fine``: found at full resolution."""
+        self.box, self.seen_at, self.state, self.fine = box, now, "locked", fine
+        self.epoch += 1
 
     def release(self) -> None:
         """Back to the default choice (the largest box)."""
-        self.box, self.state = None, "none"
+        self.box, self.state, self.fine = None, "none", False
         self.epoch += 1
 
     def query(self, now: float) -> Query | None:
         """What the next snapshot follows, or None for the default choice."""
         if self.box is None:
             return None
-        return Query(self.box, now - self.seen_at > self.rule.search_after_s, self.epoch)
+        anywhere = now - self.seen_at > self.rule.search_after_s
+        return Query(self.box, anywhere, self.epoch, self.fine)
 
     def update(self, query: Query | None, chosen: Box | None, now: float) -> LockState | None:
         """The outcome of the snapshot asked with ``query``: the box chosen, or None when the
@@ -140,3 +194,33 @@ class TargetLock:
         else:
             self.state = "lost"
         return self.state if self.state != before else None
+
+
+Search = Callable[[Box], Sequence[Box]]
+
+
+def lock_at(
+    target: TargetLock,
+    x: float,
+    y: float,
+    boxes: Sequence[Box],
+    search: Search | None,
+    width: int,
+    height: int,
+    now: float,
+) -> Literal["picked", "searched"] | None:
+    """A click at (x, y) of a ``width`` × ``height`` frame on which the operator saw
+    ``boxes`` (:func:`lockable`): lock the box picked there; else, when the operation can,
+    ``search`` the click's window (:func:`click_window`) at full resolution and lock the box
+    picked among what it finds (a ``fine`` lock); else release. Returns how it locked, or None
+    when it released. The relay's worker does the same (lock.js ``lockAt``)."""
+    if target.lock(x, y, boxes, now):
+        return "picked"
+    window = click_window(x, y, width, height, target.rule.click_search)
+    if search is None or window is None:
+        return None
+    found = pick(x, y, search(window), target.rule.near)
+    if found is None:
+        return None
+    target.hold(found, now, fine=True)
+    return "searched"

@@ -114,7 +114,9 @@ def _window_image(rgba: Rgba, region: Box, size: tuple[int, int] | None) -> MatL
     return window.crop(part, (x - x0, y - y0, w, h))
 
 
-def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> Detection:
+def _detect_cascade(
+    params: CascadeParams, rgba: Rgba, around: Box | None, full_resolution: bool
+) -> Detection:
     region = None
     ox = oy = 0
     min_size, max_size = params.min_size, params.max_size
@@ -122,7 +124,7 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
         gray, factor = _reduce(_gray(rgba), params.detect_width)
     else:
         height, width = rgba.shape[:2]
-        size = _reduction(width, height, params.detect_width)
+        size = None if full_resolution else _reduction(width, height, params.detect_width)
         factor = _factor(width, size)
         reduced_width, reduced_height = size or (width, height)
         region = window.search_region(
@@ -135,6 +137,21 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
         min_size, max_size = window.search_sizes(
             around, factor, params.window_size_ratio, min_size, max_size
         )
+    boxes = _cascades(params, gray, (ox, oy), factor, min_size, max_size)
+    return Detection(boxes=boxes, target=_centre_of_largest(boxes), region=region)
+
+
+def _cascades(
+    params: CascadeParams,
+    gray: MatLike,
+    origin: tuple[int, int],
+    factor: float,
+    min_size: tuple[int, int],
+    max_size: tuple[int, int],
+) -> list[Box]:
+    """Every cascade's boxes in ``gray`` (an image whose pixel (0, 0) is detection-image pixel
+    ``origin``), scaled to full-frame pixels by ``factor``, sorted."""
+    ox, oy = origin
     boxes: list[Box] = []
     for name in params.cascades:
         found = _classifier(name).detectMultiScale(
@@ -148,6 +165,12 @@ def _detect_cascade(params: CascadeParams, rgba: Rgba, around: Box | None) -> De
         for x, y, w, h in found:
             boxes.append(_scale_box((int(x) + ox, int(y) + oy, int(w), int(h)), factor))
     boxes.sort()
+    return boxes
+
+
+def _search_cascade(params: CascadeParams, rgba: Rgba, region: Box) -> Detection:
+    gray = _gray(window.crop(rgba, region))
+    boxes = _cascades(params, gray, region[:2], 1.0, params.min_size, params.max_size)
     return Detection(boxes=boxes, target=_centre_of_largest(boxes), region=region)
 
 
@@ -174,22 +197,39 @@ def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
     return Detection(boxes=[_scale_box((x, y, w, h), factor)], target=(cx * factor, cy * factor))
 
 
+def _check(rgba: Rgba, profile: Profile) -> None:
+    if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
+        raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; expected one of {PROFILES}")
+
+
 def detect(
     op: CascadeOperation | ColourOperation,
     rgba: Rgba,
     profile: Profile = "default",
     around: Box | None = None,
+    full_resolution: bool = False,
 ) -> Detection:
     """Run ``op`` on an RGBA frame (H×W×4 uint8) exactly as its OpenCV.js module does.
 
-    ``around`` (cascade operations only): search just the window around this full-frame box.
+    ``around`` (cascade operations only): search just the window around this full-frame box;
+    ``full_resolution``: that window of the frame as it is, not of the reduced detection image
+    (a target locked at full resolution, app/protocol/lock.py).
     """
-    if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
-        raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
-    if profile not in PROFILES:
-        raise ValueError(f"unknown profile {profile!r}; expected one of {PROFILES}")
+    _check(rgba, profile)
     if isinstance(op, CascadeOperation):
-        return _detect_cascade(op.params_for(profile), rgba, around)
+        return _detect_cascade(op.params_for(profile), rgba, around, full_resolution)
     if around is not None:
         raise ValueError(f"operation {op.id!r} is not a cascade; it has no windowed search")
     return _detect_colour(op.params_for(profile), rgba)
+
+
+def search(
+    op: CascadeOperation, rgba: Rgba, region: Box, profile: Profile = "default"
+) -> Detection:
+    """Search ``region`` (full-frame pixels) of an RGBA frame at full resolution, for objects
+    of every size the operation looks for: where a click near no box looks
+    (app/protocol/lock.py), as ``searchIn`` of the operation's OpenCV.js module does."""
+    _check(rgba, profile)
+    return _search_cascade(op.params_for(profile), rgba, region)

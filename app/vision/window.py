@@ -152,13 +152,19 @@ Choose = Callable[[Sequence[Box]], Box | None]
 
 
 def step(
-    tracker: Tracker, detect: Callable[[Box | None], D], choose: Choose = largest
+    tracker: Tracker,
+    detect: Callable[[Box | None], D],
+    choose: Choose = largest,
+    keep: Box | None = None,
 ) -> tuple[D, Scan]:
     """One snapshot: search the window if there is one, the whole frame when it finds nothing.
 
     ``detect(around)`` runs the operation around a full-frame box, or on the whole frame when
     ``around`` is None. ``choose`` picks the target among the boxes found: the largest, or the
     locked target's box (``app/vision/lock.py``); a window where it picks none is a miss.
+    ``keep``: where a target that the whole-frame scan cannot find was last seen (a lock found
+    at full resolution): when the full scan does not find it either, the window around ``keep``
+    is searched last, and a target found there is the snapshot's (scan ``"window"``).
     """
     around = tracker.window()
     if around is not None:
@@ -168,5 +174,13 @@ def step(
             tracker.record(box, "window")
             return found, "window"
     found = detect(None)
-    tracker.record(choose(found.boxes), "full")
+    box = choose(found.boxes)
+    # A full scan ran, found or not: the next one is due in full_scan_every snapshots.
+    tracker.record(box, "full")
+    if box is None and keep is not None and keep != around:
+        kept = detect(keep)
+        box = choose(kept.boxes)
+        if box is not None:
+            tracker.last = box
+            return kept, "window"
     return found, "full"

@@ -23,8 +23,13 @@ CHANNEL_SENDS = [
     ("pages/vehicle.js", AUTOPILOT_CHANNEL, "relay", {"pose"}),
     # askRelay(type) sends start/stop on `control` when signaling is down.
     ("pages/client.js", CONTROL_CHANNEL, "relay", {"getOps", "setOp", "start", "stop"}),
-    ("pages/client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive"}),
-    ("pages/relay.js", CONTROL_CHANNEL, "client", {"state", "ops", "error", "pose", "health"}),
+    ("pages/client.js", CONTROL_CHANNEL, "relay", {"takeOver", "handBack", "drive", "stopRobot"}),
+    (
+        "pages/relay.js",
+        CONTROL_CHANNEL,
+        "client",
+        {"state", "ops", "error", "pose", "health", "robotStopped"},
+    ),
     ("pages/relay.js", AUTOPILOT_CHANNEL, "vehicle", {"stop"}),
     # The operator seat's mode changes go to the vehicle and the clients, its drives to the vehicle.
     ("core/relay-seats.js", CONTROL_CHANNEL, "client", {"mode"}),

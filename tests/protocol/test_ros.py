@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from app.protocol.page import to_json
-from app.protocol.ros import ROS_CONFIG, TYPES, detect, spellings
+from app.protocol.ros import ROS_CONFIG, TYPES, canonical, spell, spellings
 
 
 def test_each_flavour_spells_turtlesim_types_its_own_way() -> None:
@@ -28,24 +28,24 @@ def test_ros2_rosbridge_also_takes_the_short_spelling() -> None:
 
 
 @pytest.mark.parametrize(
-    ("pose", "twist", "setting", "flavour", "from_robot"),
+    ("flavour", "short", "spelled"),
     [
-        ("turtlesim/Pose", "geometry_msgs/Twist", "auto", "1", True),
-        ("turtlesim/msg/Pose", None, "auto", "2", True),
-        ("turtlesim_msgs/msg/Pose", "geometry_msgs/msg/Twist", "1", "jazzy", True),
-        (None, None, "jazzy", "jazzy", False),
-        ("", None, "1", "1", False),
-        (None, None, "auto", "2", False),
-        ("some_pkg/msg/Other", None, "auto", "2", False),
+        ("1", "nav_msgs/Odometry", "nav_msgs/Odometry"),
+        ("2", "geometry_msgs/TwistStamped", "geometry_msgs/msg/TwistStamped"),
+        ("jazzy", "sensor_msgs/CompressedImage", "sensor_msgs/msg/CompressedImage"),
+        ("jazzy", "turtlesim/Pose", "turtlesim_msgs/msg/Pose"),
     ],
 )
-def test_detect_prefers_the_robots_answer_then_the_setting(
-    pose: str | None, twist: str | None, setting: str, flavour: str, from_robot: bool
+def test_a_message_type_is_spelled_per_flavour_and_read_back(
+    flavour: str, short: str, spelled: str
 ) -> None:
-    detected = detect(pose, twist, setting)  # type: ignore[arg-type]
-    assert (detected.flavour, detected.from_robot) == (flavour, from_robot)
-    assert detected.pose == TYPES[detected.flavour].pose
-    assert detected.twist == (twist or TYPES[detected.flavour].twist)
+    assert spell(flavour, short) == spelled  # type: ignore[arg-type]
+    assert canonical(spelled) == short
+
+
+@pytest.mark.parametrize("junk", ["", "Twist", "geometry_msgs/srv/Twist", "a/b/c/d", "/Twist"])
+def test_what_is_no_message_type_has_no_short_name(junk: str) -> None:
+    assert canonical(junk) is None
 
 
 def test_page_config_carries_the_whole_table() -> None:

@@ -143,6 +143,7 @@ VALID_CONTROL: list[dict[str, Any]] = [
     {"type": "handBack"},
     {"type": "setOp", "op": "face"},
     {"type": "start"},
+    {"type": "stopRobot"},
 ]
 
 

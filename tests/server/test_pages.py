@@ -149,6 +149,42 @@ def test_spawn_step_is_on_unless_switched_off(server: RunningServer) -> None:
     assert (on["spawnStep"], off["spawnStep"]) == (True, False)
 
 
+def test_the_vehicle_page_drives_the_robot_it_is_given(server: RunningServer) -> None:
+    default = embedded_config(httpx.get(f"{server.url}/vehicle").text)
+    assert default["robot"]["description"]["name"] == "turtlesim"
+    assert default["robot"]["teleportService"] == "/turtle1/teleport_absolute"
+    assert default["robotError"] is None
+    # turtlesim applies every command at once: no acceleration limit (JSON's null).
+    assert default["robot"]["description"]["limits"]["linearAccel"] is None
+    burger = embedded_config(httpx.get(f"{server.url}/vehicle?robot=turtlebot3").text)
+    description = burger["robot"]["description"]
+    assert (description["velocity"]["topic"], description["pose"]["type"]) == (
+        "/cmd_vel",
+        "nav_msgs/Odometry",
+    )
+    assert description["limits"] == {
+        "maxLinear": 0.22,
+        "maxAngular": 2.84,
+        "linearAccel": 2.5,
+        "angularAccel": 3.2,
+    }
+    assert burger["robot"]["types"]["pose"]["1"] == "nav_msgs/Odometry"
+    # No spawn step (it is turtlesim's), however asked; the operator's full stick is its top
+    # speed; the follow law knows no walls.
+    assert burger["spawnStep"] is False
+    profiles = burger["control"]["profiles"]
+    assert profiles["default"]["manualLinear"] == 0.22
+    assert (profiles["follow"]["walls"], default["control"]["profiles"]["follow"]["walls"]) == (
+        False,
+        True,
+    )
+
+
+def test_an_unknown_robot_is_an_error_on_the_page(server: RunningServer) -> None:
+    config = embedded_config(httpx.get(f"{server.url}/vehicle?robot=r2d2").text)
+    assert "r2d2" in config["robotError"] and "turtlebot3" in config["robotError"]
+
+
 @pytest.mark.parametrize("role", ROLES)
 def test_a_page_holds_no_ice_servers_and_no_turn_secret(
     turn_server: RunningServer, role: str
@@ -172,7 +208,7 @@ def test_client_has_exactly_the_thesis_buttons_the_console_s_and_a_labelled_oper
     parser = Buttons()
     parser.feed(html)
     thesis = ["Connect", "Join Room", "Leave Room", "Set Operation", "Start Piloting"]
-    console = ["Take Over", "Hand Back", "Unlock"]  # the operator's console
+    console = ["Stop robot", "Take Over", "Hand Back", "Unlock"]  # the operator's console
     assert sorted(parser.labels) == sorted([*thesis, "Stop Piloting", *console])
     assert re.search(r'<label for="operation">Select Operation</label>', html)
     assert re.search(r'<select id="operation"', html)

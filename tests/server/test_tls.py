@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import os
 import ssl
 import stat
+import subprocess
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -62,6 +64,47 @@ def test_trust_instructions_name_the_file_and_its_fingerprint(tmp_path: Path) ->
     cert = x509.load_pem_x509_certificate(files.ca_file.read_bytes())
     assert str(files.ca_file) in text and "--ca-file" in text
     assert cert.fingerprint(cert.signature_hash_algorithm).hex(":").upper() in text  # type: ignore[arg-type]
+
+
+def test_the_printed_chromium_line_trusts_the_ca_where_chromium_never_ran(tmp_path: Path) -> None:
+    files = tls.self_signed(tmp_path / "state dir", ["localhost"], LOOPBACK)
+    assert files.ca_file is not None
+    text = tls.trust_instructions(files.ca_file)
+    [line] = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("mkdir -p")]
+    home = tmp_path / "home"  # a user whose Chromium never ran: no ~/.pki at all
+    home.mkdir()
+    env = {**os.environ, "HOME": str(home)}
+    nssdb = f"sql:{home}/.pki/nssdb"
+    # Twice: the second time the database exists, as it does once Chromium has run.
+    for _ in range(2):
+        run = subprocess.run(
+            ["bash", "-c", line],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+        assert run.returncode == 0, run.stdout + run.stderr
+        listed = subprocess.run(
+            ["certutil", "-d", nssdb, "-L"],
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        ).stdout
+        assert ["webrtc-autopilot", "C,,"] in [row.split() for row in listed.splitlines()], listed
+    exported = subprocess.run(
+        ["certutil", "-d", nssdb, "-L", "-n", "webrtc-autopilot", "-a"],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=True,
+    ).stdout
+    imported = x509.load_pem_x509_certificate(exported.encode())
+    assert imported == x509.load_pem_x509_certificate(files.ca_file.read_bytes())
 
 
 @pytest.mark.parametrize("host_name", ["127.0.0.1", "localhost"])

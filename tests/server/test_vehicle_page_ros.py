@@ -2,7 +2,8 @@
 
 The server is started in each flavour; the page (roslib.js) asks its rosapi for the pose and
 cmd_vel types, subscribes with them, and its spawn step (a teleport_absolute of that flavour)
-turns the turtle to pi/2. The fallback rule is checked on the page's own module.
+turns the turtle to pi/2. The fallback rule is checked on the page's own module in
+tests/protocol/test_robot_js.py.
 """
 
 from __future__ import annotations
@@ -14,8 +15,7 @@ from typing import Any
 import pytest
 from playwright.async_api import Page
 
-from app.protocol.page import to_json
-from app.protocol.ros import ROS_CONFIG, RosFlavour
+from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
 
@@ -44,38 +44,3 @@ async def test_vehicle_page_learns_the_flavour_and_drives(
     status: dict[str, Any] = await context_page.evaluate("() => window.autopilotStatus")
     assert (status["rosFlavour"], status["rosTypesFrom"]) == (flavour, "robot")
     assert status["pose"]["theta"] == pytest.approx(math.pi / 2, abs=1e-3)
-
-
-@pytest.mark.parametrize(
-    ("setting", "pose", "twist", "expected"),
-    [
-        ("auto", "turtlesim_msgs/msg/Pose", "geometry_msgs/msg/Twist", ("jazzy", True)),
-        ("1", "turtlesim/msg/Pose", None, ("2", True)),
-        ("jazzy", None, None, ("jazzy", False)),
-        ("auto", None, None, ("2", False)),
-        ("1", "", None, ("1", False)),
-    ],
-)
-async def test_pick_types_follows_the_python_rule(
-    context_page: Page,
-    server: RunningServer,
-    setting: str,
-    pose: str | None,
-    twist: str | None,
-    expected: tuple[str, bool],
-) -> None:
-    await context_page.goto(f"{server.url}/healthz")
-    picked: dict[str, Any] = await context_page.evaluate(
-        """async ([table, setting, pose, twist]) => {
-          const { pickTypes } = await import('/static/js/core/rosflavour.js');
-          return pickTypes(table, setting, pose, twist);
-        }""",
-        [to_json(ROS_CONFIG), setting, pose, twist],
-    )
-    flavour, from_robot = expected
-    assert (picked["flavour"], picked["fromRobot"]) == (flavour, from_robot)
-    types = to_json(ROS_CONFIG)["types"]
-    assert isinstance(types, dict)
-    assert picked["pose"] == types[flavour]["pose"] == POSE_TYPE[flavour]
-    assert picked["twist"] == (twist or types[flavour]["twist"])
-    assert picked["teleport"] == types[flavour]["teleportAbsolute"]

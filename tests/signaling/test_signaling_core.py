@@ -1,4 +1,5 @@
-"""The signaling rules of DESIGN §2, exercised on the sans-I/O hub directly (no sockets)."""
+"""The signaling rules (docs/architecture.md, "Signaling protocol"), exercised on the sans-I/O
+hub directly (no sockets)."""
 
 from __future__ import annotations
 

@@ -14,13 +14,8 @@ import cbor2
 import pytest
 
 from app.protocol.ros import RosFlavour
-from app.turtlesim.rosbridge import (
-    MAX_CAMERA_TOPICS,
-    MAX_CAMERA_TOPICS_PER_ROOM,
-    RosbridgeHub,
-    RosbridgeSession,
-    encode,
-)
+from app.turtlesim.hosted import MAX_HOSTED_TOPICS, MAX_HOSTED_TOPICS_PER_ROOM
+from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession, encode
 from app.turtlesim.sim import TurtleSim
 
 TOPIC = "/camera/image/compressed"
@@ -191,7 +186,7 @@ def test_publishing_on_a_topic_nobody_declared_is_refused() -> None:
     server = hub()
     publisher = session(server)
     (status,) = send(publisher, op="publish", topic="/camera/x", msg=IMAGE)
-    assert "advertise a camera topic with its type" in status["msg"]
+    assert "advertise it with its type before publishing" in status["msg"]
 
 
 def test_a_topic_keeps_the_type_it_was_declared_with() -> None:
@@ -276,21 +271,24 @@ def test_a_topic_nobody_uses_any_more_is_forgotten() -> None:
     assert topic_type(watcher, TOPIC) == ""
 
 
-def test_a_room_holds_eight_camera_topics_and_the_server_sixty_four() -> None:
-    assert (MAX_CAMERA_TOPICS_PER_ROOM, MAX_CAMERA_TOPICS) == (8, 64)
+def test_a_room_holds_sixteen_hosted_topics_and_the_server_sixty_four() -> None:
+    assert (MAX_HOSTED_TOPICS_PER_ROOM, MAX_HOSTED_TOPICS) == (16, 64)
     server = hub()
     greedy = session(server, "a")
-    for n in range(8):
+    for n in range(16):
         assert send(greedy, op="advertise", topic=f"/cam{n}", type="sensor_msgs/Image") == []
-    (status,) = send(greedy, op="advertise", topic="/cam8", type="sensor_msgs/Image")
-    assert "at most 8 a room and 64 in all" in status["msg"]
+    (status,) = send(greedy, op="advertise", topic="/cam16", type="sensor_msgs/Image")
+    assert "at most 16 hosted topics a room and 64 in all" in status["msg"]
     # Other rooms still have theirs, up to the server's 64.
-    for room in range(1, 8):
+    for room in range(1, 4):
         client = session(server, f"r{room}")
-        for n in range(8):
+        for n in range(16):
             assert send(client, op="advertise", topic=f"/cam{n}", type="sensor_msgs/Image") == []
     (status,) = send(session(server, "z"), op="advertise", topic="/c", type="sensor_msgs/Image")
-    assert "at most 8 a room and 64 in all" in status["msg"]
+    assert "at most 16 hosted topics a room and 64 in all" in status["msg"]
+    # A topic given up makes room for another.
+    assert send(greedy, op="unadvertise", topic="/cam0") == []
+    assert send(session(server, "z"), op="advertise", topic="/c", type="sensor_msgs/Image") == []
 
 
 def test_a_frame_that_cannot_be_json_is_not_sent(caplog: pytest.LogCaptureFixture) -> None:

@@ -5,6 +5,9 @@ must answer every input with the same event records, and the same wake-up for th
 A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``goal`` (the goal message
 as the relay sends it), ``stop`` (), ``mode`` (mode, operator), ``drive`` (seq, linear,
 angular), ``pose`` (x, y, theta), ``tick`` (), ``new_link`` (), ``halt`` ().
+
+Every sequence runs with every profile on every robot preset (:data:`ROBOTS`): turtlesim's limits
+change nothing, a Burger's clamp and ramp the commands (the last sequences are about that).
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ from typing import Any
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.robot import PRESETS
 from vehicle_agent.control import Pose
 from vehicle_agent.pilot import Pilot
 
@@ -126,13 +130,50 @@ SEQUENCES: dict[str, list[Step]] = {
         *[("tick", round(0.1 + 0.05 * k, 2), []) for k in range(1, 60)],
         at(CENTRE_POSE, 3.1),
     ],
+    "an operator's commands ramped, then stopped at once": [
+        CENTRE_POSE,
+        ("mode", 0.0, ["manual", "ann"]),
+        ("drive", 0.1, [1, 1.0, -1.0]),
+        ("tick", 0.15, []),
+        ("drive", 0.2, [2, 1.0, -1.0]),
+        ("tick", 0.25, []),
+        ("drive", 0.3, [3, -1.0, 1.0]),
+        ("tick", 0.33, []),
+        ("tick", 0.4, []),
+        ("drive", 0.4, [4, -1.0, 1.0]),
+        ("tick", 0.45, []),
+        ("drive", 0.5, [5, 0.0, 0.0]),
+        ("tick", 0.55, []),
+        ("drive", 0.6, [6, 0.4, -0.2]),
+        *[("tick", round(0.6 + 0.05 * k, 2), []) for k in range(1, 9)],
+        ("halt", 1.02, []),
+    ],
+    "the autopilot ramped toward a target far behind": [
+        CENTRE_POSE,
+        goal(1, 0.1, x=0.0, y=470.0),
+        *[
+            step
+            for k in range(1, 16)
+            for step in (("tick", round(0.1 + 0.05 * k, 2), []), at(CENTRE_POSE, 0.12 + 0.05 * k))
+        ],
+        goal(2, 0.9, x=600.0, y=20.0),
+        ("tick", 0.95, []),
+        at(CENTRE_POSE, 1.0),
+        ("stop", 1.02, []),
+        ("tick", 1.05, []),
+    ],
 }
 
+# The robots every sequence runs on.
+ROBOTS = tuple(PRESETS)
 
-def pilot(profile: str) -> Pilot:
-    """The pilot each sequence runs against, built as the agent builds it: the profile's, with
-    the protocol's dead-man, tick and freshness rule (the page gets them through its config)."""
-    return Pilot(PROFILES[profile])
+
+def pilot(profile: str, robot: str = "turtlesim") -> Pilot:
+    """The pilot each sequence runs against, built as the agent builds it: the profile fitted to
+    the robot, its limits, the protocol's dead-man, tick and freshness rule (the page gets them
+    through its config)."""
+    described = PRESETS[robot]
+    return Pilot(for_robot(PROFILES[profile], described), limits=described.limits)
 
 
 def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEvent]:
@@ -157,10 +198,10 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
     raise ValueError(f"no such input {kind!r}")
 
 
-def run(steps: list[Step], profile: str) -> list[Any]:
+def run(steps: list[Step], profile: str, robot: str = "turtlesim") -> list[Any]:
     """Each step's answer: its records (log-line objects), the seconds to the next tick, the
     mode and the operator."""
-    driven = pilot(profile)
+    driven = pilot(profile, robot)
     out: list[Any] = []
     for kind, t, args in steps:
         records = [ev.record(event) for event in feed(driven, kind, t, args)]

@@ -1,4 +1,5 @@
-"""The control laws and the controller (docs/contracts.md), with the time given by the test."""
+"""The control laws and the controller (docs/architecture.md, "Vehicle control"), with the time
+given by the test."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ import math
 
 import pytest
 
-from app.protocol.control import with_standoff
+from app.protocol.control import for_robot, with_standoff
+from app.protocol.robot import PRESETS
 from app.turtlesim.sim import Pose as SimPose
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.control import (
@@ -15,6 +17,7 @@ from vehicle_agent.control import (
     Controller,
     Goal,
     Pose,
+    follow_command,
     pixel_to_terrain,
     steering_error,
     wall_clearance,
@@ -362,6 +365,26 @@ def test_follow_slows_near_a_wall() -> None:
     backing = [speed(Pose(x, 5.5, 0.0), (x + 0.5, 5.5)) for x in (3.0, 1.0, 0.6, 0.45)]
     assert backing[0] < 0.0
     assert backing[0] <= backing[1] < backing[2] < backing[3] == 0.0
+
+
+def test_follow_knows_of_walls_on_a_turtlesim_only() -> None:
+    # The same target 3 m ahead, at the turtlesim terrain's wall: a turtlesim slows down for
+    # the wall; a robot whose surroundings are not that terrain (odometry's origin is wherever
+    # it started) drives at full speed, and aims at the point itself, not one kept inside.
+    turtlesim = for_robot(PROFILES["follow"], PRESETS["turtlesim"])
+    rover = for_robot(PROFILES["follow"], PRESETS["diffdrive"])
+    assert turtlesim.walls and not rover.walls
+    pose = Pose(TurtleSim.WORLD_SIZE - 3.0, 5.5, 0.0)
+    near_wall, _ = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, turtlesim)
+    anywhere, _ = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, rover)
+    assert 0.0 < near_wall < anywhere == pytest.approx(PROFILES["follow"].max_linear)
+    # A point beyond what would be the terrain's edge, straight ahead: a robot heads for it;
+    # a turtlesim aims at the point kept inside its terrain, and so turns.
+    outside = Pose(TurtleSim.WORLD_SIZE + 2.0, -1.0, math.pi / 2)
+    assert follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, rover) == pytest.approx(
+        (PROFILES["follow"].max_linear, 0.0)
+    )
+    assert follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, turtlesim)[1] > 0.5
 
 
 def test_follow_searches_in_place_when_the_target_is_lost() -> None:

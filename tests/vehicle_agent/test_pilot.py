@@ -174,12 +174,13 @@ def test_a_control_law_plugs_in() -> None:
     assert calls[0][1] == CENTRE and calls[0][0].seq == 1
 
 
+@pytest.mark.parametrize("robot", pilot_sequences.ROBOTS)
 @pytest.mark.parametrize("profile", sorted(PROFILES))
 @pytest.mark.parametrize("name", sorted(SEQUENCES))
 def test_the_shared_sequences_give_records_the_event_log_reads_back(
-    profile: str, name: str
+    profile: str, name: str, robot: str
 ) -> None:
-    answers = pilot_sequences.run(SEQUENCES[name], profile)
+    answers = pilot_sequences.run(SEQUENCES[name], profile, robot)
     assert len(answers) == len(SEQUENCES[name])
     for records, next_tick, mode, _ in answers:
         for record in records:

@@ -70,6 +70,36 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
 ]
 
 
+# The click rule itself (near = 0.5 of a box's own size; a click window 0.6 of the shorter
+# side), written out: [x, y, boxes, the box picked or None]. LARGE is 130 wide and tall, from 100
+# to 230: half of it is 65 pixels; SMALL is 76 wide, from 440.
+LARGE, SMALL = [100, 100, 130, 130], [440, 200, 76, 76]
+NEAR_CLICKS: list[list[Any]] = [
+    [230 + 65, 165, [LARGE], LARGE],  # on the limit, to the right
+    [230 + 66, 165, [LARGE], None],
+    [165, 100 - 65, [LARGE], LARGE],  # above
+    [165, 100 - 66, [LARGE], None],
+    [100 - 65, 230 + 65, [LARGE], LARGE],  # a corner, half of it either way
+    [100 - 65, 230 + 66, [LARGE], None],
+    # Each box in its own size: 50 pixels from a 200-pixel box (a quarter of it) beats 50 from
+    # a 50-pixel one (the whole of it), whichever comes first.
+    [250, 25, [[300, 0, 50, 50], [0, 0, 200, 200]], [0, 0, 200, 200]],
+    [405, 238, [LARGE, SMALL], SMALL],  # 35 pixels left of SMALL: 0.46 of it
+    [400, 238, [LARGE, SMALL], None],  # 40 pixels: 0.53 of it
+    [228, 238, [SMALL, LARGE], LARGE],  # inside a box: that box, whatever it is near
+    [150, 150, [LARGE, [130, 130, 40, 40]], [130, 130, 40, 40]],  # the smallest under it
+]
+# [x, y, width, height, the window searched or None]: a square 0.6 of the frame's shorter side
+# (288 of 480), centred on the click, moved inside the frame; none for a click outside it.
+CLICK_WINDOWS: list[list[Any]] = [
+    [320, 240, 640, 480, [176, 96, 288, 288]],
+    [10, 10, 640, 480, [0, 0, 288, 288]],
+    [630, 470, 640, 480, [352, 192, 288, 288]],
+    [700, 10, 640, 480, None],
+    [10, -1, 640, 480, None],
+]
+
+
 def decisions(events: list[Event], outcomes: list[list[Any]]) -> list[list[Any]]:
     """What TWO_FACES states of each outcome of :func:`run` (or of lock.js's run)."""
     return [

@@ -1,8 +1,9 @@
 """The target lock's rule (app/vision/lock.py), sans I/O: clicks, association, lost and found.
 
-The last test runs it the relay's way on the two-face scene, with the Python reference
+The last tests run it the relay's way on the two-face scene, with the Python reference
 detection and the tracker's window: the smaller face, once clicked, stays the target, and the
-window follows it.
+window follows it; the tiny face the reduced scan cannot find is locked by a click (the
+full-resolution search around it) and followed at full resolution.
 """
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ import cv2
 import pytest
 
 from app.resources import OPERATIONS_SPEC
-from app.vision import lock, reference, spec, window
+from app.vision import lock, spec, window
 from tests.vision import lock_sequences
+from tests.vision.relay_steps import RelaySteps
 from vehicle_agent.video import TwoFaceVideo
 
 RULE = lock.LockRule()
@@ -22,10 +24,69 @@ SMALL = (440, 200, 76, 76)
 
 def test_a_click_picks_the_smallest_box_under_it() -> None:
     inner = (130, 130, 40, 40)
-    assert lock.pick(150, 150, [LARGE, inner]) == inner
-    assert lock.pick(105, 105, [LARGE, inner]) == LARGE
-    assert lock.pick(470, 230, [LARGE, SMALL]) == SMALL
-    assert lock.pick(10, 10, [LARGE, SMALL]) is None
+    assert lock.pick(150, 150, [LARGE, inner], RULE.near) == inner
+    assert lock.pick(105, 105, [LARGE, inner], RULE.near) == LARGE
+    assert lock.pick(470, 230, [LARGE, SMALL], RULE.near) == SMALL
+    assert lock.pick(10, 10, [LARGE, SMALL], RULE.near) is None
+
+
+def test_a_click_near_a_box_picks_it_within_half_its_size() -> None:
+    # The rule (app/protocol/lock.py), as lock_sequences writes it out: a click outside every
+    # box picks the box it is nearest to in that box's own size, when within half its width to
+    # the side and half its height above or below.
+    assert RULE.near == 0.5
+    for x, y, boxes, want in lock_sequences.NEAR_CLICKS:
+        got = lock.pick(x, y, [tuple(b) for b in boxes], RULE.near)
+        assert got == (None if want is None else tuple(want)), (x, y, boxes)
+
+
+def test_the_boxes_a_click_may_lock_are_the_snapshots_and_the_unseen_candidates() -> None:
+    # Between full scans the snapshot found only the tracked face; the last full scan's box of
+    # that face (it moved a little since) is the same face, its other box is another one.
+    tracked, earlier = (104, 102, 132, 132), (100, 100, 130, 130)
+    assert lock.lockable([tracked], [earlier, SMALL]) == [tracked, SMALL]
+    assert lock.lockable([], [earlier, SMALL]) == [earlier, SMALL]
+    assert lock.lockable([tracked, SMALL], []) == [tracked, SMALL]
+
+
+def test_a_click_window_is_a_square_of_three_fifths_of_the_shorter_side_inside_the_frame() -> None:
+    assert RULE.click_search == 0.6
+    for x, y, width, height, want in lock_sequences.CLICK_WINDOWS:
+        got = lock.click_window(x, y, width, height, RULE.click_search)
+        assert got == (None if want is None else tuple(want)), (x, y)
+
+
+def test_a_click_near_no_box_searches_its_window_and_locks_what_is_found_near_it() -> None:
+    windows: list[lock.Box] = []
+
+    def search(found: list[lock.Box]) -> lock.Search:
+        def run(window: lock.Box) -> list[lock.Box]:
+            windows.append(window)
+            return found
+
+        return run
+
+    tiny = (389, 68, 40, 40)
+    target = lock.TargetLock(RULE)
+    # Near a box: picked, no search.
+    assert lock.lock_at(target, 405, 238, [LARGE, SMALL], search([]), 640, 480, 0.0) == "picked"
+    assert target.box == SMALL and not target.fine and windows == []
+    # Near none: the click's window is searched, and the box found at the click is locked.
+    got = lock.lock_at(target, 409, 88, [LARGE, SMALL], search([SMALL, tiny]), 640, 480, 0.1)
+    assert got == "searched" and windows == [(265, 0, 288, 288)]
+    assert target.box == tiny and target.fine and target.state == "locked"
+    query = target.query(0.2)
+    assert query is not None and query.fine
+    # A click on the same target keeps it followed at full resolution; another one does not.
+    assert lock.lock_at(target, 409, 88, [tiny], None, 640, 480, 0.3) == "picked" and target.fine
+    assert lock.lock_at(target, 470, 230, [SMALL], None, 640, 480, 0.4) == "picked"
+    assert not target.fine
+    # The search finds nothing near the click: released. So does a click with no search.
+    assert lock.lock_at(target, 600, 400, [LARGE], search([SMALL]), 640, 480, 0.5) is None
+    assert target.state == "none" and target.box is None
+    target.hold(tiny, 0.6, fine=True)
+    assert lock.lock_at(target, 600, 400, [LARGE], None, 640, 480, 0.7) is None
+    assert target.state == "none" and not target.fine
 
 
 def test_association_prefers_overlap_then_the_nearest_centre_of_a_similar_size() -> None:
@@ -63,7 +124,7 @@ def test_an_answer_to_an_older_lock_is_not_news() -> None:
     asked = target.query(0.0)
     target.release()
     assert target.update(asked, SMALL, 0.1) is None and target.state == "none"
-    assert not target.lock(5, 5, [LARGE, SMALL], now=0.2)  # a click on no box releases
+    assert not target.lock(5, 5, [LARGE, SMALL], now=0.2)  # a click near no box releases
     assert target.state == "none"
 
 
@@ -96,33 +157,61 @@ def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     assert changes.count("none") == 1, changes
 
 
-def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
+def face_op() -> spec.CascadeOperation:
     op = spec.load_spec(OPERATIONS_SPEC).op("face")
     assert isinstance(op, spec.CascadeOperation)
+    return op
+
+
+def test_the_smaller_face_stays_the_target_in_the_two_face_scene() -> None:
+    op = face_op()
     video = TwoFaceVideo()
-    tracker = window.Tracker(op.params.full_scan_every)
-    target = lock.TargetLock(RULE)
+    relay = RelaySteps(op, RULE)
     scans: list[window.Scan] = []
     for i in range(0, 72, 2):  # 2.4 s of the scene's drift
-        rgba = cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA)
         t = i / video.fps
-        query = target.query(t)
-        choose = lock.chooser(query, RULE)
-        found, scan = window.step(
-            tracker, lambda box, rgba=rgba: reference.detect(op, rgba, around=box), choose
-        )
-        chosen = choose(found.boxes)
-        target.update(query, chosen, t)
-        scans.append(scan)
+        snap = relay.snapshot(cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA), t)
+        scans.append(snap.scan)
+        chosen = snap.chosen
         assert chosen is not None
         truth = video.small_centre(i) if i > 0 else video.face_centre(i)
         assert lock.contains(chosen, *truth), (i, chosen, truth)
-        if scan == "window":  # around the small face: the large one was not even searched
-            assert found.boxes == [chosen], (i, found.boxes)
+        if snap.scan == "window":  # around the small face: the large one was not even searched
+            assert snap.found.boxes == [chosen], (i, snap.found.boxes)
         if i == 0:  # the default choice was the large face: click the small one
-            assert target.lock(*video.small_centre(0), found.boxes, t)
-            tracker.reset()
+            assert relay.click(*video.small_centre(0), t) == "picked"
     # From the click on, the window followed the small face on every snapshot but the tracker's
     # periodic full scans: it never lost it to a full scan.
     cadence = ["full"] + ["window"] * (op.params.full_scan_every - 1)
     assert scans == ["full", *(cadence * 2)[: len(scans) - 1]], scans
+
+
+def test_a_face_too_small_for_the_reduced_scan_is_locked_by_a_click_and_followed() -> None:
+    # The two-face scene's tiny face: the reduced scan (256 pixels wide) never finds it. A click
+    # on it searches around the click at full resolution and locks it; from then on it is
+    # followed at full resolution, through the tracker's periodic full scans too (which cannot
+    # see it), and the goals stay on it.
+    op = face_op()
+    video = TwoFaceVideo()
+    relay = RelaySteps(op, RULE)
+    first = relay.snapshot(cv2.cvtColor(video.render(0), cv2.COLOR_RGB2RGBA), 0.0)
+    tiny = video.tiny_centre(0)
+    assert len(first.found.boxes) == 2
+    assert lock.pick(*tiny, first.found.boxes, RULE.near) is None
+    assert relay.click(*tiny, 0.01) == "searched"
+    assert relay.lock.box is not None and lock.contains(relay.lock.box, *tiny)
+    full_scans = []  # the snapshots after the click that scanned the whole frame
+    for n in range(1, 34):  # one periodic full scan after the click's
+        i = 2 * n
+        snap = relay.snapshot(cv2.cvtColor(video.render(i), cv2.COLOR_RGB2RGBA), i / video.fps)
+        if snap.full_scan:
+            full_scans.append(n)
+        tiny = video.tiny_centre(i)
+        assert snap.scan == "window"
+        assert snap.chosen is not None and lock.contains(snap.chosen, *tiny), (i, snap, tiny)
+        assert snap.target is not None and lock.contains(snap.chosen, *snap.target)
+        assert relay.lock.state == "locked" and relay.lock.fine
+    # The first snapshot after the click and the tracker's periodic one (30 snapshots later)
+    # were full scans, which did not find it; the window around where it was found it then, as
+    # the tracker's window did on every snapshot between.
+    assert full_scans == [1, 1 + op.params.full_scan_every]

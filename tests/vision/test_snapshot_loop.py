@@ -14,14 +14,19 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 import pytest
 from playwright.sync_api import Page
 
 from app.protocol import channels, frametag
 from app.protocol.channels import AUTOPILOT_CHANNEL, CONTROL_CHANNEL
 from app.protocol.relay_profiles import DEFAULT_PROFILE
+from app.resources import OPERATIONS_SPEC
+from app.vision import lock, spec
 from tests.helpers.harness import analyzer_page
 from tests.vision.frames import Placed, face_crop
+from tests.vision.relay_steps import RelaySteps
+from vehicle_agent.video import TwoFaceVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -135,9 +140,10 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 
 # Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
 # t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
-# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; and the
-# lock messages the loop announced (the lock is the analyzer's worker's: another test's goes
-# first).
+# each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; the lock
+# messages the loop announced (the lock is the analyzer's worker's: another test's goes first);
+# and the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
+# and reason of the lock message a click led to.
 LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
   const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
@@ -152,17 +158,23 @@ LOCK_STEPS = """async ({ frames, steps, profile }) => {
   loop.addEventListener('lock', (event) => messages.push(event.detail));
   loop.start();
   const outcomes = [];
+  const details = [];
   for (const [kind, t, arg] of steps) {
     now = t * 1000;
     if (kind === 'click') {
       outcomes.push(await loop.lockAt(arg[0], arg[1]));
+      const { state, box, reason } = messages.at(-1);
+      details.push({ state, box, reason });
       continue;
     }
     const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
     outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
+    const { boxes, candidates, locked } = outcome.detections;
+    details.push([boxes, candidates, locked]);
   }
   loop.stop();
-  return { outcomes, announced: messages.map((m) => m.state), messages };
+  await window.analyzer.unlock();
+  return { outcomes, details, announced: messages.map((m) => m.state), messages };
 }""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
 
 
@@ -240,3 +252,95 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
     assert on(outcomes[7][0], large)
     assert got["announced"] == ["locked", "lost", "searching", "locked", "none"]
     assert "not seen for more than 3 s" in got["messages"][-1]["reason"]
+
+
+def relay_snapshots_in_python(
+    frames: list[npt.NDArray[np.uint8]], steps: list[list[Any]]
+) -> list[Any]:
+    """What LOCK_STEPS tells of each step (``combined``), from the Python reference and
+    app/vision's lock and window as the relay's worker composes them (tests/vision/relay_steps.py):
+    the same decisions on the same pixels."""
+    op = spec.load_spec(OPERATIONS_SPEC).op("face")
+    assert isinstance(op, spec.CascadeOperation)
+    relay = RelaySteps(op)
+    outcomes: list[Any] = []
+    for kind, t, arg in steps:
+        if kind == "click":
+            relay.click(arg[0], arg[1], t)
+            box = relay.lock.box
+            outcomes.append({"state": relay.lock.state, "box": None if box is None else list(box)})
+            continue
+        snap = relay.snapshot(frames[arg], t)
+        locked = relay.lock.box if relay.lock.state == "locked" else None
+        outcomes.append(
+            [
+                None if snap.target is None else list(snap.target),
+                relay.lock.state,
+                [list(b) for b in snap.found.boxes],
+                [list(b) for b in snap.candidates],
+                None if locked is None else list(locked),
+            ]
+        )
+    return outcomes
+
+
+def combined(steps: list[list[Any]], answer: dict[str, Any]) -> list[Any]:
+    """LOCK_STEPS' answer, step by step: a snapshot's [goal, state, boxes, candidates, locked],
+    a click's {state, box}."""
+    return [
+        {"state": d["state"], "box": d["box"]} if kind == "click" else [*o, *d]
+        for (kind, _, _), o, d in zip(steps, answer["outcomes"], answer["details"], strict=True)
+    ]
+
+
+def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_python_does(
+    page: Page,
+) -> None:
+    # The two-face scene with its tiny face, as the relay's loop sees it: between full scans the
+    # second face rides along as a candidate; a click near (not in) it locks it; a click on the
+    # tiny face, which no scan of the reduced frame finds, locks it by the full-resolution search
+    # around the click, and the goals follow it through the tracker's periodic full scan. Each
+    # step as the Python reference, lock and window take it on the same pixels.
+    scene = TwoFaceVideo(WIDTH, HEIGHT)
+    indices = [0, 4, 8, 12]
+    rgbas = [cv2.cvtColor(scene.render(i), cv2.COLOR_RGB2RGBA) for i in indices]
+    frames = [base64.b64encode(rgba.tobytes()).decode() for rgba in rgbas]
+    small_x, small_y = scene.small_centre(indices[1])
+    tiny = scene.tiny_centre(indices[3])
+    steps: list[list[Any]] = [["frame", 0.05 * (k + 1), k % 4] for k in range(4)]
+    # Beside the small face's box: its centre plus 0.7 of its side to the right (beyond its
+    # half-width box edge, within half its size past that edge).
+    steps.append(["click", 0.21, [small_x + 0.7 * scene.small_px, small_y]])
+    steps += [["frame", 0.25, 0], ["frame", 0.3, 1]]
+    steps.append(["frame", 0.35, 3])  # a window snapshot, so the click finds no box near
+    steps.append(["click", 0.36, list(tiny)])
+    steps += [["frame", 0.4 + 0.05 * k, (3 - k % 2)] for k in range(33)]
+    answer = page.evaluate(
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    got = combined(steps, answer)
+    want = relay_snapshots_in_python(rgbas, steps)
+    assert got == want
+
+    def on(box: list[int] | None, centre: tuple[float, float]) -> bool:
+        return box is not None and lock.contains((box[0], box[1], box[2], box[3]), *centre)
+
+    first, windowed = got[0], got[1]
+    assert len(first[2]) == 2  # the full scan found both faces
+    assert len(windowed[2]) == 1 and len(windowed[3]) == 2  # the window: one, and two candidates
+    near = got[4]
+    assert near["state"] == "locked" and on(near["box"], (small_x, small_y))
+    assert not lock.contains(tuple(near["box"]), *steps[4][2])  # type: ignore[arg-type]
+    search = got[8]
+    assert search["state"] == "locked" and on(search["box"], tiny)
+    reasons = [
+        d["reason"]
+        for (kind, _, _), d in zip(steps, answer["details"], strict=True)
+        if kind == "click"
+    ]
+    assert reasons == [None, "found by a full-resolution search around the click"]
+    followed = got[9:]
+    assert all(
+        o[1] == "locked" and on(o[4], scene.tiny_centre(indices[3 - k % 2]))
+        for k, o in enumerate(followed)
+    )

@@ -58,7 +58,8 @@ FULL = {"rooms": 200, "failover_rooms": 20}
 QUICK = {"rooms": 200, "failover_rooms": 10}
 CANDIDATES = 10
 PACING_S = 0.02  # between two candidates of one peer, as a browser trickles them
-# Rooms arrive this fast: 200 rooms over 20 s; a session lasts ~1.3 s, so ~13 negotiate at once.
+# Rooms arrive this fast (200 rooms over 20 s): a session lasts about a second, so about a dozen
+# negotiate at once, as on a busy service.
 ARRIVAL_ROOMS_PER_S = 10.0
 # ... and for the burst figure, every room within this long.
 BURST_S = 5.0

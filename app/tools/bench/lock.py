@@ -1,4 +1,4 @@
-"""``lock_held_pct``: the target lock in the two-face scene (issue 20, DESIGN §10 "Which target").
+"""``lock_held_pct``: the target lock in the two-face scene (docs/architecture.md, "Which target").
 
 The stack runs under the default profile with the agent's ``two-faces`` video (a large face and
 a smaller one, both drifting); once goals flow, the client page clicks the smaller face, as a

@@ -1,5 +1,5 @@
 """``override_ms_p50`` / ``override_ms_p95`` and ``deadman_stop_s``: the operator's console
-(issue 20, DESIGN §10 "Manual override").
+(docs/architecture.md, "Who holds the wheel").
 
 The stack runs under the default profile with the agent as the vehicle; once goals flow the
 client page takes the wheel and the bench presses ArrowLeft as a person would, ``TRIALS`` times.

@@ -1,8 +1,8 @@
-// The control laws and the controller that paces them (docs/contracts.md): a port of
-// vehicle_agent/control.py so the browser vehicle and the Python agent behave alike, checked
-// against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js) drives it.
-// Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not written
-// here: they come from app/protocol/control.py through the page's embedded config
+// The control laws and the controller that paces them (docs/architecture.md, "Vehicle control"):
+// a port of vehicle_agent/control.py so the browser vehicle and the Python agent behave alike,
+// checked against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js)
+// drives it. Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not
+// written here: they come from app/protocol/control.py through the page's embedded config
 // (`config.control`).
 //
 // Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
@@ -88,13 +88,14 @@ export class ControlLaw {
 
   /**
    * {linear, angular} that take the turtle to `profile.standoffM` from terrain point (tx, ty):
-   * turn towards it, drive as much as it faces it, slow near walls.
+   * turn towards it, drive as much as it faces it, slow near walls (when `profile.walls`).
    */
   followCommand(tx, ty, pose, profile) {
     const margin = profile.wallMarginM;
-    // A target at the edge of the frame would lead the turtle into the wall; aim inside.
-    const x = clamp(tx, margin, this.worldSize - margin);
-    const y = clamp(ty, margin, this.worldSize - margin);
+    // A target at the edge of the frame would lead the turtle into the wall; aim inside (where
+    // the walls are known: a turtlesim's terrain).
+    const x = profile.walls ? clamp(tx, margin, this.worldSize - margin) : tx;
+    const y = profile.walls ? clamp(ty, margin, this.worldSize - margin) : ty;
     const error = this.#headingError(x, y, pose);
     if (error === null) return { linear: 0, angular: 0 };
     const angular = this.angularCommand(error, profile);
@@ -106,6 +107,7 @@ export class ControlLaw {
     );
     // Only the part of the heading that points at the target is worth driving along.
     linear *= Math.max(0, Math.cos(error));
+    if (!profile.walls) return { linear, angular };
     // Slower with less clearance ahead (behind, when backing off); zero at the wall margin.
     const allowed = Math.max(
       0,

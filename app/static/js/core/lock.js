@@ -14,13 +14,56 @@ export function contains([bx, by, bw, bh], x, y) {
   return bx <= x && x <= bx + bw && by <= y && y <= by + bh;
 }
 
-/** The box clicked at (x, y): the smallest containing it (first of equal areas), or null. */
-export function pick(x, y, boxes) {
+/**
+ * How far pixel (x, y) is from box [x, y, w, h] in the box's own size: the larger of the
+ * horizontal gap over its width and the vertical gap over its height (0 inside, edges included).
+ */
+export function gap([bx, by, bw, bh], x, y) {
+  const dx = Math.max(bx - x, 0, x - (bx + bw));
+  const dy = Math.max(by - y, 0, y - (by + bh));
+  return Math.max(dx / bw, dy / bh);
+}
+
+/**
+ * The box clicked at (x, y): the smallest containing it (first of equal areas); else the box it
+ * is nearest to in that box's own size (gap, first of equal gaps), when at most `near`; or null.
+ */
+export function pick(x, y, boxes, near) {
   let best = null;
   for (const b of boxes) {
     if (contains(b, x, y) && (best === null || b[2] * b[3] < best[2] * best[3])) best = b;
   }
+  if (best !== null) return best;
+  let bestGap = near;
+  for (const b of boxes) {
+    const g = gap(b, x, y);
+    if (g <= bestGap && (best === null || g < bestGap)) {
+      best = b;
+      bestGap = g;
+    }
+  }
   return best;
+}
+
+/**
+ * The boxes the operator sees and may click: a snapshot's `boxes`, then those of the last full
+ * scan's `candidates` that overlap none of them (the others are the same targets, seen earlier).
+ */
+export function lockable(boxes, candidates) {
+  return [...boxes, ...candidates.filter((c) => boxes.every((b) => overlap(c, b) === 0))];
+}
+
+/**
+ * Where a click near no box is searched at full resolution: a square `share` of the `width` ×
+ * `height` frame's shorter side centred on (x, y), moved inside the frame, as [x, y, w, h]; null
+ * for a click outside the frame.
+ */
+export function clickWindow(x, y, width, height, share) {
+  if (!(x >= 0 && x <= width && y >= 0 && y <= height)) return null;
+  const side = Math.floor(share * Math.min(width, height));
+  const x0 = Math.min(Math.max(0, Math.floor(x - side / 2)), width - side);
+  const y0 = Math.min(Math.max(0, Math.floor(y - side / 2)), height - side);
+  return [x0, y0, side, side];
 }
 
 /** Intersection over union of two boxes. */
@@ -78,7 +121,8 @@ export function associate(locked, boxes, anywhere, rule) {
  */
 export class TargetLock {
   /**
-   * @param {{searchAfterS: number, releaseAfterS: number, maxScale: number, reach: number}} rule
+   * @param {{searchAfterS: number, releaseAfterS: number, maxScale: number, reach: number,
+   *   near: number, clickSearch: number}} rule
    */
   constructor(rule) {
     this.rule = rule;
@@ -86,36 +130,53 @@ export class TargetLock {
     this.seenAt = 0;
     this.state = 'none';
     this.epoch = 0; // bumped by every lock and release
+    this.fine = false; // found by a full-resolution search: followed at full resolution
   }
 
-  /** A click at (x, y) on a snapshot that found `boxes`: lock the box clicked, or release. */
+  /**
+   * A click at (x, y) on a snapshot that found `boxes`: lock the box clicked (or near the
+   * click), or release when there is none. A click on the target locked already keeps it
+   * followed as it was (at full resolution or not).
+   */
   lock(x, y, boxes, now) {
-    const box = pick(x, y, boxes);
+    const box = pick(x, y, boxes, this.rule.near);
     if (box === null) {
       this.release();
       return false;
     }
+    const same = this.box !== null && overlap(box, this.box) > 0;
+    this.hold(box, now, this.fine && same);
+    return true;
+  }
+
+  /** Lock on `box`, seen at `now`; `fine`: found at full resolution. */
+  hold(box, now, fine = false) {
     this.box = box;
     this.seenAt = now;
     this.state = 'locked';
+    this.fine = fine;
     this.epoch += 1;
-    return true;
   }
 
   /** Back to the default choice (the largest box). */
   release() {
     this.box = null;
     this.state = 'none';
+    this.fine = false;
     this.epoch += 1;
   }
 
-  /** What the next snapshot follows, {box, anywhere, epoch}, or null for the default choice. */
+  /**
+   * What the next snapshot follows, {box, anywhere, epoch, fine}, or null for the default
+   * choice.
+   */
   query(now) {
     if (this.box === null) return null;
     return {
       box: this.box,
       anywhere: now - this.seenAt > this.rule.searchAfterS,
       epoch: this.epoch,
+      fine: this.fine,
     };
   }
 
@@ -144,4 +205,21 @@ export class TargetLock {
 export function chooser(lock, rule) {
   if (lock === null) return largest;
   return (boxes) => associate(lock.box, boxes, lock.anywhere, rule);
+}
+
+/**
+ * A click at (x, y) of a `width` × `height` frame on which the operator saw `boxes` (lockable):
+ * lock the box picked there; else, when the operation can (`search` not null), search the
+ * click's window (clickWindow) at full resolution, `search(window) -> boxes`, and lock the box
+ * picked among what it finds (a fine lock); else release. Returns how it locked, 'picked' or
+ * 'searched', or null when it released. The Python twin is lock.py's lock_at.
+ */
+export function lockAt(target, x, y, boxes, search, width, height, now) {
+  if (target.lock(x, y, boxes, now)) return 'picked';
+  const window = clickWindow(x, y, width, height, target.rule.clickSearch);
+  if (search === null || window === null) return null;
+  const found = pick(x, y, search(window), target.rule.near);
+  if (found === null) return null;
+  target.hold(found, now, true);
+  return 'searched';
 }

@@ -10,12 +10,15 @@
 // the manual gate (core/manual.js: while an operator holds the wheel, goals are dropped with
 // why 'manual' and drive commands steer, until the dead-man), then the freshness gate
 // (core/freshness.js: latest wins, stale goals dropped), then the controller (core/control.js,
-// with the control law the profile names). A lost link, a mode change and a stop halt the turtle.
+// with the control law the profile names); every Twist, the operator's too, then passes the
+// robot's limiter (core/limits.js: clamped to its top speeds, ramped within its accelerations, a
+// stop at once). A lost link, a mode change and a stop halt the turtle.
 import { Controller } from './control.js';
 import { GoalGate } from './freshness.js';
+import { Limiter } from './limits.js';
 import { ManualDrive } from './manual.js';
 
-function twistSent(twist, now) {
+function record(twist, now) {
   if (twist === null) return [];
   return [
     {
@@ -34,16 +37,19 @@ export class Pilot {
 
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
-   * @param profile one of `controlLaw.profiles`
+   * @param profile one of `controlLaw.profiles` (fitted to the robot by the server)
    * @param {{deadmanS: number, tickS: number, freshness: {maxAgeS: number, windowS: number},
-   *   law?: Function}} rules the protocol's numbers (`config.control`,
-   *   `config.protocol.goalFreshness`); `law` replaces the profile's control law
+   *   limits: Object, law?: Function}} rules the protocol's numbers (`config.control`,
+   *   `config.protocol.goalFreshness`) and the robot's limits (`config.robot.description.limits`);
+   *   `law` replaces the profile's control law
    */
-  constructor(controlLaw, profile, { deadmanS, tickS, freshness, law = null }) {
+  constructor(controlLaw, profile, { deadmanS, tickS, freshness, limits, law = null }) {
     this.profile = profile;
     this.tickS = tickS;
     this.controller = new Controller(controlLaw, profile, law);
     this.manual = new ManualDrive(profile, deadmanS);
+    // Between every command and the robot: its top speeds and accelerations.
+    this.limiter = new Limiter(limits, tickS);
     // Latest-wins on the lossy goal channel; reset for every new link.
     this.gate = new GoalGate(freshness);
   }
@@ -80,12 +86,12 @@ export class Pilot {
     this.#lastGoalAt = now;
     const { seq, op, x, y, w, h } = goal;
     const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
-    return [applied, ...twistSent(this.controller.goal({ x, y, w, h, seq, frame }, now), now)];
+    return [applied, ...this.#sent(this.controller.goal({ x, y, w, h, seq, frame }, now), now)];
   }
 
   /** The relay stopped piloting: the autopilot's turtle stops. */
   stop(now) {
-    return twistSent(this.controller.stop(), now);
+    return this.#sent(this.controller.stop(), now);
   }
 
   /**
@@ -97,7 +103,7 @@ export class Pilot {
     if (stopped === null) return [];
     this.controller.stop();
     const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
-    return [changed, ...twistSent(stopped, now)];
+    return [changed, ...this.#sent(stopped, now)];
   }
 
   /** An operator's drive command: it steers in manual mode when it is the newest. */
@@ -105,17 +111,24 @@ export class Pilot {
     const twist = this.manual.drive(seq, linear, angular, now);
     const moving = twist !== null && (twist.linear !== 0 || twist.angular !== 0);
     const received = { ev: 'drive', seq, applied: twist !== null, moving, t: now };
-    return [received, ...twistSent(twist, now)];
+    return [received, ...this.#sent(twist, now)];
   }
 
   /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it. */
   pose(pose, now) {
-    return twistSent(this.controller.pose(pose, now), now);
+    return this.#sent(this.controller.pose(pose, now), now);
   }
 
-  /** The clock: the goal timeout, the clock-driven profile's period, the dead-man. */
+  /**
+   * The clock: the goal timeout, the clock-driven profile's period, the dead-man, and the next
+   * step of a ramp under way.
+   */
   tick(now) {
-    return [...twistSent(this.controller.tick(now), now), ...twistSent(this.manual.tick(now), now)];
+    const done = [
+      ...this.#sent(this.controller.tick(now), now),
+      ...this.#sent(this.manual.tick(now), now),
+    ];
+    return done.length > 0 ? done : record(this.limiter.tick(now), now);
   }
 
   /**
@@ -145,7 +158,12 @@ export class Pilot {
    */
   halt(now) {
     const stopped = this.controller.stop();
-    if (!this.manual.manual) return twistSent(stopped, now);
+    if (!this.manual.manual) return this.#sent(stopped, now);
     return this.modeChange('auto', null, now);
+  }
+
+  // The record of publishing `twist` (null: nothing to publish) within the limits.
+  #sent(twist, now) {
+    return twist === null ? [] : record(this.limiter.command(twist, now), now);
   }
 }

@@ -1,8 +1,10 @@
 // Who holds what at the relay, by peer name: the vehicle seat (the one vehicle whose video the
-// relay analyses and forwards, and whose channels get the goals) and the operator seat (the one
-// client driving by hand, docs/contracts.md "Data-channel extras"). A peer's departure frees only
-// the seats that peer held: a second vehicle that came and went must not take the first one's
-// place with it. Pure: names in, decisions out; tested directly (e2e/test_relay_seats_js.py).
+// relay analyses and forwards, and whose channels get the goals), the operator seat (the one
+// client driving by hand, docs/contracts.md "Data-channel details") and the watchers (the clients
+// that can see the robot: the autopilot drives only while there is one). A peer's departure
+// frees only the seats that peer held: a second vehicle that came and went must not take the
+// first one's place with it. Pure: names in, decisions out; tested directly
+// (e2e/test_relay_seats_js.py).
 
 /** One seat, held by at most one peer at a time. */
 export class Seat {
@@ -93,6 +95,13 @@ export class OperatorSeat {
     return { drive: { type: 'drive', seq: this.#driveSeq, linear, angular } };
   }
 
+  /** The robot was stopped: the wheel goes back to the autopilot. Returns who held it, or null. */
+  takeBack() {
+    const holder = this.holder;
+    if (holder !== null) this.#hold(null);
+    return holder;
+  }
+
   /** `name` is gone: true when it held the wheel (the autopilot has it back). */
   leave(name) {
     if (this.holder !== name || name === null) return false;
@@ -104,5 +113,49 @@ export class OperatorSeat {
     if (name === null) this.#seat.release(this.holder);
     else this.#seat.claim(name);
     this.#driveSeq = 0;
+  }
+}
+
+/**
+ * The clients watching the robot: each client in the room whose link to the relay has not
+ * dropped. A client counts from the moment it is in the room (its link is being set up, or it
+ * pilots through signaling alone), stops counting when it leaves or its link drops (its control
+ * channel closed, its connection failed), and counts again when its link comes back. Each
+ * change answers whether it left nobody watching where somebody was: the moment the relay
+ * stops piloting (docs/contracts.md).
+ */
+export class Watchers {
+  #inRoom = new Set();
+  #dropped = new Set(); // in the room, link dropped
+
+  /** The names of the clients watching, in the order they came. */
+  get names() {
+    return [...this.#inRoom].filter((name) => !this.#dropped.has(name));
+  }
+
+  /** The room's clients are now `names` (the roster): true when that left nobody watching. */
+  room(names) {
+    return this.#change(() => {
+      this.#inRoom = new Set(names);
+      for (const name of this.#dropped) if (!this.#inRoom.has(name)) this.#dropped.delete(name);
+    });
+  }
+
+  /** `name`'s link to the relay is up (its control channel opened). */
+  linkUp(name) {
+    this.#dropped.delete(name);
+  }
+
+  /** `name`'s link to the relay dropped: true when that left nobody watching. */
+  linkDown(name) {
+    return this.#change(() => {
+      if (this.#inRoom.has(name)) this.#dropped.add(name);
+    });
+  }
+
+  #change(apply) {
+    const before = this.names.length;
+    apply();
+    return before > 0 && this.names.length === 0;
   }
 }

@@ -13,7 +13,8 @@ import { RelayStats } from './relay-stats.js';
  * Events (CustomEvent detail):
  *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?}) once sent
  *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms,
- *                 goalsPerS, locked: the locked target's box or null})
+ *                 goalsPerS, locked: the locked target's box or null, candidates: the last
+ *                 full scan's boxes})
  *   `lock`        the lockState message ({type: 'lockState', state, box, reason}) when the lock
  *                 changed
  *   `failure`     an analysis error's message, once until a snapshot succeeds again
@@ -60,9 +61,9 @@ export class SnapshotLoop extends EventTarget {
   }
 
   /**
-   * A click at frame pixel (x, y): lock on the target whose box on the last snapshot (or else
-   * the last full scan) contains it, or release the lock when it hit none. Resolves to whether
-   * it locked.
+   * A click at frame pixel (x, y): lock on the target at or near it (on the last snapshot, the
+   * last full scan, or found by a full-resolution search around it), or release the lock when
+   * there is none (the analyzer's lockAt). Resolves to whether it locked.
    */
   async lockAt(x, y) {
     const answer = await this.analyzer.lockAt(x, y, this.clock() / 1000);
@@ -172,6 +173,7 @@ export class SnapshotLoop extends EventTarget {
       ms,
       goalsPerS: this.stats.goalsPerS(now),
       locked: this.lock.state === 'locked' ? this.lock.box : null,
+      candidates: result.candidates ?? [],
     };
     this.lastDetections = detections;
     this.#emit('detections', detections);

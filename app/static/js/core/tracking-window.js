@@ -109,9 +109,12 @@ export class Tracker {
  * One snapshot: search the window if there is one, the whole frame when it finds nothing.
  * `detect(around)` runs the operation around a full-frame box, or on the whole frame for null.
  * `choose(boxes)` picks the target box: the largest, or the locked target's (lock.js); a window
- * where it picks none is a miss. Returns {found, scan}.
+ * where it picks none is a miss. `keep`: where a target that the whole-frame scan cannot find was
+ * last seen (a lock found at full resolution), or null: when the full scan does not find it
+ * either, the window around `keep` is searched last, and a target found there is the
+ * snapshot's (scan 'window'). Returns {found, scan}.
  */
-export function step(tracker, detect, choose = largest) {
+export function step(tracker, detect, choose = largest, keep = null) {
   const around = tracker.window();
   if (around !== null) {
     const found = detect(around);
@@ -122,6 +125,20 @@ export function step(tracker, detect, choose = largest) {
     }
   }
   const found = detect(null);
-  tracker.record(choose(found.boxes), 'full');
+  const box = choose(found.boxes);
+  // A full scan ran, found or not: the next one is due in fullScanEvery snapshots.
+  tracker.record(box, 'full');
+  if (box === null && keep !== null && !sameBox(keep, around)) {
+    const kept = detect(keep);
+    const keptBox = choose(kept.boxes);
+    if (keptBox !== null) {
+      tracker.last = keptBox;
+      return { found: kept, scan: 'window' };
+    }
+  }
   return { found, scan: 'full' };
+}
+
+function sameBox(a, b) {
+  return b !== null && a.every((v, i) => v === b[i]);
 }

@@ -1,7 +1,7 @@
-// Link health (DESIGN §10): one link's received video from two getStats() reports a period apart
-// — round trip, packet loss, frames per second, resolution and the selected candidate pair's type
-// — and the warnings the client page shows. The thresholds come from app/protocol/link_health.py
-// through the page's config (`PROTOCOL.health`).
+// Link health (docs/architecture.md, "What happened, what is happening"): one link's received video
+// from two getStats() reports a period apart — round trip, packet loss, frames per second,
+// resolution and the selected candidate pair's type — and the warnings the client page shows. The
+// thresholds come from app/protocol/link_health.py through the page's config (`PROTOCOL.health`).
 
 const RELAYED_FIRST = ['relay', 'srflx', 'prflx', 'host'];
 

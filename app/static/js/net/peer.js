@@ -2,9 +2,10 @@
 // webrtc/samples (peerconnection/perfect-negotiation), plus the JSON data-channel plumbing every
 // role shares.
 //
-// The signaling server lets only vehicles and clients send `offer` and only the relay send
-// `answer` (DESIGN §2), so the relay is the polite side and never offers: it forwards video by
-// replacing the track of the client's recvonly transceiver, which needs no renegotiation.
+// The signaling server lets only vehicles and clients send `offer` and only the relay send `answer`
+// (docs/architecture.md, "Signaling protocol"), so the relay is the polite side and never offers:
+// it forwards video by replacing the track of the client's recvonly transceiver, which needs no
+// renegotiation.
 import { acceptedTypes, describeProblems, validate } from '../core/schema.js';
 
 /**

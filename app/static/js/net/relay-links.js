@@ -13,6 +13,8 @@ import { Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
  *   `vehicletrack`  the served vehicle's video track, or null when it left
  *   `vehicle`       the served vehicle's name once its autopilot channel is open, null when closed
  *   `control`       a client's name, when its control channel opened
+ *   `controlclosed` a client's name, when the control channel of its connection closed (the
+ *                   link dropped with the connection still there)
  *   `left`          {name, role}: a peer's connection is gone
  *   `changed`       the connections or their channels changed (for the page's peer list)
  */
@@ -263,8 +265,13 @@ export class RelayLinks extends EventTarget {
       return;
     }
     channel.addEventListener('close', () => {
-      if (entry.channel === channel) entry.channel = null;
+      const current = entry.channel === channel;
+      if (current) entry.channel = null;
       if (entry.role === 'vehicle' && this.vehicle === name) this.#setVehicle(null);
+      // A connection closed here (close()) is no longer in #peers and said `left` already.
+      if (entry.role === 'client' && current && this.#peers.get(name) === entry) {
+        this.#emit('controlclosed', name);
+      }
       this.#emit('changed');
     });
   }

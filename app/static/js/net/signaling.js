@@ -1,5 +1,5 @@
-// Client side of the /ws signaling protocol (DESIGN §2): JSON text frames, one `message`
-// event per message, login as a promise.
+// Client side of the /ws signaling protocol (docs/architecture.md, "Signaling protocol"): JSON text
+// frames, one `message` event per message, login as a promise.
 
 /** Thrown by `login` when the server refuses it; `message` is the server's reason. */
 export class LoginRefused extends Error {}

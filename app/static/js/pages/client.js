@@ -1,5 +1,6 @@
 // The client page: watches the relayed video (with detection boxes) and the turtle's route,
-// lists the relay's operations, sets one, starts and stops piloting.
+// lists the relay's operations, sets one, starts and stops piloting, and stops the robot
+// (Stop robot, whoever drives).
 import { ControlLaw } from '../core/control.js';
 import { LinkMeter, warnings } from '../net/link-health.js';
 import { LockPanel } from '../view/lock-view.js';
@@ -55,6 +56,7 @@ const status = {
   // one (a relay pool taking the room over) is asked to start again on its first state.
   wantPiloting: false,
   lock: null, // the relay's last lockState: {state, box, reason}
+  stopped: null, // the last robotStopped while it stands: {by: client or null, reason}
   mode: null, // the relay's last mode: {mode: 'auto'|'manual', operator, reason}
   get drivesSent() {
     return driveInput.sent;
@@ -73,6 +75,14 @@ const health = {
   warnings: [],
 };
 window.autopilotHealth = health;
+
+/**
+ * What the video shows, read-only for tests: the boxes drawn over it, each {x, y, w, h} in the
+ * analysed frame's pixels and its kind, 'tracked', 'locked' or 'candidate'
+ * (core/shown-boxes.js), and that frame's size.
+ */
+const view = { boxes: [], w: null, h: null };
+window.autopilotView = view;
 
 /** Everything else this page holds, in one place. */
 const session = {
@@ -130,6 +140,10 @@ function onState(msg) {
     log.info(status.relay.piloting ? 'piloting started' : 'piloting stopped');
   }
   if (!status.relay.piloting) clearDetections();
+  else if (status.stopped !== null) {
+    status.stopped = null; // piloting again: the stop no longer stands
+    show('stop-state', '');
+  }
   show('active-op', status.relay.op ?? '–');
   showState();
   updateControls();
@@ -139,7 +153,7 @@ function onDetections(msg) {
   status.detections += 1;
   status.lastDetections = msg;
   // The boxes go with the video's frames; the figures and the map change a few times a second.
-  drawDetections(overlay, msg);
+  Object.assign(view, { boxes: drawDetections(overlay, msg), w: msg.w, h: msg.h });
   session.recentMs.push(msg.ms);
   if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
   const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
@@ -225,6 +239,19 @@ function onLockState(msg) {
   if (msg.reason) log.info(`target lock ${msg.state}: ${msg.reason}`);
 }
 
+/** Someone pressed Stop robot, or the relay stopped because nobody watched: say who and why. */
+function onRobotStopped(msg) {
+  status.stopped = { by: msg.by ?? null, reason: msg.reason };
+  // A stop outranks this person's wish to pilot: a relay that takes over must not resume.
+  status.wantPiloting = false;
+  show('stop-state', stopText(status.stopped));
+  log.warn(`robot stopped: ${msg.reason}`);
+}
+
+function stopText({ by, reason }) {
+  return by === null ? `Robot stopped: ${reason}` : `Robot stopped by ${by}`;
+}
+
 function onMode(msg) {
   const previous = status.mode;
   status.mode = { mode: msg.mode, operator: msg.operator ?? null, reason: msg.reason ?? null };
@@ -261,7 +288,7 @@ function median(values) {
 }
 
 function clearDetections() {
-  drawDetections(overlay, null);
+  Object.assign(view, { boxes: drawDetections(overlay, null), w: null, h: null });
   turtleView.setTarget(null);
 }
 
@@ -286,6 +313,7 @@ function setupPeer(peer) {
     pose: onPose,
     lockState: onLockState,
     mode: onMode,
+    robotStopped: onRobotStopped,
     health: onHealth,
   };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
@@ -337,6 +365,8 @@ function updateControls() {
   button('start').disabled = !reachable || piloting;
   button('stop').disabled = !reachable || !piloting;
   const mode = status.mode;
+  // Stop robot goes on the control channel, or through signaling while that is down.
+  button('stop-robot').disabled = !reachable && !(room.phase === 'joined' && room.relay);
   button('take-over').disabled = !reachable || mode === null || mode.mode === 'manual';
   button('hand-back').disabled =
     !reachable || mode?.mode !== 'manual' || mode.operator !== room.name;
@@ -391,13 +421,32 @@ for (const [action, msg] of [
   });
 }
 
+// Stop robot: any client, whoever drives. On the control channel (the relay stops piloting and
+// takes the wheel back); with none, piloting at least is stopped through signaling.
+button('stop-robot').addEventListener('click', () => {
+  status.wantPiloting = false;
+  if (sendJson(session.control, { type: 'stopRobot' })) {
+    log.info('asked the relay to stop the robot');
+    return;
+  }
+  try {
+    askRelay('stop');
+  } catch (err) {
+    log.error(`cannot stop the robot: ${err.message}`);
+  }
+});
+
 room.bindControls();
 room.addEventListener('phase', (event) => {
   showState();
+  updateControls();
   // As in the thesis, ask for the operations on joining (the answer comes on the data channel).
   if (event.detail === 'joined' && room.relay !== undefined) room.send({ type: 'getOps' });
 });
-room.addEventListener('roster', showState);
+room.addEventListener('roster', () => {
+  showState();
+  updateControls();
+});
 room.addEventListener('problem', showState);
 const link = new RelayLink(room, { log, setup: setupPeer });
 link.addEventListener('lost', () => {

@@ -7,8 +7,9 @@ import { largest } from '../core/tracking-window.js';
 const state = document.getElementById('state');
 
 /**
- * Base64 of a byte array, by the browser's own encoder (a data: URL of a Blob): a 1920×1080 RGBA
- * frame takes milliseconds, where btoa over String.fromCharCode chunks took a third of a second.
+ * Base64 of a byte array, by the browser's own encoder (a data: URL of a Blob): native code over
+ * the whole buffer at once, where btoa needs a string built from the bytes in chunks, which is
+ * slow for a full-HD RGBA frame.
  */
 function toBase64(bytes) {
   return new Promise((resolve, reject) => {

@@ -4,12 +4,13 @@
 // detections go to the clients on `control`. This module wires the parts and answers the
 // clients' control messages:
 // - net/relay-links.js: the peer connections, the vehicle seat and the video forwarding;
-// - core/relay-seats.js: who holds the wheel (manual override);
+// - core/relay-seats.js: who holds the wheel (manual override), and who watches (the autopilot
+//   drives only while a client does);
 // - view/frame-source.js: how frames reach core/snapshot-loop.js, whose analyzer's worker owns
 //   the target lock;
 // - view/relay-view.js: what the page shows.
 import { CONFIG, PROTOCOL } from '../config.js';
-import { OperatorSeat } from '../core/relay-seats.js';
+import { OperatorSeat, Watchers } from '../core/relay-seats.js';
 import { SnapshotLoop } from '../core/snapshot-loop.js';
 import { BadMessage } from '../net/peer.js';
 import { RelayLinks } from '../net/relay-links.js';
@@ -59,6 +60,14 @@ const status = {
   get operator() {
     return session.operator.holder;
   },
+  /** The clients watching: in the room, their link not dropped (relay-seats.js Watchers). */
+  get watchers() {
+    return session.watchers.names;
+  },
+  /** The last robotStopped message ({by, reason}) while that stop stands, or null. */
+  get stopped() {
+    return session.lastStop;
+  },
   drivesForwarded: 0,
   get snapshots() {
     return session.loop?.stats.snapshots ?? 0;
@@ -102,6 +111,10 @@ const session = {
   analyzer: null,
   loop: null, // the SnapshotLoop, once the analyzer is ready
   operator: new OperatorSeat(),
+  watchers: new Watchers(),
+  // The robotStopped message of the last stop, until piloting starts again: a client that
+  // connects meanwhile hears why the robot stands.
+  lastStop: null,
   links: new RelayLinks({
     room,
     log,
@@ -110,6 +123,7 @@ const session = {
       setOp: (msg) => setOp(msg, name),
       start: () => setPiloting(true, name),
       stop: () => setPiloting(false, name),
+      stopRobot: () => stopRobot(name, `Stop robot pressed by ${name}`),
       lock: (msg) => lockAt(msg, name),
       unlock: () => unlock(`released by ${name}`),
       takeOver: () => takeOver(name),
@@ -206,6 +220,14 @@ function setOp(msg, from) {
 }
 
 function setPiloting(on, from) {
+  if (on && session.watchers.names.length === 0) {
+    // The autopilot drives only while someone watches (a start from a client whose link dropped).
+    log.warn(`not piloting for ${from}: no client is watching`);
+    const reason = 'no client is watching the robot, so piloting stays off';
+    session.links.sendTo(from, { type: 'error', reason, ref: 'start' });
+    broadcastState();
+    return;
+  }
   if (on === status.piloting) {
     broadcastState();
     return;
@@ -213,14 +235,44 @@ function setPiloting(on, from) {
   status.piloting = on;
   log.info(`${on ? 'piloting started' : 'piloting stopped'} by ${from}`);
   if (on) {
+    session.lastStop = null;
     session.loop?.start();
     frames.start();
   } else {
-    session.loop?.stop();
-    frames.stop();
-    session.links.sendToVehicle({ type: 'stop' });
+    haltPiloting();
   }
   broadcastState();
+}
+
+/** The snapshots stop, and the vehicle hears `stop` (zero at once). */
+function haltPiloting() {
+  session.loop?.stop();
+  frames.stop();
+  session.links.sendToVehicle({ type: 'stop' });
+}
+
+/**
+ * Stop the robot at once, whoever holds the wheel (docs/contracts.md): piloting stops, the
+ * vehicle hears `stop`, and an operator's wheel goes back to the autopilot -- its mode change
+ * stops the vehicle too, and makes it ignore a drive command still on its way (drive commands
+ * ride the lossy channel, which the reliable one does not wait for). Every client hears who
+ * (`by`: a client, or null when the relay stopped because nobody watches) and why.
+ */
+function stopRobot(by, reason) {
+  log.warn(`robot stopped: ${reason}`);
+  status.piloting = false;
+  haltPiloting();
+  if (session.operator.takeBack() !== null) announceOperator(reason);
+  session.lastStop = { type: 'robotStopped', by, reason };
+  session.links.broadcast(session.lastStop);
+  broadcastState();
+}
+
+/** A change of who watches left nobody watching: nothing drives unwatched. */
+function nobodyWatching(why) {
+  if (status.piloting || session.operator.holder !== null) {
+    stopRobot(null, `no client is watching (${why})`);
+  }
 }
 
 // ---------------------------------------------------------------- manual override
@@ -330,11 +382,14 @@ session.links.addEventListener('vehicle', ({ detail: name }) => {
   broadcastState();
 });
 session.links.addEventListener('control', ({ detail: name }) => {
+  session.watchers.linkUp(name);
+  // Why the robot stands, before the state that shows it standing.
+  if (session.lastStop !== null) session.links.sendTo(name, session.lastStop);
   session.links.sendTo(name, stateMessage());
   session.links.sendTo(name, session.operator.modeMessage());
   if (session.loop !== null) session.links.sendTo(name, session.loop.lockMessage());
 });
-session.links.addEventListener('left', ({ detail: { name } }) => {
+session.links.addEventListener('left', ({ detail: { name, role } }) => {
   // What the peer held goes with it, and nothing else: the vehicle seat (relay-links.js), the
   // wheel. The failsafe: the operator's link is gone, so nobody drives and the autopilot stays
   // off.
@@ -342,6 +397,12 @@ session.links.addEventListener('left', ({ detail: { name } }) => {
     if (status.piloting) setPiloting(false, `operator ${name} leaving`);
     announceOperator(`operator ${name} left`);
   }
+  if (role === 'client' && session.watchers.linkDown(name)) {
+    nobodyWatching(`${name}'s link to the relay closed`);
+  }
+});
+session.links.addEventListener('controlclosed', ({ detail: name }) => {
+  if (session.watchers.linkDown(name)) nobodyWatching(`${name}'s control channel closed`);
 });
 session.links.addEventListener('changed', () => view.peers(session.links.describe()));
 
@@ -354,7 +415,11 @@ room.addEventListener('phase', (event) => {
     session.links.closeAll('left the room');
   }
 });
-room.addEventListener('roster', showState);
+room.addEventListener('roster', ({ detail: roster }) => {
+  const clients = roster.filter((peer) => peer.role === 'client').map((peer) => peer.name);
+  if (session.watchers.room(clients)) nobodyWatching('the last client left the room');
+  showState();
+});
 room.addEventListener('problem', showState);
 room.addEventListener('peerleft', (event) => session.links.left(event.detail));
 room.addEventListener('signal', (event) => {

@@ -1,6 +1,8 @@
 // The vehicle page: camera to the relay, goals from the lossy `autopilot-state` data channel
-// (latest wins) turned into Twists on /turtle1/cmd_vel through roslib.js, pose telemetry back to
-// the relay on the same channel; `stop` on the reliable `autopilot` channel. What to do with
+// (latest wins) turned into velocity commands for the robot `?robot=` names (turtlesim's
+// /turtle1/cmd_vel by default; config.robot, from app/protocol/robot.py) through roslib.js,
+// pose telemetry back to the relay on the same channel; `stop` on the reliable `autopilot`
+// channel. What to do with
 // goals, stops, mode changes, drive commands, poses and the clock is the pilot's to decide
 // (core/pilot.js, the twin of the agent's vehicle_agent/pilot.py): this page feeds it, with the
 // time, and acts on its records: publishes their Twists, counts and shows them.
@@ -10,6 +12,7 @@ import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
 import { pickTypes } from '../core/rosflavour.js';
+import { poseOf, velocityMessage } from '../core/robot.js';
 import { byTestId, fmt, Log, show } from '../view/ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
@@ -21,10 +24,12 @@ const config = CONFIG;
 const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
+const described = config.robot.description;
 const pilot = new Pilot(law, law.profiles[config.profile], {
   deadmanS: config.control.deadmanS,
   tickS: config.control.tickS,
   freshness: PROTOCOL.goalFreshness,
+  limits: described.limits,
 });
 /** The page's clock, in the seconds the pilot takes. */
 const now = () => performance.now() / 1000;
@@ -39,6 +44,8 @@ const status = {
   twistsPublished: 0, // Twists that reached rosbridge
   lastTwist: null,
   pose: null,
+  robot: described.name,
+  velocityType: null, // the velocity topic's type once connected (the robot's, if it says)
   rosConnected: false,
   rosFlavour: null, // '1', '2' or 'jazzy' once connected
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
@@ -51,19 +58,24 @@ const status = {
 };
 window.autopilotStatus = status;
 
-/** roslib.js connection to a rosbridge: cmd_vel out, pose in, the spawn step once. */
-class Turtle {
+/**
+ * roslib.js connection to a rosbridge: velocity commands out, pose in, and on a turtlesim the
+ * spawn step once.
+ */
+class RobotLink {
   /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
-  constructor(url, setting, rosTypes, token) {
+  constructor(url, setting, rosTypes, robot, token) {
     this.url = url;
     this.setting = setting;
     this.rosTypes = rosTypes;
+    this.robot = robot; // config.robot: the description and its type names
     this.token = token;
     this.types = null; // learnt on each connection
     this.ros = null;
     this.cmdVel = null;
     this.spawnDone = false;
     this.reported = false; // an outage has been logged
+    this.badPoseLogged = false;
     this.onPose = () => {};
   }
 
@@ -105,21 +117,25 @@ class Turtle {
 
   // The robot's own type names from rosapi topic_type; the ros= setting when it cannot say.
   async #learnTypes(ros) {
-    const [pose, twist] = await Promise.all(
-      ['/turtle1/pose', '/turtle1/cmd_vel'].map((topic) => this.#topicType(ros, topic)),
+    const { velocity, pose } = this.robot.description;
+    const [poseType, velocityType] = await Promise.all(
+      [pose.topic, velocity.topic].map((topic) => this.#topicType(ros, topic)),
     );
     if (this.ros !== ros) return; // reconnected meanwhile
-    const types = pickTypes(this.rosTypes, this.setting, pose, twist);
+    const types = pickTypes(this.rosTypes, this.robot, this.setting, poseType, velocityType);
     this.types = types;
     status.rosFlavour = types.flavour;
     status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
+    status.velocityType = types.velocity;
     const from = types.fromRobot
       ? 'as its rosapi reports'
       : `from ros=${this.setting}: rosapi did not say`;
-    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.twist}) ${from}`);
-    show('ros-state', `connected (ROS ${types.flavour})`);
-    this.cmdVel = new ROSLIB.Topic({ ros, name: '/turtle1/cmd_vel', messageType: types.twist });
-    const topic = new ROSLIB.Topic({ ros, name: '/turtle1/pose', messageType: types.pose });
+    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.velocity}) ${from}`);
+    if (types.velocityKind !== velocity.type)
+      log.warn(`${velocity.topic} is a ${types.velocityKind} on the robot, not a ${velocity.type}`);
+    show('ros-state', `connected (ROS ${types.flavour}, ${this.robot.description.name})`);
+    this.cmdVel = new ROSLIB.Topic({ ros, name: velocity.topic, messageType: types.velocity });
+    const topic = new ROSLIB.Topic({ ros, name: pose.topic, messageType: types.pose });
     topic.subscribe((msg) => this.#pose(msg));
   }
 
@@ -136,41 +152,52 @@ class Turtle {
 
   publish(twist) {
     if (this.cmdVel === null) return false;
-    this.cmdVel.publish({
-      linear: { x: twist.linear, y: 0, z: 0 },
-      angular: { x: 0, y: 0, z: twist.angular },
-    });
+    const { velocityKind, flavour } = this.types;
+    const { frameId } = this.robot.description.velocity;
+    // ROS time is the wall clock's: a TwistStamped is stamped with it.
+    const stampS = Date.now() / 1000;
+    this.cmdVel.publish(
+      velocityMessage(velocityKind, flavour, twist.linear, twist.angular, stampS, frameId),
+    );
     return true;
   }
 
   #pose(msg) {
+    const pose = poseOf(this.robot.description.pose.type, msg);
+    if (pose === null) {
+      if (!this.badPoseLogged) log.warn(`${this.robot.description.pose.topic}: no pose in it`);
+      this.badPoseLogged = true;
+      return;
+    }
     if (!this.spawnDone) {
       this.spawnDone = true;
-      this.#spawnStep(msg);
+      this.#spawnStep(pose);
     }
-    this.onPose({ x: msg.x, y: msg.y, theta: msg.theta });
+    this.onPose(pose);
   }
 
   // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
+  // A turtlesim's only (the server leaves it off for any other robot).
   #spawnStep(pose) {
-    if (!config.spawnStep) return;
+    if (!config.spawnStep || this.robot.teleportService === null) return;
     const service = new ROSLIB.Service({
       ros: this.ros,
-      name: '/turtle1/teleport_absolute',
+      name: this.robot.teleportService,
       serviceType: this.types.teleport,
     });
     service.callService(
       { x: pose.x, y: pose.y, theta: law.spawnTheta },
-      () => log.info('spawn step: turtle1 turned to π/2'),
+      () => log.info('spawn step: the turtle turned to π/2'),
       (err) => log.error(`spawn step failed: ${err}`),
     );
   }
 }
 
-const turtle = new Turtle(
+const robotLink = new RobotLink(
   config.rosbridge,
   config.ros,
   config.rosTypes,
+  config.robot,
   config.rosbridgeAuth ? config.token : null,
 );
 /** Everything else this page holds, in one place. */
@@ -182,7 +209,7 @@ const session = {
 };
 
 function publish(twist, why) {
-  if (!turtle.publish(twist)) {
+  if (!robotLink.publish(twist)) {
     // Once per outage: goals keep coming at frame rate and would flood the log.
     if (!session.rosWarned) log.warn(`no rosbridge connection: Twists are not published (${why})`);
     session.rosWarned = true;
@@ -250,7 +277,7 @@ function onDrive(msg) {
   );
 }
 
-turtle.onPose = (pose) => {
+robotLink.onPose = (pose) => {
   status.pose = pose;
   show('pose', `x ${fmt(pose.x, 2)}  y ${fmt(pose.y, 2)}  θ ${fmt(pose.theta, 3)}`);
   const t = now();
@@ -365,7 +392,7 @@ async function startCamera() {
   }
 }
 
-room.addEventListener('renewed', (event) => turtle.renew(event.detail));
+room.addEventListener('renewed', (event) => robotLink.renew(event.detail));
 room.bindControls();
 room.addEventListener('phase', showState);
 room.addEventListener('roster', showState);
@@ -373,11 +400,14 @@ room.addEventListener('problem', showState);
 room.addEventListener('phase', (event) => {
   if (event.detail === 'disconnected') halt('left the room');
 });
-if (config.rosbridgeError) {
+if (config.robotError) {
+  log.error(config.robotError);
+  show('ros-state', `refused: ${config.robotError}`);
+} else if (config.rosbridgeError) {
   log.error(config.rosbridgeError);
   show('ros-state', 'refused: insecure rosbridge URL');
 } else {
-  turtle.connect();
+  robotLink.connect();
 }
 const stream = await startCamera();
 const link = new RelayLink(room, { log, setup: (peer) => setupPeer(peer, stream) });

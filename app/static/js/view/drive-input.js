@@ -1,7 +1,8 @@
-// The operator's console on the client page (manual override, docs/contracts.md): drive commands
-// from the keyboard, the on-screen joystick and a gamepad, sent to the relay, which forwards them
-// to the vehicle. A held key, pad or stick resends its command every `repeatS` (the vehicle's
-// dead-man stops the turtle when they stop coming); letting go sends one zero command at once.
+// The operator's console on the client page (docs/architecture.md, "The data path of a drive
+// command"): drive commands from the keyboard, the on-screen joystick and a gamepad, sent to the
+// relay, which forwards them to the vehicle. A held key, pad or stick resends its command every
+// `repeatS` (the vehicle's dead-man stops the turtle when they stop coming); letting go sends one
+// zero command at once.
 import { stickAxis } from '../core/joystick.js';
 
 const KEYS = Object.freeze({

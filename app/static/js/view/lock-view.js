@@ -1,7 +1,8 @@
-// The client page's side of the target lock (DESIGN §10): a click on the video asks the relay
-// to lock on the target there (frame pixels, on the control channel), Unlock releases it, and
-// the relay's lockState messages say how the lock stands. The relay owns the lock (lock.js,
-// snapshot-loop.js); this only asks and shows.
+// The client page's side of the target lock (docs/architecture.md, "Which target"): a click
+// on the video asks the relay to lock on the target at or near it (frame pixels, on the control
+// channel), Unlock releases it, and the relay's lockState messages say how the lock stands and
+// how to release it. The relay owns the lock (lock.js, snapshot-loop.js); this only asks and
+// shows.
 
 /**
  * The frame pixel under client point (clientX, clientY) of an element whose box is `rect` and
@@ -23,9 +24,13 @@ const WORDS = {
   searching: 'locked target lost: searching the whole frame',
 };
 
+// While a lock holds, how to let go of it stays in view.
+const RELEASE = 'Unlock, or a click where there is no face, releases it';
+
 /** Words for a lockState message. */
 export function describeLock({ state, reason }) {
-  return reason ? `${WORDS[state]} (${reason})` : WORDS[state];
+  const words = reason ? `${WORDS[state]} (${reason})` : WORDS[state];
+  return state === 'none' ? words : `${words}; ${RELEASE}`;
 }
 
 /** Wires the video stage and the Unlock button to the relay, and shows the lock's state. */

@@ -1,4 +1,5 @@
 // Small DOM helpers shared by the role pages: the log, text fields, the overlay.
+import { shownBoxes } from '../core/shown-boxes.js';
 
 /** The element with `data-testid=id` (throws if the template lacks it: a bug, not bad input). */
 export function byTestId(id) {
@@ -88,10 +89,19 @@ export function throttle(periodMs, fn) {
   };
 }
 
+// How each kind of box (core/shown-boxes.js) is drawn: what the autopilot follows stands out,
+// the other boxes a click may lock are drawn faintly.
+const BOX_STYLES = {
+  tracked: { colour: '#39ff88', width: 3, dash: [], alpha: 1, label: null },
+  locked: { colour: '#ffd23f', width: 5, dash: [], alpha: 1, label: 'locked' },
+  candidate: { colour: '#39ff88', width: 1.5, dash: [6, 4], alpha: 0.55, label: null },
+};
+
 /**
- * Draw detection boxes, the locked target's box (`locked`, in its own colour) and the target on
- * the canvas laid over a video. Boxes are in the detection frame's pixels (`w` × `h`); the canvas
- * covers the <video>, whose picture is letterboxed (object-fit: contain).
+ * Draw a detections message's boxes, each by its kind (shownBoxes: the tracked or locked target,
+ * and the candidates a click may lock), and the target on the canvas laid over a video; returns
+ * the boxes drawn. Boxes are in the detection frame's pixels (`w` × `h`); the canvas covers the
+ * <video>, whose picture is letterboxed (object-fit: contain).
  */
 export function drawDetections(canvas, detections) {
   const rect = canvas.getBoundingClientRect();
@@ -103,28 +113,27 @@ export function drawDetections(canvas, detections) {
   if (canvas.height !== height) canvas.height = height;
   const ctx = canvas.getContext('2d');
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  if (detections === null || !detections.w || !detections.h) return;
+  if (detections === null || !detections.w || !detections.h) return [];
   const scale = Math.min(canvas.width / detections.w, canvas.height / detections.h);
   const ox = (canvas.width - detections.w * scale) / 2;
   const oy = (canvas.height - detections.h * scale) / 2;
-  ctx.lineWidth = 3 * dpr;
-  ctx.strokeStyle = '#39ff88';
   ctx.font = `${13 * dpr}px system-ui, sans-serif`;
-  ctx.fillStyle = '#39ff88';
-  for (const [x, y, w, h] of detections.boxes || []) {
+  const boxes = shownBoxes(detections);
+  for (const { x, y, w, h, kind } of boxes) {
+    const style = BOX_STYLES[kind];
+    ctx.globalAlpha = style.alpha;
+    ctx.lineWidth = style.width * dpr;
+    ctx.setLineDash(style.dash.map((v) => v * dpr));
+    ctx.strokeStyle = style.colour;
     ctx.strokeRect(ox + x * scale, oy + y * scale, w * scale, h * scale);
+    if (style.label) {
+      ctx.fillStyle = style.colour;
+      ctx.fillText(style.label, ox + x * scale, oy + y * scale - 4 * dpr);
+    }
   }
-  if (detections.locked) {
-    // The locked target (lock.js): thicker, in its own colour, labelled.
-    const [x, y, w, h] = detections.locked;
-    ctx.lineWidth = 5 * dpr;
-    ctx.strokeStyle = '#ffd23f';
-    ctx.fillStyle = '#ffd23f';
-    ctx.strokeRect(ox + x * scale, oy + y * scale, w * scale, h * scale);
-    ctx.fillText('locked', ox + x * scale, oy + y * scale - 4 * dpr);
-    ctx.lineWidth = 3 * dpr;
-    ctx.fillStyle = '#39ff88';
-  }
+  ctx.globalAlpha = 1;
+  ctx.setLineDash([]);
+  ctx.lineWidth = 3 * dpr;
   if (detections.target) {
     const tx = ox + detections.target.x * scale;
     const ty = oy + detections.target.y * scale;
@@ -137,5 +146,7 @@ export function drawDetections(canvas, detections) {
     ctx.lineTo(tx, ty + r);
     ctx.stroke();
   }
+  ctx.fillStyle = '#39ff88';
   if (detections.op) ctx.fillText(detections.op, ox + 6 * dpr, oy + 16 * dpr);
+  return boxes;
 }

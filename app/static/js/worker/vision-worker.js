@@ -59,8 +59,9 @@ const session = {
   target: null, // the relay's TargetLock (lock.js), followed by the snapshots analysed `at` a time
   lastBoxes: [], // the boxes of the last such snapshot, where a click is looked up
   // Between full scans the tracker searches a window around the target, so the last snapshot's
-  // boxes may lack the one a person clicks: the last full scan's has it.
+  // boxes may lack the one a person clicks: the last full scan's has it (the candidates).
   lastFullScanBoxes: [],
+  lastInstance: null, // the operation instance of the last such snapshot (a click's search)
   frameTag: null, // the imported frame-tag.js (the frame number stamped into its pixels)
   files: [], // cascade files written to the Emscripten FS
   canvas: null,
@@ -165,8 +166,8 @@ const OPENCV_YUV_MATRICES = ['smpte170m', 'bt470bg'];
 
 /**
  * Whether the frame's I420 planes can be copied as they are and converted by OpenCV, part by
- * part: Chromium's own conversion into RGBA costs ~0.8 ms a 640×480 frame however little of it
- * an operation reads, the planes' copy 0.1 ms (docs/bench/relay-cost.md).
+ * part: Chromium's own conversion into RGBA converts the whole frame however little of it an
+ * operation reads, while the planes' copy is a fraction of that (docs/bench/relay-cost.md).
  */
 function convertsInOpenCv(frame) {
   const { format, colorSpace, visibleRect: r } = frame;
@@ -307,21 +308,34 @@ function describe(error) {
 /**
  * Run the operation on the frame: with `track`, its tracker picks a window around the last
  * target (chosen by `choose`) or a full scan (window.js step); with `around` (a full-frame box,
- * parity checks), the window around it alone is searched; otherwise the whole frame.
+ * parity checks), the window around it alone is searched; otherwise the whole frame. A lock
+ * found at full resolution (`query.fine`) is searched for in windows of the full-resolution
+ * frame, and around where it was last seen when the full scan does not find it (lock.js).
+ * Returns {found, scan, fullScan: the boxes of the full scan run, or null}.
  */
-function detectIn(instance, frame, track, around, choose) {
+function detectIn(instance, frame, track, around, choose, query) {
+  const fine = query?.fine === true;
+  let fullScan = null;
   const search = (box) => {
+    const options = { fullResolution: fine && box !== null };
     // Only what the operation reads of the frame is converted (an operation without `reads`
     // reads it all).
-    ensurePixels(frame, instance.op.reads?.(frame.cols, frame.rows, box) ?? null);
-    return instance.op.detect(frame, box);
+    ensurePixels(frame, instance.op.reads?.(frame.cols, frame.rows, box, options) ?? null);
+    const found = instance.op.detect(frame, box, options);
+    if (box === null) fullScan = found.boxes;
+    return found;
   };
+  let outcome;
   if (around != null) {
     if (!instance.windowed) throw new Error('this operation has no windowed search');
-    return { found: search(around), scan: 'window' };
+    outcome = { found: search(around), scan: 'window' };
+  } else if (track) {
+    const keep = fine && instance.windowed ? query.box : null;
+    outcome = session.window.step(instance.tracker, search, choose, keep);
+  } else {
+    outcome = { found: search(null), scan: 'full' };
   }
-  if (track) return session.window.step(instance.tracker, search, choose);
-  return { found: search(null), scan: 'full' };
+  return { ...outcome, fullScan };
 }
 
 async function analyze({
@@ -347,14 +361,14 @@ async function analyze({
   const query = at === null ? null : session.target.query(at);
   // Locked (lock.js): the target is the centre of the box that continues the locked track.
   const choose = session.lock.chooser(query, PROTOCOL.lock);
-  const { found, scan } = detectIn(instance, frame, track, around, choose);
+  const { found, scan, fullScan } = detectIn(instance, frame, track, around, choose, query);
   const { boxes, region = null } = found;
   const locked = query === null ? null : choose(boxes);
   let { target } = found;
   if (query !== null)
     target =
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
-  const lock = at === null ? null : followed(query, locked, boxes, scan, at);
+  const lock = at === null ? null : followed(instance, query, locked, boxes, fullScan, at);
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (frame-tag.js).
   const { decodeFrameTag, tagBlockSize } = session.frameTag;
@@ -374,19 +388,23 @@ async function analyze({
     region,
     locked,
     lock,
+    // The relay's snapshots: the last full scan's boxes, which a click may lock.
+    candidates: at === null ? null : session.lastFullScanBoxes,
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
 }
 
 /**
- * The relay's snapshot at `at` (s) chose `locked` (null: not found) for the lock's `query`:
- * update the lock and keep the boxes a click is looked up in. Returns {state, box, changed: the
- * new state or null, reason: why it changed, or null}.
+ * The relay's snapshot at `at` (s) with `instance` chose `locked` (null: not found) for the
+ * lock's `query`: update the lock and keep the boxes a click is looked up in (`fullScan`: the
+ * boxes of the full scan it ran, or null). Returns {state, box, changed: the new state or null,
+ * reason: why it changed, or null}.
  */
-function followed(query, locked, boxes, scan, at) {
+function followed(instance, query, locked, boxes, fullScan, at) {
+  session.lastInstance = instance;
   session.lastBoxes = boxes;
-  if (scan === 'full') session.lastFullScanBoxes = boxes;
+  if (fullScan !== null) session.lastFullScanBoxes = fullScan;
   const { target } = session;
   const changed = target.update(query, locked, at);
   const reason =
@@ -395,16 +413,31 @@ function followed(query, locked, boxes, scan, at) {
 }
 
 /**
- * A click at (x, y) at time `at` (s): lock on the box there on the last snapshot (or else the
- * last full scan), or release when it hit none. Returns {locked, state, box, reason}.
+ * A click at (x, y) at time `at` (s): lock on the box at or near it among those the operator
+ * saw (the last snapshot's and the last full scan's, lock.js lockable); else search around it
+ * at full resolution in the last snapshot's frame and lock what is found there; else release.
+ * Returns {locked, state, box, reason}.
  */
 function lockAt({ x, y, at }) {
-  const { target, lastBoxes, lastFullScanBoxes } = session;
-  const boxes = session.lock.pick(x, y, lastBoxes) !== null ? lastBoxes : lastFullScanBoxes;
-  const locked = target.lock(x, y, boxes, at);
+  const { target, lastBoxes, lastFullScanBoxes, lastInstance: instance, frame } = session;
+  const boxes = session.lock.lockable(lastBoxes, lastFullScanBoxes);
+  const canSearch = instance !== null && frame !== null && instance.op.searchIn !== undefined;
+  const search = canSearch
+    ? (region) => {
+        const [rx, ry, width, height] = region;
+        ensurePixels(frame, { x: rx, y: ry, width, height });
+        return instance.op.searchIn(frame, region).boxes;
+      }
+    : null;
+  const size = [frame?.cols ?? 0, frame?.rows ?? 0];
+  const how = session.lock.lockAt(target, x, y, boxes, search, ...size, at);
   forgetTargets();
-  const reason = locked ? null : 'the click was on no detection box';
-  return { locked, state: target.state, box: target.box, reason };
+  let reason = null;
+  if (how === 'searched') reason = 'found by a full-resolution search around the click';
+  else if (how === null && canSearch)
+    reason = 'nothing found at or near the click, even at full resolution';
+  else if (how === null) reason = 'the click was on no detection box and near none';
+  return { locked: how !== null, state: target.state, box: target.box, reason };
 }
 
 /** Release the lock, if there is one. Returns {released, state, box}. */

@@ -72,12 +72,13 @@ export function createCascadeOperation(cv, spec, files) {
 
   /**
    * How a search around the full-frame box `around` goes on a width×height frame: the detection
-   * image's size (null: the frame as it is) and its factor, the window in detection-image pixels
-   * (null: nothing to search), the parts window.js sourceRect reduces alone (null: the grid does
-   * not allow it), and `reads`, the part of the frame the search reads (null: all of it).
+   * image's size (null: the frame as it is, always with `fullResolution`) and its factor, the
+   * window in detection-image pixels (null: nothing to search), the parts window.js sourceRect
+   * reduces alone (null: the grid does not allow it), and `reads`, the part of the frame the
+   * search reads (null: all of it).
    */
-  function windowPlan(width, height, around) {
-    const size = reduction(width, height, p.detectWidth);
+  function windowPlan(width, height, around, fullResolution) {
+    const size = fullResolution ? null : reduction(width, height, p.detectWidth);
     const factor = factorOf(width, size);
     const reduced = size ?? { width, height };
     const region = searchRegion(around, factor, reduced.width, reduced.height, p.windowMargin);
@@ -121,13 +122,30 @@ export function createCascadeOperation(cv, spec, files) {
     }
   }
 
+  /**
+   * Every cascade's boxes in `searched` (an image whose pixel (0, 0) is detection-image pixel
+   * (ox, oy)), scaled to full-frame pixels by `factor`, sorted.
+   */
+  function cascades(searched, ox, oy, factor, sizeMin, sizeMax) {
+    const boxes = [];
+    for (const c of classifiers) {
+      c.detectMultiScale(searched, found, p.scaleFactor, p.minNeighbors, 0, sizeMin, sizeMax);
+      for (let i = 0; i < found.size(); i += 1) {
+        const r = found.get(i);
+        boxes.push(scaleBox([r.x + ox, r.y + oy, r.width, r.height], factor));
+      }
+    }
+    return sortBoxes(boxes);
+  }
+
   return {
     /**
      * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point or null, and the window
      * searched (detection-image pixels) or null. `around`: a full-frame box whose window alone
-     * is searched, or null for the whole frame.
+     * is searched, or null for the whole frame; `fullResolution`: that window of the frame as it
+     * is, not of the reduced detection image (a target locked at full resolution, lock.js).
      */
-    detect(rgba, around = null) {
+    detect(rgba, around = null, { fullResolution = false } = {}) {
       let region = null;
       let searched;
       let factor;
@@ -136,7 +154,7 @@ export function createCascadeOperation(cv, spec, files) {
         cv.cvtColor(rgba, gray, cv.COLOR_RGBA2GRAY);
         ({ input: searched, factor } = reduce(cv, gray, small, p.detectWidth));
       } else {
-        const plan = windowPlan(rgba.cols, rgba.rows, around);
+        const plan = windowPlan(rgba.cols, rgba.rows, around, fullResolution);
         ({ factor, region } = plan);
         if (region === null) return { boxes: [], target: null, region };
         const sizes = searchSizes(around, factor, p.windowSizeRatio, p.minSize, p.maxSize);
@@ -144,30 +162,33 @@ export function createCascadeOperation(cv, spec, files) {
         sizeMax = new cv.Size(...sizes.max);
         searched = windowImage(rgba, plan);
       }
-      const boxes = [];
-      const ox = region?.x ?? 0;
-      const oy = region?.y ?? 0;
+      let boxes;
       try {
-        for (const c of classifiers) {
-          c.detectMultiScale(searched, found, p.scaleFactor, p.minNeighbors, 0, sizeMin, sizeMax);
-          for (let i = 0; i < found.size(); i += 1) {
-            const r = found.get(i);
-            boxes.push(scaleBox([r.x + ox, r.y + oy, r.width, r.height], factor));
-          }
-        }
+        boxes = cascades(searched, region?.x ?? 0, region?.y ?? 0, factor, sizeMin, sizeMax);
       } finally {
         if (region !== null) searched.delete();
       }
-      sortBoxes(boxes);
       const searchedBox = region && [region.x, region.y, region.width, region.height];
       return { boxes, target: centreOfLargest(boxes), region: searchedBox };
     },
     /**
-     * The part {x, y, width, height} of a width×height frame that detect(frame, around) reads,
-     * or null for all of it: the worker converts no more of a frame than that (vision-worker.js).
+     * Search `region` ([x, y, w, h], full-frame pixels) at full resolution, for objects of every
+     * size the operation looks for: where a click near no box looks (lock.js clickWindow). The
+     * same boxes as app/vision/reference.py's search on the same pixels.
      */
-    reads(width, height, around = null) {
-      return around === null ? null : windowPlan(width, height, around).reads;
+    searchIn(rgba, region) {
+      const [x, y, width, height] = region;
+      grayOf(rgba, { x, y, width, height });
+      const boxes = cascades(gray, x, y, 1, minSize, maxSize);
+      return { boxes, target: centreOfLargest(boxes), region };
+    },
+    /**
+     * The part {x, y, width, height} of a width×height frame that detect(frame, around,
+     * {fullResolution}) reads, or null for all of it: the worker converts no more of a frame
+     * than that (vision-worker.js).
+     */
+    reads(width, height, around = null, { fullResolution = false } = {}) {
+      return around === null ? null : windowPlan(width, height, around, fullResolution).reads;
     },
     delete() {
       for (const c of classifiers) c.delete();
