@@ -60,6 +60,10 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
             ["camera /cam", "cannot connect to rosbridge at ws://127.0.0.1:9"],
         ),
         (["--camera-compression", "png"], ["--camera-compression", "png"]),
+        (
+            ["--video", "ros", "--rosbridge", "ws://127.0.0.1:9"],
+            ["--video ros", "turtlesim has no camera topic", "--video ros:/camera"],
+        ),
     ],
 )
 def test_vehicle_bad_input(args: list[str], needles: list[str]) -> None:

@@ -30,7 +30,7 @@ from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.metrics import serve_agent_metrics
 from vehicle_agent.rosbridge_client import CBOR, NONE
-from vehicle_agent.roscamera import CameraError, RosCamera, topic_of
+from vehicle_agent.roscamera import CameraError, RosCamera, camera_of
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
@@ -65,8 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="synthetic",
         metavar="SOURCE",
         help="'synthetic' (a moving face with frame tags), 'two-faces' (two faces drifting, to"
-        " try the target lock), a video file (looped), /dev/videoN, or ros:TOPIC (the robot's"
-        " camera topic through --rosbridge: sensor_msgs/CompressedImage or Image)",
+        " try the target lock), a video file (looped), /dev/videoN, ros:TOPIC (the robot's"
+        " camera topic through --rosbridge: sensor_msgs/CompressedImage or Image) or ros (the"
+        " camera topic of the --robot description)",
     )
     parser.add_argument(
         "--size",
@@ -248,16 +249,18 @@ async def _open_video(
     args: argparse.Namespace, events: EventLog, rosbridge_token: str | None
 ) -> MediaStreamTrack:
     """The ``--video`` track; a camera topic is connected to before anything else starts."""
-    topic = topic_of(args.video)
-    if topic is None:
+    found = camera_of(args.video, args.robot)
+    if found is None:
         return open_source(
             args.video, args.size, args.fps, on_frame=events.emit, sweep_s=args.sweep_s
         )
+    topic, described = found
     if not args.rosbridge:
         raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
     camera = RosCamera(
         args.rosbridge,
         topic,
+        described=described,
         size=args.size or VIDEO_SIZE,
         fps=args.fps or VIDEO_FPS,
         token=rosbridge_token,

@@ -48,6 +48,7 @@ from app.protocol.camera import (
     parse,
 )
 from app.protocol.events import CaptureClock, FrameSent
+from app.protocol.robot import Robot
 from app.protocol.ros import DETECT_TIMEOUT_S
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import Backoff
@@ -69,6 +70,8 @@ log = logging.getLogger(__name__)
 
 # The --video prefix of a camera topic: ros:/camera/image/compressed.
 ROS_PREFIX: Final = "ros:"
+# ``--video ros``: the camera topic the robot's description names.
+ROS_SOURCE: Final = "ros"
 # With no new picture for this long the camera is silent: "no camera" frames from then on. Half
 # a second is 15 frames of a 30 fps camera, and well inside the default goal timeout, so a
 # vehicle whose camera stops stops soon after.
@@ -86,6 +89,27 @@ T = TypeVar("T")
 
 class CameraError(VideoSourceError):
     """The camera topic cannot be used: unreachable rosbridge, a type that is no image."""
+
+
+def camera_of(source: str, robot: Robot) -> tuple[str, CameraType | None] | None:
+    """The camera topic of a ``--video`` value, and its type where ``robot``'s description
+    names it; None for a source that is not a ROS topic.
+
+    ``ros:TOPIC`` names the topic; a bare ``ros`` is the camera ``robot`` describes. The
+    description's type goes with its own topic only (any other topic's type is learnt from
+    rosapi or its name)."""
+    if source == ROS_SOURCE:
+        if robot.camera is None:
+            raise CameraError(
+                f"--video ros: the robot {robot.name} has no camera topic in its description; "
+                "name one: --video ros:/camera/image_raw/compressed"
+            )
+        return robot.camera.topic, robot.camera.type
+    topic = topic_of(source)
+    if topic is None:
+        return None
+    described = robot.camera.type if robot.camera and robot.camera.topic == topic else None
+    return topic, described
 
 
 def topic_of(source: str) -> str | None:

@@ -29,7 +29,7 @@ from pydantic import (
 )
 
 from app.protocol.errors import describe
-from app.protocol.ros import RosFlavour, type_name
+from app.protocol.ros import RosFlavour, canonical
 
 CameraType = Literal["sensor_msgs/CompressedImage", "sensor_msgs/Image"]
 CAMERA_TYPES: Final[tuple[CameraType, ...]] = get_args(CameraType)
@@ -41,18 +41,10 @@ COMPRESSED_SUFFIX: Final = "/compressed"
 UInt32 = Annotated[int, Field(ge=0, le=2**32 - 1)]
 
 
-def short_type(reported: str) -> str:
-    """``package/Name`` for a type spelled either way (ROS 2's ``package/msg/Name`` too)."""
-    parts = reported.split("/")
-    if len(parts) == 3 and parts[1] == "msg":
-        return f"{parts[0]}/{parts[2]}"
-    return reported
-
-
 def camera_type(reported: str) -> CameraType | None:
     """The camera type ``reported`` names (rosapi's ``topic_type`` answer, in either spelling);
     None for any other type."""
-    short = short_type(reported)
+    short = canonical(reported)
     for known in CAMERA_TYPES:
         if short == known:
             return known
@@ -177,12 +169,6 @@ MODELS: Final[dict[CameraType, type[CompressedImage] | type[Image]]] = {
     COMPRESSED_IMAGE: CompressedImage,
     IMAGE: Image,
 }
-
-
-def type_spelled(kind: CameraType, flavour: RosFlavour) -> str:
-    """How a rosbridge of ``flavour`` names ``kind`` (``sensor_msgs/msg/Image`` in ROS 2)."""
-    package, name = kind.split("/")
-    return type_name(flavour, package, "msg", name)
 
 
 def wire(image: CameraImage, flavour: RosFlavour) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 
 from app.protocol import frametag
 from app.protocol.events import FrameSent
+from app.protocol.robot import PRESETS
 from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec
@@ -32,6 +33,7 @@ from vehicle_agent.roscamera import (
     LatestSlot,
     RosCamera,
     blank_frame,
+    camera_of,
     capture_time,
     topic_of,
 )
@@ -72,6 +74,24 @@ def test_video_values_naming_a_topic() -> None:
     assert topic_of("/dev/video0") is None
     with pytest.raises(CameraError, match="names no topic"):
         topic_of("ros:/")
+
+
+def test_a_bare_ros_is_the_camera_of_the_robots_description() -> None:
+    burger = PRESETS["turtlebot3"]
+    assert camera_of("ros", burger) == (
+        "/camera/image_raw/compressed",
+        "sensor_msgs/CompressedImage",
+    )
+    # The description's type goes with its own topic; another topic's is learnt elsewhere.
+    assert camera_of("ros:/camera/image_raw/compressed", burger) == (
+        "/camera/image_raw/compressed",
+        "sensor_msgs/CompressedImage",
+    )
+    assert camera_of("ros:/camera/image_raw", burger) == ("/camera/image_raw", None)
+    assert camera_of("synthetic", burger) is None
+    # A turtlesim has no camera topic: a bare ros says so, and how to name one.
+    with pytest.raises(CameraError, match="turtlesim has no camera topic.*--video ros:/camera"):
+        camera_of("ros", PRESETS["turtlesim"])
 
 
 def test_the_no_camera_frame_gives_no_operation_a_target() -> None:
