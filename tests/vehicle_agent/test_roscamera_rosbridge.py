@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -164,10 +165,19 @@ def newest(track: RosCamera) -> int | None:
     return int(waiting.msg["header"]["frame_id"].removeprefix("n"))
 
 
-@pytest.mark.parametrize("problem", ["encoding", "truncated", "sizes"])
+# What the agent's log says of each sort of bad picture.
+SAYS = {
+    "encoding": "encoding 'yuv422' is not one the agent reads",
+    "sizes": "data holds 36864 bytes, not height x step = 97 x 384",
+    "truncated": "truncated or corrupt",
+}
+
+
+@pytest.mark.parametrize("problem", list(SAYS))
 async def test_bad_pictures_through_the_server_are_skipped_and_the_next_good_one_shows(
-    server: RunningServer, ros: roslibpy.Ros, problem: str
+    server: RunningServer, ros: roslibpy.Ros, problem: str, caplog: pytest.LogCaptureFixture
 ) -> None:
+    caplog.set_level(logging.WARNING, logger="vehicle_agent.roscamera")
     topic = f"/camera/bad_{problem}"
     kind = "sensor_msgs/CompressedImage" if problem == "truncated" else "sensor_msgs/Image"
     publisher = advertise(ros, topic, kind)
@@ -184,6 +194,8 @@ async def test_bad_pictures_through_the_server_are_skipped_and_the_next_good_one
         publish(publisher, bad)
         await picture(track, 1)
         assert sum(track.problems.values()) == 1 and track.pictures == 0
+        (said,) = [r.message for r in caplog.records if "skipped a message" in r.message]
+        assert said.startswith(f"camera {topic}: skipped a message: ") and SAYS[problem] in said
         publish(publisher, good)
         frame = await picture(track, 2)
         source = (128, 96) if problem != "truncated" else (320, 240)
@@ -257,3 +269,23 @@ async def test_the_cameras_connection_outlives_its_token_by_renewing_with_the_ag
         with contextlib.suppress(asyncio.CancelledError):
             await task
         vehicle.close()
+
+
+async def test_a_message_not_of_the_topics_type_never_leaves_the_server(
+    server: RunningServer, ros: roslibpy.Ros
+) -> None:
+    """The server checks each image against its topic's type (the publisher is told why, when
+    it listens for statuses): the agent never sees it, and the next good one comes on."""
+    topic = "/camera/checked"
+    publisher = advertise(ros, topic, "sensor_msgs/msg/Image")
+    good = raw(pattern(128, 96, 55), "rgb8", time.time())
+    async with camera(rosbridge_url(server), topic) as track:
+        sent = as_json(good)
+        for bad in ({"height": "ninety-six"}, {"data": "@@ not base64 @@"}, {"colour": "red"}):
+            publisher.publish(roslibpy.Message({**sent, **bad}))
+        publish(publisher, good)
+        frame = await picture(track, 1)
+        assert read_back(frame, (128, 96))[0] == 55
+        await asyncio.sleep(0.3)
+        assert (track.slot.received, sum(track.problems.values())) == (1, 0)
+    publisher.unadvertise()
