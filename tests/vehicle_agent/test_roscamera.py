@@ -8,6 +8,7 @@ types, is tests/vehicle_agent/test_roscamera_rosbridge.py.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import logging
 import time
@@ -234,6 +235,41 @@ async def test_a_camera_slower_than_the_track_has_its_newest_picture_sent_again(
         assert len({e.t for e in sent}) == 1
         assert camera.pictures == 1
     finally:
+        await camera.close()
+
+
+async def test_a_camera_faster_than_the_track_is_paced_to_its_frame_rate_newest_first(
+    stub: StubRosbridge,
+) -> None:
+    """A camera flooding the topic does not speed the video up: frames go out at ``fps``, their
+    timestamps 1/fps apart, each with the newest picture there was."""
+    camera = RosCamera(stub.url, TOPIC, fps=10)
+    await camera.start()
+    await eventually(lambda: bool(stub.subscribes), 5, "the subscription")
+    flooding = True
+
+    async def flood() -> None:
+        number = 0
+        while flooding:
+            number += 1
+            await stub.publish(jpeg_msg(number % 256))
+            await asyncio.sleep(0.005)
+
+    task = asyncio.create_task(flood())
+    try:
+        await eventually(lambda: camera.slot.received > 0, 5, "the first picture")
+        begun = time.monotonic()
+        frames = [await camera.recv() for _ in range(6)]
+        elapsed = time.monotonic() - begun
+        # Six frames at 10 fps: five periods of 0.1 s at least, however fast pictures came.
+        assert elapsed >= 0.5 - 0.01
+        periods = {b.pts - a.pts for a, b in itertools.pairwise(frames)}
+        assert periods == {9000}  # 1/10 s at the video's 90 kHz clock
+        assert camera.slot.received > camera.pictures  # pictures came faster than frames ...
+        assert camera.slot.dropped >= 1  # ... and the older ones waiting were dropped
+    finally:
+        flooding = False
+        await task
         await camera.close()
 
 
