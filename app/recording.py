@@ -7,22 +7,35 @@ the camera on :data:`IMAGE_TOPIC`, each channel with a JSON Schema that Foxglove
 read natively; an event's schema is derived from its dataclass (:func:`json_schema`) and its
 message is its record without ``ev`` (the topic names the kind). ``autopilot replay``
 (``app/tools/replay.py``) reads the files back here (:func:`messages`, :func:`events`,
-:func:`summary`), without the recorder's media stack.
+:func:`images`, :func:`summary`), without the recorder's media stack.
+
+A file is read as damaged files must be (docs/recording.md): record by record from its start,
+each length checked against what is left, each chunk's expansion bounded and its checksum
+checked, so that whatever a file says it cannot make the reader hold more than a fixed multiple
+of its size; anything wrong is a :class:`RecordingError` naming the file, the byte offset and the
+channel. A file cut off (:class:`CutOff`) reads up to its cut.
 """
 
 from __future__ import annotations
 
+import base64
 import dataclasses
+import io
 import json
+import struct
 import types
 import typing
-from collections.abc import Iterator, Sequence
+import zlib
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, Literal
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import EndOfFile, McapError
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Message, Schema
 
 from app.protocol import events as ev
 from app.protocol.events import AnyEvent, Event
@@ -109,53 +122,309 @@ def message(event: Event) -> dict[str, Any]:
     return fields
 
 
-def messages(paths: Sequence[Path]) -> Iterator[tuple[str, int, dict[str, Any]]]:
-    """Every message of the files in log-time order per file: (topic, log time ns, fields)."""
-    for path in paths:
-        with path.open("rb") as stream:
-            for _, channel, found in make_reader(stream).iter_messages(log_time_order=True):
-                yield channel.topic, found.log_time, json.loads(found.data)
+class RecordingError(ValueError):
+    """A flight recording that cannot be read, in one line: the file, the byte offset (of the
+    record, or of the chunk a message is in) and the channel where there is one."""
 
 
-def events(paths: Sequence[Path]) -> Iterator[tuple[int, AnyEvent]]:
-    """Every recorded event of the files, typed, with its log time (ns), in log-time order per
-    file; :class:`~app.protocol.events.EventError` on a message that is not its topic's kind."""
-    for path in paths:
-        with path.open("rb") as stream:
-            for _, channel, found in make_reader(stream).iter_messages(log_time_order=True):
-                kind = _KIND_OF_TOPIC.get(channel.topic)
-                if kind is not None:
-                    yield found.log_time, ev.from_fields(kind, found.data)
+class CutOff(RecordingError):
+    """A file that ends before its records do: a run that stopped without finishing it, or a
+    disk that filled. What comes before the cut is whole and reads."""
 
 
-def summary(paths: Sequence[Path]) -> dict[str, Any]:
-    """Channels (topic, schema, messages), duration and size of the files, from their
-    summary sections."""
+# Bounds on what a file may make the reader hold, whatever it says of itself: a chunk expands
+# at most this many times its compressed size, and never beyond the chunk limit. The recorder's
+# chunks with images expand a few times, a still turtle's poses alone far more (their numbers
+# repeat), a zstd bomb of zeros more again by orders of magnitude.
+EXPANSION_LIMIT: Final = 1000
+CHUNK_LIMIT: Final = 64 * 2**20
+_MAGIC: Final = b"\x89MCAP0\r\n"
+_RECORD_HEAD: Final = struct.Struct("<BQ")
+# A JPEG starts with its start-of-image marker and the first marker's prefix.
+_JPEG_START: Final = b"\xff\xd8\xff"
+
+
+@dataclass(frozen=True)
+class _Recorded:
+    """One message as the file holds it: where, on which channel, when, and its bytes."""
+
+    path: Path
+    offset: int
+    topic: str
+    schema: str
+    log_time: int
+    data: bytes
+
+    def where(self) -> str:
+        return f"{self.path}: the message on {self.topic} at byte {self.offset}"
+
+    def fields(self) -> dict[str, Any]:
+        try:
+            found = json.loads(self.data)
+        except (ValueError, RecursionError) as exc:
+            raise RecordingError(f"{self.where()} is not JSON ({_one_line(exc)})") from exc
+        if not isinstance(found, dict):
+            raise RecordingError(f"{self.where()} is not a JSON object")
+        return found
+
+
+def messages(
+    paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None
+) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """Every message of the files, in the order written: (topic, log time ns, fields).
+    :class:`RecordingError` on a damaged file; a file cut off (:class:`CutOff`) goes to
+    ``on_cut_off`` after its whole records, or is raised without it."""
+    for found in _scan(paths, on_cut_off):
+        yield found.topic, found.log_time, found.fields()
+
+
+def events(
+    paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None
+) -> Iterator[tuple[int, AnyEvent]]:
+    """Every recorded event of the files, typed, with its log time (ns), in the order written;
+    :class:`RecordingError` on a message that is not its topic's kind (and as
+    :func:`messages`)."""
+    for found in _scan(paths, on_cut_off):
+        kind = _KIND_OF_TOPIC.get(found.topic)
+        if kind is not None:
+            found.fields()  # JSON that is not an object is named as such
+            try:
+                event = ev.from_fields(kind, found.data)
+            except ev.EventError as exc:
+                raise RecordingError(f"{found.where()}: {_one_line(exc)}") from exc
+            yield found.log_time, event
+
+
+def images(
+    paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None
+) -> Iterator[tuple[int | None, bytes]]:
+    """Every camera image of the files, in the order written: its frame tag (None: untagged)
+    and its JPEG bytes; :class:`RecordingError` on an image that is not a tagged JPEG (and as
+    :func:`messages`)."""
+    for found in _scan(paths, on_cut_off):
+        if found.topic != IMAGE_TOPIC:
+            continue
+        fields = found.fields()
+        frame, data = fields.get("frame"), fields.get("data")
+        if frame is not None and (not isinstance(frame, int) or isinstance(frame, bool)):
+            raise RecordingError(f"{found.where()} has a frame tag that is not an integer")
+        if fields.get("format") != "jpeg" or not isinstance(data, str):
+            raise RecordingError(f"{found.where()} is not a JPEG image")
+        try:
+            jpeg = base64.b64decode(data, validate=True)
+        except ValueError as exc:
+            raise RecordingError(f"{found.where()} has data that is not base64") from exc
+        if not jpeg.startswith(_JPEG_START):
+            raise RecordingError(f"{found.where()} has data that is not a JPEG")
+        yield frame, jpeg
+
+
+def summary(
+    paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None
+) -> dict[str, Any]:
+    """Channels (topic, schema, messages), duration and size of the files, from their messages
+    (a file cut off has no summary section, and a damaged one may say anything in it)."""
     found_channels: dict[str, dict[str, Any]] = {}
-    start, end, size = None, None, 0
-    for path in paths:
-        size += path.stat().st_size
-        with path.open("rb") as stream:
-            found = make_reader(stream).get_summary()
-        if found is None or found.statistics is None:
-            raise McapError(f"{path} has no summary (a recording cut off before it was finished)")
-        stats = found.statistics
-        for channel_id, channel in found.channels.items():
-            entry = found_channels.setdefault(
-                channel.topic,
-                {"schema": found.schemas[channel.schema_id].name, "messages": 0},
-            )
-            entry["messages"] += stats.channel_message_counts.get(channel_id, 0)
-        if stats.message_count:
-            start = min(start or stats.message_start_time, stats.message_start_time)
-            end = max(end or stats.message_end_time, stats.message_end_time)
+    start, end = None, None
+    for found in _scan(paths, on_cut_off):
+        entry = found_channels.setdefault(found.topic, {"schema": found.schema, "messages": 0})
+        entry["messages"] += 1
+        start = found.log_time if start is None else min(start, found.log_time)
+        end = found.log_time if end is None else max(end, found.log_time)
     duration = 0.0 if start is None or end is None else (end - start) / 1e9
     return {
         "files": len(paths),
-        "bytes": size,
+        "bytes": sum(path.stat().st_size for path in paths),
         "duration_s": round(duration, 3),
         "channels": found_channels,
     }
+
+
+def _scan(
+    paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None
+) -> Iterator[_Recorded]:
+    for path in paths:
+        try:
+            yield from _scan_file(path)
+        except CutOff as cut:
+            if on_cut_off is None:
+                raise
+            on_cut_off(cut)
+        except OSError as exc:
+            raise RecordingError(f"{path}: {exc.strerror or exc}") from exc
+
+
+def _scan_file(path: Path) -> Iterator[_Recorded]:
+    """The messages of one file's data section, read record by record (not through its
+    summary section or indexes, which a cut-off file lacks), every length checked against what
+    remains and every chunk's expansion bounded."""
+    schemas: dict[int, str] = {0: ""}
+    channels: dict[int, tuple[str, int]] = {}
+    for offset, opcode, body in _records(path):
+        where = f"{path}: the {_opcode_name(opcode)} record at byte {offset}"
+        try:
+            if opcode == Opcode.CHUNK:
+                chunk = Chunk.read(_Exact(body))
+                inner = _records_of(_chunk_data(chunk, where), f"{where}, in its data")
+                for _, inner_opcode, inner_body in inner:
+                    found = _read(inner_opcode, inner_body, schemas, channels)
+                    if found is not None:
+                        yield _recorded(path, offset, found, schemas, channels)
+            else:
+                found = _read(opcode, body, schemas, channels)
+                if found is not None:
+                    yield _recorded(path, offset, found, schemas, channels)
+        except (McapError, struct.error, UnicodeDecodeError) as exc:
+            raise RecordingError(f"{where} is damaged ({_one_line(exc) or 'too short'})") from exc
+        except _Unknown as exc:
+            raise RecordingError(f"{where} {exc}") from exc
+
+
+class _Unknown(Exception):
+    """A message on a channel the file never defined (or a channel on an unknown schema)."""
+
+
+def _read(
+    opcode: int, body: bytes, schemas: dict[int, str], channels: dict[int, tuple[str, int]]
+) -> Message | None:
+    """A message record read; a schema or channel record noted; any other record skipped."""
+    if opcode == Opcode.SCHEMA:
+        schema = Schema.read(_Exact(body))
+        schemas[schema.id] = schema.name
+    elif opcode == Opcode.CHANNEL:
+        channel = Channel.read(_Exact(body))
+        channels[channel.id] = (channel.topic, channel.schema_id)
+    elif opcode == Opcode.MESSAGE:
+        found: Message = Message.read(_Exact(body), len(body))
+        return found
+    return None
+
+
+def _recorded(
+    path: Path,
+    offset: int,
+    found: Message,
+    schemas: dict[int, str],
+    channels: dict[int, tuple[str, int]],
+) -> _Recorded:
+    if found.channel_id not in channels:
+        raise _Unknown(f"has a message on channel {found.channel_id}, which is not defined")
+    topic, schema_id = channels[found.channel_id]
+    if schema_id not in schemas:
+        raise _Unknown(f"has a message on {topic}, whose schema {schema_id} is not defined")
+    return _Recorded(path, offset, topic, schemas[schema_id], found.log_time, found.data)
+
+
+def _records(path: Path) -> Iterator[tuple[int, int, bytes]]:
+    """(offset, opcode, body) of each record of the file's data section. A record that runs
+    past the end is a cut (:class:`CutOff`) in a file that was never finished, and damage in
+    one that was (it ends with the magic)."""
+    size = path.stat().st_size
+    with path.open("rb") as stream:
+        magic = stream.read(len(_MAGIC))
+        if magic != _MAGIC:
+            what = "empty" if not magic else f"not an MCAP file (it starts {magic!r})"
+            raise RecordingError(f"{path} is {what}")
+        stream.seek(max(size - len(_MAGIC), len(_MAGIC)))
+        overrun = RecordingError if stream.read() == _MAGIC else CutOff
+        stream.seek(len(_MAGIC))
+        offset = len(_MAGIC)
+        while True:
+            head = stream.read(_RECORD_HEAD.size)
+            if len(head) < _RECORD_HEAD.size:
+                raise overrun(f"{path} is cut off at byte {offset}: the rest is missing")
+            opcode, length = _RECORD_HEAD.unpack(head)
+            remaining = size - offset - _RECORD_HEAD.size
+            if length > remaining:
+                problem = "is cut off" if overrun is CutOff else "is damaged"
+                raise overrun(
+                    f"{path} {problem} at byte {offset}: its {_opcode_name(opcode)} record "
+                    f"says {length} bytes, {remaining} remain"
+                )
+            yield offset, opcode, stream.read(length)
+            if opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                return  # the summary section after it says nothing the messages do not
+            offset += _RECORD_HEAD.size + length
+
+
+def _records_of(data: bytes, where: str) -> Iterator[tuple[int, int, bytes]]:
+    """(offset, opcode, body) of each record of a chunk's data."""
+    offset = 0
+    while offset < len(data):
+        if len(data) - offset < _RECORD_HEAD.size:
+            raise RecordingError(f"{where}: a record cut off at byte {offset}")
+        opcode, length = _RECORD_HEAD.unpack_from(data, offset)
+        start = offset + _RECORD_HEAD.size
+        if length > len(data) - start:
+            raise RecordingError(f"{where}: a record at byte {offset} longer than the chunk")
+        yield offset, opcode, data[start : start + length]
+        offset = start + length
+
+
+def _chunk_data(chunk: Chunk, where: str) -> bytes:
+    """A chunk's records, decompressed no further than it may expand and checked."""
+    limit = min(CHUNK_LIMIT, EXPANSION_LIMIT * max(len(chunk.data), 1))
+    if chunk.uncompressed_size > limit:
+        raise RecordingError(
+            f"{where} says it holds {chunk.uncompressed_size} bytes in {len(chunk.data)}: more "
+            f"than a recording's chunk may ({limit})"
+        )
+    if chunk.compression == "zstd":
+        try:
+            # Read no further than the size the chunk says: a frame that holds more is refused
+            # below, without ever being held whole.
+            data = _decompress(chunk.data, chunk.uncompressed_size + 1)
+        except zstandard.ZstdError as exc:
+            raise RecordingError(f"{where} does not decompress ({_one_line(exc)})") from exc
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        raise RecordingError(f"{where} is compressed with {chunk.compression!r}, not zstd")
+    if len(data) != chunk.uncompressed_size:
+        raise RecordingError(
+            f"{where} says it holds {chunk.uncompressed_size} bytes, not the "
+            f"{'more' if len(data) > chunk.uncompressed_size else len(data)} it does"
+        )
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise RecordingError(f"{where} is damaged (its checksum does not match)")
+    return data
+
+
+def _decompress(data: bytes, most: int) -> bytes:
+    """At most ``most`` bytes of zstd ``data``, whatever its frame header says."""
+    parts, wanted = [], most
+    with zstandard.ZstdDecompressor().stream_reader(data) as reader:
+        while wanted > 0:
+            part = reader.read(wanted)
+            if not part:
+                break
+            parts.append(part)
+            wanted -= len(part)
+    return b"".join(parts)
+
+
+class _Exact(ReadDataStream):
+    """A record's body: reading past its end is an error, not a short read."""
+
+    def __init__(self, body: bytes) -> None:
+        super().__init__(io.BytesIO(body))
+
+    def read(self, length: int) -> bytes:
+        data = super().read(length)
+        if len(data) != length:
+            raise EndOfFile(f"{length} bytes wanted, {len(data)} left")
+        return data
+
+
+def _opcode_name(opcode: int) -> str:
+    try:
+        return Opcode(opcode).name.lower().replace("_", " ")
+    except ValueError:
+        return f"unknown (opcode {opcode:#x})"
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 _JSON_TYPES: Final[dict[type, str]] = {

@@ -12,6 +12,9 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+import shutil
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -80,3 +83,48 @@ def test_opencv_is_one_version_on_both_sides() -> None:
     assert sdist_sha256 in built[0]["source"]
     constraints = (REPO / "constraints.txt").read_text().splitlines()
     assert f"opencv-python-headless=={pin}" in constraints
+
+
+def test_the_simd_build_records_each_patch_build_opencv_js_applies() -> None:
+    """scripts/build-opencv-js applies every scripts/opencv-js-patches/*.patch; a patch changed
+    or added without a rebuild (and its record) fails here."""
+    (entry,) = [e for e in vendored()["files"] if e["path"] == "app/static/opencv-simd.js"]
+    patches = sorted((REPO / "scripts/opencv-js-patches").glob("*.patch"))
+    assert patches
+    assert [p["path"] for p in entry["patches"]] == [str(p.relative_to(REPO)) for p in patches]
+    for recorded, patch in zip(entry["patches"], patches, strict=True):
+        assert hashlib.sha256(patch.read_bytes()).hexdigest() == recorded["sha256"]
+
+
+def test_record_simd_writes_the_builds_provenance_and_keeps_the_rest(tmp_path: Path) -> None:
+    """`scripts/vendor record-simd`, as scripts/build-opencv-js calls it, in a copy of the
+    repository's pins and record: the built file's sha256, the sdist it came from and each
+    patch with its sha256; the npm entries left as they were."""
+    (tmp_path / "scripts/opencv-js-patches").mkdir(parents=True)
+    (tmp_path / "app/static").mkdir(parents=True)
+    shutil.copy(REPO / "scripts/vendor", tmp_path / "scripts/vendor")
+    shutil.copy(REPO / "pyproject.toml", tmp_path / "pyproject.toml")
+    shutil.copy(STATIC / "VENDORED.json", tmp_path / "app/static/VENDORED.json")
+    (tmp_path / "app/static/opencv-simd.js").write_bytes(b"built")
+    patch = tmp_path / "scripts/opencv-js-patches/a.patch"
+    patch.write_bytes(b"--- a\n+++ b\n")
+    argv = [sys.executable, "scripts/vendor", "record-simd", "app/static/opencv-simd.js", "emcc 9"]
+    argv.append("scripts/opencv-js-patches/a.patch")
+    done = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    written = json.loads((tmp_path / "app/static/VENDORED.json").read_text())
+    assert written["written_by"] == "scripts/vendor"
+    by_path = {entry["path"]: entry for entry in written["files"]}
+    simd = by_path.pop("app/static/opencv-simd.js")
+    assert simd["sha256"] == hashlib.sha256(b"built").hexdigest()
+    assert simd["package"] == "opencv-python-headless" and simd["version"] == opencv_pin()
+    assert pyproject()["tool"]["autopilot"]["vendor"]["opencv-sdist-sha256"] in simd["source"]
+    assert simd["toolchain"] == "emcc 9"
+    assert simd["patches"] == [
+        {
+            "path": "scripts/opencv-js-patches/a.patch",
+            "sha256": hashlib.sha256(b"--- a\n+++ b\n").hexdigest(),
+        }
+    ]
+    kept = {e["path"]: e for e in vendored()["files"] if e["path"] != "app/static/opencv-simd.js"}
+    assert by_path == kept

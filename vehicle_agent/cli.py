@@ -173,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         return asyncio.run(_main(args))
-    except (SignalingError, TurtleError, VideoSourceError, OSError) as exc:
+    except (SignalingError, TurtleError, VideoSourceError, recorder.RecorderError, OSError) as exc:
         log.error("%s", exc)
         return 1
 
@@ -182,62 +182,52 @@ async def _main(args: argparse.Namespace) -> int:
     ws_url(args.server)  # a malformed URL is reported before anything starts
     robot = args.robot
     events = EventLog(args.events)
+    record = recorder.settings_from(args, args.room)
+    # A folder that cannot be written is said now, not at the first write.
+    flight = None if record is None else recorder.FlightRecorder(record)
     # The token goes only to the server's own /rosbridge.
     rosbridge_token = (
         args.token if args.rosbridge and same_server(args.server, args.rosbridge) else None
     )
-    video = await _open_video(args, events, rosbridge_token)
-    turtle: Turtle = SimTurtle()
-    if args.rosbridge:
-        turtle = RosbridgeTurtle(
-            args.rosbridge, args.ros, robot, token=rosbridge_token, ca_file=args.ca_file
-        )
-    config = AgentConfig(
-        server=args.server,
-        room=args.room,
-        name=args.name,
-        profile=args.profile,
-        goal_timeout_s=args.goal_timeout,
-        standoff_m=args.standoff,
-        spawn_step=args.spawn_step,
-        robot=robot,
-        ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
-        token=args.token,
-        tls=tls_context(args.ca_file),
-    )
-    record = recorder.settings_from(args, args.room)
-    flight = None if record is None else recorder.FlightRecorder(record)
-    agent = Agent(config, video, turtle, events)
-    if isinstance(video, RosCamera):
-        agent.token_renewed.append(video.renew)
     camera = None
-    if flight is not None:
-        events.listeners.append(flight.on_event)
-        camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
-    metrics = serve_agent_metrics(args, events)
-    task = asyncio.create_task(agent.run())
-    on_stop_signals(task.cancel)
+    metrics = None
     try:
+        video = await _open_video(args, events, rosbridge_token)
+        turtle: Turtle = SimTurtle()
+        if args.rosbridge:
+            turtle = RosbridgeTurtle(
+                args.rosbridge, args.ros, robot, token=rosbridge_token, ca_file=args.ca_file
+            )
+        config = AgentConfig(
+            server=args.server,
+            room=args.room,
+            name=args.name,
+            profile=args.profile,
+            goal_timeout_s=args.goal_timeout,
+            standoff_m=args.standoff,
+            spawn_step=args.spawn_step,
+            robot=robot,
+            ice_servers=[RTCIceServer(urls=url) for url in args.ice_server],
+            token=args.token,
+            tls=tls_context(args.ca_file),
+        )
+        agent = Agent(config, video, turtle, events)
+        if isinstance(video, RosCamera):
+            agent.token_renewed.append(video.renew)
+        if flight is not None:
+            events.listeners.append(flight.on_event)
+            camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
+        metrics = serve_agent_metrics(args, events)
+        task = asyncio.create_task(agent.run())
+        on_stop_signals(task.cancel)
         with contextlib.suppress(asyncio.CancelledError):
             await task
     finally:
-        if flight is not None and camera is not None:
+        if camera is not None:
             camera.cancel()
-            await flight.close()
-            totals = flight.totals()
-            log.info(
-                "flight recorder: %d images, %d messages (%d dropped) in %d file(s), %d of %d "
-                "camera frames held; its CPU %.2f s over %.0f s",
-                totals.images,
-                totals.messages,
-                totals.dropped,
-                totals.files,
-                totals.frames_held,
-                totals.frames,
-                totals.cpu_s,
-                totals.seconds,
-            )
-            events.emit(totals)
+        if flight is not None:
+            # Also when setting up failed: the recorder's writer thread would keep the process.
+            await _close_recorder(flight, events)
         events.close()
         if metrics is not None:
             metrics.close()
@@ -270,3 +260,22 @@ async def _open_video(
     )
     await camera.start()
     return camera
+
+
+async def _close_recorder(flight: recorder.FlightRecorder, events: EventLog) -> None:
+    """Finish the recording, and log and record what it held and cost."""
+    await flight.close()
+    totals = flight.totals()
+    log.info(
+        "flight recorder: %d images, %d messages (%d dropped) in %d file(s), %d of %d "
+        "camera frames held; its CPU %.2f s over %.0f s",
+        totals.images,
+        totals.messages,
+        totals.dropped,
+        totals.files,
+        totals.frames_held,
+        totals.frames,
+        totals.cpu_s,
+        totals.seconds,
+    )
+    events.emit(totals)

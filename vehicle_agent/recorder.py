@@ -27,6 +27,12 @@ drains the queue once a second, JPEG-encodes and writes. A full queue drops the 
 or the recorder's ``clock``), taken when the event happened. Files roll over by size and age, and
 only the newest ``max_files`` are kept, so a day's run cannot fill the disk unnoticed.
 
+A disk that refuses must not stop the vehicle: the first file is opened when the recorder starts,
+so that a folder it cannot write is said then (:class:`RecorderError`); a write refused later
+(a full disk) is one warning, the file is left as far as it got (its whole chunks read back,
+``app/recording.py``), what comes meanwhile is dropped and counted, and each drain tries a new
+file until the disk takes one.
+
 The recorder counts its own CPU time, the loop's share and the writer thread's
 (:meth:`FlightRecorder.totals`), so that what it costs the agent is measured directly, not only
 as the difference between two runs of a noisy machine (``autopilot bench --recorder``).
@@ -38,6 +44,7 @@ import argparse
 import asyncio
 import base64
 import collections
+import contextlib
 import json
 import logging
 import threading
@@ -95,6 +102,12 @@ class RecordSettings:
     max_mb: float = 100.0
     max_minutes: float = 60.0
     max_files: int = 20
+    # What the writer holds before it writes a chunk: at most what a crash or a full disk loses.
+    chunk_bytes: int = 1024 * 1024
+
+
+class RecorderError(Exception):
+    """The recording's folder cannot be written: said when the recorder starts."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -224,8 +237,8 @@ class FlightRecorder:
 
     def __init__(self, settings: RecordSettings, clock: Callable[[], int] = time.time_ns) -> None:
         """``clock``: wall-clock nanoseconds, the recording's one clock (log times, image
-        timestamps, file names and ages)."""
-        settings.folder.mkdir(parents=True, exist_ok=True)
+        timestamps, file names and ages). :class:`RecorderError` when the folder cannot be
+        written, found by opening the first file."""
         self.settings = settings
         self._clock = clock
         self.files: list[Path] = []
@@ -255,6 +268,18 @@ class FlightRecorder:
         self._kept_ns = 0  # the last image kept: when its frame arrived
         self._frames = 0
         self._frames_held = 0
+        # Set while the disk refuses (the writer thread's own): what is queued is dropped, and a
+        # new file is tried each drain.
+        self._failing = False
+        self._dropped_failing = 0
+        self._fell_behind = False
+        try:
+            settings.folder.mkdir(parents=True, exist_ok=True)
+            self._open(clock())
+        except OSError as exc:
+            raise RecorderError(
+                f"cannot record into {settings.folder}: {exc.strerror or exc}"
+            ) from exc
         self._thread.start()
 
     # --- the agent's side: stamp and queue, never wait --------------------------------------
@@ -324,9 +349,13 @@ class FlightRecorder:
     def _put(
         self, kind: Literal["image", "event"], payload: Any, log_ns: int | None = None
     ) -> None:
+        if not self._thread.is_alive():  # closed, or stopped by a fault it logged
+            self.dropped += 1
+            return
         if len(self._queue) >= QUEUE_LIMIT:
-            if self.dropped == 0:
+            if not self._fell_behind:
                 log.warning("flight recorder falling behind: dropping what it cannot write")
+                self._fell_behind = True
             self.dropped += 1
             return
         self._queue.append((kind, self._clock() if log_ns is None else log_ns, payload))
@@ -363,21 +392,82 @@ class FlightRecorder:
         try:
             while True:
                 stopping = self._stopping.wait(DRAIN_PERIOD_S)
-                while self._queue:
-                    kind, log_ns, payload = self._queue.popleft()
-                    if kind == "image":
-                        self._write(recording.IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
-                        self.images += 1
-                    else:
-                        topic = recording.EVENT_CHANNELS[type(payload)].topic
-                        self._write(topic, log_ns, recording.message(payload))
+                self._drain()
                 self._writer_cpu_s = time.thread_time()
                 if stopping:
                     break
         except Exception:
+            # Not the disk (that is _fail's): a fault of the recorder's own, which must not
+            # stop the vehicle; the recording stops here.
             log.exception("flight recorder stopped")
+            self._failing = True
         finally:
-            self._finish()
+            try:
+                self._finish()
+            except OSError as exc:
+                # Stopping: nothing more will come to drop or to resume for.
+                path = self.files[-1] if self.files else self.settings.folder
+                log.warning(
+                    "flight recorder cannot finish %s (%s); its whole chunks stay readable",
+                    path,
+                    exc.strerror or exc,
+                )
+                self._close_file()
+
+    def _drain(self) -> None:
+        """Write what is queued; while the disk refuses, drop it and try a new file."""
+        if self._failing and not self._resume():
+            self._drop_queued()
+            return
+        while self._queue:
+            kind, log_ns, payload = self._queue.popleft()
+            try:
+                if kind == "image":
+                    self._write(recording.IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
+                    self.images += 1
+                else:
+                    topic = recording.EVENT_CHANNELS[type(payload)].topic
+                    self._write(topic, log_ns, recording.message(payload))
+            except OSError as exc:
+                self.dropped += 1
+                self._fail(exc)
+                self._drop_queued()
+                return
+
+    def _fail(self, exc: OSError) -> None:
+        """The disk refused a write: say so once, leave the file as far as it got (whole
+        chunks read back), and write nothing more until a new file can be opened."""
+        path = self.files[-1] if self.files else self.settings.folder
+        log.warning(
+            "flight recorder cannot write %s (%s): dropping what it records until it can "
+            "write again, then a new file; what the file holds so far stays readable",
+            path,
+            exc.strerror or exc,
+        )
+        self._failing = True
+        self._writer = None  # its unwritten chunk is lost with it
+        self._close_file()
+
+    def _resume(self) -> bool:
+        """A new file, if the disk takes one now."""
+        try:
+            self._open(self._clock())
+        except OSError:
+            return False
+        self._failing = False
+        log.info(
+            "flight recorder writing again, to %s (%d items dropped while it could not)",
+            self.files[-1],
+            self._dropped_failing,
+        )
+        self._dropped_failing = 0
+        return True
+
+    def _drop_queued(self) -> None:
+        while self._queue:
+            self._queue.popleft()
+            self.dropped += 1
+            self._dropped_failing += 1
 
     def _image(self, held: _Held, log_ns: int) -> dict[str, Any]:
         # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
@@ -420,21 +510,33 @@ class FlightRecorder:
         return self._open(now_ns)
 
     def _open(self, now_ns: int) -> Writer:
+        """A new file, its header and schemas written through to the disk, so that a folder
+        or a disk that refuses is found here (the file removed again), not a chunk later."""
         stamp = datetime.fromtimestamp(now_ns / 1e9, UTC).strftime("%Y%m%dT%H%M%S.%fZ")
         room = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.settings.room)
         path = self.settings.folder / f"autopilot-{room}-{stamp}.mcap"
-        self._file = path.open("wb")
-        writer = Writer(self._file, compression=CompressionType.ZSTD)
-        writer.start(profile="", library="webrtc-autopilot flight recorder")
-        self._channels = {}
-        for topic, schema in recording.channels():
-            schema_id = writer.register_schema(
-                name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+        file = path.open("wb")
+        try:
+            writer = Writer(
+                file, chunk_size=self.settings.chunk_bytes, compression=CompressionType.ZSTD
             )
-            self._channels[topic] = writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=schema_id
-            )
-        self._writer = writer
+            writer.start(profile="", library="webrtc-autopilot flight recorder")
+            channels = {}
+            for topic, schema in recording.channels():
+                schema_id = writer.register_schema(
+                    name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+                )
+                channels[topic] = writer.register_channel(
+                    topic=topic, message_encoding="json", schema_id=schema_id
+                )
+            file.flush()
+        except OSError:
+            with contextlib.suppress(OSError):
+                file.close()
+            with contextlib.suppress(OSError):
+                path.unlink()
+            raise
+        self._file, self._writer, self._channels = file, writer, channels
         self._opened_ns = now_ns
         self._bytes = 0
         self.files.append(path)
@@ -450,9 +552,15 @@ class FlightRecorder:
             oldest.unlink(missing_ok=True)
 
     def _finish(self) -> None:
-        if self._writer is not None:
-            self._writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
-            self._writer = None
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        """Write the open file's summary and close it; OSError when the disk refuses."""
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
+        self._close_file()
+
+    def _close_file(self) -> None:
+        file, self._file = self._file, None
+        if file is not None:
+            # What closing flushes may be refused too: the file keeps what the disk took.
+            with contextlib.suppress(OSError):
+                file.close()

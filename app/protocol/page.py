@@ -34,6 +34,7 @@ from app.protocol.control import ControlConfig
 from app.protocol.frametag import LAYOUT, FrameTagLayout
 from app.protocol.link_health import HEALTH, HealthLimits
 from app.protocol.lock import LockRule
+from app.protocol.opencv import RELAY_OPENCV_BUILD, OpenCvBuild
 from app.protocol.robot import Robot, TypeTable, type_table
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import RosConfig, RosSetting
@@ -138,6 +139,8 @@ class PageProtocol:
     frame_tag: FrameTagLayout
     lock: LockRule
     health: HealthLimits
+    # The OpenCV.js build the analyzer loads unless the page's ?opencv= names another.
+    opencv_build: OpenCvBuild
     # schemas[channel label][receiving role]: JSON Schema (draft 2020-12 subset, schema.js).
     schemas: Verbatim
 
@@ -219,5 +222,6 @@ def page_protocol() -> PageProtocol:
         frame_tag=LAYOUT,
         lock=LockRule(),
         health=HEALTH,
+        opencv_build=RELAY_OPENCV_BUILD,
         schemas=Verbatim(channel_schemas()),
     )

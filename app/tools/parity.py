@@ -27,14 +27,15 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any
 
 import cv2
 import numpy as np
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Browser, Page, sync_playwright
 
 from app.arguments import add_relay_profile
 from app.chromium import launch_options
+from app.protocol.opencv import OPENCV_BUILDS, RELAY_OPENCV_BUILD, OpenCvBuild
 from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
@@ -54,9 +55,6 @@ Box = tuple[int, int, int, int]
 # it once per image. Bounded, for a long batch of images.
 _REFERENCES: dict[tuple[str, str, Box | None], Detection] = {}
 _REFERENCES_KEPT = 512
-# Which OpenCV.js the analyzer loads (app/static/js/worker/vision-worker.js).
-OpenCvBuild = Literal["auto", "simd", "official"]
-OPENCV_BUILDS: tuple[OpenCvBuild, ...] = get_args(OpenCvBuild)
 
 
 def iou(a: Sequence[int], b: Sequence[int]) -> float:
@@ -147,11 +145,26 @@ class Harness:
     Use :func:`open_harness`; one harness serves a whole batch of images.
     """
 
-    def __init__(self, page: Page, spec: Spec, build: str) -> None:
+    def __init__(self, page: Page, spec: Spec, server_url: str) -> None:
         self.page = page
         self.spec = spec
         # The OpenCV.js build the page loaded: "simd" or "official".
-        self.build = build
+        self.build: str = page.evaluate("document.body.dataset.opencv")
+        # The server the page came from, for other pages in the same browser.
+        self.server_url = server_url
+
+    @contextmanager
+    def on_build(self, build: OpenCvBuild) -> Iterator[Harness]:
+        """A harness on another parity page in the same browser, with OpenCV.js ``build``;
+        its page is closed afterwards."""
+        browser = self.page.context.browser
+        if browser is None:
+            raise RuntimeError("the parity page has no browser")
+        page = _parity_page(browser, self.server_url, build)
+        try:
+            yield Harness(page, self.spec, self.server_url)
+        finally:
+            page.close()
 
     def run(
         self,
@@ -323,12 +336,30 @@ def _pair(
     )
 
 
+def _parity_page(browser: Browser, server_url: str, build: OpenCvBuild | None) -> Page:
+    """A parity page whose analyzer is ready, on OpenCV.js ``build`` (None: the relay's)."""
+    page = browser.new_page()
+    page.on("console", lambda m: log.debug("page console: %s", m.text))
+    # No ?opencv= on the relay's page either (app.relay.page.relay_url).
+    page.goto(f"{server_url}/parity" + ("" if build is None else f"?opencv={build}"))
+    # A function, not an expression: Playwright evals a bare expression inside the page, which
+    # the page's CSP (no 'unsafe-eval') refuses.
+    page.wait_for_function(
+        "() => document.body.dataset.ready", timeout=READY_TIMEOUT_MS, polling=100
+    )
+    if page.evaluate("document.body.dataset.ready") != "true":
+        state = page.text_content("#state")
+        page.close()
+        raise RuntimeError(f"parity page: {state}")
+    return page
+
+
 @contextmanager
 def open_harness(
-    settings: Settings | None = None, build: OpenCvBuild = "auto"
+    settings: Settings | None = None, build: OpenCvBuild | None = None
 ) -> Iterator[Harness]:
     """Start the server and headless Chromium on the parity page, with the OpenCV.js ``build``
-    (``auto``: SIMD where the browser has it); stop both afterwards."""
+    (None: the build the relay page loads, by the same rule); stop both afterwards."""
     settings = settings or Settings()
     spec = load_spec(settings.operations_spec)
     server = start_in_thread(settings)
@@ -336,17 +367,7 @@ def open_harness(
         with sync_playwright() as pw:
             browser = pw.chromium.launch(**launch_options())
             try:
-                page = browser.new_page()
-                page.on("console", lambda m: log.debug("page console: %s", m.text))
-                page.goto(f"{server.url}/parity?opencv={build}")
-                # A function, not an expression: Playwright evals a bare expression inside the
-                # page, which the page's CSP (no 'unsafe-eval') refuses.
-                page.wait_for_function(
-                    "() => document.body.dataset.ready", timeout=READY_TIMEOUT_MS, polling=100
-                )
-                if page.evaluate("document.body.dataset.ready") != "true":
-                    raise RuntimeError(f"parity page: {page.text_content('#state')}")
-                yield Harness(page, spec, page.evaluate("document.body.dataset.opencv"))
+                yield Harness(_parity_page(browser, server.url, build), spec, server.url)
             finally:
                 browser.close()
     finally:
@@ -375,9 +396,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--opencv",
         choices=OPENCV_BUILDS,
-        default="auto",
-        help="OpenCV.js build: simd (scripts/build-opencv-js), official (npm) or auto (default:"
-        " SIMD where the browser supports it)",
+        help="OpenCV.js build: simd (scripts/build-opencv-js) or official (npm); default: the"
+        f" one the relay page loads ({RELAY_OPENCV_BUILD})",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 

@@ -17,21 +17,18 @@ compared.
 from __future__ import annotations
 
 import argparse
-import base64
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
-
 from app.arguments import add_relay_profile
 from app.protocol.events import GoalApplied
 from app.protocol.relay_profiles import Profile
-from app.recording import IMAGE_TOPIC, events, messages, summary
+from app.recording import IMAGE_TOPIC, CutOff, RecordingError, events, images, summary
 from app.tools.parity import open_harness
 
 # A replayed goal agrees when within this fraction of the frame's width of the recorded one.
@@ -41,12 +38,18 @@ DEFAULT_MIN_AGREEMENT = 99.0
 LISTED = 10
 
 
+class UndecodableImage(ValueError):
+    """A recorded image the browser cannot decode, though it looks like a JPEG."""
+
+
 @dataclass
 class Recording:
-    """What replay needs from one or more MCAP files: images and goals by frame tag."""
+    """What replay needs from one or more MCAP files: goals by frame tag, and the images of
+    their frames (how many images there were in all, and how many had no tag)."""
 
     images: dict[int, bytes] = field(default_factory=dict)
     goals: dict[int, GoalApplied] = field(default_factory=dict)
+    images_recorded: int = 0
     untagged_images: int = 0
 
 
@@ -62,40 +65,46 @@ class Replay:
     disagreements: list[dict[str, Any]] = field(default_factory=list)
 
     @property
-    def agreement_pct(self) -> float:
-        """Share of compared goals that agree (100 when none could be compared)."""
-        return 100.0 * self.agreed / self.goals_compared if self.goals_compared else 100.0
+    def agreement_pct(self) -> float | None:
+        """Share of compared goals that agree; None when none could be compared."""
+        return 100.0 * self.agreed / self.goals_compared if self.goals_compared else None
 
     def as_json(self) -> dict[str, Any]:
         """The last line of ``--json``."""
-        return {**asdict(self), "agreement_pct": round(self.agreement_pct, 2)}
+        pct = self.agreement_pct
+        return {**asdict(self), "agreement_pct": None if pct is None else round(pct, 2)}
 
 
-def load(paths: Sequence[Path]) -> Recording:
-    """The recorded images (JPEG bytes) and applied goals, each by frame tag."""
+def load(paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None) -> Recording:
+    """The applied goals, each by frame tag, and the recorded images (JPEG bytes) of their
+    frames: read in two passes, so that only the images a goal names are held."""
     recording = Recording()
-    for topic, _, fields in messages(paths):
-        if topic == IMAGE_TOPIC:
-            if fields.get("frame") is None:
-                recording.untagged_images += 1
-            else:
-                recording.images[fields["frame"]] = base64.b64decode(fields["data"])
-    for _, event in events(paths):
+    for _, event in events(paths, on_cut_off):
         if isinstance(event, GoalApplied) and event.frame is not None:
             recording.goals[event.frame] = event
+    # The cut is said once, on the first pass.
+    for frame, jpeg in images(paths, lambda _: None):
+        recording.images_recorded += 1
+        if frame is None:
+            recording.untagged_images += 1
+        elif frame in recording.goals:
+            recording.images[frame] = jpeg
     return recording
 
 
 def compare(recording: Recording, analyse: Any, op: str | None = None) -> Replay:
     """Replay every recorded goal whose frame was recorded; ``analyse(jpeg, op)`` returns the
     replayed target ``{x, y}`` or None; ``op`` overrides the recorded operation."""
-    replay = Replay(frames=len(recording.images), goals_recorded=len(recording.goals))
+    replay = Replay(frames=recording.images_recorded, goals_recorded=len(recording.goals))
     for frame, goal in sorted(recording.goals.items()):
         jpeg = recording.images.get(frame)
         if jpeg is None:
             continue
         replay.goals_compared += 1
-        target = analyse(jpeg, op or goal.op)
+        try:
+            target = analyse(jpeg, op or goal.op)
+        except UndecodableImage as exc:
+            raise UndecodableImage(f"the image of frame {frame} on {IMAGE_TOPIC}: {exc}") from exc
         distance = None
         if target is not None:
             replay.goals_replayed += 1
@@ -137,15 +146,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Replay (or summarise) the files; 1 below ``--min-agreement``, 2 on unreadable input."""
+    """Replay (or summarise) the files: 1 below ``--min-agreement`` or with nothing to compare,
+    2 on unreadable input. A file cut off is read up to its cut, and the cut said."""
+
+    def cut_off(cut: CutOff) -> None:
+        sys.stderr.write(f"autopilot replay: {cut}; reading what comes before it\n")
+
     try:
         if args.summary:
-            return _print_summary(summary(args.files), args.json)
-        recording = load(args.files)
-    # ValueError: JSON that is not a message, or not its topic's event (EventError).
-    except (OSError, McapError, ValueError, KeyError) as exc:
+            return _print_summary(summary(args.files, cut_off), args.json)
+        recording = load(args.files, cut_off)
+    except RecordingError as exc:
         sys.stderr.write(f"autopilot replay: cannot read the recording: {exc}\n")
         return 2
+    if not any(frame in recording.images for frame in recording.goals):
+        # Before a browser is started for nothing: no goal has its image.
+        sys.stderr.write(
+            f"autopilot replay: nothing to compare: {len(recording.goals)} goals with a frame "
+            f"tag, {recording.images_recorded} images, none of a goal's frame\n"
+        )
+        return 1
     profile: Profile = args.profile
     with open_harness() as harness:
         known = [operation.id for operation in harness.spec.operations]
@@ -154,19 +174,29 @@ def run(args: argparse.Namespace) -> int:
             return 2
 
         def analyse(jpeg: bytes, op: str) -> dict[str, Any] | None:
-            target: dict[str, Any] | None = harness.results(jpeg, [op], profile)[op]["target"]
+            try:
+                results = harness.results(jpeg, [op], profile)
+            except ValueError as exc:  # the harness's word for an image it cannot decode
+                raise UndecodableImage(str(exc)) from exc
+            target: dict[str, Any] | None = results[op]["target"]
             return target
 
-        replay = compare(recording, analyse, args.op)
+        try:
+            replay = compare(recording, analyse, args.op)
+        except UndecodableImage as exc:
+            sys.stderr.write(f"autopilot replay: cannot read the recording: {exc}\n")
+            return 2
     for item in replay.disagreements:
         sys.stdout.write(
             f"frame {item['frame']} {item['op']}: recorded {item['recorded']}, "
             f"replayed {item['replayed']}\n"
         )
+    agreement = replay.agreement_pct
+    assert agreement is not None  # a goal with its image was compared
     sys.stdout.write(
         f"{replay.frames} frames, {replay.goals_recorded} goals recorded, "
         f"{replay.goals_compared} on recorded frames, {replay.goals_replayed} replayed: "
-        f"{replay.agreement_pct:.1f} % agree\n"
+        f"{agreement:.1f} % agree\n"
     )
     if recording.untagged_images:
         sys.stdout.write(
@@ -174,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.json:
         sys.stdout.write(json.dumps(replay.as_json()) + "\n")
-    return 0 if replay.agreement_pct >= args.min_agreement else 1
+    return 0 if agreement >= args.min_agreement else 1
 
 
 def _print_summary(found: dict[str, Any], as_json: bool) -> int:

@@ -7,12 +7,16 @@ from contextlib import AbstractContextManager, contextmanager
 
 from playwright.sync_api import Page
 
+from app.protocol.opencv import OpenCvBuild
 from app.server.config import Settings
 from app.tools import parity
 
 
-def open_harness(build: parity.OpenCvBuild = "auto") -> AbstractContextManager[parity.Harness]:
-    """The harness on a development server that asks for no token, with OpenCV.js ``build``."""
+def open_harness(
+    build: OpenCvBuild | None = None,
+) -> AbstractContextManager[parity.Harness]:
+    """The harness on a development server that asks for no token, with OpenCV.js ``build``
+    (None: the relay's, as ``autopilot parity`` loads by default)."""
     return parity.open_harness(Settings(environment="development", token=None), build)
 
 

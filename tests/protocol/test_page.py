@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from app.protocol.control import control_config
+from app.protocol.opencv import RELAY_OPENCV_BUILD
 from app.protocol.page import BaseConfig, Verbatim, page_protocol, to_json
 from app.protocol.ros import ROS_CONFIG
 
@@ -80,3 +81,5 @@ def test_the_protocol_carries_the_frame_tag_lock_and_health_numbers() -> None:
         "control": "control",
     }
     assert set(protocol["schemas"]) == {"autopilot", "autopilot-state", "control"}
+    # Every page's analyzer loads the relay's OpenCV.js unless its ?opencv= says otherwise.
+    assert protocol["opencvBuild"] == RELAY_OPENCV_BUILD

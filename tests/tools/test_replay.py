@@ -31,6 +31,7 @@ def test_goals_are_compared_on_recorded_frames_and_agree_within_the_tolerance() 
     recording = Recording(
         images={1: b"one", 3: b"three", 4: b"four", 9: b"nine"},
         goals={1: _goal(1, 100), 2: _goal(2, 100), 3: _goal(3, 100), 4: _goal(4, 300)},
+        images_recorded=4,
     )
     replayed: dict[bytes, dict[str, Any]] = {
         b"one": {"x": 100 + near, "y": 240},
@@ -66,9 +67,12 @@ def test_an_unreadable_recording_is_one_line_and_exit_status_2(
     assert "cannot read the recording" in capsys.readouterr().err
 
 
-def _write_recording(path: Path, goals: dict[int, tuple[float, float]]) -> None:
+def _write_recording(
+    path: Path, goals: dict[int, tuple[float, float]], undecodable: frozenset[int] = frozenset()
+) -> None:
     """An MCAP file as the recorder writes it: for each frame tag, the camera's image of that
-    frame (a face at a fixed place) and the goal the relay sent for it, at (x, y)."""
+    frame (a face at a fixed place) and the goal the relay sent for it, at (x, y); the frames
+    of ``undecodable`` have an image that starts as a JPEG does and is not one."""
     video = SyntheticVideo(path=FixedPath(0.3, 0.42))
     with path.open("wb") as stream:
         writer = Writer(stream)
@@ -80,7 +84,10 @@ def _write_recording(path: Path, goals: dict[int, tuple[float, float]]) -> None:
         )
         for frame, (x, y) in goals.items():
             bgr = cv2.cvtColor(video.render(frame), cv2.COLOR_RGB2BGR)
-            jpeg = base64.b64encode(cv2.imencode(".jpg", bgr)[1].tobytes()).decode()
+            data = cv2.imencode(".jpg", bgr)[1].tobytes()
+            if frame in undecodable:
+                data = data[:3] + bytes(64)
+            jpeg = base64.b64encode(data).decode()
             image = {"format": "jpeg", "data": jpeg, "frame": frame}
             goal = message(_goal(frame, x, y))
             for channel, fields in ((images, image), (goal_topic, goal)):
@@ -106,4 +113,11 @@ def test_replay_exits_1_below_the_minimum_agreement_and_0_at_it(
             statuses.append(main(["replay", "--min-agreement", minimum, "--json", str(recording)]))
             last = json.loads(capsys.readouterr().out.splitlines()[-1])
             assert (last["goals_compared"], last["agreed"]) == (2, 1), last
-    assert statuses == [1, 0]
+        assert statuses == [1, 0]
+        # An image the browser cannot decode, though it starts as a JPEG: one line naming it.
+        broken = tmp_path / "broken.mcap"
+        _write_recording(broken, {1: face, 2: face}, undecodable=frozenset({2}))
+        assert main(["replay", str(broken)]) == 2
+        [line] = capsys.readouterr().err.splitlines()
+        assert line.startswith("autopilot replay: cannot read the recording: the image of frame 2 ")
+        assert "the browser cannot decode it" in line, line

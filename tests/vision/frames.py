@@ -5,6 +5,7 @@ Everything is drawn from a seeded generator so a failing frame can be regenerate
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,6 +117,27 @@ def clip_frames(count: int) -> list[Bgr]:
             frames.append(frame)
     capture.release()
     return frames
+
+
+def clip_stills(indices: Sequence[int]) -> list[Bgr]:
+    """The clip's frames at ``indices`` (0-based), read in order from the first: a seek may land
+    on a neighbouring frame."""
+    wanted = set(indices)
+    capture = cv2.VideoCapture(str(CLIP))
+    found: dict[int, Bgr] = {}
+    index = 0
+    while len(found) < len(wanted):
+        ok, frame = capture.read()
+        if not ok:
+            break
+        if index in wanted:
+            found[index] = frame
+        index += 1
+    capture.release()
+    missing = wanted - found.keys()
+    if missing:
+        raise ValueError(f"{CLIP.name} has no frames {sorted(missing)}")
+    return [found[i] for i in indices]
 
 
 def write_generated_frames(folder: Path, seed: int = 4) -> list[Path]:

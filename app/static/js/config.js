@@ -29,7 +29,8 @@ export const CONFIG = readConfig();
  *  relayProfiles: {name: {snapshotPeriodMs}}, channels: {autopilot, autopilotState, control},
  *  stateChannelOptions, goalFreshness, video: {width, height}, clientForwardScaleDown,
  *  frameTag: {blocksPerWidth, markerBlocks, bits}, lock: {searchAfterS, releaseAfterS, maxScale,
- *  reach}, health: {periodS, maxLossPct, maxRttMs}, schemas: {label: {role: JSON Schema}}}
+ *  reach}, health: {periodS, maxLossPct, maxRttMs}, opencvBuild: 'simd'|'official',
+ *  schemas: {label: {role: JSON Schema}}}
  */
 export const PROTOCOL = CONFIG.protocol;
 export const CHANNELS = PROTOCOL.channels;

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.arguments import positive_number
+from app.arguments import positive_integer, positive_number
 from app.protocol.control import PROFILES
 from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
@@ -100,6 +100,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " thread and stage, codec counters, worker timers (relay-cost.md)",
     )
     parser.add_argument(
+        "--opencv-builds",
+        action="store_true",
+        help="time the cascades on each OpenCV.js build instead, side by side on the same frames,"
+        " with Python as the baseline, and check the build the relay loads (opencv-builds.md)",
+    )
+    parser.add_argument(
+        "--frames",
+        type=positive_integer,
+        metavar="N",
+        help=f"with --opencv-builds: count N frames (default {FULL['frames']:g}, --quick"
+        f" {QUICK['frames']:g})",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -115,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
     if args.condition and not args.field:
         log.error("--condition goes with --field")
         return 2
+    if args.frames is not None and not args.opencv_builds:
+        log.error("--frames goes with --opencv-builds")
+        return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
@@ -129,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         return asyncio.run(_recorder(args))
     if args.relay_cost:
         return asyncio.run(_relay_cost(args))
+    if args.opencv_builds:
+        return asyncio.run(_opencv_builds(args))
     obj = asyncio.run(_bench(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
@@ -187,6 +205,10 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--recorder")
     if args.relay_cost:
         argv.append("--relay-cost")
+    if args.opencv_builds:
+        argv.append("--opencv-builds")
+    if args.frames is not None:
+        argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -247,6 +269,56 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     log.info("relay cost report: %s", relaycost.write_report(args.out, found))
     if args.json:
         sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    return 0
+
+
+async def _opencv_builds(args: argparse.Namespace) -> int:
+    """The cascades on each OpenCV.js build: print the figures, write opencv-builds.md; 1 when
+    the build the relay loads is not the one the measurement chooses."""
+    from playwright.async_api import async_playwright
+
+    from app.chromium import launch_options
+    from app.server.serve import start_in_thread
+    from app.tools.bench import jsnative, opencv_builds
+
+    counted = args.frames or int((QUICK if args.quick else FULL)["frames"])
+    frames = jsnative.synthetic_frames(counted + jsnative.WARMUP_FRAMES)
+    started = datetime.datetime.now(datetime.UTC)
+    load_before = os.getloadavg()[0]
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                times = await opencv_builds.compare_builds(browser, server.url, frames)
+                browser_version = browser.version
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    found = opencv_builds.decide(
+        {
+            "command": _command(args),
+            "started": started.isoformat(timespec="seconds"),
+            "machine": _machine(),
+            "chromium": browser_version,
+            "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+            "frames": counted,
+            "ops": [opencv_builds.op_figures(t) for t in times],
+        }
+    )
+    log.info("OpenCV.js builds report: %s", opencv_builds.write_report(args.out, found))
+    if args.json:
+        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    if found["choice"] != found["relay_loads"]:
+        log.error(
+            "measured: the relay should load the %s OpenCV.js (%s); it loads the %s"
+            " (app/protocol/opencv.py)",
+            found["choice"],
+            found["reason"],
+            found["relay_loads"],
+        )
+        return 1
     return 0
 
 
@@ -396,6 +468,10 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if args.relay_cost:
         parts.append("--relay-cost")
+    if args.opencv_builds:
+        parts.append("--opencv-builds")
+    if args.frames is not None:
+        parts.append(f"--frames {args.frames}")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

@@ -19,10 +19,12 @@ from typing import Any
 import cv2
 import numpy as np
 import numpy.typing as npt
-from playwright.async_api import Browser
+from playwright.async_api import Browser, Page
 
+from app.protocol.opencv import OpenCvBuild
 from app.protocol.relay_profiles import PROFILES, Profile
 from app.server.config import Settings
+from app.tools.parity import READY_TIMEOUT_MS
 from app.vision import window
 from app.vision.reference import detect
 from app.vision.spec import CascadeParams, load_spec
@@ -41,8 +43,8 @@ REPEATS = 3
 # page's fromBase64, and every timed run analyses that copy (the analyzer copies the pixels to
 # its worker, so the page's frame stays whole). around: search only the window around that box,
 # as detect-then-track does between full scans.
-_LOAD_JS = "(b64) => { window.benchFrame = new Uint8ClampedArray(window.fromBase64(b64).buffer); }"
-_ANALYZE_JS = """async ([width, height, opId, profile, around]) => {
+LOAD_JS = "(b64) => { window.benchFrame = new Uint8ClampedArray(window.fromBase64(b64).buffer); }"
+ANALYZE_JS = """async ([width, height, opId, profile, around]) => {
   const data = window.benchFrame;
   const r = await window.analyzer.analyze({ width, height, data }, opId, { profile, around });
   return { ms: r.ms, boxes: r.boxes };
@@ -88,16 +90,8 @@ async def compare(
     """Time ``op_id`` on every frame in OpenCV.js (in ``browser``) and in Python, per profile."""
     spec = load_spec((settings or Settings()).operations_spec)
     op = spec.op(op_id)
-    page = await browser.new_page()
+    page = await parity_page(browser, base_url)
     try:
-        await page.goto(f"{base_url}/parity")
-        # A function, not an expression, which the page's CSP would refuse to eval.
-        await page.wait_for_function(
-            "() => document.body.dataset.ready !== undefined", timeout=180_000
-        )
-        if await page.evaluate("document.body.dataset.ready") != "true":
-            state = await page.text_content("#state")
-            raise RuntimeError(f"the parity page's analyzer did not start: {state}")
         results: dict[str, Comparison] = {}
         threads = cv2.getNumThreads()
         cv2.setNumThreads(1)
@@ -108,11 +102,11 @@ async def compare(
                 tracks = isinstance(params, CascadeParams) and params.full_scan_every > 1
                 for i, rgba in enumerate(frames):
                     height, width = rgba.shape[:2]
-                    await page.evaluate(_LOAD_JS, base64.b64encode(rgba.tobytes()).decode("ascii"))
+                    await page.evaluate(LOAD_JS, base64.b64encode(rgba.tobytes()).decode("ascii"))
                     js_ms, native_ms, window_ms = [], [], []
                     for _ in range(REPEATS):
                         js: dict[str, Any] = await page.evaluate(
-                            _ANALYZE_JS, [width, height, op_id, profile, None]
+                            ANALYZE_JS, [width, height, op_id, profile, None]
                         )
                         js_ms.append(float(js["ms"]))
                         started = time.perf_counter()
@@ -121,7 +115,7 @@ async def compare(
                         around = window.largest([tuple(b) for b in js["boxes"]])
                         if around is not None and tracks:
                             windowed: dict[str, Any] = await page.evaluate(
-                                _ANALYZE_JS, [width, height, op_id, profile, around]
+                                ANALYZE_JS, [width, height, op_id, profile, around]
                             )
                             window_ms.append(float(windowed["ms"]))
                     if i < WARMUP_FRAMES:
@@ -150,3 +144,18 @@ async def compare(
         return results
     finally:
         await page.close()
+
+
+async def parity_page(browser: Browser, base_url: str, build: OpenCvBuild | None = None) -> Page:
+    """A parity page whose analyzer is ready, with OpenCV.js ``build`` (None: the relay's)."""
+    page = await browser.new_page()
+    await page.goto(f"{base_url}/parity" + ("" if build is None else f"?opencv={build}"))
+    # A function, not an expression, which the page's CSP would refuse to eval.
+    await page.wait_for_function(
+        "() => document.body.dataset.ready !== undefined", timeout=READY_TIMEOUT_MS
+    )
+    if await page.evaluate("document.body.dataset.ready") != "true":
+        state = await page.text_content("#state")
+        await page.close()
+        raise RuntimeError(f"the parity page's analyzer did not start: {state}")
+    return page

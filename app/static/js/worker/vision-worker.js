@@ -15,9 +15,9 @@
 'use strict';
 
 // Two builds of OpenCV.js of the OpenCV pyproject.toml pins: the official one (npm) and ours with
-// WebAssembly SIMD (scripts/build-opencv-js). `?opencv=simd|official` chooses; by default SIMD
-// where the browser validates a module that uses a v128 instruction (wasm-feature-detect's
-// probe), else official.
+// WebAssembly SIMD (scripts/build-opencv-js). `?opencv=simd|official` chooses (vision.js passes
+// the page's choice or the relay's, app/protocol/opencv.py); SIMD only where the browser
+// validates a module that uses a v128 instruction (wasm-feature-detect's probe), else official.
 const SIMD_PROBE = new Uint8Array([
   0, 97, 115, 109, 1, 0, 0, 0, 1, 5, 1, 96, 0, 1, 123, 3, 2, 1, 0, 10, 10, 1, 8, 0, 65, 0, 253, 15,
   253, 98, 11,
@@ -25,9 +25,7 @@ const SIMD_PROBE = new Uint8Array([
 const OPENCV_BUILDS = { simd: '/static/opencv-simd.js', official: '/static/opencv.js' };
 const OPENCV_BUILD = (() => {
   const asked = new URLSearchParams(self.location.search).get('opencv');
-  const wanted =
-    asked in OPENCV_BUILDS ? asked : WebAssembly.validate(SIMD_PROBE) ? 'simd' : 'official';
-  if (wanted === 'simd') {
+  if (asked === 'simd' && WebAssembly.validate(SIMD_PROBE)) {
     try {
       importScripts(OPENCV_BUILDS.simd);
       return 'simd';

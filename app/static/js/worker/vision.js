@@ -5,14 +5,16 @@
 import { PROTOCOL } from '../config.js';
 
 // The worker has no page config: what it needs of the protocol rides in its URL, and so does
-// the page's `?opencv=simd|official` (which OpenCV.js build; default: SIMD where supported).
+// the OpenCV.js build to load: the page's `?opencv=simd|official`, else the relay's
+// (`PROTOCOL.opencvBuild`), so that the parity page runs what the relay runs.
 const WORKER_URL = `/static/js/worker/vision-worker.js?${new URLSearchParams({
   protocol: JSON.stringify({
     frameTag: PROTOCOL.frameTag,
     defaultProfile: PROTOCOL.defaultProfile,
     lock: PROTOCOL.lock,
   }),
-  opencv: new URLSearchParams(globalThis.location?.search ?? '').get('opencv') ?? 'auto',
+  opencv:
+    new URLSearchParams(globalThis.location?.search ?? '').get('opencv') ?? PROTOCOL.opencvBuild,
 })}`;
 
 /**

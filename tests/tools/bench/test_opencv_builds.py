@@ -1,0 +1,133 @@
+"""The OpenCV.js builds bench's pure core: the relay's per-snapshot cost, the figures, the
+choice of build and the report (``autopilot bench --opencv-builds``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from app.protocol.opencv import RELAY_OPENCV_BUILD
+from app.tools.bench.opencv_builds import (
+    FrameTimes,
+    OpTimes,
+    choose,
+    decide,
+    op_figures,
+    report_text,
+)
+
+
+def frame(
+    simd: float,
+    official: float,
+    window: tuple[float, float] | None = None,
+    agrees: tuple[bool, bool] = (True, True),
+) -> FrameTimes:
+    return FrameTimes(
+        full_ms={"simd": simd, "official": official},
+        window_ms={
+            "simd": None if window is None else window[0],
+            "official": None if window is None else window[1],
+        },
+        python_ms=10.0,
+        agrees={"simd": agrees[0], "official": agrees[1]},
+    )
+
+
+def test_the_relay_scans_in_full_once_in_full_scan_every_snapshots() -> None:
+    tracked = frame(30.0, 40.0, window=(3.0, 4.0))
+    # One full scan and 29 window searches per 30 snapshots.
+    assert tracked.relay_ms("simd", 30) == (30.0 + 29 * 3.0) / 30
+    assert tracked.relay_ms("official", 30) == (40.0 + 29 * 4.0) / 30
+    # Nothing to follow: every snapshot is a full scan.
+    assert frame(30.0, 40.0).relay_ms("simd", 30) == 30.0
+    # Tracking off (thesis profile): every snapshot is a full scan.
+    assert tracked.relay_ms("simd", 1) == 30.0
+
+
+def test_figures_pair_frames_and_take_the_median_ratio() -> None:
+    times = OpTimes(
+        "face",
+        30,
+        [
+            frame(20.0, 40.0, window=(2.0, 2.0)),
+            frame(30.0, 40.0, window=(3.0, 2.0), agrees=(False, True)),
+            frame(40.0, 40.0),  # found nothing: no window search
+        ],
+    )
+    found = op_figures(times)
+    assert found["frames"] == 3 and found["full_scan_every"] == 30
+    assert found["agrees"] == {"simd": 2, "official": 3}
+    assert found["full"] == {
+        "simd": 30.0,
+        "official": 40.0,
+        "frames": 3,
+        "ratio": 0.75,
+        "ratio_q3": 0.875,
+        "python": 10.0,
+    }
+    # Only the two frames where both builds searched a window.
+    assert found["window"]["frames"] == 2
+    assert found["window"]["ratio"] == 1.25
+    relay = [f.relay_ms("simd", 30) / f.relay_ms("official", 30) for f in times.frames]
+    assert found["relay"]["ratio"] == round(sorted(relay)[1], 3)
+
+
+def figures(op: str, ratio: float, q3: float, agrees: tuple[int, int] = (40, 40)) -> dict[str, Any]:
+    return {
+        "op": op,
+        "frames": 40,
+        "agrees": {"simd": agrees[0], "official": agrees[1]},
+        "relay": {"ratio": ratio, "ratio_q3": q3},
+    }
+
+
+def test_simd_is_chosen_for_a_tenth_less_time_on_every_operation() -> None:
+    assert choose([figures("face", 0.9, 0.99), figures("body", 0.6, 0.7)])[0] == "simd"
+    build, reason = choose([figures("face", 0.91, 0.95), figures("body", 0.6, 0.7)])
+    assert build == "official"
+    assert "face 0.91" in reason and "body" not in reason
+
+
+def test_simd_must_be_faster_on_three_frames_in_four() -> None:
+    build, reason = choose([figures("face", 0.8, 1.0)])
+    assert build == "official" and "p75 1.0" in reason
+
+
+def test_simd_must_agree_with_python_wherever_official_does() -> None:
+    build, reason = choose([figures("face", 0.5, 0.6, agrees=(39, 40))])
+    assert build == "official" and "39 of 40" in reason
+    # Both wrong on the same frame is no reason against SIMD.
+    assert choose([figures("face", 0.5, 0.6, agrees=(39, 39))])[0] == "simd"
+
+
+def test_nothing_measured_keeps_the_official_build() -> None:
+    assert choose([]) == ("official", "nothing was measured")
+    assert choose([figures("face", None, None)])[0] == "official"  # type: ignore[arg-type]
+
+
+def run(ops: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "command": "autopilot bench --opencv-builds",
+        "started": "then",
+        "machine": "here",
+        "chromium": "1",
+        "load_average": [1.0, 2.0],
+        "frames": 2,
+        "ops": ops,
+    }
+
+
+def test_the_report_shows_each_scan_the_choice_and_what_the_relay_loads() -> None:
+    times = OpTimes("face", 30, [frame(20.0, 40.0, window=(2.0, 4.0))] * 2)
+    found = decide(run([op_figures(times)]))
+    assert found["relay_loads"] == RELAY_OPENCV_BUILD
+    assert found["choice"] == "simd"
+    text = report_text(found)
+    assert "| face | full | 2 | 20.0 | 40.0 | 0.5 | 0.5 | 10.0 |" in text
+    assert "| face | window | 2 | 2.0 | 4.0 | 0.5 | 0.5 |  |" in text
+    assert "**Measured choice: simd**" in text
+    mismatch = "not the one measured here"
+    assert (mismatch in text) == (RELAY_OPENCV_BUILD != "simd")
+    slower = decide(run([op_figures(OpTimes("face", 30, [frame(40.0, 40.0)] * 2))]))
+    assert slower["choice"] == "official"
+    assert (mismatch in report_text(slower)) == (RELAY_OPENCV_BUILD != "official")
