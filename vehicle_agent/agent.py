@@ -37,6 +37,7 @@ from app.protocol.robot import TURTLESIM, Robot
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.signaling import Renew, Renewed
 from app.supervise import Backoff
+from vehicle_agent.capture_times import CaptureTimes
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
@@ -114,6 +115,9 @@ class Agent:
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
         self._last_telemetry = 0.0
+        # The camera's tagged frames (its frame_sent events), batched for the relay's clients.
+        self._capture_times = CaptureTimes()
+        self.events.listeners.append(self._on_event)
         self.logged_in = asyncio.Event()
         self._handlers: dict[str, Callable[[Any], Awaitable[None]]] = {
             "login": self._ignore,
@@ -456,6 +460,19 @@ class Agent:
 
     def _on_peer_error(self, relay: str, message: channels.Error) -> None:
         log.warning("%r reported an error: %r", relay, message.reason)
+
+    # --- the camera's capture times --------------------------------------------------------
+
+    def _on_event(self, event: ev.AnyEvent) -> None:
+        if not isinstance(event, ev.FrameSent):
+            return
+        # The event's clock is monotonic, which no other process can read; the clients compare
+        # the capture time with their own wall clock.
+        captured_ms = (time.time() - (time.monotonic() - event.t)) * 1000
+        batch = self._capture_times.add(event.frame, captured_ms, event.t)
+        if batch is not None and self._link is not None:
+            # State, like pose: a lost batch is a few frames without a figure.
+            self._link.send_state(batch)
 
     # --- turtle ------------------------------------------------------------------------------
 

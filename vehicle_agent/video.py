@@ -31,15 +31,16 @@ from aiortc import MediaStreamTrack
 from aiortc.contrib.media import MediaPlayer
 from aiortc.mediastreams import MediaStreamError
 
+from app.flame import draw_flame
 from app.protocol import frametag
 from app.protocol.events import FrameSent
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
+from app.resources import FACES_DIR
 
 log = logging.getLogger(__name__)
 
-ASSETS = Path(__file__).resolve().parent / "assets"
-DEFAULT_FACE = ASSETS / "obama.jpg"
-SMALL_FACE = ASSETS / "biden.jpg"
+DEFAULT_FACE = FACES_DIR / "obama.jpg"
+SMALL_FACE = FACES_DIR / "biden.jpg"
 CLOCK_RATE = 90_000
 TIME_BASE = fractions.Fraction(1, CLOCK_RATE)
 
@@ -233,46 +234,6 @@ def _background(width: int, height: int) -> Image:
 # Where the scene's flame stands, as fractions of width and height: on the floor, well below
 # the face's path, so that the face and fire operations pick different targets.
 DEFAULT_FLAME = (0.62, 0.86)
-# Flame colours, outside in (RGB): red-orange, orange, yellow. All lie inside the fire
-# operation's HSV ranges (app/operations.json); a pale core would not.
-_FLAME_LAYERS = ((230, 60, 20), (255, 140, 20), (255, 215, 70))
-
-
-def _flame_height(height: int) -> int:
-    return max(12, height // 7)
-
-
-def draw_flame(rgb: Image, cx: float, cy: float, frame: int) -> None:
-    """A flickering flame centred on (``cx``, ``cy``) pixels, drawn into ``rgb`` in place.
-
-    A teardrop per colour layer, the tip swaying and the height breathing from frame to frame;
-    its centre stays put so the target it gives does not wander.
-    """
-    full = _flame_height(rgb.shape[0])
-    flicker = 1.0 + 0.08 * math.sin(frame * 1.3)
-    sway = 0.12 * math.sin(frame * 0.7)
-    for i, colour in enumerate(_FLAME_LAYERS):
-        scale = 1.0 - 0.28 * i
-        h = full * scale * flicker
-        w = 0.55 * full * scale
-        # The teardrop is heavier at the bottom: lift it so its centroid sits on (cx, cy).
-        base_y = cy + 0.38 * full - (full - h) * 0.1
-        bulb_y = base_y - 0.3 * h
-        tip = (cx + sway * w, base_y - h)
-        left = (cx - w / 2, bulb_y)
-        right = (cx + w / 2, bulb_y)
-        cv2.ellipse(
-            rgb,
-            (round(cx), round(bulb_y)),
-            (max(1, round(w / 2)), max(1, round(0.3 * h))),
-            0,
-            0,
-            360,
-            colour,
-            -1,
-        )
-        points = np.array([left, tip, right], dtype=np.float64).round().astype(np.int32)
-        cv2.fillPoly(rgb, [points], colour)
 
 
 class PacedVideoTrack(MediaStreamTrack):

@@ -8,10 +8,10 @@ against JSON Schemas generated from these same models (:func:`channel_schemas`).
 
 The vehicle opens two channels to the relay (docs/architecture.md, "Lossy links").
 ``autopilot`` is reliable and ordered: mode commands (``stop``) and error reports, which must
-arrive. ``autopilot-state`` is unordered and never retransmits: goals (relay -> vehicle) and pose
-(vehicle -> relay) are state, only the newest matters, and a lost one is better skipped than
-waited for (no head-of-line blocking on a lossy link). The vehicle applies a goal only if its
-``seq`` is newer than every goal applied on this link and it is not stale
+arrive. ``autopilot-state`` is unordered and never retransmits: goals (relay -> vehicle), pose and
+frame capture times (vehicle -> relay) are state, only the newest matters, and a lost one is
+better skipped than waited for (no head-of-line blocking on a lossy link). The vehicle applies a
+goal only if its ``seq`` is newer than every goal applied on this link and it is not stale
 (``vehicle_agent/freshness.py``, ``app/static/js/core/freshness.js``). The client's ``control``
 channel is reliable.
 """
@@ -36,6 +36,8 @@ CONTROL_CHANNEL: Final = "control"
 # RTCDataChannelInit of the state channel (aiortc takes the same two keyword arguments).
 STATE_CHANNEL_ORDERED: Final = False
 STATE_CHANNEL_MAX_RETRANSMITS: Final = 0
+# The most frame capture times one ``frameTimes`` message carries.
+MAX_FRAME_TIMES: Final = 64
 # A goal that took this much longer than the quickest goal of the last GOAL_AGE_WINDOW_S on its
 # way is stale and dropped.
 GOAL_MAX_AGE_S: Final = 0.5
@@ -79,6 +81,24 @@ class Pose(_Message):
     t: Finite | None = None
     # Milliseconds since the vehicle last applied a goal (None: none on this link yet).
     goalAgeMs: NonNegative | None = None  # noqa: N815 -- the wire name
+
+
+class FrameTime(_Message):
+    """When the vehicle's camera handed frame number ``frame`` (its frame tag) to the encoder:
+    ``t`` in Unix milliseconds on the vehicle's clock."""
+
+    frame: Count
+    t: Finite
+
+
+class FrameTimes(_Message):
+    """vehicle→relay on the state channel, and relay→client as forwarded: the capture times of
+    the tagged frames sent since the last such message. A client that reads the tag of a frame
+    it shows subtracts its capture time from the moment it showed it: glass to glass. The
+    clocks are the vehicle's and the client's (docs/contracts.md, "Glass to glass")."""
+
+    type: Literal["frameTimes"] = "frameTimes"
+    frames: Annotated[list[FrameTime], Field(min_length=1, max_length=MAX_FRAME_TIMES)]
 
 
 class Stop(_Message):
@@ -282,6 +302,7 @@ class Error(_Message):
 ChannelMessage = (
     Goal
     | Pose
+    | FrameTimes
     | Stop
     | Start
     | GetOps
@@ -318,7 +339,11 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
         "vehicle": (Goal, Stop, ModeChange, Drive, Error),
         "relay": (Pose, Error),
     },
-    AUTOPILOT_STATE_CHANNEL: {"vehicle": (Goal, Drive, Error), "relay": (Pose, Error)},
+    # Capture times, like pose, are state: only the lossy channel carries them.
+    AUTOPILOT_STATE_CHANNEL: {
+        "vehicle": (Goal, Drive, Error),
+        "relay": (Pose, FrameTimes, Error),
+    },
     CONTROL_CHANNEL: {
         "relay": (
             GetOps,
@@ -338,6 +363,7 @@ RECEIVERS: Final[dict[str, dict[Role, tuple[type[_Message], ...]]]] = {
             State,
             Detections,
             Pose,
+            FrameTimes,
             LockStatus,
             ModeChange,
             RobotStopped,

@@ -146,6 +146,54 @@ class PageProtocol:
 
 
 @dataclass(frozen=True)
+class BillboardMark:
+    """A billboard of the simulated room as the client's map draws it: a picture ``width``
+    metres wide where it starts (``x``, ``y``, facing ``yaw``), and the closed path it walks
+    (empty when it stands still)."""
+
+    name: str
+    kind: str
+    width: float
+    x: float
+    y: float
+    yaw: float
+    walk: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class RoomMap:
+    """The simulated room, for the client's map, when the server simulates one: its size, the
+    robot's radius and camera's field of view (the wedge drawn from its pose), the billboards,
+    and where to read their places now (``GET state_path?room=R``, every ``state_period_ms``)."""
+
+    width: float
+    depth: float
+    robot_radius: float
+    hfov: float
+    billboards: tuple[BillboardMark, ...]
+    state_path: str
+    state_period_ms: int
+
+
+@dataclass(frozen=True)
+class PlacedMark:
+    """Where one billboard stands now (``GET /room/state``)."""
+
+    name: str
+    x: float
+    y: float
+    yaw: float
+
+
+@dataclass(frozen=True)
+class RoomState:
+    """What ``GET /room/state`` answers: the room's time (s) and its billboards' places."""
+
+    t: float
+    billboards: tuple[PlacedMark, ...]
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     """The robot the vehicle page drives (``?robot=NAME``): its description, what follows from
     it, and its type names in every flavour (``core/rosflavour.js`` picks among them)."""
@@ -187,6 +235,8 @@ class PageConfig:
     # The fallback when the robot's rosapi cannot name its types.
     ros: RosSetting
     ros_types: RosConfig
+    # The simulated room the client draws instead of turtlesim's terrain; None: no room.
+    room_map: RoomMap | None
     robot: RobotConfig
     # Why the robot asked for (``?robot=``) cannot be driven, or None.
     robot_error: str | None

@@ -124,8 +124,9 @@ TURTLESIM: Final = Robot(
 
 PRESETS: Final[dict[str, Robot]] = {
     "turtlesim": TURTLESIM,
-    # The differential-drive robot with an onboard camera that the simulator plays: it renders
-    # the camera with this field of view and moves the robot within these limits.
+    # The differential-drive robot with an onboard camera that the simulator plays
+    # (app/diffdrive): it speaks these topics, renders the camera with this field of view and
+    # caps the robot's speeds at these.
     "diffdrive": Robot(
         name="diffdrive",
         velocity=Velocity("/cmd_vel", TWIST, ""),

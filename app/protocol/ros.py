@@ -83,6 +83,9 @@ class RosTypes:
     twist: str
     pose: str
     color: str
+    # the differential-drive robot's (and a TurtleBot's): its odometry and camera
+    odometry: str
+    compressed_image: str
     # turtlesim's services
     spawn: str
     kill: str
@@ -116,6 +119,8 @@ def _types(flavour: RosFlavour) -> RosTypes:
         twist=msg("geometry_msgs", "Twist"),
         pose=msg("turtlesim", "Pose"),
         color=msg("turtlesim", "Color"),
+        odometry=msg("nav_msgs", "Odometry"),
+        compressed_image=msg("sensor_msgs", "CompressedImage"),
         spawn=srv("turtlesim", "Spawn"),
         kill=srv("turtlesim", "Kill"),
         empty=srv("std_srvs", "Empty"),

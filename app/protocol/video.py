@@ -12,8 +12,10 @@ from typing import Final
 VIDEO_SIZE: Final = (640, 480)
 # The agent's frame rate.
 VIDEO_FPS: Final = 30.0
-# The relay re-encodes the vehicle's video for each client at this fraction of its size per side
-# (RTCRtpEncodingParameters.scaleResolutionDownBy): the operator watches it, the relay analyses
-# the full-size decoded frames, and the encode is the relay's largest cost after the cascade
-# (docs/bench/relay-cost.md).
+# Where the relay cannot pass the vehicle's encoded frames through to a client (its browser has
+# no encoded transforms, or the client does not receive the vehicle's codec: docs/contracts.md,
+# "Video forward"), it encodes the video again for that client at this fraction of its size per
+# side (RTCRtpEncodingParameters.scaleResolutionDownBy): the operator watches it, the relay
+# analyses the full-size decoded frames, and that encode is the relay's largest cost after the
+# cascade (docs/bench/relay-cost.md).
 CLIENT_FORWARD_SCALE_DOWN: Final = 2.0

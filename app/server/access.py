@@ -1,17 +1,21 @@
-"""Who may do what on ``/rosbridge`` and ``/turtlesim/state``, decided by room/role tokens.
+"""Who may do what on ``/rosbridge``, ``/turtlesim/state`` and ``/room/state``, decided by
+room/role tokens.
 
 Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bearer`` header) and
-each frame, parsed once (:func:`app.turtlesim.rosbridge.parse_frame`), and gets back whether to
+each frame, parsed once (:func:`app.rosbridge.protocol.parse_frame`), and gets back whether to
 pass the frame on to the rosbridge session, a reply to send, and whether to close. A connection
 proves itself with its first message: the rosbridge ``auth`` op (``{"op": "auth", "token": T}``;
 roslib.js's ``authenticate()`` puts it in ``mac``) or any op carrying a ``token`` field. The
 connection ends when its token expires (status error, close 1008 "token expired") unless it sends
 ``auth`` again with a fresh token before then.
 
-What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token (of any room:
-the simulator is one for the whole server) drives; a relay or client token only reads -- it may
-subscribe and call rosapi's reading services, and nothing that publishes, changes the simulator
-or sets a parameter. With no secret configured (development) every connection is let through.
+What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token drives; a
+relay or client token only reads -- it may subscribe and call rosapi's reading services, and
+nothing that publishes, changes the simulator or sets a parameter. Which robot a token reaches
+is the server's: turtlesim is one simulator for every room; the differential-drive robots are
+one per room, and the adapter binds a connection to its token's room (:meth:`RosbridgeGate.bind`),
+after which only a token of that room renews it. With no secret configured (development) every
+connection is let through.
 """
 
 from __future__ import annotations
@@ -23,8 +27,7 @@ from typing import Any, Final
 from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
 from app.protocol.tokens import Claims, TokenError, TokenRole
-from app.turtlesim.rosapi import ROSAPI_READS
-from app.turtlesim.rosbridge import (
+from app.rosbridge.protocol import (
     OPS,
     Auth,
     CallService,
@@ -33,12 +36,13 @@ from app.turtlesim.rosbridge import (
     service_path,
     status,
 )
+from app.rosbridge.rosapi import ROSAPI_READS
 
 
 @dataclass(frozen=True)
 class Rights:
     """What a token's role may do on ``/rosbridge``: these ops, and ``call_service`` on these
-    services (named as :func:`~app.turtlesim.rosbridge.service_path` names them; None: any)."""
+    services (named as :func:`~app.rosbridge.protocol.service_path` names them; None: any)."""
 
     ops: frozenset[str]
     services: frozenset[str] | None
@@ -91,6 +95,8 @@ class RosbridgeGate:
 
     secret: str | None
     claims: Claims | None = field(default=None)
+    # The room whose robot the connection reaches, once the adapter bound it to one.
+    bound_room: str | None = field(default=None)
 
     def handshake(self, token: str | None, now: float) -> str | None:
         """Check a token sent with the handshake; returns why it is refused, or None."""
@@ -101,6 +107,16 @@ class RosbridgeGate:
         except TokenError as exc:
             return str(exc)
         return None
+
+    @property
+    def room(self) -> str | None:
+        """The room the connection's token names; None while it has proved none."""
+        return None if self.claims is None else self.claims.room
+
+    def bind(self, room: str | None) -> None:
+        """The connection now reaches ``room``'s robot (None: a robot of every room): from now
+        on only a token of that room renews it."""
+        self.bound_room = room
 
     @property
     def expires_at(self) -> float | None:
@@ -156,9 +172,16 @@ class RosbridgeGate:
         connection goes on with the token it has, until that expires)."""
         assert self.secret is not None
         try:
-            self.claims = tokens.verify(self.secret, auth.proof or "", now=now)
+            claims = tokens.verify(self.secret, auth.proof or "", now=now)
         except TokenError as exc:
             return Decision(forward=False, reply=status("error", f"auth: {exc}", auth.id))
+        if self.bound_room is not None and claims.room != self.bound_room:
+            refusal = (
+                f"auth: this connection reaches room {self.bound_room!r}'s robot; "
+                f"a token of room {claims.room!r} cannot renew it"
+            )
+            return Decision(forward=False, reply=status("error", refusal, auth.id))
+        self.claims = claims
         return Decision(forward=False)
 
     def _refusal(self, operation: Operation) -> str | None:
@@ -177,13 +200,18 @@ def state_refusal(secret: str | None, token: str | None, now: float) -> str | No
     """Why ``GET /turtlesim/state`` is refused to a request with ``token``, or None."""
     if secret is None:
         return None
+    claims = bearer_claims(secret, token, now)
+    return claims if isinstance(claims, str) else None
+
+
+def bearer_claims(secret: str, token: str | None, now: float) -> Claims | str:
+    """What a request's bearer ``token`` (of any role) grants, or why it is refused."""
     if token is None:
         return "send a token of any role: Authorization: Bearer <token>"
     try:
-        tokens.verify(secret, token, now=now)
+        return tokens.verify(secret, token, now=now)
     except TokenError as exc:
         return str(exc)
-    return None
 
 
 def _token_of(frame: Operation | Refused) -> str | None:

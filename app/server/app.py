@@ -42,7 +42,7 @@ def fleet_hub(settings: Settings) -> FleetHub:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the app: signaling at /ws, role pages, turtle simulator and /rosbridge.
+    """Build the app: signaling at /ws, role pages, the simulated robot and /rosbridge.
 
     Its metrics are on ``app.state.metrics`` (:class:`ServerMetrics`); ``autopilot serve
     --metrics-port`` serves their registry.
@@ -100,7 +100,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(pages_router)
     app.include_router(fleet_router)
     app.state.simulator = Simulator.from_settings(settings)
-    app.state.turtlesim = app.state.simulator.sim
+    if app.state.simulator.turtle is not None:
+        app.state.turtlesim = app.state.simulator.sim
     app.state.simulator.outboxes.refused = metrics.refused
     app.include_router(rosbridge_router)
 

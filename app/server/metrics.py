@@ -95,10 +95,10 @@ class ServerMetrics:
         self, hub: CensusSource, simulator: Simulator, period_s: float = SAMPLE_PERIOD_S
     ) -> None:
         """Sample the gauges every ``period_s`` until cancelled."""
-        ticks, at = simulator.sim.ticks, time.monotonic()
+        ticks, at = simulator.ticks, time.monotonic()
         while True:
             self.sample(hub.census(), len(simulator.outboxes))
             await asyncio.sleep(period_s)
             now = time.monotonic()
-            self.tick_rate.set((simulator.sim.ticks - ticks) / (now - at))
-            ticks, at = simulator.sim.ticks, now
+            self.tick_rate.set((simulator.ticks - ticks) / (now - at))
+            ticks, at = simulator.ticks, now

@@ -22,7 +22,7 @@ from app.protocol.rooms import ROLES
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
-from app.server.config import Settings, describe_settings_error
+from app.server.config import SIMULATED_ROBOTS, Settings, describe_settings_error
 from app.server.metrics import ServerMetrics
 from app.vision.spec import SpecError
 
@@ -42,8 +42,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="ROS flavour the simulated robot speaks: 1, 2 (up to Iron) or jazzy "
         f"(default: AUTOPILOT_ROS or {DEFAULT_FLAVOUR})",
     )
+    add_robot_argument(parser)
     tls.add_arguments(parser)
     add_metrics_arguments(parser)
+
+
+def add_robot_argument(parser: argparse.ArgumentParser) -> None:
+    """``--robot``: which robot the server simulates (``autopilot serve`` and ``demo``)."""
+    parser.add_argument(
+        "--robot",
+        choices=SIMULATED_ROBOTS,
+        help="the simulated robot: turtlesim's turtle, one for the whole server, or diffdrive, a"
+        " differential-drive robot with a camera in a walled room, one per room"
+        " (default: AUTOPILOT_ROBOT or turtlesim)",
+    )
+
+
+def settings_from(args: argparse.Namespace) -> Settings:
+    """The environment's settings, with what the command line sets over them."""
+    given = {name: getattr(args, name, None) for name in ("ros", "robot")}
+    return Settings(**{name: value for name, value in given.items() if value})
 
 
 def page_urls(base: str, room: str = "default") -> dict[str, str]:
@@ -76,7 +94,7 @@ def port_in_use(host: str, port: int) -> bool:
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted; a bad setting or operations spec is one line and exit 1."""
     try:
-        settings = Settings(**({"ros": args.ros} if getattr(args, "ros", None) else {}))
+        settings = settings_from(args)
     except ValidationError as exc:
         log.error("cannot start: %s", describe_settings_error(exc))
         return 1

@@ -31,8 +31,15 @@ from app.protocol import tokens
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
-from app.server.config import Settings, describe_settings_error
-from app.server.serve import ANY_ADDRESS, RunningServer, reachable_hosts, start_in_thread
+from app.server.config import Settings, SimulatedRobot, describe_settings_error
+from app.server.serve import (
+    ANY_ADDRESS,
+    RunningServer,
+    add_robot_argument,
+    reachable_hosts,
+    settings_from,
+    start_in_thread,
+)
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
@@ -70,6 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the agent's synthetic video: a face sweeping across (synthetic, the default) or"
         " two faces drifting, to try the target lock (two-faces)",
     )
+    add_robot_argument(parser)
     tls.add_arguments(parser)
     recorder.add_arguments(parser)
     # The server's metrics (the relay's and the agent's are each their own process's).
@@ -95,10 +103,12 @@ def children_for(
     ca_file: Path | None = None,
     video: str = DEMO_VIDEOS[0],
     vehicle_args: Sequence[str] = (),
+    robot: SimulatedRobot = "turtlesim",
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the
-    agent as they are (the flight recorder's options)."""
+    agent as they are (the flight recorder's options). The agent drives the server's ``robot``
+    (its description's topics and limits)."""
     python = sys.executable
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
     common = ["--server", base_url, "--room", room]
@@ -144,6 +154,8 @@ def children_for(
                 video,
                 "--rosbridge",
                 rosbridge,
+                "--robot",
+                robot,
                 *vehicle_args,
             ],
             token_env("vehicle"),
@@ -210,10 +222,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         chromium_path()
         files = tls.from_arguments(args)
-        settings = Settings()
+        settings = settings_from(args)
         # The demo mints its own tokens: with a secret made for this run when none is set.
         if settings.secret is None:
-            settings = Settings(secret=secrets.token_urlsafe(32))
+            settings = settings.model_copy(update={"secret": secrets.token_urlsafe(32)})
         server = start_in_thread(
             settings, host=args.host, port=args.port, log_level="info", tls_files=files
         )
@@ -265,6 +277,7 @@ async def _main(
         ca_file,
         args.video,
         recorder.arguments_of(args),
+        settings.robot,
     )
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
     token = None

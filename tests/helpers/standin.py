@@ -1,6 +1,6 @@
 """A robot that is not a turtle, played through a rosbridge with roslibpy: it publishes its
 odometry as a TurtleBot's bringup does and records what arrives on its velocity topic. Against
-the server's /rosbridge its topics are hosted ones (app/turtlesim/hosted.py)."""
+the server's /rosbridge its topics are hosted ones (app/rosbridge/hosted.py)."""
 
 from __future__ import annotations
 

@@ -37,6 +37,9 @@ OPS: dict[str, Any] = {
     "current": "face",
 }  # fmt: skip
 STATE: dict[str, Any] = {"type": "state", "piloting": True, "op": "face", "vehicle": None}
+FRAME_TIMES: dict[str, Any] = {
+    "type": "frameTimes", "frames": [{"frame": 41, "t": 1.7e12}, {"frame": 42, "t": 1.7e12 + 33}],
+}  # fmt: skip
 
 
 def _with(base: dict[str, Any], **changes: Any) -> str:
@@ -47,7 +50,7 @@ def _without(base: dict[str, Any], key: str) -> str:
     return json.dumps({k: v for k, v in base.items() if k != key})
 
 
-A, C = "autopilot", "control"
+A, S, C = "autopilot", "autopilot-state", "control"
 
 SAMPLES: list[Sample] = [
     # relay -> vehicle on `autopilot`
@@ -86,6 +89,19 @@ SAMPLES: list[Sample] = [
     Sample(A, "relay", _with(POSE, theta="up"), False, "theta"),
     Sample(A, "relay", _without(POSE, "y"), False, "y"),
     Sample(A, "relay", json.dumps(GOAL), False),
+    # Capture times ride the lossy state channel only.
+    Sample(A, "relay", json.dumps(FRAME_TIMES), False),
+    # vehicle -> relay on `autopilot-state`
+    Sample(S, "relay", json.dumps(POSE), True),
+    Sample(S, "relay", json.dumps(FRAME_TIMES), True),
+    Sample(S, "relay", _with(FRAME_TIMES, frames=[]), False, "frames"),
+    Sample(S, "relay", _with(FRAME_TIMES, frames=[{"frame": 1, "t": 2}] * 65), False, "frames"),
+    Sample(S, "relay", _with(FRAME_TIMES, frames=[{"frame": -1, "t": 2}]), False, "frames.0.frame"),
+    Sample(S, "relay", _with(FRAME_TIMES, frames=[{"frame": 1}]), False, "frames.0.t"),
+    Sample(S, "relay", _with(FRAME_TIMES, frames=[{"frame": 1, "t": "now"}]), False, "frames.0.t"),
+    Sample(S, "relay", _with(FRAME_TIMES, frames={"frame": 1, "t": 2}), False, "frames"),
+    Sample(S, "relay", json.dumps(FRAME_TIMES).replace("1700000000000.0", "NaN", 1), False),
+    Sample(S, "vehicle", json.dumps(FRAME_TIMES), False),
     # client -> relay on `control`
     Sample(C, "relay", '{"type": "getOps"}', True),
     Sample(C, "relay", '{"type": "start"}', True),
@@ -122,6 +138,11 @@ SAMPLES: list[Sample] = [
     Sample(C, "client", _with(DETECTIONS, ms=-1), False, "ms"),
     Sample(C, "client", _without(DETECTIONS, "goalsPerS"), False, "goalsPerS"),
     Sample(C, "client", json.dumps(POSE), True),
+    Sample(C, "client", json.dumps(FRAME_TIMES), True),
+    Sample(
+        C, "client", _with(FRAME_TIMES, frames=[{"frame": 1.5, "t": 2}]), False, "frames.0.frame"
+    ),
+    Sample(C, "relay", json.dumps(FRAME_TIMES), False),
     Sample(C, "client", _with(DETECTIONS, locked=[1, 2, 30, 40]), True),
     Sample(C, "client", _with(DETECTIONS, locked=None), True),
     Sample(C, "client", _with(DETECTIONS, locked=[1, 2]), False, "locked"),

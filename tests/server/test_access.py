@@ -8,6 +8,7 @@ import pytest
 
 from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
+from app.rosbridge.protocol import Operation, Refused, parse_frame
 from app.server.access import (
     ROSBRIDGE_RIGHTS,
     Decision,
@@ -15,7 +16,6 @@ from app.server.access import (
     bearer_token,
     state_refusal,
 )
-from app.turtlesim.rosbridge import Operation, Refused, parse_frame
 
 SECRET = "rosbridge-gate-test-secret"
 NOW = 1_800_000_000.0

@@ -1,4 +1,4 @@
-"""The rosbridge hub carries other robots' topics between its clients (app/turtlesim/hosted.py):
+"""The rosbridge hub carries other robots' topics between its clients (app/rosbridge/hosted.py):
 the types of a robot description only, each message checked against its topic's type."""
 
 from __future__ import annotations
@@ -8,7 +8,9 @@ from typing import Any
 
 import pytest
 
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.rosbridge.hosted import MAX_HOSTED_TOPICS
+from app.rosbridge.protocol import RosbridgeSession
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import TurtleSim
 
 
@@ -172,3 +174,21 @@ def test_rosapi_describes_the_turtles_topics_beside_hosted_ones(hub: RosbridgeHu
         session, op="call_service", service="/rosapi/node_details", args={"node": "/turtlesim"}
     )
     assert "/camera/image/compressed" not in str(details["values"])
+
+
+def test_at_most_so_many_hosted_topics(hub: RosbridgeHub) -> None:
+    sessions = [client(hub) for _ in range(MAX_HOSTED_TOPICS // 32 + 1)]
+    made = 0
+    for k in range(MAX_HOSTED_TOPICS):
+        session = sessions[k // 32]
+        replies = send(
+            session, op="advertise", topic=f"/robot{k}/base/cmd_vel", type="geometry_msgs/Twist"
+        )
+        assert replies == [], replies
+        made += 1
+    last = sessions[-1]
+    text = error(
+        send(last, op="advertise", topic="/one_more/base/cmd_vel", type="geometry_msgs/Twist")
+    )
+    assert f"at most {MAX_HOSTED_TOPICS}" in text
+    assert made == MAX_HOSTED_TOPICS

@@ -9,13 +9,13 @@ from typing import Any
 
 import pytest
 
-from app.turtlesim.rosbridge import (
+from app.rosbridge.protocol import (
     MAX_QUEUE_LENGTH,
     MAX_SUBSCRIPTIONS,
     MAX_THROTTLE_RATE_MS,
-    RosbridgeHub,
     RosbridgeSession,
 )
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import MAX_CANVAS_POINTS, MAX_NAME_LENGTH, MAX_TURTLES, TurtleSim
 
 LARGEST = sys.float_info.max

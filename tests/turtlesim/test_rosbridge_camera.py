@@ -1,6 +1,5 @@
-"""Camera topics on the sans-I/O rosbridge (app/turtlesim/rosbridge.py): a client advertises and
-publishes images, the others subscribe in JSON or CBOR; each room sees its own; bad images are
-refused naming the field."""
+"""Camera topics on the sans-I/O rosbridge (app/rosbridge/): a client advertises and publishes
+images, the others subscribe in JSON or CBOR; bad images are refused naming the field."""
 
 from __future__ import annotations
 
@@ -14,8 +13,8 @@ import cbor2
 import pytest
 
 from app.protocol.ros import RosFlavour
-from app.turtlesim.hosted import MAX_HOSTED_TOPICS, MAX_HOSTED_TOPICS_PER_ROOM
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession, encode
+from app.rosbridge.protocol import RosbridgeSession, encode
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import TurtleSim
 
 TOPIC = "/camera/image/compressed"
@@ -31,9 +30,8 @@ def hub(flavour: RosFlavour = "2") -> RosbridgeHub:
     return RosbridgeHub(TurtleSim(), flavour)
 
 
-def session(hub: RosbridgeHub, room: str | None = None) -> RosbridgeSession:
+def session(hub: RosbridgeHub) -> RosbridgeSession:
     opened = hub.open_session()
-    opened.room = room
     assert send(opened, op="set_level", level="warning") == []
     return opened
 
@@ -186,7 +184,7 @@ def test_publishing_on_a_topic_nobody_declared_is_refused() -> None:
     server = hub()
     publisher = session(server)
     (status,) = send(publisher, op="publish", topic="/camera/x", msg=IMAGE)
-    assert "advertise it with its type before publishing" in status["msg"]
+    assert "unknown topic '/camera/x'" in status["msg"]
 
 
 def test_a_topic_keeps_the_type_it_was_declared_with() -> None:
@@ -205,24 +203,6 @@ def test_a_subscription_may_come_before_the_publisher() -> None:
     assert send(watcher, op="subscribe", topic=TOPIC, type="sensor_msgs/CompressedImage") == []
     assert send(publisher, op="publish", topic=TOPIC, msg=IMAGE) == []  # declared by the subscribe
     assert len(frames(watcher)) == 1
-
-
-def test_each_room_has_its_own_camera_topics() -> None:
-    server = hub()
-    in_a, watcher_a = session(server, "a"), session(server, "a")
-    watcher_b = session(server, "b")
-    camera(in_a)
-    send(watcher_a, op="subscribe", topic=TOPIC)
-    # Room b does not know room a's topic: without a type there is nothing to subscribe to ...
-    (status,) = send(watcher_b, op="subscribe", topic=TOPIC, id="b")
-    assert "unknown topic" in status["msg"]
-    # ... and with one, it is room b's own topic, on which room a's images never come.
-    assert send(watcher_b, op="subscribe", topic=TOPIC, type="sensor_msgs/CompressedImage") == []
-    send(in_a, op="publish", topic=TOPIC, msg=IMAGE)
-    assert len(frames(watcher_a)) == 1
-    assert frames(watcher_b) == []
-    assert topic_type(watcher_a, TOPIC) == "sensor_msgs/msg/CompressedImage"
-    assert TOPIC not in topics(session(server, "c"))
 
 
 def topic_type(client: RosbridgeSession, topic: str) -> str:
@@ -269,26 +249,6 @@ def test_a_topic_nobody_uses_any_more_is_forgotten() -> None:
     assert topic_type(watcher, TOPIC) != ""  # still subscribed to
     send(watcher, op="unsubscribe", topic=TOPIC)
     assert topic_type(watcher, TOPIC) == ""
-
-
-def test_a_room_holds_sixteen_hosted_topics_and_the_server_sixty_four() -> None:
-    assert (MAX_HOSTED_TOPICS_PER_ROOM, MAX_HOSTED_TOPICS) == (16, 64)
-    server = hub()
-    greedy = session(server, "a")
-    for n in range(16):
-        assert send(greedy, op="advertise", topic=f"/cam{n}", type="sensor_msgs/Image") == []
-    (status,) = send(greedy, op="advertise", topic="/cam16", type="sensor_msgs/Image")
-    assert "at most 16 hosted topics a room and 64 in all" in status["msg"]
-    # Other rooms still have theirs, up to the server's 64.
-    for room in range(1, 4):
-        client = session(server, f"r{room}")
-        for n in range(16):
-            assert send(client, op="advertise", topic=f"/cam{n}", type="sensor_msgs/Image") == []
-    (status,) = send(session(server, "z"), op="advertise", topic="/c", type="sensor_msgs/Image")
-    assert "at most 16 hosted topics a room and 64 in all" in status["msg"]
-    # A topic given up makes room for another.
-    assert send(greedy, op="unadvertise", topic="/cam0") == []
-    assert send(session(server, "z"), op="advertise", topic="/c", type="sensor_msgs/Image") == []
 
 
 def test_a_frame_that_cannot_be_json_is_not_sent(caplog: pytest.LogCaptureFixture) -> None:

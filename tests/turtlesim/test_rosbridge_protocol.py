@@ -8,7 +8,8 @@ from typing import Any
 
 import pytest
 
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.rosbridge.protocol import RosbridgeSession
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import TurtleSim
 
 CENTRE = TurtleSim.WORLD_SIZE / 2

@@ -16,7 +16,8 @@ from typing import Any
 import pytest
 
 from app.protocol.ros import RosFlavour
-from app.turtlesim.rosbridge import RosbridgeHub, RosbridgeSession
+from app.rosbridge.protocol import RosbridgeSession
+from app.turtlesim.rosbridge import RosbridgeHub
 from app.turtlesim.sim import TurtleSim
 
 TRACES = Path(__file__).resolve().parent / "traces"

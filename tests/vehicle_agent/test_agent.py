@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from app.protocol import tokens
-from app.protocol.events import AnyEvent, DriveReceived, TwistSent
+from app.protocol.events import AnyEvent, DriveReceived, FrameSent, TwistSent
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.sockets import rosbridge_url
@@ -52,7 +52,7 @@ async def running_agent(server_url: str, **config: Any) -> AsyncIterator[Running
     events: list[AnyEvent] = []
     log = EventLog()
     log.listeners.append(events.append)
-    video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5))
+    video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5), on_frame=log.emit)
     turtle = SimTurtle()
     agent = Agent(AgentConfig(server=server_url, **config), video, turtle, log)
     task = asyncio.create_task(agent.run())
@@ -122,6 +122,26 @@ async def test_agent_streams_tagged_video_and_pose_telemetry(server: RunningServ
         pose = next(m for m in relay.messages if m["type"] == "pose")
         assert pose["x"] == pytest.approx(5.544445, abs=1e-3)
         assert {"y", "theta", "t"} <= pose.keys()
+
+
+async def test_the_relay_learns_when_each_frame_it_decodes_was_captured(
+    server: RunningServer,
+) -> None:
+    async with running_agent(server.url) as run, relay_in(server) as relay:
+        await connected(relay)
+
+        def captured() -> dict[int, float]:
+            batches = [m for m in relay.messages if m["type"] == "frameTimes"]
+            return {f["frame"]: f["t"] for m in batches for f in m["frames"]}
+
+        await relay.until(lambda: relay.tags[-1] in captured())
+        # When the frame was handed to the encoder (its frame_sent event), on the wall clock,
+        # which a client on this machine can compare with its own.
+        wall_minus_monotonic = time.time() - time.monotonic()
+        sent = {e.frame: e.t for e in run.events if isinstance(e, FrameSent)}
+        for frame, t_ms in captured().items():
+            assert t_ms / 1000 == pytest.approx(sent[frame] + wall_minus_monotonic, abs=0.02)
+        assert captured()[relay.tags[-1]] < time.time() * 1000
 
 
 async def test_goals_turn_the_turtle_to_the_face_and_stop_zeroes(server: RunningServer) -> None:

@@ -240,12 +240,16 @@ def authenticated_ros(server: RunningServer, bearer: str) -> roslibpy.Ros:
     return client
 
 
-async def test_a_vehicle_publishes_its_camera_for_its_own_room_only(guarded: RunningServer) -> None:
-    topic = "/camera/image/compressed"
-    vehicle = authenticated_ros(guarded, token("vehicle"))
+async def test_a_vehicle_publishes_its_camera_for_its_own_room_only(
+    start_server: Callable[[Settings], RunningServer],
+) -> None:
+    # Rooms of their own: the diffdrive server's, one robot (and one hub) a room.
+    rooms = start_server(Settings(environment="development", secret=SECRET, robot="diffdrive"))
+    topic = "/rover/camera/compressed"
+    vehicle = authenticated_ros(rooms, token("vehicle"))
     try:
         publisher = advertise(vehicle, topic, "sensor_msgs/CompressedImage")
-        url = rosbridge_url(guarded)
+        url = rosbridge_url(rooms)
         async with (
             camera(url, topic, token=token("client")) as watcher,
             camera(url, topic, token=token("vehicle", room="elsewhere")) as stranger,

@@ -100,6 +100,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " thread and stage, codec counters, worker timers (relay-cost.md)",
     )
     parser.add_argument(
+        "--baseline",
+        action="store_true",
+        help="with --relay-cost: also measure the fallback that encodes the video for each client"
+        " (the relay's encoded transforms removed), the two forwards in alternation",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=positive_integer,
+        default=2,
+        metavar="N",
+        help="with --baseline: this many runs of each forward (2)",
+    )
+    parser.add_argument(
         "--opencv-builds",
         action="store_true",
         help="time the cascades on each OpenCV.js build instead, side by side on the same frames,"
@@ -111,6 +124,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help=f"with --opencv-builds: count N frames (default {FULL['frames']:g}, --quick"
         f" {QUICK['frames']:g})",
+    )
+    parser.add_argument(
+        "--camera",
+        action="store_true",
+        help="measure the simulated robot's camera instead: render and JPEG encode per frame,"
+        " the room against the empty room (camera.md)",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
@@ -128,6 +147,9 @@ def run(args: argparse.Namespace) -> int:
     if args.condition and not args.field:
         log.error("--condition goes with --field")
         return 2
+    if args.baseline and not args.relay_cost:
+        log.error("--baseline goes with --relay-cost")
+        return 2
     if args.frames is not None and not args.opencv_builds:
         log.error("--frames goes with --opencv-builds")
         return 2
@@ -137,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
         return fleet.run(args)
     if args.field:
         return _field(args)
+    if args.camera:
+        return _camera(args)
     if _can_enter_netns():
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
@@ -167,7 +191,7 @@ def _field(args: argparse.Namespace) -> int:
         log.error("the field bench builds network namespaces: run it as root")
         return 2
     conditions = args.condition or FIELD_CONDITIONS
-    obj = field.run(args.out, args.quick, conditions, args.seconds, args.fps)
+    obj = field.run(args.out, args.quick, conditions, args.seconds, args.fps, _provenance(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     unmeasured = [(r["condition"], k) for r in obj["field"] for k in r["problems"]]
@@ -176,6 +200,18 @@ def _field(args: argparse.Namespace) -> int:
     if unmeasured:
         log.error("not all measured (reasons in %s)", args.out / "field.md")
         return 1
+    return 0
+
+
+def _camera(args: argparse.Namespace) -> int:
+    """The simulated camera's cost: no network, so no namespace."""
+    from app.tools.bench import camera  # OpenCV's renderer, which no other bench needs
+
+    frames = camera.QUICK_FRAMES if args.quick else camera.FULL_FRAMES
+    obj = camera.run(args.out, frames, args.fps)
+    log.info("camera report: %s", args.out / "camera.md")
+    if args.json:
+        sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     return 0
 
 
@@ -205,6 +241,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv.append("--recorder")
     if args.relay_cost:
         argv.append("--relay-cost")
+    if args.baseline:
+        argv += ["--baseline", "--rounds", str(args.rounds)]
     if args.opencv_builds:
         argv.append("--opencv-builds")
     if args.frames is not None:
@@ -251,24 +289,31 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     from app.tools.bench import relaycost
 
     seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
+    # With --baseline: the forward as the relay does it and the fallback, in alternation.
+    forwards = list(relaycost.FORWARDS) * args.rounds if args.baseline else ["as is"]
+    provenance = _provenance(args)
+    runs = []
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
-            # The relay alone in a Chromium of its own: all its threads are the relay's.
-            relay = await playwright.chromium.launch(
-                **launch_options(extra_args=[relaycost.MARKER])
-            )
-            client = await playwright.chromium.launch(**launch_options())
-            try:
-                found = await relaycost.run(relay, client, server.url, seconds, args.fps)
-            finally:
-                await relay.close()
-                await client.close()
+            for forward in forwards:
+                # The relay alone in a Chromium of its own: all its threads are the relay's.
+                relay = await playwright.chromium.launch(
+                    **launch_options(extra_args=[relaycost.MARKER])
+                )
+                client = await playwright.chromium.launch(**launch_options())
+                try:
+                    runs.append(
+                        await relaycost.run(relay, client, server.url, seconds, args.fps, forward)
+                    )
+                finally:
+                    await relay.close()
+                    await client.close()
     finally:
         server.stop()
-    log.info("relay cost report: %s", relaycost.write_report(args.out, found))
+    log.info("relay cost report: %s", relaycost.write_report(args.out, runs, provenance))
     if args.json:
-        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+        sys.stdout.write(json.dumps(relaycost.report_object(runs), allow_nan=False) + "\n")
     return 0
 
 
@@ -462,12 +507,23 @@ def _machine() -> str:
     return f"{os.cpu_count()} x {model}, Python {platform.python_version()}"
 
 
+def _provenance(args: argparse.Namespace) -> dict[str, str]:
+    """When, where and how a report's figures were measured, for its first lines."""
+    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    return {"started": started, "machine": _machine(), "command": _command(args)}
+
+
 def _command(args: argparse.Namespace) -> str:
     parts = ["autopilot bench"]
     if args.quick:
         parts.append("--quick")
+    if args.field:
+        parts.append("--field")
+        parts += [f"--condition {name}" for name in args.condition or ()]
     if args.relay_cost:
         parts.append("--relay-cost")
+    if args.baseline:
+        parts.append(f"--baseline --rounds {args.rounds}")
     if args.opencv_builds:
         parts.append("--opencv-builds")
     if args.frames is not None:

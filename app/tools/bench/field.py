@@ -3,9 +3,11 @@
 For each condition the lab is set, the whole system is started afresh (NAT and DNAT decisions
 are per connection), piloting starts, and after the first goal and a settling second the run
 is measured over a window: the agent's event log gives goals, Twists, poses and the link, the
-client page its received video frames. ``link_drop`` darkens the robot's link for 3 s inside
-its window and times the stop and the resumption. Nothing is asserted here; figures that could
-not be measured are null with the reason in ``problems``.
+client page its received video frames and its glass to glass (vehicle capture to presentation
+at the client, each frame it measured; the lab's namespaces share one clock). ``link_drop``
+darkens the robot's link for 3 s inside its window and times the stop and the resumption.
+Nothing is asserted here; figures that could not be measured are null with the reason in
+``problems``.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,11 @@ RESUME_TIMEOUT_S = 30.0
 VIDEO_COLUMNS = (
     "condition", "hint", "degradation_preference", "fps", "width", "kbit_per_s", "limited_by",
 )  # fmt: skip
+# The client's glass-to-glass samples: how many so far, and the latest (a bounded ring).
+_GLASS_JS = """() => ({
+  count: window.autopilotHealth.framesTimed,
+  ms: window.autopilotHealth.glassToGlassMs,
+})"""
 _VIDEO_FRAMES_JS = """() => {
   const video = document.querySelector('[data-testid=video]');
   if (!video || !video.getVideoPlaybackQuality) return null;
@@ -74,7 +81,19 @@ class FieldRow:
     heading_error_deg_median: float | None = None
     stale_goals_applied: int | None = None
     client_video_fps: float | None = None
+    client_glass_to_glass_ms_p50: float | None = None
+    client_glass_to_glass_ms_p95: float | None = None
     problems: dict[str, str] = field(default_factory=dict)
+
+    def client_glass(self, samples: list[float]) -> None:
+        """The client's glass-to-glass figures from its samples over the window."""
+        if not samples:
+            self.problems["client_glass_to_glass_ms_p50"] = (
+                "the client measured no frame (no tagged frame with a known capture time)"
+            )
+            return
+        self.client_glass_to_glass_ms_p50 = round(float(np.percentile(samples, 50)), 1)
+        self.client_glass_to_glass_ms_p95 = round(float(np.percentile(samples, 95)), 1)
 
 
 def figures(condition: str, events: list[AnyEvent], window: tuple[float, float]) -> FieldRow:
@@ -120,6 +139,13 @@ def figures(condition: str, events: list[AnyEvent], window: tuple[float, float])
     )
     row.stale_goals_applied = stale_goals_applied(events)
     return row
+
+
+def samples_since(before: dict[str, Any], after: dict[str, Any]) -> list[float]:
+    """The client's glass-to-glass samples taken between two readings of ``_GLASS_JS`` (a ring
+    that holds the latest: a window longer than the ring keeps its last part)."""
+    taken = int(after["count"]) - int(before["count"])
+    return [float(ms) for ms in after["ms"][-taken:]] if taken > 0 else []
 
 
 def stale_goals_applied(events: list[AnyEvent]) -> int:
@@ -172,6 +198,7 @@ def run(
     conditions: Sequence[str] = ORDER,
     seconds: float | None = None,
     fps: float | None = None,
+    provenance: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Measure ``conditions`` (in the bench's order) and the video sender, each for ``seconds``
     if given (``--seconds``), the vehicle's camera at ``fps`` if given (``--fps``; the video
@@ -204,6 +231,7 @@ def run(
                     continue
                 time.sleep(SETTLE_S)
                 frames_before = stack.client.evaluate(_VIDEO_FRAMES_JS)
+                glass_before = stack.client.evaluate(_GLASS_JS)
                 start = time.monotonic()
                 if name == "link_drop":
                     time.sleep(OUTAGE_AT_S)
@@ -223,6 +251,7 @@ def run(
                 end = time.monotonic()
                 frames_after = stack.client.evaluate(_VIDEO_FRAMES_JS)
                 row = figures(name, stack.all_events(), (start, end))
+                row.client_glass(samples_since(glass_before, stack.client.evaluate(_GLASS_JS)))
                 if isinstance(frames_before, int) and isinstance(frames_after, int):
                     row.client_video_fps = round((frames_after - frames_before) / (end - start), 1)
                 else:
@@ -240,6 +269,7 @@ def run(
         "quick": quick,
         # Everything shares this machine's cores: the figures move with its load.
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+        "run": dict(provenance or {}),
     }
     write(out, obj)
     return obj
@@ -259,6 +289,8 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         "heading_error_deg_median",
         "stale_goals_applied",
         "client_video_fps",
+        "client_glass_to_glass_ms_p50",
+        "client_glass_to_glass_ms_p95",
     ]
     lines = [
         "# Field bench",
@@ -267,19 +299,29 @@ def write(out: Path, obj: dict[str, Any]) -> None:
         "(see `app/tools/bench/field.py`). Null: not measured, the reason is listed below. "
         f"Load average before/after: {obj.get('load_average')}.",
         "",
+    ]
+    run = obj.get("run")
+    if run:
+        lines += [
+            f"Run {run['started']} on {run['machine']}, command `{run['command']}`.",
+            "",
+        ]
+    lines += [
         "| " + " | ".join(keys) + " |",
         "| " + " | ".join("---" for _ in keys) + " |",
     ]
     for row in obj["field"]:
         lines.append("| " + " | ".join(_cell(row[k]) for k in keys) + " |")
-    drop = obj["link_drop"]
-    lines += [
-        "",
-        f"link_drop: zero Twist {_cell(drop['stop_after_s'])} s after the last goal (target "
-        f"<= 0.75 s); goals again {_cell(drop['resume_after_s'])} s after the link came back "
-        "(target <= 3 s).",
-        "",
-    ]
+    lines.append("")
+    # The outage's two figures, when link_drop was among the conditions run.
+    if any(row["condition"] == "link_drop" for row in obj["field"]):
+        drop = obj["link_drop"]
+        lines += [
+            f"link_drop: zero Twist {_cell(drop['stop_after_s'])} s after the last goal (target "
+            f"<= 0.75 s); goals again {_cell(drop['resume_after_s'])} s after the link came "
+            "back (target <= 3 s).",
+            "",
+        ]
     if obj.get("video"):
         lines += [
             "Chromium's video sender, robot uplink capped, per content hint (received at the "

@@ -39,6 +39,8 @@ LABELS = {
     "goals_per_s": "goals per second",
     "glass_to_command_ms_p50": "glass-to-command p50 (ms)",
     "glass_to_command_ms_p95": "glass-to-command p95 (ms)",
+    "client_glass_to_glass_ms_p50": "client glass-to-glass p50 (ms)",
+    "client_glass_to_glass_ms_p95": "client glass-to-glass p95 (ms)",
     "heading_error_deg_median": "median heading error (deg)",
     "js_over_native_ratio": "OpenCV.js / Python OpenCV",
     "memory_growth_pct": "relay memory growth (%)",
@@ -291,6 +293,13 @@ def _limits(key: str, results: dict[str, Any]) -> str:
             f" analysed {d['relay_snapshots'] / window:.1f} snapshots/s, one at a time at"
             f" {proc['mean']:.0f} ms each on average{busy}"
         )
+    if key.startswith("client_glass"):
+        return (
+            "the vehicle's encode, the network, the relay's forward (the vehicle's encoded frames"
+            " passed through, or decoded and encoded again where the browser cannot), the"
+            " client's jitter buffer and decode, and the wait for the next display refresh"
+            f"{busy}"
+        )
     if key.startswith("glass"):
         f2g, g2c = p50("frame_to_goal_ms"), p50("goal_to_command_ms")
         if f2g is not None and g2c is not None:
@@ -517,6 +526,10 @@ def markdown(results: dict[str, Any]) -> str:
         "- Glass-to-command: the agent's time of sending frame n to its time of publishing the"
         " first Twist computed from the goal that echoes frame n (frame number drawn into the"
         " pixels, read back by the relay); one clock.",
+        "- Client glass-to-glass: the agent's wall-clock time of handing frame n to its"
+        " encoder (sent to the clients through the relay) to the moment the client page expects"
+        " frame n on its screen (`requestVideoFrameCallback`'s `expectedDisplayTime`, frame"
+        " number read from the presented pixels); one machine's clock.",
         "- Heading error: turtle heading against the direction from the turtle to the synthetic"
         " face's true centre mapped onto the terrain by the control law, after a 1 s settle.",
         "- OpenCV.js against Python: the same RGBA frames and operation parameters, OpenCV.js in"

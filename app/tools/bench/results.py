@@ -34,6 +34,8 @@ FIGURE_KEYS = (
     "goals_per_s",
     "glass_to_command_ms_p50",
     "glass_to_command_ms_p95",
+    "client_glass_to_glass_ms_p50",
+    "client_glass_to_glass_ms_p95",
     "heading_error_deg_median",
     "js_over_native_ratio",
     "memory_growth_pct",
@@ -61,6 +63,15 @@ TARGETS = (
     Target("goals_per_s", 15.0, False, ">= 15 goals/s"),
     Target("glass_to_command_ms_p50", 120.0, True, "glass-to-command p50 <= 120 ms"),
     Target("glass_to_command_ms_p95", 200.0, True, "glass-to-command p95 <= 200 ms"),
+    Target(
+        "client_glass_to_glass_ms_p50", 60.0, True, "client glass-to-glass p50 <= 60 ms (loopback)"
+    ),
+    Target(
+        "client_glass_to_glass_ms_p95",
+        100.0,
+        True,
+        "client glass-to-glass p95 <= 100 ms (loopback)",
+    ),
     Target("heading_error_deg_median", 5.0, True, "median heading error <= 5 deg"),
     Target("js_over_native_ratio", 1.3, True, "OpenCV.js / Python OpenCV <= 1.3"),
     Target("memory_growth_pct", 5.0, True, "memory growth <= 5 % over a 10-minute soak"),
@@ -121,6 +132,9 @@ class ProfileRun:
     position_error: list[tuple[float, float]] = field(default_factory=list)
     # Cores the agent process used over the window (its CPU time / the window's length).
     agent_cores: float | None = None
+    # Vehicle capture -> presentation at the client page, ms, each frame it measured while
+    # measuring (its window.autopilotHealth; the vehicle's and the client's wall clocks).
+    client_glass: list[float] = field(default_factory=list)
 
     def position_error_summary(self) -> Summary | None:
         """Distribution of the follow profile's position error after the settle time."""
@@ -208,6 +222,12 @@ def figures(run: ProfileRun) -> tuple[dict[str, float | None], dict[str, str]]:
         "no Twist could be traced back to a tagged frame",
     )
 
+    percentiles(
+        "client_glass_to_glass_ms",
+        summarize(run.client_glass),
+        "the client page measured no frame (no tagged frame with a known capture time)",
+    )
+
     heading = (
         heading_error_deg_median(run.heading, run.settle_at) if run.settle_at is not None else None
     )
@@ -266,6 +286,7 @@ def details(run: ProfileRun) -> dict[str, Any]:
         "glass_to_command_ms": summary(run.glass_ms()),
         "frame_to_goal_ms": summary(run.frame_to_goal_ms()),
         "goal_to_command_ms": summary(run.goal_to_command_ms()),
+        "client_glass_to_glass_ms": summary(run.client_glass),
         "frames_sent_per_s": (
             sum(1 for t in run.frame_sent.values() if run.window[0] <= t < run.window[1])
             / (run.window[1] - run.window[0])

@@ -65,6 +65,13 @@ _POLL_JS = """(seen) => {
   return { snapshots: s.snapshots, goalsSent: s.goalsSent, ms };
 }"""
 
+# The client's glass-to-glass samples since the last poll (its health keeps a bounded ring).
+_CLIENT_POLL_JS = """(seen) => {
+  const h = window.autopilotHealth;
+  const k = Math.min(h.framesTimed - seen, h.glassToGlassMs.length);
+  return { framesTimed: h.framesTimed, ms: k > 0 ? h.glassToGlassMs.slice(-k) : [] };
+}"""
+
 # JS heap after a full collection when the browser exposes gc (--js-flags=--expose-gc), so that
 # garbage not yet collected is not mistaken for growth.
 _JS_HEAP_JS = """() => {
@@ -162,7 +169,7 @@ async def run_profile(
             await prepare(relay, client)
         log.info("%s run: goals flowing, measuring for %.0f s", name, options.duration_s)
         cpu_before = tree_cpu_s({"agent": [agent.pid]})
-        run.window = await _measure(relay, options, run)
+        run.window = await _measure(relay, client, options, run)
         used = tree_cpu_s({"agent": [agent.pid]})["agent"] - cpu_before["agent"]
         run.agent_cores = used / (run.window[1] - run.window[0])
         if finish is not None:
@@ -172,11 +179,15 @@ async def run_profile(
     return run
 
 
-async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple[float, float]:
-    """Poll the relay's samples and memory for ``duration_s``; returns the window measured."""
+async def _measure(
+    relay: Page, client: Page, options: StackOptions, run: ProfileRun
+) -> tuple[float, float]:
+    """Poll the relay's samples and memory, and the client's glass to glass, for
+    ``duration_s``; returns the window measured."""
     begin = time.monotonic()
     first = await relay.evaluate(_POLL_JS, 0)
     seen = first["snapshots"]
+    timed = (await client.evaluate(_CLIENT_POLL_JS, 0))["framesTimed"]
     next_memory = begin + MEMORY_FIRST_SAMPLE_S
     run.memory_baseline_at = begin + max(
         MEMORY_FIRST_SAMPLE_S,
@@ -188,7 +199,9 @@ async def _measure(relay: Page, options: StackOptions, run: ProfileRun) -> tuple
             next_memory += options.memory_every_s
         await asyncio.sleep(POLL_S)
         seen = (await _collect(relay, seen, run))["snapshots"]
+        timed = await _collect_client(client, timed, run)
     last = await _collect(relay, seen, run)
+    await _collect_client(client, timed, run)
     run.snapshots = last["snapshots"] - first["snapshots"]
     run.relay_goals = last["goalsSent"] - first["goalsSent"]
     run.memory.append(await _memory(relay, run))
@@ -289,6 +302,14 @@ async def _collect(relay: Page, seen: int, run: ProfileRun) -> dict[str, Any]:
     now = time.monotonic()
     run.processing.extend((now, float(ms)) for ms in polled["ms"])
     return polled
+
+
+async def _collect_client(client: Page, timed: int, run: ProfileRun) -> int:
+    """Append the client's glass-to-glass samples since frame ``timed``; returns its count."""
+    polled: dict[str, Any] = await client.evaluate(_CLIENT_POLL_JS, timed)
+    run.client_glass.extend(float(ms) for ms in polled["ms"])
+    count: int = polled["framesTimed"]
+    return count
 
 
 async def _memory(relay: Page, run: ProfileRun) -> MemorySample:

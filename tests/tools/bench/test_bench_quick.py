@@ -54,6 +54,9 @@ def check_plausible(figures: dict[str, object], profile: str) -> None:
         values[key] = float(value)
     assert 0 < values["processing_ms_p50"] <= values["processing_ms_p95"] < 60_000
     assert 0 < values["glass_to_command_ms_p50"] <= values["glass_to_command_ms_p95"] < 60_000
+    # Capture at the vehicle to presentation at the client: one machine's clock, so positive.
+    p50, p95 = values["client_glass_to_glass_ms_p50"], values["client_glass_to_glass_ms_p95"]
+    assert 0 < p50 <= p95 < 60_000
     # A goal per decoded frame at most.
     assert 0 < values["goals_per_s"] <= FPS + 1
     assert 0 <= values["heading_error_deg_median"] <= 180

@@ -24,7 +24,8 @@ from app.tools.bench.stats import FaceSample, HeadingSample
 def synthetic_run(profile: str, delay_ms: float) -> ProfileRun:
     """30 frames/s for 10 s; every frame becomes a goal 40 ms later and a Twist 10 ms after that;
     the turtle is always 2 degrees off; the heaps grow by 1 % and 2 %; the face leaps across the
-    640x480 frame at frame 150 and the goal of frame 151 finds it, the one of 150 does not."""
+    640x480 frame at frame 150 and the goal of frame 151 finds it, the one of 150 does not; the
+    client shows each frame 30, 40 or 50 ms after it was captured, in turn."""
     run = ProfileRun(profile)
     run.frame_size = (640, 480)
     for n in range(300):
@@ -37,6 +38,7 @@ def synthetic_run(profile: str, delay_ms: float) -> ProfileRun:
         run.commands.append((t + 0.050, n))
         run.processing.append((t, delay_ms + (n % 2)))  # alternating delay, delay + 1
         run.heading.append(HeadingSample(t, math.radians(32), math.radians(30), math.radians(2)))
+        run.client_glass.append(30.0 + 10 * (n % 3))
     run.window = (0.04, 10.04)
     run.settle_at = 1.0
     run.js_ms = [12.0] * 5
@@ -51,6 +53,8 @@ def test_figures_of_a_known_run() -> None:
     assert values["processing_ms_p50"] == pytest.approx(8.5)
     assert values["goals_per_s"] == pytest.approx(30.0)
     assert values["glass_to_command_ms_p50"] == pytest.approx(50.0)
+    assert values["client_glass_to_glass_ms_p50"] == pytest.approx(40.0)
+    assert values["client_glass_to_glass_ms_p95"] == pytest.approx(50.0)
     assert values["heading_error_deg_median"] == pytest.approx(2.0)
     assert values["js_over_native_ratio"] == pytest.approx(1.2)
     assert values["memory_growth_pct"] == pytest.approx(2.0)  # the worse of the two heaps

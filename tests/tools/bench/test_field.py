@@ -12,7 +12,13 @@ from app.protocol.events import (
     PoseReport,
     TwistSent,
 )
-from app.tools.bench.field import figures, link_drop_times, stale_goals_applied, write
+from app.tools.bench.field import (
+    figures,
+    link_drop_times,
+    samples_since,
+    stale_goals_applied,
+    write,
+)
 
 
 def _log() -> list[AnyEvent]:
@@ -44,6 +50,18 @@ def test_figures_have_every_key_and_plausible_values() -> None:
     assert row.heading_error_deg_median is not None and row.heading_error_deg_median < 1
     assert row.stale_goals_applied == 0
     assert row.problems == {}
+
+
+def test_the_client_glass_to_glass_over_the_window() -> None:
+    # The ring holds the latest samples; those taken since the first reading are the window's.
+    before = {"count": 10, "ms": [90.0] * 10}
+    after = {"count": 14, "ms": [90.0] * 10 + [40.0, 50.0, 60.0, 70.0]}
+    row = figures("rtt_150", _log(), (1.0, 3.0))
+    row.client_glass(samples_since(before, after))
+    assert (row.client_glass_to_glass_ms_p50, row.client_glass_to_glass_ms_p95) == (55.0, 68.5)
+    empty = figures("loss_2", _log(), (1.0, 3.0))
+    empty.client_glass(samples_since(after, after))
+    assert "client_glass_to_glass_ms_p50" in empty.problems
 
 
 def test_a_goal_applied_after_a_newer_one_counts_as_stale_until_the_next_link() -> None:
@@ -79,8 +97,15 @@ def test_a_run_without_a_link_says_why(tmp_path: Path) -> None:
         "kbit_per_s": 220,
         "limited_by": "bandwidth",
     }
-    write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video]})
+    run = {"started": "2026-11-26T18:00:00+00:00", "machine": "2 x CPU", "command": "bench"}
+    write(tmp_path, {**obj, "window_s": 1.0, "quick": True, "video": [video], "run": run})
     report = (tmp_path / "field.md").read_text()
+    assert "Run 2026-11-26T18:00:00+00:00 on 2 x CPU, command `bench`." in report
+    # No link_drop row: no outage figures, not even as "not measured".
+    assert "link_drop:" not in report
+    dropped = figures("link_drop", [], (0.0, 1.0)).__dict__
+    write(tmp_path, {**obj, "field": [dropped], "window_s": 1.0, "quick": True, "video": []})
+    assert "link_drop: zero Twist – s after the last goal" in (tmp_path / "field.md").read_text()
     assert "clean connect_ms: the link never came up" in report
     assert "| cap_300kbit | motion | maintain-framerate | 9.5 | 320 | 220 | bandwidth |" in report
     assert (tmp_path / "field-latency.png").stat().st_size > 0

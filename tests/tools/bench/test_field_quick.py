@@ -60,6 +60,9 @@ def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
         assert 0 < row["goals_per_s"] <= FPS + 1  # at most a goal per frame
         assert 0 <= row["heading_error_deg_median"] <= 180
         assert 0 < row["client_video_fps"] <= FPS + 1
+        # Capture at the vehicle to presentation at the client: one machine's clock.
+        p50, p95 = row["client_glass_to_glass_ms_p50"], row["client_glass_to_glass_ms_p95"]
+        assert 0 < p50 <= p95 < 60_000
         # Latest wins: never a goal older than one already applied (a rule, not a timing).
         assert row["stale_goals_applied"] == 0
     drop = obj["link_drop"]

@@ -7,11 +7,12 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from app.tools.bench.cpu import ThreadCpu
-from app.tools.bench.relaycost import STAGES, breakdown, thread_cores
+from app.tools.bench.relaycost import STAGES, breakdown, thread_cores, write_report
 
 
 def _thread(process: str, name: str, tid: int, cpu_s: float, pid: int = 10) -> ThreadCpu:
@@ -21,6 +22,8 @@ def _thread(process: str, name: str, tid: int, cpu_s: float, pid: int = 10) -> T
 RENDERER = [
     _thread("renderer", "chromium", 10, 1.0),  # the main thread: tid == pid
     _thread("renderer", "DedicatedWorker", 11, 4.0),
+    # The pass-through forward's worker: the same name, far less work than the vision worker's.
+    _thread("renderer", "DedicatedWorker", 17, 0.3),
     _thread("renderer", "ThreadPoolPrese", 12, 2.0),
     _thread("renderer", "ThreadPoolPrese", 13, 0.5),
     _thread("renderer", "WebRTC_W_and_N", 14, 0.5),
@@ -42,11 +45,12 @@ def test_every_threads_time_goes_to_one_stage() -> None:
     threads = thread_cores([], RENDERER, seconds=10.0)
     stages = breakdown(threads, encode_cores=0.15, decode_cores=0.05, pixel_share=0.25)
     assert set(stages) == {*STAGES, "total"}
-    assert stages["total"] == pytest.approx(0.9)
+    assert stages["total"] == pytest.approx(0.93)
     assert sum(stages[s] for s in STAGES) == pytest.approx(stages["total"])
-    # The worker's thread, split by its own timers.
+    # The vision worker's thread (the busier worker), split by its own timers.
     assert stages[STAGES[0]] == pytest.approx(0.1)
     assert stages[STAGES[1]] == pytest.approx(0.3)
+    assert stages[STAGES[9]] == pytest.approx(0.03)  # the forward's worker
     # The thread pool (0.25 cores) holds both codecs as their counters say, and the rest.
     assert stages[STAGES[2]] == pytest.approx(0.15)
     assert stages[STAGES[3]] == pytest.approx(0.05)
@@ -80,15 +84,83 @@ def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: 
     cores = found["relay_cores"]
     # The relay's Chromium worked (the worker and the codecs above all), on two cores at most.
     assert 0 < cores["total"] < 2, cores
-    assert cores[STAGES[1]] > 0 and cores[STAGES[2]] > 0 and cores[STAGES[3]] > 0, cores
+    assert cores[STAGES[1]] > 0 and cores[STAGES[3]] > 0, cores
     assert any(t["thread"].startswith("DedicatedWorker") for t in found["threads"])
     assert found["codecs"]["frames_decoded_per_s"] > 0
-    assert found["codecs"]["frames_encoded_per_s"] > 0
-    # The forward to the client is encoded at half the vehicle's 640x480 per side (or less,
-    # when Chromium's balanced degradation scales it down further).
-    assert [s["width"] for s in found["codecs"]["forward"]] != []
-    assert all(0 < s["width"] <= 320 for s in found["codecs"]["forward"]), found["codecs"]
+    # The relay's Chromium passes the vehicle's frames through: it encodes none for the client.
+    assert found["forward"] == "pass-through"
+    assert found["codecs"]["forward"] != []
+    assert found["codecs"]["frames_encoded_per_s"] == 0
     assert found["per_snapshot_ms"]["snapshots"] > 0
+    glass = found["client_glass_to_glass_ms"]
+    assert 0 < glass["p50"] <= glass["p95"], glass
     report = (tmp_path / "relay-cost.md").read_text()
     assert "the relay's Chromium in all" in report and "DedicatedWorker" in report
     assert json.loads((tmp_path / "relay-cost.json").read_text()) == found
+
+
+def _found(forward: str, total: float) -> dict[str, Any]:
+    """A run's figures as ``relaycost.run`` returns them, every stage ``total`` / 10 cores."""
+    return {
+        "fps": 30,
+        "seconds": 20.0,
+        "load_average": 1.5,
+        "forward": forward,
+        "relay_cores": {**dict.fromkeys(STAGES, total / 10), "total": total},
+        "threads": [{"process": "renderer", "thread": "DedicatedWorker", "cores": 0.1}],
+        "per_snapshot_ms": {"pixels_p50": 0.2, "detect_p50": 3, "worker_p50": 3.5, "snapshots": 9},
+        "codecs": {
+            "decode_ms_per_frame": 0.7,
+            "encode_ms_per_frame": None if forward == "pass-through" else 1.9,
+            "frames_decoded_per_s": 30.0,
+            "frames_encoded_per_s": 0.0 if forward == "pass-through" else 30.0,
+            "forward": [{"width": None if forward == "pass-through" else 320, "height": None}],
+        },
+        "main_thread_busy": {"TaskDuration": 0.03, "ScriptDuration": 0.01},
+        "processing_ms": {"p50": 3.6, "p95": 6.3},
+        "glass_to_command_ms": {"p50": 18.0, "p95": 25.0},
+        "client_glass_to_glass_ms": {"p50": 40.0 if forward == "pass-through" else 55.0, "p95": 70},
+        "goals_per_s": 30.0,
+    }
+
+
+def test_runs_are_reported_side_by_side_in_the_order_they_ran(tmp_path: Path) -> None:
+    runs = [_found("pass-through", 0.2), _found("re-encode", 0.3), _found("pass-through", 0.21)]
+    text = write_report(tmp_path, runs).read_text()
+    assert "| stage | pass-through (cores) | re-encode (cores) | pass-through (cores) |" in text
+    assert "| **the relay's Chromium in all** | **0.200** | **0.300** | **0.210** |" in text
+    assert "| client glass-to-glass p50 / p95 (ms) | 40.0 / 70 | 55.0 / 70 | 40.0 / 70 |" in text
+    # At 30 fps each run is judged against the issue's 0.18 cores per room.
+    assert "| within ≤ 0.18 cores per room at 30 fps | no | no | no |" in text
+    assert json.loads((tmp_path / "relay-cost.json").read_text()) == {"runs": runs}
+    # One run alone keeps its figures at the top of the JSON.
+    write_report(tmp_path, runs[:1])
+    assert json.loads((tmp_path / "relay-cost.json").read_text()) == runs[0]
+
+
+def test_the_report_says_when_where_and_how_it_was_measured(tmp_path: Path) -> None:
+    provenance = {
+        "started": "2026-11-26T18:00:00+00:00",
+        "machine": "2 x CPU",
+        "command": "autopilot bench --relay-cost --baseline --rounds 2",
+    }
+    runs = [_found("pass-through", 0.17), _found("re-encode", 0.27)]
+    text = write_report(tmp_path, runs, provenance).read_text()
+    assert (
+        "Run 2026-11-26T18:00:00+00:00 on 2 x CPU, command "
+        "`autopilot bench --relay-cost --baseline --rounds 2`." in text
+    )
+    assert "| within ≤ 0.18 cores per room at 30 fps | yes | no |" in text
+    # Another frame rate is measured, not judged against a target set at 30 fps.
+    slower = [{**found, "fps": 10} for found in runs]
+    text = write_report(tmp_path, slower).read_text()
+    assert "within ≤" not in text and "not judged: this run's 10 fps" in text
+
+
+def test_baseline_alone_is_refused() -> None:
+    # --baseline measures the fallback beside the relay's cores: without --relay-cost it means
+    # nothing, and must not start another bench in its place.
+    argv = [sys.executable, "-m", "app.cli", "bench", "--baseline"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "--baseline goes with --relay-cost" in done.stderr

@@ -28,8 +28,10 @@ export class Peer extends EventTarget {
    * @param {import('../view/ui.js').Log} options.log
    * @param {(pc: RTCPeerConnection) => Promise<void>} [options.beforeAnswer] runs between
    *   applying a remote offer and creating the answer (the relay sets its send tracks there)
+   * @param {(sdp: string) => Promise<string>} [options.shapeAnswer] the answer's SDP as it is
+   *   to be applied and sent (the relay renumbers the vehicle's codec for its forward)
    */
-  constructor({ remote, polite, mayOffer, ice, send, log, beforeAnswer }) {
+  constructor({ remote, polite, mayOffer, ice, send, log, beforeAnswer, shapeAnswer }) {
     super();
     this.remote = remote;
     this.polite = polite;
@@ -37,6 +39,7 @@ export class Peer extends EventTarget {
     this.send = send;
     this.log = log;
     this.beforeAnswer = beforeAnswer;
+    this.shapeAnswer = shapeAnswer;
     this.pc = new RTCPeerConnection({
       iceServers: ice.iceServers,
       iceTransportPolicy: ice.iceTransportPolicy,
@@ -111,7 +114,10 @@ export class Peer extends EventTarget {
     }
     if (description.type === 'offer') {
       if (this.beforeAnswer) await this.beforeAnswer(pc);
-      await pc.setLocalDescription();
+      if (this.shapeAnswer) {
+        const answer = await pc.createAnswer();
+        await pc.setLocalDescription({ type: 'answer', sdp: await this.shapeAnswer(answer.sdp) });
+      } else await pc.setLocalDescription();
       this.#signal({ type: 'answer', to: this.remote, sdp: pc.localDescription.sdp });
     }
   }

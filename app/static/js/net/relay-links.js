@@ -2,11 +2,15 @@
 // vehicle and of the clients, takes in the vehicle's video and forwards it to every client, and
 // opens the vehicle's and the clients' data channels to the page. One vehicle is served at a
 // time (core/relay-seats.js): another vehicle's offer is ignored while the seat is taken, and a
-// peer's departure clears only what that peer held.
+// peer's departure clears only what that peer held. The video goes to a client as the vehicle
+// encoded it where the browser allows it and the client decodes the vehicle's codec
+// (net/video-forward.js, 'pass-through'); otherwise the relay encodes the decoded video again
+// for that client, at a smaller size ('re-encode').
 import { CHANNELS, PROTOCOL, SCHEMAS } from '../config.js';
 import { Seat } from '../core/relay-seats.js';
 import { LinkMeter } from './link-health.js';
 import { Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
+import { VideoForward } from './video-forward.js';
 
 /**
  * Events (CustomEvent detail):
@@ -19,7 +23,7 @@ import { Peer, preferLowLatency, sendJson, serveChannel } from './peer.js';
  *   `changed`       the connections or their channels changed (for the page's peer list)
  */
 export class RelayLinks extends EventTarget {
-  #peers = new Map(); // remote name -> {peer, role, channel, stateChannel, meter}
+  #peers = new Map(); // remote name -> {peer, role, channel, stateChannel, meter, forward}
   #signalQueues = new Map(); // remote name -> promise of its last signaling message handled
   #seat = new Seat('the relay');
 
@@ -29,16 +33,33 @@ export class RelayLinks extends EventTarget {
    * @param {import('../view/ui.js').Log} options.log
    * @param {(name: string) => object} options.controlHandlers a client's control-channel
    *   handlers, by message type (serveChannel)
-   * @param {(msg: object) => void} options.onPose the vehicle's pose, validated
+   * @param {{pose: (msg: object) => void, frameTimes: (msg: object) => void}}
+   *   options.vehicleHandlers the served vehicle's messages, validated: its pose, the capture
+   *   times of its frames
    */
-  constructor({ room, log, controlHandlers, onPose }) {
+  constructor({ room, log, controlHandlers, vehicleHandlers }) {
     super();
     this.room = room;
     this.log = log;
     this.controlHandlers = controlHandlers;
-    this.onPose = onPose;
+    this.vehicleHandlers = vehicleHandlers;
     this.vehicleTrack = null; // the served vehicle's video track
     this.vehicle = null; // the served vehicle's name while its autopilot channel is open
+    // The pass-through forward, or null where this browser cannot pass encoded frames on.
+    this.forward = VideoForward.supported ? new VideoForward({ log }) : null;
+    this.forward?.addEventListener('mode', ({ detail: { name, passing } }) =>
+      this.#onForwardMode(name, passing),
+    );
+    if (this.forward === null) {
+      log.info("this browser has no encoded transforms: the relay encodes each client's video");
+    }
+  }
+
+  /** How each client gets the video: {name: 'pass-through' | 're-encode'}. */
+  get forwards() {
+    return Object.fromEntries(
+      this.#clientEntries().map((entry) => [entry.peer.remote, entry.forward]),
+    );
   }
 
   /** The names of the clients connected. */
@@ -87,6 +108,7 @@ export class RelayLinks extends EventTarget {
     if (entry === undefined) return;
     this.#peers.delete(name);
     entry.peer.close();
+    if (entry.role === 'client') this.forward?.removeClient(name);
     this.log.info(`connection with ${name} closed: ${reason}`);
     if (entry.role === 'vehicle' && this.#seat.release(name)) {
       this.#setVehicle(null);
@@ -169,7 +191,12 @@ export class RelayLinks extends EventTarget {
       ice: this.room.ice,
       send: (msg) => this.room.send(msg),
       log: this.log,
-      beforeAnswer: role === 'client' ? (pc) => this.#sendVideoOn(pc) : undefined,
+      beforeAnswer: role === 'client' ? () => this.#sendVideoTo(entry) : undefined,
+      // The vehicle sends its codec with the number the clients receive it at (pass-through).
+      shapeAnswer:
+        role === 'vehicle' && this.forward !== null
+          ? (sdp) => this.forward.answerVehicle(sdp)
+          : undefined,
     });
     // The vehicle's link is measured here, where its video is received (link health).
     const entry = {
@@ -178,12 +205,15 @@ export class RelayLinks extends EventTarget {
       channel: null,
       stateChannel: null,
       meter: role === 'vehicle' ? new LinkMeter(peer.pc) : null,
+      // A client's video: 'pass-through' or 're-encode', once its sender is set up.
+      forward: null,
     };
     peer.addEventListener('track', (event) => {
       const { track, receiver } = event.detail;
       if (role === 'vehicle' && track.kind === 'video' && this.#seat.holder === name) {
         // Goals are worth most when fresh: a decoded frame is shown (and analysed) at once.
         preferLowLatency(receiver);
+        this.forward?.receiveVehicle(receiver);
         this.#setVehicleTrack(track);
       }
     });
@@ -191,6 +221,10 @@ export class RelayLinks extends EventTarget {
     peer.addEventListener('state', (event) => {
       if (event.detail === 'failed' && this.#peers.get(name) === entry) {
         this.close(name, 'connection failed');
+      }
+      // A client that passes through starts with the vehicle's next key frame.
+      if (event.detail === 'connected' && entry.forward === 'pass-through') {
+        this.forward.requestKeyFrame();
       }
       this.#emit('changed');
     });
@@ -202,11 +236,7 @@ export class RelayLinks extends EventTarget {
   #setVehicleTrack(track) {
     this.vehicleTrack = track;
     if (track !== null) this.log.info('vehicle video arrived; forwarding it to the clients');
-    for (const client of this.#clientEntries()) {
-      this.#sendVideoOn(client.peer.pc).catch((err) =>
-        this.log.error(`could not forward the vehicle's video: ${err.message}`),
-      );
-    }
+    for (const client of this.#clientEntries()) this.#resendVideoTo(client);
     this.#emit('vehicletrack', track);
   }
 
@@ -216,25 +246,60 @@ export class RelayLinks extends EventTarget {
     this.#emit('vehicle', name);
   }
 
-  /** Send the vehicle's video (or nothing yet) on every video transceiver of a client's link. */
-  async #sendVideoOn(pc) {
+  /**
+   * Send the vehicle's video (or nothing yet) on every video transceiver of a client's link:
+   * passed through, or the decoded track encoded again (the sender's track).
+   */
+  async #sendVideoTo(entry) {
+    const pc = entry.peer.pc;
     for (const transceiver of pc.getTransceivers()) {
       if (transceiver.stopped || transceiver.receiver.track.kind !== 'video') continue;
       // The client offers recvonly; answering sendonly lets the track change later with no
       // renegotiation, which this side could not start anyway.
       if (pc.signalingState === 'have-remote-offer') transceiver.direction = 'sendonly';
+      if (entry.forward === null) {
+        // Its encoded streams must exist before the sender ever has a track.
+        if (this.forward !== null)
+          this.forward.addClient(entry.peer.remote, transceiver.sender, pc.remoteDescription.sdp);
+        entry.forward = this.forward !== null ? 'pass-through' : 're-encode';
+      }
+      if (entry.forward === 'pass-through') {
+        await transceiver.sender.replaceTrack(null);
+        continue;
+      }
       // Chromium's default degradation (balanced) on purpose: see vehicle.js.
       await transceiver.sender.replaceTrack(this.vehicleTrack);
       await forwardSmaller(transceiver.sender);
     }
   }
 
+  #resendVideoTo(entry) {
+    this.#sendVideoTo(entry).catch((err) =>
+      this.log.error(`could not forward the vehicle's video: ${err.message}`),
+    );
+  }
+
+  /** The forward found the vehicle's frames do (or do not) decode at client `name`. */
+  #onForwardMode(name, passing) {
+    const entry = this.#peers.get(name);
+    if (entry?.role !== 'client') return;
+    const forward = passing ? 'pass-through' : 're-encode';
+    if (entry.forward === forward) return;
+    entry.forward = forward;
+    this.log.info(
+      passing
+        ? `client ${name} gets the vehicle's video as the vehicle encoded it`
+        : `client ${name} does not receive the vehicle's codec at its number: encoding for it`,
+    );
+    this.#resendVideoTo(entry);
+  }
+
   #onDataChannel(entry, channel) {
     const name = entry.peer.remote;
     if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilotState) {
-      // Goals go out and pose comes in here: unordered, never retransmitted, latest wins.
+      // Goals go out, pose and capture times come in here: unordered, never retransmitted.
       const schema = SCHEMAS[CHANNELS.autopilotState].relay;
-      serveChannel(channel, { pose: (msg) => this.onPose(msg) }, this.log, schema);
+      serveChannel(channel, this.vehicleHandlers, this.log, schema);
       channel.addEventListener('open', () => {
         entry.stateChannel = channel;
       });
@@ -245,7 +310,7 @@ export class RelayLinks extends EventTarget {
     }
     if (entry.role === 'vehicle' && channel.label === CHANNELS.autopilot) {
       const schema = SCHEMAS.autopilot.relay;
-      serveChannel(channel, { pose: (msg) => this.onPose(msg) }, this.log, schema);
+      serveChannel(channel, { pose: this.vehicleHandlers.pose }, this.log, schema);
       channel.addEventListener('open', () => {
         entry.channel = channel;
         this.log.info(`autopilot channel to vehicle ${name} open`);
@@ -282,8 +347,9 @@ export class RelayLinks extends EventTarget {
 }
 
 /**
- * Encode the forward to a client at PROTOCOL.clientForwardScaleDown of the vehicle's size per
- * side: the encode is the relay's largest cost after the cascade (docs/bench/relay-cost.md).
+ * Encode the forward to a client (where it is not passed through) at
+ * PROTOCOL.clientForwardScaleDown of the vehicle's size per side: the encode is the relay's
+ * largest cost after the cascade (docs/bench/relay-cost.md).
  */
 async function forwardSmaller(sender) {
   const params = sender.getParameters();

@@ -7,6 +7,8 @@ import { LockPanel } from '../view/lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
+import { pollRoomState } from '../net/room-state.js';
+import { RoomView } from '../view/roomview.js';
 import { TurtleView } from '../view/turtleview.js';
 import {
   button,
@@ -19,6 +21,7 @@ import {
   throttle,
 } from '../view/ui.js';
 import { DriveInput } from '../view/drive-input.js';
+import { GlassView } from '../view/glass-view.js';
 import { hasTouch, Joystick } from '../view/joystick.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
@@ -30,7 +33,19 @@ const video = byTestId('video');
 const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
-const turtleView = new TurtleView(byTestId('turtle-view'), law.worldSize);
+// The simulated room when the server has one (`autopilot serve --robot diffdrive`), else
+// turtlesim's terrain.
+const map = config.roomMap;
+const mapView =
+  map === null
+    ? new TurtleView(byTestId('turtle-view'), law.worldSize)
+    : new RoomView(byTestId('turtle-view'), map);
+// Vehicle capture → presentation here, frame by frame (view/glass-view.js).
+const glassView = new GlassView({
+  video,
+  layout: PROTOCOL.frameTag,
+  figure: byTestId('glass-to-glass'),
+});
 // A click on the video locks the relay on the target there; Unlock releases it.
 const lockPanel = new LockPanel({
   stage: video.parentElement,
@@ -61,6 +76,10 @@ const status = {
   get drivesSent() {
     return driveInput.sent;
   },
+  // The simulated room's billboards where the map draws them ({name: {x, y, yaw}}), or null.
+  get billboards() {
+    return map === null ? null : mapView.placed;
+  },
 };
 window.autopilotStatus = status;
 
@@ -73,6 +92,18 @@ const health = {
   relayToClient: null, // measured here
   goalAgeMs: null, // from the vehicle's pose: since it last applied a goal
   warnings: [],
+  /** Vehicle capture → presentation here: {p50Ms, p95Ms, lastMs, frames} of the latest
+   * frames, or null until a tagged frame's capture time is known (docs/contracts.md). */
+  get glassToGlass() {
+    return glassView.glass.summary();
+  },
+  /** The same, every frame measured (the latest 2000, ms, oldest first), and how many. */
+  get glassToGlassMs() {
+    return glassView.glass.samples.toArray();
+  },
+  get framesTimed() {
+    return glassView.glass.count;
+  },
 };
 window.autopilotHealth = health;
 
@@ -156,8 +187,9 @@ function onDetections(msg) {
   Object.assign(view, { boxes: drawDetections(overlay, msg), w: msg.w, h: msg.h });
   session.recentMs.push(msg.ms);
   if (session.recentMs.length > MS_SMOOTHING) session.recentMs.shift();
-  const target = msg.target ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null;
-  turtleView.setTarget(target);
+  // A goal pixel is a place on turtlesim's terrain only: the fixed camera watches it.
+  const fixed = map === null && msg.target;
+  mapView.setTarget(fixed ? law.pixelToTerrain(msg.target.x, msg.target.y, msg.w, msg.h) : null);
   showFigures();
 }
 
@@ -166,8 +198,8 @@ function onPose(msg) {
   status.pose = pose;
   if (msg.goalAgeMs !== undefined) health.goalAgeMs = msg.goalAgeMs;
   status.poses += 1;
-  turtleView.addPose(pose);
-  status.routeM = turtleView.routeLength;
+  mapView.addPose(pose);
+  status.routeM = mapView.routeLength;
   showFigures();
 }
 
@@ -289,7 +321,7 @@ function median(values) {
 
 function clearDetections() {
   Object.assign(view, { boxes: drawDetections(overlay, null), w: null, h: null });
-  turtleView.setTarget(null);
+  mapView.setTarget(null);
 }
 
 // ---------------------------------------------------------------- connection to the relay
@@ -303,6 +335,7 @@ function setupPeer(peer) {
     preferLowLatency(event.detail.receiver);
     status.videoTracks += 1;
     video.srcObject = new MediaStream([event.detail.track]);
+    glassView.newVideo();
     log.info('relayed video track received');
   });
   const dc = peer.pc.createDataChannel(CHANNELS.control);
@@ -315,6 +348,7 @@ function setupPeer(peer) {
     mode: onMode,
     robotStopped: onRobotStopped,
     health: onHealth,
+    frameTimes: (msg) => glassView.captured(msg),
   };
   serveChannel(dc, handlers, log, SCHEMAS.control.client);
   dc.addEventListener('open', () => {
@@ -454,6 +488,7 @@ link.addEventListener('lost', () => {
   forgetMode();
   session.meter = null;
   Object.assign(health, { vehicleToRelay: null, relayToClient: null, goalAgeMs: null });
+  glassView.newVideo();
   showHealth();
   clearDetections();
   showState();
@@ -462,4 +497,17 @@ link.addEventListener('lost', () => {
 link.addEventListener('peer', showState);
 updateControls();
 showState();
+if (map !== null) {
+  const canvas = byTestId('turtle-view');
+  canvas.setAttribute('aria-label', 'Room map');
+  canvas.closest('section').setAttribute('aria-label', 'Room');
+  pollRoomState({
+    path: map.statePath,
+    periodMs: map.statePeriodMs,
+    room: () => room.room ?? config.room,
+    token: () => config.token,
+    onState: (state) => mapView.setBillboards(state.billboards),
+    onError: (reason) => log.error(`the room's state: ${reason}`),
+  });
+}
 if (config.auto) room.autoJoin();

@@ -55,6 +55,10 @@ const status = {
     return session.links.clients;
   },
   vehicleTracks: 0, // vehicle video tracks received (a vehicle that comes back brings a new one)
+  /** How each client gets the video: {name: 'pass-through' | 're-encode'} (relay-links.js). */
+  get forwards() {
+    return session.links.forwards;
+  },
   lock: 'none', // the target lock's state (lock.js)
   /** The client holding the wheel (manual override), or null: the autopilot steers. */
   get operator() {
@@ -130,7 +134,8 @@ const session = {
       handBack: () => handBack(name),
       drive: (msg) => forwardDrive(msg, name),
     }),
-    onPose,
+    // The capture times go to every client as they came: each measures its own glass to glass.
+    vehicleHandlers: { pose: onPose, frameTimes: (msg) => session.links.broadcast(msg) },
   }),
 };
 

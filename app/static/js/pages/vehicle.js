@@ -55,6 +55,9 @@ const status = {
   mode: 'auto', // 'manual' while an operator holds the wheel
   operator: null,
   drivesApplied: 0,
+  // The relay's stops heard, whether or not the turtle was moving (a stop with no goal in hand
+  // publishes nothing, so the Twists alone cannot tell that it arrived).
+  stopsHeard: 0,
 };
 window.autopilotStatus = status;
 
@@ -314,7 +317,10 @@ function setupPeer(peer, stream) {
   const dc = peer.pc.createDataChannel(CHANNELS.autopilot);
   const handlers = {
     goal: onGoal,
-    stop: () => act(pilot.stop(now()), 'relay says stop'),
+    stop: () => {
+      status.stopsHeard += 1;
+      act(pilot.stop(now()), 'relay says stop');
+    },
     mode: onMode,
     drive: onDrive,
   };

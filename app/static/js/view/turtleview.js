@@ -1,20 +1,19 @@
 // A turtlesim look-alike drawn from pose telemetry: the blue terrain (the world size comes from
 // the page config, 45 px per metre at 500 px), the pen trail (the route), and the turtle itself.
+import { Route } from './route.js';
 import { throttle } from './ui.js';
 
 const BACKGROUND = 'rgb(69, 86, 255)'; // turtlesim's default background
 const PEN = 'rgb(179, 184, 255)'; // turtlesim's default pen
-const TRAIL_LIMIT = 20000;
 // Poses and goals arrive 30 to 60 times a second, and each redraw paints the whole route: the
 // view is redrawn at most 20 times a second (a turtle at 2 m/s moves 4.5 px between two).
 const REDRAW_PERIOD_MS = 50;
 
 /** Draws the turtle and its route on a square canvas `worldSize` metres wide. */
 export class TurtleView {
-  #trail = [];
+  #route = new Route();
   #pose = null;
   #target = null;
-  #routeM = 0;
   #redraw = throttle(REDRAW_PERIOD_MS, () => this.draw());
 
   constructor(canvas, worldSize) {
@@ -25,24 +24,18 @@ export class TurtleView {
 
   /** Metres driven since the view opened (turning in place adds nothing). */
   get routeLength() {
-    return this.#routeM;
+    return this.#route.length;
   }
 
   /** Points of the drawn route. */
   get routePoints() {
-    return this.#trail.length;
+    return this.#route.points.length;
   }
 
   /** Add a pose {x, y, theta} (terrain metres, radians); redrawn within REDRAW_PERIOD_MS. */
   addPose(pose) {
-    const last = this.#trail.at(-1);
     // The pen only draws when the turtle moves; rotating in place leaves no mark.
-    const step = last === undefined ? 0 : Math.hypot(pose.x - last.x, pose.y - last.y);
-    if (last === undefined || step > 0.005) {
-      this.#routeM += step;
-      this.#trail.push({ x: pose.x, y: pose.y });
-      if (this.#trail.length > TRAIL_LIMIT) this.#trail.splice(0, this.#trail.length - TRAIL_LIMIT);
-    }
+    this.#route.add(pose);
     this.#pose = pose;
     this.#redraw();
   }
@@ -61,15 +54,7 @@ export class TurtleView {
     const py = (y) => canvas.height - y * scale;
     ctx.fillStyle = BACKGROUND;
     ctx.fillRect(0, 0, canvas.width, canvas.height);
-    if (this.#trail.length > 1) {
-      ctx.strokeStyle = PEN;
-      ctx.lineWidth = 3;
-      ctx.lineJoin = 'round';
-      ctx.beginPath();
-      ctx.moveTo(px(this.#trail[0].x), py(this.#trail[0].y));
-      for (const p of this.#trail.slice(1)) ctx.lineTo(px(p.x), py(p.y));
-      ctx.stroke();
-    }
+    this.#route.draw(ctx, (p) => [px(p.x), py(p.y)], PEN, 3);
     if (this.#pose !== null && this.#target !== null) {
       ctx.setLineDash([6, 6]);
       ctx.strokeStyle = 'rgba(255, 255, 255, 0.7)';

@@ -3,7 +3,7 @@
 As in rosbridge, unknown fields are an error and missing ones take their message's defaults;
 numbers must be finite JSON numbers. ``geometry_msgs/Twist`` is what a turtle takes; the others
 are the types of a robot description (:mod:`app.protocol.robot`) that the rosbridge carries
-between its clients on topics the simulator does not own (:mod:`app.turtlesim.hosted`), but for
+between its clients on topics the simulator does not own (:mod:`app.rosbridge.hosted`), but for
 the camera's images, which :mod:`app.protocol.camera` reads. A header's time is spelled per
 flavour -- ``secs``/``nsecs`` in ROS 1, ``sec``/``nanosec`` in ROS 2 -- and checked against the
 flavour given as the validation context (``{"flavour": ...}``).

@@ -1,22 +1,21 @@
 """Topics the simulator does not own, carried between the rosbridge's clients, without any I/O.
 
-A real rosbridge carries any topic of its robot's graph; this one simulates a turtlesim, and
-besides its turtles' topics it hosts the topics of the message types a robot description names
-(:mod:`app.protocol.robot`: ``Twist``, ``TwistStamped``, ``Odometry``, and the camera's
-``CompressedImage`` and ``Image``), so that a stand-in or a vehicle can play a robot that is not
-a turtle -- publish its ``/odom`` and its camera, read the agent's ``/cmd_vel`` -- through the
-very endpoint a vehicle drives.
+A real rosbridge carries any topic of its robot's graph; this one simulates a robot (turtlesim,
+or the diffdrive robot in its room), and besides that robot's own topics it hosts the topics of
+the message types a robot description names (:mod:`app.protocol.robot`: ``Twist``,
+``TwistStamped``, ``Odometry``, ``CompressedImage``, ``Image``), so that a test or a stand-in can
+play another robot -- publish its ``/odom``, read the agent's ``/cmd_vel`` -- through the very
+endpoint a vehicle drives.
 
 A topic is hosted from the first ``advertise`` or typed ``subscribe`` that names it with one of
 those types (in the served flavour's spelling) until no client advertises or subscribes to it
-any more; its type is the one it was first given. Hosted topics belong to the room of the token
-that opened the connection (None without tokens: one space for all), so one room's clients
-neither see nor reach another room's. Every message published on one is checked against its type
-(:mod:`app.turtlesim.messages`; a camera image by :mod:`app.protocol.camera`, its data read into
-bytes once) and kept with a version number for its subscribers to take (the rosbridge's sessions
-pull what is newer than what they had): the latest few of a topic, the latest one only of a
-camera (a newer picture supersedes the older ones, and an image is large). Any other type, or an
-untyped subscribe to a topic nobody hosts, is refused as an unknown topic.
+any more; its type is the one it was first given. Every message published on it is checked
+against that type (:mod:`app.rosbridge.messages`; a camera image by :mod:`app.protocol.camera`,
+its data read into bytes once) and kept, the latest few of each topic with a version number, for
+its subscribers to take (the rosbridge's sessions pull what is newer than what they had): a
+camera topic keeps its latest image only (a newer picture supersedes the older ones, and an
+image is large). Any other type, or an untyped subscribe to a topic nobody hosts, is refused as
+an unknown topic.
 """
 
 from __future__ import annotations
@@ -31,12 +30,12 @@ from pydantic import ValidationError
 from app.protocol import camera
 from app.protocol.errors import describe
 from app.protocol.ros import RosFlavour, canonical, spell, spellings
-from app.turtlesim.messages import MODELS
+from app.rosbridge.messages import MODELS
 
-# At most this many hosted topics at once, in one room and in all (each costs a dict entry, its
-# kept messages -- an image each for a camera -- and its subscribers' work).
-MAX_HOSTED_TOPICS_PER_ROOM: Final = 16
+# At most this many hosted topics at once (each costs a dict entry, its kept messages and its
+# subscribers' work).
 MAX_HOSTED_TOPICS: Final = 64
+
 # Every type a topic may be hosted with.
 HOSTED_TYPES: Final[tuple[str, ...]] = (*MODELS, *camera.CAMERA_TYPES)
 
@@ -51,9 +50,8 @@ class HostingError(ValueError):
 
 @dataclass(frozen=True)
 class HostedTopic:
-    """A hosted topic: its room (None without tokens) and its absolute name."""
+    """A hosted topic, by its absolute name."""
 
-    room: str | None
     name: str
 
 
@@ -69,56 +67,49 @@ class HostedTopics:
 
     def __init__(self, flavour: RosFlavour, kept: int) -> None:
         self.flavour: RosFlavour = flavour
-        # How many of a topic's latest messages are kept for subscribers that read slowly.
+        # How many of each topic's latest messages are kept for subscribers that read slowly.
         self._kept = kept
-        self._topics: dict[HostedTopic, _Hosting] = {}
+        self._topics: dict[str, _Hosting] = {}
         # The version of the last message published on any hosted topic: one count for all, so
         # that a topic hosted again never gives out a version a subscription has seen.
         self._version = 0
 
-    def types(self, room: str | None) -> dict[str, str]:
-        """Every hosted topic of ``room`` and its type as the flavour spells it (for rosapi)."""
-        return {
-            topic.name: spell(self.flavour, h.kind)
-            for topic, h in self._topics.items()
-            if topic.room == room
-        }
+    def types(self) -> dict[str, str]:
+        """Every hosted topic and its type as the flavour spells it (for rosapi)."""
+        return {name: spell(self.flavour, h.kind) for name, h in self._topics.items()}
 
-    def find(self, room: str | None, name: str) -> HostedTopic | None:
-        """The hosted topic ``name`` (leading slash optional) of ``room``, if it is hosted."""
-        topic = HostedTopic(room, _absolute(name))
-        return topic if topic in self._topics else None
+    def find(self, name: str) -> HostedTopic | None:
+        """The hosted topic ``name`` (leading slash optional), if it is hosted."""
+        absolute = _absolute(name)
+        return HostedTopic(absolute) if absolute in self._topics else None
 
-    def claim(
-        self, room: str | None, name: str, type_name: str | None, user: object
-    ) -> HostedTopic:
-        """``user`` (a session of ``room``) advertises or subscribes to ``name`` giving
-        ``type_name``: the topic, hosted from now on if it was not; :class:`HostingError` if it
-        cannot be."""
-        topic = HostedTopic(room, _absolute(name))
-        hosting = self._topics.get(topic)
+    def claim(self, name: str, type_name: str | None, user: object) -> HostedTopic:
+        """``user`` (a session) advertises or subscribes to ``name`` giving ``type_name``: the
+        topic, hosted from now on if it was not; :class:`HostingError` if it cannot be."""
+        absolute = _absolute(name)
+        hosting = self._topics.get(absolute)
         if hosting is None:
-            hosting = self._host(topic, type_name)
+            hosting = self._host(absolute, type_name)
         elif type_name is not None:
             spelled = spell(self.flavour, hosting.kind)
             if type_name not in spellings(self.flavour, spelled):
                 raise HostingError(f"{name} has type {spelled}, not {type_name!r}")
         hosting.users.add(user)
-        return topic
+        return HostedTopic(absolute)
 
     def release(self, topic: HostedTopic, user: object) -> None:
         """``user`` no longer advertises or subscribes to ``topic``; unhosted when nobody does."""
-        hosting = self._topics.get(topic)
+        hosting = self._topics.get(topic.name)
         if hosting is None:
             return
         hosting.users.discard(user)
         if not hosting.users:
-            del self._topics[topic]
+            del self._topics[topic.name]
 
     def publish(self, topic: HostedTopic, msg: dict[str, Any]) -> None:
         """``msg`` published on ``topic``: checked against its type and kept (missing fields
         filled in) for its subscribers; :class:`HostingError` naming the bad fields."""
-        hosting = self._topics.get(topic)
+        hosting = self._topics.get(topic.name)
         if hosting is None:
             raise HostingError(f"{topic.name} is no longer advertised")
         kind = hosting.kind
@@ -144,16 +135,16 @@ class HostedTopics:
 
     def newer(self, topic: HostedTopic, seen: int) -> list[Versioned]:
         """``topic``'s kept messages newer than version ``seen``, oldest first."""
-        hosting = self._topics.get(topic)
+        hosting = self._topics.get(topic.name)
         if hosting is None:
             return []
         return [item for item in hosting.kept if item[0] > seen]
 
-    def _host(self, topic: HostedTopic, type_name: str | None) -> _Hosting:
+    def _host(self, absolute: str, type_name: str | None) -> _Hosting:
         hosted = ", ".join(HOSTED_TYPES)
         if type_name is None:
             raise HostingError(
-                f"unknown topic {topic.name!r}: no client advertises it; give its type to host "
+                f"unknown topic {absolute!r}: no client advertises it; give its type to host "
                 f"it ({hosted})"
             )
         kind = canonical(type_name)
@@ -161,20 +152,16 @@ class HostedTopics:
             self.flavour, spell(self.flavour, kind)
         ):
             raise HostingError(
-                f"unknown topic {topic.name!r}: this simulator hosts only topics of a robot's "
-                f"types ({hosted}, as ROS {self.flavour} spells them), not {type_name!r}"
+                f"unknown topic {absolute!r}: this simulator hosts only topics of a robot's types "
+                f"({hosted}, as ROS {self.flavour} spells them), not {type_name!r}"
             )
-        if not _NAME_RE.match(topic.name):
-            raise HostingError(f"{topic.name!r} is not a ROS topic name")
-        in_room = sum(1 for t in self._topics if t.room == topic.room)
-        if in_room >= MAX_HOSTED_TOPICS_PER_ROOM or len(self._topics) >= MAX_HOSTED_TOPICS:
-            raise HostingError(
-                f"no room for topic {topic.name}: at most {MAX_HOSTED_TOPICS_PER_ROOM} hosted "
-                f"topics a room and {MAX_HOSTED_TOPICS} in all"
-            )
+        if not _NAME_RE.match(absolute):
+            raise HostingError(f"{absolute!r} is not a ROS topic name")
+        if len(self._topics) >= MAX_HOSTED_TOPICS:
+            raise HostingError(f"at most {MAX_HOSTED_TOPICS} hosted topics at once")
         # A camera keeps its latest picture only: latest wins, and an image is large.
         kept = 1 if kind in camera.CAMERA_TYPES else self._kept
-        hosting = self._topics[topic] = _Hosting(kind, deque(maxlen=kept))
+        hosting = self._topics[absolute] = _Hosting(kind, deque(maxlen=kept))
         return hosting
 
 
