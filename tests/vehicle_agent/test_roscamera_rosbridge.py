@@ -21,6 +21,7 @@ import roslibpy
 
 from app.protocol import frametag, tokens
 from app.protocol.events import FrameSent
+from app.protocol.robot import PRESETS
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.camera_frames import as_json, compressed, pattern, pattern_error, raw, read_back
@@ -29,7 +30,7 @@ from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
 from vehicle_agent.rosbridge_client import Compression
-from vehicle_agent.roscamera import RosCamera
+from vehicle_agent.roscamera import RosCamera, camera_of
 from vehicle_agent.turtle import SimTurtle
 
 pytestmark = pytest.mark.timeout(120)
@@ -314,3 +315,22 @@ async def test_a_message_not_of_the_topics_type_never_leaves_the_server(
         await asyncio.sleep(0.3)
         assert (track.slot.received - received, sum(track.problems.values())) == (1, 0)
     publisher.unadvertise()
+
+
+@pytest.mark.parametrize("compression", ["cbor", "none"])
+async def test_the_diffdrive_robots_own_camera_is_what_video_ros_takes(
+    start_server: Callable[[Settings], RunningServer], compression: Compression
+) -> None:
+    """``--video ros --robot diffdrive`` against the server that simulates that robot: the
+    description's camera topic, the type rosapi names, its rendered pictures decoded."""
+    rooms = start_server(Settings(environment="development", token=None, robot="diffdrive"))
+    topic, described = camera_of("ros", PRESETS["diffdrive"])
+    async with camera(
+        rosbridge_url(rooms), topic, described=described, compression=compression
+    ) as track:
+        assert track.message_type == "sensor_msgs/CompressedImage"
+        await eventually(lambda: track.slot.received >= 1, WAIT_S, "the robot's camera")
+        frame = await track.recv()
+        assert (frame.width, frame.height) == (640, 480)
+        assert track.pictures == 1 and not track.problems
+        assert (track.binary > 0) == (compression == "cbor")
