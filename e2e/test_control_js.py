@@ -200,19 +200,22 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
 
 def test_the_onboard_law_matches_the_python_agent(page: Page) -> None:
     # Through the diffdrive robot's 60° camera: columns across the frame, boxes near and far (and
-    # none), goals that arrived at other headings than the pose's (the turn since is taken off).
+    # none), goals that arrived at other headings than the pose's (the turn since is taken off),
+    # faces that walk round the robot (their drift, led by their frame's age).
     profile = PROFILES["onboard"]
     cases: list[dict[str, Any]] = [
         {
             "goal": {
                 "x": x, "y": 200.0, "w": W, "h": H, "boxH": box_h,
                 "targetHeightM": None if box_h is None else 0.24, "heading": heading,
+                "drift": drift, "age": age,
             },
             "pose": {"x": 1.0, "y": 3.0, "theta": theta},
         }
         for x in (0.0, 100.0, 300.0, 319.5, 320.0, 321.0, 340.0, 500.0, 640.0)
         for box_h in (None, 30.0, 111.0, 300.0)
         for heading, theta in ((None, 0.0), (0.0, 0.0), (0.2, 0.5), (3.0, -3.0), (-1.0, -1.3))
+        for drift, age in ((0.0, 0.0), (0.5, 0.12), (-2.4, 0.3))
     ]  # fmt: skip
     js: list[dict[str, Any]] = page.evaluate(
         """([cases, profile]) => cases.map(({ goal, pose }) => ({
@@ -227,7 +230,7 @@ def test_the_onboard_law_matches_the_python_agent(page: Page) -> None:
         g, p = case["goal"], case["pose"]
         goal = control.Goal(
             g["x"], g["y"], W, H, box_h=g["boxH"], target_height_m=g["targetHeightM"],
-            heading=g["heading"],
+            heading=g["heading"], drift=g["drift"], age=g["age"],
         )  # fmt: skip
         bearing = control.pixel_bearing(goal.x, goal.w, profile.hfov)
         assert got["bearing"] == pytest.approx(bearing, abs=1e-12), case

@@ -78,6 +78,9 @@ class Goal:
 
     ``heading`` is the vehicle's heading when the goal's frame was taken, or else when the goal
     arrived (the controller sets it): a bearing is relative to the heading the vehicle had then.
+    ``drift`` is how fast the target itself turns about the vehicle (rad/s in the room's frame,
+    positive counter-clockwise: 0 when not measured) and ``age`` how long ago its frame was
+    taken (s); the controller sets both, and the onboard law leads the target by them.
     """
 
     x: float
@@ -89,6 +92,8 @@ class Goal:
     box_h: float | None = None
     target_height_m: float | None = None
     heading: float | None = None
+    drift: float = 0.0
+    age: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -225,18 +230,23 @@ def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]
 
     The bearing is the goal pixel's, less how far the vehicle has turned since its frame was
     taken (or since the goal arrived, when the vehicle does not know when that was): what it
-    turned while the frame was on its way and between goals keeps the command current. The
-    range comes from the box's height; without a box or a real height the vehicle only turns.
+    turned while the frame was on its way and between goals keeps the command current. A target
+    that moves round the vehicle (``goal.drift``) has moved on by its drift times the frame's
+    age, and the vehicle turns at its drift besides: a turn in proportion to the bearing alone
+    would trail it by the drift over the gain. The range comes from the box's height; without
+    a box or a real height the vehicle only turns.
     """
     if profile.hfov <= 0:
         return 0.0, 0.0
-    bearing = pixel_bearing(goal.x, goal.w, profile.hfov)
+    bearing = pixel_bearing(goal.x, goal.w, profile.hfov) + goal.drift * goal.age
     if goal.heading is not None:
         bearing = wrap_angle(bearing - wrap_angle(pose.theta - goal.heading))
     # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
     if not math.isfinite(bearing):
         return 0.0, 0.0
     angular = angular_command(bearing, profile)
+    if goal.drift != 0.0:
+        angular = _clamp(angular + goal.drift, -profile.max_angular, profile.max_angular)
     if goal.box_h is None or goal.target_height_m is None:
         return 0.0, angular
     distance = target_range(goal.box_h, goal.target_height_m, goal.w, profile.hfov)
@@ -286,6 +296,11 @@ class Controller:
         self._last_publish: float | None = None
         # When the search under way began (its first search Twist), None when not searching.
         self._search_since: float | None = None
+        # When the current goal's frame was taken (or it arrived, when that is not known).
+        self._captured = 0.0
+        # The target's recent sightings, oldest first: (when its frame was taken, its bearing
+        # in the room's frame, unwrapped), for its drift (Profile.drift_window_s).
+        self._sightings: deque[tuple[float, float]] = deque()
 
     @property
     def search_since(self) -> float | None:
@@ -309,9 +324,10 @@ class Controller:
     def goal(self, goal: Goal, now: float, captured_at: float | None = None) -> Twist | None:
         """Take a new goal and answer it now when the profile's timing allows; it ends a
         search. ``captured_at``: when its frame was taken, on ``now``'s clock, if known."""
-        self._goal = replace(
-            goal, heading=self._heading_at(now if captured_at is None else captured_at)
-        )
+        captured = now if captured_at is None else captured_at
+        heading = self._heading_at(captured)
+        self._goal = replace(goal, heading=heading, drift=self._drift(goal, heading, captured))
+        self._captured = captured
         self._goal_at = now
         self._unanswered = True
         self._search_since = None
@@ -343,6 +359,7 @@ class Controller:
         self._unanswered = False
         self._last_publish = None
         self._search_since = None
+        self._sightings.clear()
         return ZERO_TWIST
 
     def _heading_at(self, t: float) -> float | None:
@@ -356,6 +373,33 @@ class Controller:
                 break
             heading = theta
         return heading
+
+    def _drift(self, goal: Goal, heading: float | None, captured: float) -> float:
+        """How fast the target turns about the vehicle (rad/s, room frame), from its sightings
+        of the last ``drift_window_s`` once they span half of it; 0 before, and when the profile
+        does not measure it. A sighting that moved faster than the vehicle can turn is a jump
+        (another target, a detection astray), not a walk: the measure starts again from it."""
+        profile = self.profile
+        if profile.drift_window_s <= 0 or profile.hfov <= 0 or heading is None:
+            return 0.0
+        seen = heading + pixel_bearing(goal.x, goal.w, profile.hfov)
+        if not math.isfinite(seen):
+            self._sightings.clear()
+            return 0.0
+        sightings = self._sightings
+        if sightings:
+            last_at, last = sightings[-1]
+            seen = last + wrap_angle(seen - last)
+            if abs(seen - last) > profile.max_angular * max(0.0, captured - last_at):
+                sightings.clear()
+        # A frame seen before (or an older one) adds nothing to the measure.
+        if not sightings or captured > sightings[-1][0]:
+            sightings.append((captured, seen))
+        while sightings[0][0] < captured - profile.drift_window_s:
+            sightings.popleft()
+        (first_at, first), (last_at, last) = sightings[0], sightings[-1]
+        span = last_at - first_at
+        return 0.0 if span < profile.drift_window_s / 2 else (last - first) / span
 
     def _lost(self, now: float) -> bool:
         return now - self._goal_at > self.profile.search_after_s
@@ -401,7 +445,7 @@ class Controller:
             if self._search_since is None:
                 self._search_since = now
             return Twist(0.0, self._last_side * profile.search_angular)
-        linear, angular = self.law(goal, pose, profile)
+        linear, angular = self.law(replace(goal, age=now - self._captured), pose, profile)
         # Where the goal put the target, not where the turns since have left the estimate: a
         # vehicle that turned past a target that left by the right must still search right.
         if answers_goal and angular != 0.0:

@@ -90,6 +90,11 @@ class Profile:
     # The bearing (rad) at which the forward speed has fallen to zero: the vehicle drives while
     # it faces the target and turns first when it does not.
     slow_bearing: float = math.inf
+    # Over how long (s) the target's own turn about the vehicle (its bearing in the room's
+    # frame, per second) is measured from its sightings: the vehicle turns with it as well as
+    # toward it, so that a target walking round it is not trailed by that rate over the gain
+    # (0: the target's motion is not measured).
+    drift_window_s: float = 0.0
     # --- manual override ---------------------------------------------------------------------
     # An operator's full key or stick deflection (a drive command of 1) is this speed.
     manual_linear: float = 1.5
@@ -160,6 +165,8 @@ PROFILES: dict[str, Profile] = {
         max_linear=1.0,
         standoff_m=1.2,
         slow_bearing=0.45,
+        # A few goals' worth: the rate is still the walker's of the moment.
+        drift_window_s=0.5,
         search_after_s=0.3,
         search_angular=1.6,
         goal_timeout_s=0.3 + 3 * math.pi / 1.6,

@@ -32,9 +32,12 @@ from app.diffdrive.room import (
     Pose2D,
 )
 from app.diffdrive.sim import Placed, Scene
+from app.protocol.control import PROFILES, for_robot
+from app.protocol.robot import PRESETS
 from app.resources import OPERATIONS_SPEC
 from app.vision import reference
 from app.vision.spec import load_spec
+from vehicle_agent.control import pixel_bearing
 
 CAMERA = Pinhole()  # 640x480, 60° across
 ROBOT = RobotState(2.0, 3.0, 0.0, 0.0, 0.0)  # facing east, the room's long way
@@ -234,6 +237,21 @@ def test_the_face_operations_find_a_rendered_face_where_the_projection_puts_it(
     assert x + w / 2 == pytest.approx(projected[0], abs=tolerance)
     assert y + h / 2 == pytest.approx(projected[1], abs=tolerance)
     assert h == pytest.approx(CAMERA.focal * FACE_BOX_M / distance, rel=0.15)
+
+
+@pytest.mark.parametrize("degrees", [-20.0, -10.0, -3.0, 0.0, 3.0, 10.0, 20.0])
+def test_the_onboard_law_reads_a_rendered_face_at_its_true_bearing(
+    renderer: Renderer, degrees: float
+) -> None:
+    """The simulator's camera and the onboard law agree: the walker rendered at a known bearing,
+    found by the operation the bench follows it with, is at that bearing by the law's
+    pixel-to-bearing conversion (the robot description's field of view, the frame's width)."""
+    law = for_robot(PROFILES["onboard"], PRESETS["diffdrive"])
+    frame = renderer.render(scene(facing_robot(WALKER, 1.5, math.radians(degrees))))
+    found = reference.detect(load_spec(OPERATIONS_SPEC).op("face_small"), rgba(frame))
+    assert found.target is not None
+    bearing = pixel_bearing(found.target[0], frame.shape[1], law.hfov)
+    assert math.degrees(bearing) == pytest.approx(degrees, abs=0.5)
 
 
 def test_both_faces_of_the_room_are_found_side_by_side(renderer: Renderer) -> None:

@@ -189,6 +189,29 @@ SEQUENCES: dict[str, list[Step]] = {
         goal(3, 0.4, x=330.0, y=240.0, box_h=60.0, captured=-5.0),
         goal(4, 0.5, x=330.0, y=240.0, box_h=60.0),
     ],
+    # A face that walks left round the robot, 0.05 rad a frame every 0.1 s (frames taken 0.1 s
+    # before their goals arrive), the robot turning: it is turned with as well as toward; then
+    # one seen far off to the right at once (another face, not a walk).
+    "a walking face is turned with, a jump is not a walk": [
+        odom(0.0, 0.0),
+        *[
+            step
+            for k in range(1, 6)
+            for step in (
+                odom(round(0.1 * k, 2), 0.02 * k),
+                goal(
+                    k,
+                    round(0.1 * k + 0.01, 2),
+                    x=320.0 - 40.0 * k,
+                    box_h=80.0,
+                    captured=round(0.1 * k - 0.09, 2),
+                ),
+            )
+        ],
+        odom(0.58, 0.12),
+        goal(6, 0.61, x=600.0, box_h=80.0, captured=0.52),
+        odom(0.66, 0.1),
+    ],
     # The face leaves by the left: a search turns left, and finds it again.
     "a face lost on the left is searched for and found": [
         odom(0.0, 0.0),

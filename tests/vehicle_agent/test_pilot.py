@@ -325,6 +325,66 @@ def test_without_a_camera_the_onboard_law_never_moves_the_robot() -> None:
     assert not _moving(pilot.goal(face(1, 0.0, x=500.0, range_m=3.0), 0.0))
 
 
+def _trail(target_rate: float, seconds: float = 6.0) -> list[tuple[float, float]]:
+    """A robot on the diffdrive preset's limits following a face that walks round it at
+    ``target_rate`` rad/s (counter-clockwise: to the left), over ``seconds``: goals about 8 a
+    second, each from a frame taken 0.15 s before it arrives, and odometry every 20 ms. The
+    robot turns exactly as commanded. The face's true bearing (rad) at each odometry, by time."""
+    pilot = Pilot(ONBOARD, limits=PRESETS["diffdrive"].limits)
+    theta, angular = 0.0, 0.0
+    headings: list[tuple[float, float]] = []
+    trail: list[tuple[float, float]] = []
+    seq = 0
+    for k in range(round(seconds / 0.02)):
+        now = 0.02 * k
+        theta += angular * 0.02
+        headings.append((now, theta))
+        answers = pilot.pose(Pose(1.0, 3.0, theta), now)
+        if k % 6 == 3 and now >= 0.15:
+            seq += 1
+            taken = now - 0.15
+            then = next(h for t, h in reversed(headings) if t <= taken + 1e-9)
+            bearing = target_rate * taken - then
+            x = 320.0 - FOCAL_PX * math.tan(bearing)
+            answers += pilot.goal(face(seq, now, x=x, range_m=1.2), now, captured_at=taken)
+        answers += pilot.tick(now + 0.001)
+        for twist in _twists(answers):
+            angular = twist.angular
+        trail.append((now, target_rate * now - theta))
+    return trail
+
+
+@pytest.mark.parametrize("target_rate", [0.4, -0.6])
+def test_a_face_that_walks_round_the_robot_is_kept_on_the_axis(target_rate: float) -> None:
+    # A walker crossing the view 1.2 m away at 0.5-0.7 m/s turns about the robot at 0.4-0.6
+    # rad/s. A turn in proportion to its bearing alone would trail it by rate / gain plus what
+    # it walks while its frames are on their way (0.4 / 4 + 0.4 * 0.15 rad, 9°); the law also
+    # turns at the rate it is seen walking, and leads it by its frames' age: it keeps the face
+    # within its dead band (1.15°) and a little.
+    settled = [bearing for t, bearing in _trail(target_rate) if t >= 3.0]
+    assert max(abs(math.degrees(b)) for b in settled) < 1.5
+
+
+def _at_bearing(bearing: float) -> float:
+    """The column of a 640-pixel frame a face ``bearing`` rad to the left is seen in."""
+    return 320.0 - FOCAL_PX * math.tan(bearing)
+
+
+def test_a_face_seen_walking_is_turned_with_and_a_jump_is_not_a_walk() -> None:
+    # The robot still, a face seen 0.05 rad further left every 0.1 s: it walks at 0.5 rad/s.
+    pilot = onboard()
+    for k in range(4):
+        twist = _command(pilot, face(k + 1, 0.1 * k, x=_at_bearing(0.05 * k)), 0.1 * k)
+    # 0.15 rad off: 4 (rad/s)/rad toward it, and 0.5 rad/s with it.
+    assert twist.angular == pytest.approx(4.0 * 0.15 + 0.5, abs=1e-6)
+    # Between goals the face is led by its walk: 0.06 s on, 0.03 rad further left.
+    later = _twists(pilot.pose(ODOM, 0.36))[-1]
+    assert later.angular == pytest.approx(4.0 * 0.18 + 0.5, abs=1e-6)
+    # 0.45 rad in 0.1 s is faster than the robot turns (2.5 rad/s): another face, not a walk.
+    jumped = _command(pilot, face(5, 0.4, x=_at_bearing(-0.3)), 0.4)
+    assert jumped.angular == pytest.approx(4.0 * -0.3, abs=1e-6)
+
+
 def _lost_after(side_x: float) -> tuple[Pilot, list[Any]]:
     """An onboard pilot that saw a face at column ``side_x`` at 0 and nothing since, fed
     odometry every 30 ms for 10 s (the robot not turning); every answer, in order."""

@@ -156,17 +156,22 @@ export class ControlLaw {
    * The onboard law: turn the target's bearing toward zero, and drive to the standoff from it
    * as much as the vehicle faces it. The bearing is the goal pixel's less how far the vehicle
    * has turned since its frame was taken, or since it arrived when that is not known
-   * (`goal.heading`); the range comes from the box's height, and without a box or a real height
-   * the vehicle only turns.
+   * (`goal.heading`). A target that moves round the vehicle (`goal.drift`, rad/s) has moved on
+   * by its drift times the frame's age (`goal.age`, s), and the vehicle turns at its drift
+   * besides: a turn in proportion to the bearing alone would trail it by the drift over the
+   * gain. The range comes from the box's height, and without a box or a real height the
+   * vehicle only turns.
    */
   onboard(goal, pose, profile) {
     if (!(profile.hfov > 0)) return { linear: 0, angular: 0 };
-    let bearing = this.pixelBearing(goal.x, goal.w, profile.hfov);
+    const drift = goal.drift ?? 0;
+    let bearing = this.pixelBearing(goal.x, goal.w, profile.hfov) + drift * (goal.age ?? 0);
     if (goal.heading !== null && goal.heading !== undefined)
       bearing = wrapAngle(bearing - wrapAngle(pose.theta - goal.heading));
     // A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
     if (!Number.isFinite(bearing)) return { linear: 0, angular: 0 };
-    const angular = this.angularCommand(bearing, profile);
+    let angular = this.angularCommand(bearing, profile);
+    if (drift !== 0) angular = clamp(angular + drift, -profile.maxAngular, profile.maxAngular);
     if (goal.boxH == null || goal.targetHeightM == null) return { linear: 0, angular };
     const distance = this.targetRange(goal.boxH, goal.targetHeightM, goal.w, profile.hfov);
     let linear = clamp(
@@ -215,10 +220,15 @@ export class Controller {
   #headings = []; // the headings of the last headingMemoryS, oldest first: [time, theta]
   #lastPublish = null;
   #searchSince = null; // when the search under way began (its first Twist), null when none is
+  #captured = 0; // when the current goal's frame was taken (or it arrived, when not known)
+  // The target's recent sightings, oldest first: [when its frame was taken, its bearing in the
+  // room's frame, unwrapped], for its drift (profile.driftWindowS).
+  #sightings = [];
 
   constructor(controlLaw, profile, law = null) {
     this.profile = profile;
     this.headingMemoryS = controlLaw.headingMemoryS;
+    this.controlLaw = controlLaw;
     this.law = law ?? controlLaw.lawOf(profile);
   }
 
@@ -247,7 +257,10 @@ export class Controller {
    * `capturedAt`: when its frame was taken, on `now`'s clock, if known.
    */
   goal(goal, now, capturedAt = null) {
-    this.#goal = { ...goal, heading: this.#headingAt(capturedAt ?? now) };
+    const captured = capturedAt ?? now;
+    const heading = this.#headingAt(captured);
+    this.#goal = { ...goal, heading, drift: this.#drift(goal, heading, captured), age: 0 };
+    this.#captured = captured;
     this.#goalAt = now;
     this.#unanswered = true;
     this.#searchSince = null;
@@ -277,12 +290,46 @@ export class Controller {
     return heading;
   }
 
+  /**
+   * How fast the target turns about the vehicle (rad/s, room frame), from its sightings of the
+   * last driftWindowS once they span half of it; 0 before, and when the profile does not
+   * measure it. A sighting that moved faster than the vehicle can turn is a jump (another
+   * target, a detection astray), not a walk: the measure starts again from it.
+   */
+  #drift(goal, heading, captured) {
+    const profile = this.profile;
+    if (!(profile.driftWindowS > 0) || !(profile.hfov > 0) || heading === null) return 0;
+    let seen = heading + this.controlLaw.pixelBearing(goal.x, goal.w, profile.hfov);
+    const sightings = this.#sightings;
+    if (!Number.isFinite(seen)) {
+      sightings.length = 0;
+      return 0;
+    }
+    if (sightings.length > 0) {
+      const [lastAt, last] = sightings[sightings.length - 1];
+      seen = last + wrapAngle(seen - last);
+      if (Math.abs(seen - last) > profile.maxAngular * Math.max(0, captured - lastAt)) {
+        sightings.length = 0;
+      }
+    }
+    // A frame seen before (or an older one) adds nothing to the measure.
+    if (sightings.length === 0 || captured > sightings[sightings.length - 1][0]) {
+      sightings.push([captured, seen]);
+    }
+    while (sightings[0][0] < captured - profile.driftWindowS) sightings.shift();
+    const [firstAt, first] = sightings[0];
+    const [lastAt, last] = sightings[sightings.length - 1];
+    const span = lastAt - firstAt;
+    return span < profile.driftWindowS / 2 ? 0 : (last - first) / span;
+  }
+
   stop() {
     if (this.#goal === null) return null;
     this.#goal = null;
     this.#unanswered = false;
     this.#lastPublish = null;
     this.#searchSince = null;
+    this.#sightings.length = 0;
     return ZERO_TWIST;
   }
 
@@ -329,7 +376,7 @@ export class Controller {
       if (this.#searchSince === null) this.#searchSince = now;
       return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
     }
-    const { linear, angular } = this.law(goal, pose, profile);
+    const { linear, angular } = this.law({ ...goal, age: now - this.#captured }, pose, profile);
     // Where the goal put the target, not where the turns since have left the estimate: a vehicle
     // that turned past a target that left by the right must still search right.
     if (answersGoal && angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
