@@ -53,6 +53,17 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
         (["--goal-timeout", "0"], ["--goal-timeout", "positive"]),
         (["--fps", "inf"], ["--fps", "finite"]),
         (["--standoff", "-1"], ["--standoff", ">= 0"]),
+        (["--video", "ros:/camera/image_raw"], ["--video ros:/camera/image_raw", "--rosbridge"]),
+        (["--video", "ros:"], ["names no topic"]),
+        (
+            ["--video", "ros:/cam", "--rosbridge", "ws://127.0.0.1:9"],
+            ["camera /cam", "cannot connect to rosbridge at ws://127.0.0.1:9"],
+        ),
+        (["--camera-compression", "png"], ["--camera-compression", "png"]),
+        (
+            ["--video", "ros", "--rosbridge", "ws://127.0.0.1:9"],
+            ["--video ros", "turtlesim has no camera topic", "--video ros:/camera"],
+        ),
     ],
 )
 def test_vehicle_bad_input(args: list[str], needles: list[str]) -> None:

@@ -108,6 +108,9 @@ class Agent:
         # The session's token as last renewed (the next login uses it), and the renewal's timer.
         self.token = config.token
         self._renewal: asyncio.TimerHandle | None = None
+        # Who else proves the token beside the turtle (the ROS camera's rosbridge connection):
+        # each is given every fresh token.
+        self.token_renewed: list[Callable[[str], None]] = []
         self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
@@ -255,6 +258,8 @@ class Agent:
             return
         self.token = renewed.token
         self.turtle.renew(renewed.token)
+        for listener in self.token_renewed:
+            listener(renewed.token)
         log.debug("token renewed; next renewal in %.0f s", renewed.renewIn)
         self._renew_after(renewed.renewIn)
 

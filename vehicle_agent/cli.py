@@ -10,7 +10,7 @@ import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from aiortc import RTCIceServer
+from aiortc import MediaStreamTrack, RTCIceServer
 
 from app.arguments import (
     add_robot_option,
@@ -29,6 +29,8 @@ from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.metrics import serve_agent_metrics
+from vehicle_agent.rosbridge_client import CBOR, NONE
+from vehicle_agent.roscamera import CameraError, RosCamera, camera_of
 from vehicle_agent.signaling import SignalingError, ws_url
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
@@ -63,13 +65,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="synthetic",
         metavar="SOURCE",
         help="'synthetic' (a moving face with frame tags), 'two-faces' (two faces drifting, to"
-        " try the target lock), a video file (looped) or /dev/videoN",
+        " try the target lock), a video file (looped), /dev/videoN, ros:TOPIC (the robot's"
+        " camera topic through --rosbridge: sensor_msgs/CompressedImage or Image) or ros (the"
+        " camera topic of the --robot description)",
     )
     parser.add_argument(
         "--size",
         type=_size,
         metavar="WxH",
-        help="frame size (synthetic: {}x{}; files, devices: their own)".format(*VIDEO_SIZE),
+        help="frame size (synthetic, ros: {}x{}; files, devices: their own)".format(*VIDEO_SIZE),
     )
     parser.add_argument(
         "--fps", type=positive_number, help=f"frame rate (default {VIDEO_FPS:g}, or the file's)"
@@ -88,6 +92,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " turtlesim",
     )
     add_robot_option(parser, "the robot driven: its topics, types and limits")
+    parser.add_argument(
+        "--camera-compression",
+        choices=(CBOR, NONE),
+        default=CBOR,
+        help="ros: ask rosbridge for the camera's messages in CBOR (binary frames; the default,"
+        " JSON where the server has no CBOR) or none (JSON with the image in base64)",
+    )
     parser.add_argument(
         "--ros",
         choices=ROS_SETTINGS,
@@ -174,21 +185,18 @@ async def _main(args: argparse.Namespace) -> int:
     record = recorder.settings_from(args, args.room)
     # A folder that cannot be written is said now, not at the first write.
     flight = None if record is None else recorder.FlightRecorder(record)
+    # The token goes only to the server's own /rosbridge.
+    rosbridge_token = (
+        args.token if args.rosbridge and same_server(args.server, args.rosbridge) else None
+    )
     camera = None
     metrics = None
     try:
-        video = open_source(
-            args.video,
-            args.size,
-            args.fps,
-            on_frame=events.emit,
-            sweep_s=args.sweep_s,
-        )
+        video = await _open_video(args, events, rosbridge_token)
         turtle: Turtle = SimTurtle()
         if args.rosbridge:
-            token = args.token if same_server(args.server, args.rosbridge) else None
             turtle = RosbridgeTurtle(
-                args.rosbridge, args.ros, robot, token=token, ca_file=args.ca_file
+                args.rosbridge, args.ros, robot, token=rosbridge_token, ca_file=args.ca_file
             )
         config = AgentConfig(
             server=args.server,
@@ -204,6 +212,8 @@ async def _main(args: argparse.Namespace) -> int:
             tls=tls_context(args.ca_file),
         )
         agent = Agent(config, video, turtle, events)
+        if isinstance(video, RosCamera):
+            agent.token_renewed.append(video.renew)
         if flight is not None:
             events.listeners.append(flight.on_event)
             camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
@@ -223,6 +233,33 @@ async def _main(args: argparse.Namespace) -> int:
             metrics.close()
     log.info("vehicle agent stopped")
     return 0
+
+
+async def _open_video(
+    args: argparse.Namespace, events: EventLog, rosbridge_token: str | None
+) -> MediaStreamTrack:
+    """The ``--video`` track; a camera topic is connected to before anything else starts."""
+    found = camera_of(args.video, args.robot)
+    if found is None:
+        return open_source(
+            args.video, args.size, args.fps, on_frame=events.emit, sweep_s=args.sweep_s
+        )
+    topic, described = found
+    if not args.rosbridge:
+        raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
+    camera = RosCamera(
+        args.rosbridge,
+        topic,
+        described=described,
+        size=args.size or VIDEO_SIZE,
+        fps=args.fps or VIDEO_FPS,
+        token=rosbridge_token,
+        tls=tls_context(args.ca_file),
+        compression=args.camera_compression,
+        on_frame=events.emit,
+    )
+    await camera.start()
+    return camera
 
 
 async def _close_recorder(flight: recorder.FlightRecorder, events: EventLog) -> None:

@@ -28,6 +28,10 @@ from app.protocol.channels import Mode
 # or the operator holds the wheel (``manual``).
 DropReason = Literal["old", "stale", "manual"]
 LinkState = Literal["offer", "up", "down"]
+# What a frame's time is: when the synthetic scene drew it (``render``), the camera message's
+# header stamp (``stamp``), or when the message arrived, its stamp missing or not believable
+# (``receipt``).
+CaptureClock = Literal["render", "stamp", "receipt"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,14 +48,20 @@ class Event:
 
 @dataclass(frozen=True, kw_only=True)
 class FrameSent(Event):
-    """A synthetic frame handed to the encoder, with the true face centre in pixels; ``jump`` is
-    true on the first frame after the face leapt across the frame (``SweepPath.jump_times``)."""
+    """A frame handed to the encoder, ``frame`` its tag; ``t`` is when its picture was taken.
+
+    A synthetic frame carries the true face centre in pixels (``face_x``, ``face_y``; None for a
+    camera's frame, whose truth nobody knows); ``jump`` is true on the first frame after the
+    face leapt across the frame (``SweepPath.jump_times``). ``capture`` says what ``t`` is
+    (:data:`CaptureClock`).
+    """
 
     kind: ClassVar[str] = "frame_sent"
     frame: int
-    face_x: float
-    face_y: float
+    face_x: float | None = None
+    face_y: float | None = None
     jump: bool = False
+    capture: CaptureClock = "render"
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -5,11 +5,13 @@ Python's ``json`` accepts more than JSON and more than the other side can handle
 of thousands of digits (``int()`` refuses past 4300 digits with a ``ValueError`` that is not a
 ``JSONDecodeError``), nesting deep enough to raise ``RecursionError``, and bytes that are not
 UTF-8. :func:`loads` turns each of these into one :class:`JsonEdgeError` with a sentence a peer can
-read, so every caller needs one ``except``; :func:`dumps` never writes NaN or Infinity.
+read, so every caller needs one ``except``; :func:`dumps` never writes NaN or Infinity, and
+writes ``bytes`` in base64.
 """
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 from typing import Any, Final
@@ -83,8 +85,15 @@ def loads(data: str | bytes) -> Any:
 
 
 def dumps(value: Any) -> str:
-    """Serialise a message for a peer; ``ValueError`` if it holds NaN or Infinity."""
-    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+    """Serialise a message for a peer; ``ValueError`` if it holds NaN or Infinity. ``bytes`` (a
+    ROS ``uint8[]``, an image's data) are written in base64, as rosbridge writes them."""
+    return json.dumps(value, allow_nan=False, separators=(",", ":"), default=_base64)
+
+
+def _base64(value: Any) -> str:
+    if isinstance(value, bytes):
+        return base64.b64encode(value).decode("ascii")
+    raise TypeError(f"{type(value).__name__} is not JSON")
 
 
 def _depth(value: Any) -> int:

@@ -26,15 +26,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, Literal, cast, get_args
 
+from app.protocol.camera import CAMERA_TYPES, CameraType
 from app.protocol.ros import AUTO, DEFAULT_FLAVOUR, ROS_FLAVOURS, RosFlavour, RosSetting, spell
 from app.protocol.ros import canonical as canonical_type
 
 VelocityType = Literal["geometry_msgs/Twist", "geometry_msgs/TwistStamped"]
 PoseType = Literal["turtlesim/Pose", "nav_msgs/Odometry"]
-CameraType = Literal["sensor_msgs/CompressedImage", "sensor_msgs/Image"]
 VELOCITY_TYPES: Final[tuple[VelocityType, ...]] = get_args(VelocityType)
 POSE_TYPES: Final[tuple[PoseType, ...]] = get_args(PoseType)
-CAMERA_TYPES: Final[tuple[CameraType, ...]] = get_args(CameraType)
 TWIST: Final[VelocityType] = "geometry_msgs/Twist"
 TWIST_STAMPED: Final[VelocityType] = "geometry_msgs/TwistStamped"
 TURTLESIM_POSE: Final[PoseType] = "turtlesim/Pose"

@@ -10,9 +10,11 @@ endpoint a vehicle drives.
 A topic is hosted from the first ``advertise`` or typed ``subscribe`` that names it with one of
 those types (in the served flavour's spelling) until no client advertises or subscribes to it
 any more; its type is the one it was first given. Every message published on it is checked
-against that type (:mod:`app.rosbridge.messages`) and kept, the latest few of each topic with
-a version number, for its subscribers to take (the rosbridge's sessions pull what is newer than
-what they had). Any other type, or an untyped subscribe to a topic nobody hosts, is refused as
+against that type (:mod:`app.rosbridge.messages`; a camera image by :mod:`app.protocol.camera`,
+its data read into bytes once) and kept, the latest few of each topic with a version number, for
+its subscribers to take (the rosbridge's sessions pull what is newer than what they had): a
+camera topic keeps its latest image only (a newer picture supersedes the older ones, and an
+image is large). Any other type, or an untyped subscribe to a topic nobody hosts, is refused as
 an unknown topic.
 """
 
@@ -25,6 +27,7 @@ from typing import Any, Final
 
 from pydantic import ValidationError
 
+from app.protocol import camera
 from app.protocol.errors import describe
 from app.protocol.ros import RosFlavour, canonical, spell, spellings
 from app.rosbridge.messages import MODELS
@@ -32,6 +35,9 @@ from app.rosbridge.messages import MODELS
 # At most this many hosted topics at once (each costs a dict entry, its kept messages and its
 # subscribers' work).
 MAX_HOSTED_TOPICS: Final = 64
+
+# Every type a topic may be hosted with.
+HOSTED_TYPES: Final[tuple[str, ...]] = (*MODELS, *camera.CAMERA_TYPES)
 
 Versioned = tuple[int, dict[str, Any]]  # a message with its version: newer ones are larger
 
@@ -106,12 +112,22 @@ class HostedTopics:
         hosting = self._topics.get(topic.name)
         if hosting is None:
             raise HostingError(f"{topic.name} is no longer advertised")
-        try:
-            model = MODELS[hosting.kind].model_validate(msg, context={"flavour": self.flavour})
-        except ValidationError as exc:
-            raise HostingError(f"{topic.name} ({hosting.kind}): {describe(exc)}") from None
+        kind = hosting.kind
+        message: dict[str, Any]
+        if kind in camera.CAMERA_TYPES:
+            try:
+                image = camera.parse(kind, msg)
+            except camera.CameraMessageError as exc:
+                raise HostingError(f"{topic.name}: {exc}") from None
+            message = camera.wire(image, self.flavour)
+        else:
+            try:
+                model = MODELS[kind].model_validate(msg, context={"flavour": self.flavour})
+            except ValidationError as exc:
+                raise HostingError(f"{topic.name} ({kind}): {describe(exc)}") from None
+            message = model.model_dump(exclude_none=True)
         self._version += 1
-        hosting.kept.append((self._version, model.model_dump(exclude_none=True)))
+        hosting.kept.append((self._version, message))
 
     def version(self) -> int:
         """The current version: a new subscription takes only what is published after it."""
@@ -125,14 +141,14 @@ class HostedTopics:
         return [item for item in hosting.kept if item[0] > seen]
 
     def _host(self, absolute: str, type_name: str | None) -> _Hosting:
-        hosted = ", ".join(MODELS)
+        hosted = ", ".join(HOSTED_TYPES)
         if type_name is None:
             raise HostingError(
                 f"unknown topic {absolute!r}: no client advertises it; give its type to host "
                 f"it ({hosted})"
             )
         kind = canonical(type_name)
-        if kind not in MODELS or type_name not in spellings(
+        if kind not in HOSTED_TYPES or type_name not in spellings(
             self.flavour, spell(self.flavour, kind)
         ):
             raise HostingError(
@@ -143,7 +159,9 @@ class HostedTopics:
             raise HostingError(f"{absolute!r} is not a ROS topic name")
         if len(self._topics) >= MAX_HOSTED_TOPICS:
             raise HostingError(f"at most {MAX_HOSTED_TOPICS} hosted topics at once")
-        hosting = self._topics[absolute] = _Hosting(kind, deque(maxlen=self._kept))
+        # A camera keeps its latest picture only: latest wins, and an image is large.
+        kept = 1 if kind in camera.CAMERA_TYPES else self._kept
+        hosting = self._topics[absolute] = _Hosting(kind, deque(maxlen=kept))
         return hosting
 
 

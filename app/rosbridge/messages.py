@@ -3,9 +3,10 @@
 As in rosbridge, unknown fields are an error and missing ones take their message's defaults;
 numbers must be finite JSON numbers. ``geometry_msgs/Twist`` is what a turtle takes; the others
 are the types of a robot description (:mod:`app.protocol.robot`) that the rosbridge carries
-between its clients on topics the simulator does not own (:mod:`app.rosbridge.hosted`). A
-header's time is spelled per flavour -- ``secs``/``nsecs`` in ROS 1, ``sec``/``nanosec`` in
-ROS 2 -- and checked against the flavour given as the validation context (``{"flavour": ...}``).
+between its clients on topics the simulator does not own (:mod:`app.rosbridge.hosted`), but for
+the camera's images, which :mod:`app.protocol.camera` reads. A header's time is spelled per
+flavour -- ``secs``/``nsecs`` in ROS 1, ``sec``/``nanosec`` in ROS 2 -- and checked against the
+flavour given as the validation context (``{"flavour": ...}``).
 """
 
 from __future__ import annotations
@@ -24,11 +25,8 @@ from pydantic import (
 
 from app.protocol.ros import RosFlavour
 
-UInt8 = Annotated[StrictInt, Field(ge=0, le=255)]
 UInt32 = Annotated[StrictInt, Field(ge=0, le=2**32 - 1)]
 Int32 = Annotated[StrictInt, Field(ge=-(2**31), le=2**31 - 1)]
-# An image's bytes: base64 text, as rosbridge sends a uint8[], or the numbers themselves.
-Bytes = StrictStr | list[UInt8]
 
 
 class Payload(BaseModel):
@@ -129,31 +127,9 @@ class Odometry(Payload):
     twist: TwistWithCovariance = Field(default_factory=TwistWithCovariance)
 
 
-class CompressedImage(Payload):
-    """``sensor_msgs/CompressedImage``."""
-
-    header: Header = Field(default_factory=Header)
-    format: StrictStr = ""
-    data: Bytes = ""
-
-
-class Image(Payload):
-    """``sensor_msgs/Image``."""
-
-    header: Header = Field(default_factory=Header)
-    height: UInt32 = 0
-    width: UInt32 = 0
-    encoding: StrictStr = ""
-    is_bigendian: UInt8 = 0
-    step: UInt32 = 0
-    data: Bytes = ""
-
-
 # The models by message type (``package/Name``).
 MODELS: Final[dict[str, type[Payload]]] = {
     "geometry_msgs/Twist": Twist,
     "geometry_msgs/TwistStamped": TwistStamped,
     "nav_msgs/Odometry": Odometry,
-    "sensor_msgs/CompressedImage": CompressedImage,
-    "sensor_msgs/Image": Image,
 }

@@ -6,7 +6,9 @@ connection). The adapter parses each text frame once (:func:`parse_frame`: a typ
 a :class:`Refused` saying why it is none) and hands it to :meth:`RosbridgeSession.handle`, which
 returns the direct replies (``service_response`` and ``status``); after each simulator step it
 calls :meth:`Hub.tick`, and when a client's socket is ready for more it sends what
-:meth:`RosbridgeSession.take_publications` returns (``publish`` messages for subscribed topics).
+:meth:`RosbridgeSession.take_frames` returns (``publish`` messages for subscribed topics: JSON
+text, a ``uint8[]`` in base64, or CBOR binary frames, a ``uint8[]`` a byte string, for a
+subscription that asks ``compression: "cbor"``, as rosbridge_server sends them).
 A robot is a subclass of :class:`Hub`: turtlesim's turtles (:mod:`app.turtlesim.rosbridge`), the
 differential-drive robot in its room (:mod:`app.diffdrive.rosbridge`).
 
@@ -34,6 +36,7 @@ from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Final, Generic, Literal, TypeVar, get_args
 
+import cbor2
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -54,6 +57,8 @@ log = logging.getLogger(__name__)
 
 Json = dict[str, Any]
 MessageId = StrictStr | StrictInt | None
+# One WebSocket frame as sent: JSON text, or CBOR bytes.
+Frame = str | bytes
 _Model = TypeVar("_Model", bound=BaseModel)
 
 # Status levels by rank: after set_level a session receives statuses at or above its level;
@@ -121,7 +126,7 @@ class Subscribe(_Op):
         default=0, ge=0, le=MAX_THROTTLE_RATE_MS, strict=True, allow_inf_nan=False
     )
     queue_length: StrictInt = Field(default=0, ge=0, le=MAX_QUEUE_LENGTH)
-    compression: Literal["none"] | None = None
+    compression: Literal["none", "cbor"] | None = None
 
 
 class Unsubscribe(_Op):
@@ -232,6 +237,16 @@ def parse_payload(model: type[_Model], data: object, what: str = "") -> _Model:
         raise ProtocolError(f"{what}: {problems}" if what else problems) from None
 
 
+def encode(message: Json, cbor: bool) -> Frame | None:
+    """``message`` as one frame: CBOR bytes, or JSON text (``bytes`` in base64); None (logged)
+    for a message that cannot be sent (NaN or Infinity in JSON)."""
+    try:
+        return cbor2.dumps(message) if cbor else jsonedge.dumps(message)
+    except ValueError as exc:  # a bug upstream: never sent
+        log.error("not sending a %r message: %s", message.get("op"), exc)
+        return None
+
+
 # -- subscriptions ---------------------------------------------------------------------------
 
 
@@ -250,18 +265,26 @@ class _Subscription:
     topic: Hashable
     # The topic's version last delivered (or current when subscribed): only newer ones are due.
     seen: int
-    by_id: dict[MessageId, tuple[float, int]] = field(default_factory=dict)
+    # Each id's throttle (ms), queue length and whether it asked for CBOR.
+    by_id: dict[MessageId, tuple[float, int, bool]] = field(default_factory=dict)
     last_sent: float = -math.inf
 
     @property
     def throttle_s(self) -> float:
-        return min(t for t, _ in self.by_id.values()) / 1000.0
+        return min(t for t, _, _ in self.by_id.values()) / 1000.0
 
     @property
     def queue_length(self) -> int:
-        return max(q for _, q in self.by_id.values())
+        return max(q for _, q, _ in self.by_id.values())
 
-    def take(self, now: float, newer: list[Versioned], room: int, out: list[Json]) -> None:
+    @property
+    def cbor(self) -> bool:
+        """CBOR when any id asked for it, as rosbridge_server picks one compression a topic."""
+        return any(c for _, _, c in self.by_id.values())
+
+    def take(
+        self, now: float, newer: list[Versioned], room: int, out: list[tuple[Json, bool]]
+    ) -> None:
         """Send what is due at time ``now`` of ``newer`` (the topic's messages since ``seen``),
         at most ``room`` messages, oldest first."""
         kept = newer[-max(1, self.queue_length) :]
@@ -274,7 +297,7 @@ class _Subscription:
         else:
             return
         for _, msg in due:
-            out.append({"op": "publish", "topic": self.name, "msg": msg})
+            out.append(({"op": "publish", "topic": self.name, "msg": msg}, self.cbor))
         self.seen = due[-1][0]
         self.last_sent = now
 
@@ -339,11 +362,20 @@ class RosbridgeSession:
         """A ``status`` error for a frame the adapter refused (binary or oversize)."""
         return self.refuse(Refused(text))
 
+    def take_frames(self) -> list[Frame]:
+        """What the subscriptions have to send now, as frames (``publish`` messages in JSON, or
+        CBOR where the subscription asked): call it when the client's socket is ready for
+        more. Nothing waits for a client that does not call it, so one that never reads costs
+        the tick nothing; one that reads is sent at most :data:`MAX_PUBLICATIONS_PER_S`, its
+        subscriptions served in turn."""
+        frames = (encode(message, cbor) for message, cbor in self._take())
+        return [frame for frame in frames if frame is not None]
+
     def take_publications(self) -> list[Json]:
-        """What the subscriptions have to send now (``publish`` messages): call it when the
-        client's socket is ready for more. Nothing waits for a client that does not call it,
-        so one that never reads costs the tick nothing; one that reads is sent at most
-        :data:`MAX_PUBLICATIONS_PER_S`, its subscriptions served in turn."""
+        """The ``publish`` messages :meth:`take_frames` would send now, as messages."""
+        return [message for message, _ in self._take()]
+
+    def _take(self) -> list[tuple[Json, bool]]:
         now = self._hub.now
         elapsed = max(0.0, now - self._allowance_at)
         self._allowance = min(
@@ -354,7 +386,7 @@ class RosbridgeSession:
         if not subs:
             return []
         first = self._turn % len(subs)
-        out: list[Json] = []
+        out: list[tuple[Json, bool]] = []
         served = 0
         for sub in subs[first:] + subs[:first]:
             room = int(self._allowance) - len(out)
@@ -434,7 +466,7 @@ class RosbridgeSession:
         if sub is None:
             sub = _Subscription(msg.topic, topic, seen=self._hub.topic_version(topic))
             self._subscriptions[msg.topic] = sub
-        sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length)
+        sub.by_id[msg.id] = (msg.throttle_rate, msg.queue_length, msg.compression == "cbor")
         return []
 
     def _unsubscribe(self, msg: Unsubscribe) -> list[Json]:

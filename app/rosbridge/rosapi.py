@@ -108,6 +108,11 @@ _DEFINITIONS: dict[str, str] = {
     "geometry_msgs/Quaternion": "float64 x\nfloat64 y\nfloat64 z\nfloat64 w",
     "geometry_msgs/TwistWithCovariance": "geometry_msgs/Twist twist\nfloat64[36] covariance",
     "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
+    "sensor_msgs/Image": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
+        "uint8 is_bigendian\nuint32 step\nuint8[] data"
+    ),
+    "geometry_msgs/TwistStamped": "std_msgs/Header header\ngeometry_msgs/Twist twist",
 }
 _ROS2_DEFINITIONS: dict[str, str] = {
     "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id",
@@ -129,6 +134,8 @@ _USES: dict[str, tuple[str, ...]] = {
     "geometry_msgs/Pose": ("geometry_msgs/Point", "geometry_msgs/Quaternion"),
     "geometry_msgs/TwistWithCovariance": ("geometry_msgs/Twist",),
     "sensor_msgs/CompressedImage": ("std_msgs/Header",),
+    "sensor_msgs/Image": ("std_msgs/Header",),
+    "geometry_msgs/TwistStamped": ("std_msgs/Header", "geometry_msgs/Twist"),
 }
 _ROS2_USES: dict[str, tuple[str, ...]] = {
     "std_msgs/Header": ("builtin_interfaces/Time",),

@@ -43,7 +43,7 @@ from app.protocol.page import to_json
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.protocol.signaling import Name
-from app.rosbridge.protocol import Hub, Refused, RosbridgeSession, parse_frame
+from app.rosbridge.protocol import Frame, Hub, Publish, Refused, RosbridgeSession, parse_frame
 from app.rosbridge.protocol import status as rosbridge_status
 from app.server.access import RosbridgeGate, bearer_claims, bearer_token, state_refusal
 from app.server.config import Settings, SimulatedRobot
@@ -106,9 +106,9 @@ class Connection:
         self.session: RosbridgeSession | None = None
         self.room: str | None = None
 
-    def pull(self) -> list[dict[str, Any]]:
-        """The session's publications (none before it has one)."""
-        return [] if self.session is None else self.session.take_publications()
+    def pull(self) -> list[Frame]:
+        """The session's publications as frames, JSON or CBOR (none before it has a session)."""
+        return [] if self.session is None else self.session.take_frames()
 
 
 class Simulator:
@@ -256,9 +256,10 @@ class Simulator:
         for robot in self.rooms.values():
             robot.step(now)
         self.ticks += 1
-        self._wake()
+        self.wake()
 
-    def _wake(self) -> None:
+    def wake(self) -> None:
+        """Tell every writer there may be something new to send (a tick, a publication)."""
         for _, outbox in self.outboxes.items():
             outbox.wake()
 
@@ -285,7 +286,7 @@ class Simulator:
                 scene, stamp = robot.sim.scene(), time.time()
                 jpeg = await loop.run_in_executor(thread, _shoot, renderer, scene)
                 robot.hub.publish_frame(jpeg, stamp)
-                self._wake()
+                self.wake()
             next_at += period
             delay = next_at - loop.time()
             if delay < -MAX_LAG_S:
@@ -421,6 +422,8 @@ async def rosbridge(websocket: WebSocket) -> None:
                 metrics.refused("invalid")
             bound = session() if decision.forward else None
             replies = bound.handle(frame) if bound is not None else []
+            if bound is not None and isinstance(frame, Publish):
+                simulator.wake()  # a camera image goes out now, not at the next tick
             if decision.reply is not None:  # the gate replies only to refuse: no token, or a
                 metrics.refused("auth")  # role that may not do this
                 replies.append(decision.reply)

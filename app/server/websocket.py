@@ -66,15 +66,18 @@ class Shut:
     reason: str
 
 
-Pull = Callable[[], list[dict[str, Any]]]
+# A frame as sent: JSON text, or a binary frame (a rosbridge subscription in CBOR).
+Frame = str | bytes
+Pull = Callable[[], list[Frame]]
 
 
 class Outbox:
     """Frames waiting for one peer, bounded in count and bytes; overflowing closes the peer
     (and calls ``on_slow_reader``, for the metrics).
 
-    ``pull`` gives the messages a newer one supersedes (publications): asked for only when every
-    queued frame has been sent and :meth:`wake` has said there may be some.
+    ``pull`` gives the frames a newer one supersedes (publications, encoded by the core that
+    makes them): asked for only when every queued frame has been sent and :meth:`wake` has said
+    there may be some.
     """
 
     def __init__(
@@ -88,7 +91,7 @@ class Outbox:
         self.max_bytes = max_bytes
         self.on_slow_reader = on_slow_reader
         self._pull = pull
-        self._frames: deque[str] = deque()
+        self._frames: deque[Frame] = deque()
         self._bytes = 0
         self._shut: Shut | None = None
         self._ready = asyncio.Event()
@@ -130,7 +133,7 @@ class Outbox:
             self._ready.set()
             self.closing.set()
 
-    async def get(self) -> str | Shut:
+    async def get(self) -> Frame | Shut:
         """The next frame, or the close once every frame before it has been taken."""
         while not self._frames:
             if self._shut is not None:
@@ -146,16 +149,15 @@ class Outbox:
     def _pulled(self) -> bool:
         """Queue what ``pull`` gives, as far as it fits; True when anything was queued."""
         assert self._pull is not None
-        for message in self._pull():
-            frame = self._encode(message)
-            if frame is not None and self._fits(frame):
+        for frame in self._pull():
+            if self._fits(frame):
                 self._push(frame)
         return bool(self._frames)
 
-    def _fits(self, frame: str) -> bool:
+    def _fits(self, frame: Frame) -> bool:
         return len(self._frames) < self.max_messages and self._bytes + len(frame) <= self.max_bytes
 
-    def _push(self, frame: str) -> None:
+    def _push(self, frame: Frame) -> None:
         self._frames.append(frame)
         self._bytes += len(frame)
         self._ready.set()
@@ -306,7 +308,10 @@ async def _write(websocket: WebSocket, outbox: Outbox) -> None:
             if isinstance(item, Shut):
                 await websocket.close(item.code, item.reason)
                 return
-            await websocket.send_text(item)
+            if isinstance(item, bytes):
+                await websocket.send_bytes(item)
+            else:
+                await websocket.send_text(item)
     except (WebSocketDisconnect, WebSocketDisconnected):
         return
     except RuntimeError as exc:

@@ -37,6 +37,11 @@ frame_id = "rover_base"
 topic = "/rover/odom"
 type = "nav_msgs/Odometry"
 
+[camera]
+topic = "/rover/camera/image_raw"
+type = "sensor_msgs/Image"
+hfov_deg = 70.0
+
 [limits]
 max_linear = 0.3
 max_angular = 0.5
@@ -55,8 +60,11 @@ async def stand_in(url: str, velocity: tuple[str, str], odom: str) -> AsyncItera
 
 
 @contextlib.contextmanager
-def agent(server: RunningServer, robot: str, log: Path) -> Iterator[subprocess.Popen[bytes]]:
-    """``autopilot vehicle --robot ROBOT`` on the server's /rosbridge, logging to ``log``."""
+def agent(
+    server: RunningServer, robot: str, log: Path, video: str
+) -> Iterator[subprocess.Popen[bytes]]:
+    """``autopilot vehicle --robot ROBOT --video VIDEO`` on the server's /rosbridge, logging to
+    ``log``."""
     rosbridge = server.url.replace("http", "ws", 1) + "/rosbridge"
     with log.open("wb") as out:
         process = subprocess.Popen(
@@ -71,6 +79,8 @@ def agent(server: RunningServer, robot: str, log: Path) -> Iterator[subprocess.P
                 rosbridge,
                 "--robot",
                 robot,
+                "--video",
+                video,
                 "--size",
                 "160x120",
                 "--fps",
@@ -114,6 +124,7 @@ async def drive_and_collect(
     odom: str,
     log: Path,
     top: tuple[float, float],
+    video: str = "synthetic",
 ) -> tuple[StandIn, PyRelay]:
     """Drive ``robot`` by hand to its ``top`` speed and let go; the stand-in and the relay."""
     url = server.url.replace("http", "ws", 1) + "/rosbridge"
@@ -121,7 +132,7 @@ async def drive_and_collect(
         relay = PyRelay(server.ws_url)
         await relay.start()
         try:
-            with agent(server, robot, log):
+            with agent(server, robot, log, video):
                 await relay.until(
                     lambda: relay.channel is not None and relay.channel.readyState == "open", 60
                 )
@@ -178,10 +189,15 @@ async def test_a_robot_file_with_twist_stamped(server: RunningServer, tmp_path: 
     log = tmp_path / "agent.log"
     velocity = ("/rover/base/cmd_vel", "geometry_msgs/msg/TwistStamped")
     before = time.time()
+    # Its camera is the one the file names (`--video ros`), of the type it names while the
+    # robot's rosapi cannot say (nobody publishes it yet).
     standin, relay = await drive_and_collect(
-        server, str(description), velocity, "/rover/odom", log, (0.3, -0.5)
+        server, str(description), velocity, "/rover/odom", log, (0.3, -0.5), video="ros"
     )
     output = log.read_text()
+    assert "camera /rover/camera/image_raw: sensor_msgs/Image (from the robot's description)" in (
+        output
+    ), output
     assert reported_pose(relay)["theta"] == pytest.approx(YAW), output
     messages = [m for _, m in standin.commands()]
     assert messages, output

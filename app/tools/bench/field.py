@@ -124,7 +124,11 @@ def figures(condition: str, events: list[AnyEvent], window: tuple[float, float])
         row.glass_to_command_ms_p95 = round(float(np.percentile(glass, 95)), 1)
     else:
         row.problems["glass_to_command_ms_p50"] = "no tagged goal turned into a Twist"
-    truth = [TruthSample(e.t, e.face_x, e.face_y, *VIDEO_SIZE) for e in frames]
+    truth = [
+        TruthSample(e.t, e.face_x, e.face_y, *VIDEO_SIZE)
+        for e in frames
+        if e.face_x is not None and e.face_y is not None
+    ]
     poses = [
         PoseSample(e.t, e.x, e.y, e.theta)
         for e in of_kind(events, PoseReport)

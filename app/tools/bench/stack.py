@@ -347,8 +347,9 @@ def _read_events(run: ProfileRun, path: Path, options: StackOptions) -> None:
         match event:
             case FrameSent(frame=frame, face_x=face_x, face_y=face_y, jump=jump, t=t):
                 run.frame_sent[frame] = t
-                run.face.append(FaceSample(frame, face_x, face_y, jump))
-                truth.append(TruthSample(t, face_x, face_y, *options.size))
+                if face_x is not None and face_y is not None:  # a scene that knows its face
+                    run.face.append(FaceSample(frame, face_x, face_y, jump))
+                    truth.append(TruthSample(t, face_x, face_y, *options.size))
             case GoalApplied(frame=frame, x=x, y=y, t=t):
                 run.goals.append((t, frame))
                 if frame is not None:
