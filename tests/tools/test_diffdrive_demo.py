@@ -1,7 +1,8 @@
 """``autopilot demo --robot diffdrive`` end to end in the browser: the server's room with its
-diffdrive robot, the agent driving it through ``/rosbridge`` by its description, the relay
-finding a face in the agent's video, and the client page showing the room's map, the robot where
-its odometry puts it, and the robot moving once piloting starts.
+diffdrive robot, the agent filming through the robot's own camera topic and driving it through
+``/rosbridge`` by its description, the relay finding a face in that video, and the client page
+showing the camera's video, the room's map, the robot where its odometry puts it, and the robot
+moving once piloting starts.
 
 Run inside the private network namespace, as the other demo tests.
 """
@@ -19,11 +20,17 @@ from pathlib import Path
 from queue import Queue
 from typing import Any
 
+import cv2
+import numpy as np
+import numpy.typing as npt
 import pytest
 from playwright.sync_api import Page, sync_playwright
 
 from app.chromium import launch_options
+from app.diffdrive.camera import Pinhole, Renderer, encode_jpeg
+from app.diffdrive.robot import CAMERA_HFOV
 from app.diffdrive.room import ROOM
+from app.diffdrive.sim import RoomSim
 from tests.helpers.processes import descendants, wait_all_gone
 from tests.helpers.waiting import wait_until
 from tests.tools.test_demo import wait_for_line, with_suppressed_kill
@@ -37,6 +44,14 @@ START_S = 120.0
 WAIT_S = 60.0
 # The robot's colour on the map (roomview.js).
 ROBOT = (0x2F, 0x6F, 0xD0)
+CAMERA = Pinhole(hfov=CAMERA_HFOV)
+# The strips of the camera's frame compared (rows, from and to): the ceiling below the frame
+# tag the agent stamps on the top 16 rows, and the floor just in front of the robot.
+CEILING_ROWS = (24, 40)
+FLOOR_ROWS = (456, 472)
+# How far the video's colours may be from the camera's frame, after its JPEG and the two
+# WebRTC encodes (per channel, 0 to 255).
+COLOUR_TOLERANCE = 12.0
 
 
 @pytest.fixture
@@ -84,6 +99,42 @@ def status(page: Page) -> dict[str, Any]:
     return found
 
 
+def strips(page: Page) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+    """The client's video frame, drawn at the camera's size (the video may arrive smaller): the
+    median colour (RGB) of the ceiling's and the floor's strips; None before the video plays."""
+    found: dict[str, list[int]] | None = page.evaluate(
+        """([width, height, ceiling, floor]) => {
+            const video = document.querySelector('video');
+            if (!video.videoWidth) return null;
+            const canvas = Object.assign(document.createElement('canvas'), { width, height });
+            const ctx = canvas.getContext('2d');
+            ctx.drawImage(video, 0, 0, width, height);
+            const rows = ([from, to]) =>
+                Array.from(ctx.getImageData(0, from, width, to - from).data);
+            return { ceiling: rows(ceiling), floor: rows(floor) };
+        }""",
+        [CAMERA.width, CAMERA.height, CEILING_ROWS, FLOOR_ROWS],
+    )
+    if found is None:
+        return None
+    rgba = {name: np.array(values, np.float64).reshape(-1, 4) for name, values in found.items()}
+    return np.median(rgba["ceiling"][:, :3], axis=0), np.median(rgba["floor"][:, :3], axis=0)
+
+
+def expected_strips() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The same medians of the robot camera's frame at the room's start, as the server sends it
+    (JPEG): the ceiling and the floor look the same from any pose away from the walls."""
+    renderer = Renderer(ROOM, CAMERA)
+    jpeg = encode_jpeg(renderer.render(RoomSim().scene()))
+    bgr = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB).astype(np.float64)
+
+    def median(rows: tuple[int, int]) -> npt.NDArray[np.float64]:
+        return np.median(rgb[rows[0] : rows[1]].reshape(-1, 3), axis=0)
+
+    return median(CEILING_ROWS), median(FLOOR_ROWS)
+
+
 def pixel(page: Page, x: float, y: float) -> tuple[int, int, int]:
     """The map canvas's colour at room point (x, y) metres."""
     rgb: list[int] = page.evaluate(
@@ -104,7 +155,7 @@ def ahead(pose: dict[str, float], distance: float, bearing: float) -> tuple[floa
     return pose["x"] + distance * math.cos(heading), pose["y"] + distance * math.sin(heading)
 
 
-def test_the_diffdrive_demo_drives_the_rooms_robot(
+def test_the_diffdrive_demo_drives_the_rooms_robot_from_its_own_camera(
     demo: tuple[subprocess.Popen[str], Queue[str]],
 ) -> None:
     process, lines = demo
@@ -123,6 +174,13 @@ def test_the_diffdrive_demo_drives_the_rooms_robot(
                 "() => !document.querySelector('[data-action=start]').disabled",
                 timeout=START_S * 1000,
             )
+            # The video the client sees is the robot's own camera: its ceiling and floor.
+            ceiling, floor = expected_strips()
+            wait_until(lambda: strips(page) is not None, WAIT_S, "the robot's video")
+            shown = strips(page)
+            assert shown is not None
+            assert list(shown[0]) == pytest.approx(list(ceiling), abs=COLOUR_TOLERANCE), shown
+            assert list(shown[1]) == pytest.approx(list(floor), abs=COLOUR_TOLERANCE), shown
             # The map is the room's, its billboards where the server's room has them.
             wait_until(lambda: status(page)["billboards"] is not None, WAIT_S, "the room's map")
             assert set(status(page)["billboards"]) == {b.name for b in ROOM.billboards}
@@ -139,7 +197,7 @@ def test_the_diffdrive_demo_drives_the_rooms_robot(
             )
             assert wedge[0] - wedge[2] > behind[0] - behind[2] + 20, (wedge, behind)
             page.get_by_role("button", name="Start Piloting").click()
-            # The relay finds a face in the agent's video, and the goals it sends drive the
+            # The relay finds a face in the robot's camera, and the goals it sends drive the
             # robot through /rosbridge.
             wait_until(lambda: status(page)["target"] is not None, WAIT_S, "a target")
 
