@@ -71,7 +71,8 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
         default=control.DEFAULT_PROFILE,
         help="vehicle profile: default (turn in place), thesis"
         f" ({control.PROFILES['thesis'].period_s * 1000:.0f} ms pacing), follow (drive to the"
-        " target and keep a standoff)",
+        " target and keep a standoff), onboard (a robot that carries its camera: steer the"
+        " target's bearing to zero, keep a standoff, search when it is lost)",
     )
 
 

@@ -72,6 +72,8 @@ EVENT_CHANNELS: Final[dict[type[Event], EventChannel]] = {
     ev.GoalDropped: EventChannel("/autopilot/goal_dropped", "autopilot.GoalDropped"),
     ev.ModeChanged: EventChannel("/autopilot/mode", "autopilot.Mode"),
     ev.DriveReceived: EventChannel("/autopilot/drive", "autopilot.Drive"),
+    ev.SearchStarted: EventChannel("/autopilot/search", "autopilot.Search"),
+    ev.SearchEnded: EventChannel("/autopilot/search_ended", "autopilot.SearchEnded"),
     ev.LinkChanged: EventChannel("/autopilot/link", "autopilot.Link"),
 }
 _KIND_OF_TOPIC: Final = {channel.topic: kind for kind, channel in EVENT_CHANNELS.items()}

@@ -29,9 +29,11 @@ POSES = [
     for theta in (-math.pi, -2.0, -math.pi / 2, 0.0, 0.5, math.pi / 2, 3.0, math.pi)
 ] + [(1.0, 9.0, 0.3), (10.5, 0.5, -2.9), (0.3, 5.0, math.pi), (10.9, 10.9, 0.8), (6.0, 2.0, -1.2)]
 PROFILE_NAMES = sorted(control.PROFILES)
-# The follow profile as a robot other than a turtlesim gets it: no terrain walls to keep from.
+# The profiles as the pages get them, the onboard one on the diffdrive robot (its 60° camera),
+# and the follow profile as a robot other than a turtlesim gets it: no terrain walls to keep from.
 ROVER_FOLLOW = for_robot(control.PROFILES["follow"], PRESETS["diffdrive"])
-PROFILES_AND_A_ROVERS_FOLLOW = {**control.PROFILES, "roverFollow": ROVER_FOLLOW}
+ONBOARD = for_robot(control.PROFILES["onboard"], PRESETS["diffdrive"])
+PROFILES = {**control.PROFILES, "onboard": ONBOARD, "roverFollow": ROVER_FOLLOW}
 
 
 @pytest.fixture
@@ -43,7 +45,7 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
              window.control = await import('/static/js/core/control.js');
              window.law = new control.ControlLaw(constants);
            }""",
-        to_json(control_config(PROFILES_AND_A_ROVERS_FOLLOW)),
+        to_json(control_config(PROFILES)),
     )
     yield opened
     opened.close()
@@ -119,7 +121,11 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
     # a pause long enough for a timeout (and for follow, a search), a goal burst inside the
     # command-rate cap, and stops.
     events: list[tuple[str, float, dict[str, float] | None]] = []
-    goals = [{"x": 100.0, "y": 240.0, "w": W, "h": H}, {"x": 600.0, "y": 60.0, "w": W, "h": H}]
+    # With a face's box, far and near (only the onboard law reads it).
+    goals = [
+        {"x": 100.0, "y": 240.0, "w": W, "h": H, "boxH": 40.0, "targetHeightM": 0.24},
+        {"x": 600.0, "y": 60.0, "w": W, "h": H, "boxH": 150.0, "targetHeightM": 0.24},
+    ]
     t = 0.0
     for step in range(130):
         t = step * 0.037
@@ -147,7 +153,7 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
            }""",
         [profile, events],
     )
-    controller = control.Controller(control.PROFILES[profile])
+    controller = control.Controller(PROFILES[profile])
     expected: list[list[float | int | None] | None] = []
     untils: list[float | None] = []
     for kind, t, arg in events:
@@ -161,6 +167,8 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
                     int(arg["h"]),
                     int(arg["seq"]),
                     int(arg["frame"]),
+                    box_h=arg["boxH"],
+                    target_height_m=arg["targetHeightM"],
                 ),
                 t,
             )
@@ -176,9 +184,9 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
     published = [e for e in expected if e is not None]
     assert any(e[1] != 0 for e in published), "the script never drove the turtle"
     assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"
-    if profile == "follow":
-        assert any(e[0] != 0 for e in published), "follow never drove forward or back"
-        assert any(e[2] is None and e[1] != 0 for e in published), "follow never searched"
+    if profile in ("follow", "onboard"):
+        assert any(e[0] != 0 for e in published), f"{profile} never drove forward or back"
+        assert any(e[2] is None and e[1] != 0 for e in published), f"{profile} never searched"
     assert len(js) == len(expected)
     # Both sides agree on when the goal timeout falls due (the ticker wakes up for it).
     assert [until for _, until in js] == pytest.approx(untils, abs=1e-12)
@@ -188,3 +196,44 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
         else:
             assert got is not None
             assert got[:2] == pytest.approx(want[:2], abs=1e-12) and got[2] == want[2]
+
+
+def test_the_onboard_law_matches_the_python_agent(page: Page) -> None:
+    # Through the diffdrive robot's 60° camera: columns across the frame, boxes near and far (and
+    # none), goals that arrived at other headings than the pose's (the turn since is taken off).
+    profile = PROFILES["onboard"]
+    cases: list[dict[str, Any]] = [
+        {
+            "goal": {
+                "x": x, "y": 200.0, "w": W, "h": H, "boxH": box_h,
+                "targetHeightM": None if box_h is None else 0.24, "heading": heading,
+            },
+            "pose": {"x": 1.0, "y": 3.0, "theta": theta},
+        }
+        for x in (0.0, 100.0, 300.0, 319.5, 320.0, 321.0, 340.0, 500.0, 640.0)
+        for box_h in (None, 30.0, 111.0, 300.0)
+        for heading, theta in ((None, 0.0), (0.0, 0.0), (0.2, 0.5), (3.0, -3.0), (-1.0, -1.3))
+    ]  # fmt: skip
+    js: list[dict[str, Any]] = page.evaluate(
+        """([cases, profile]) => cases.map(({ goal, pose }) => ({
+             bearing: law.pixelBearing(goal.x, goal.w, profile.hfov),
+             range: goal.boxH === null ? null
+               : law.targetRange(goal.boxH, goal.targetHeightM, goal.w, profile.hfov),
+             command: law.lawOf(profile)(goal, pose, profile),
+           }))""",
+        [cases, to_json(profile)],
+    )
+    for case, got in zip(cases, js, strict=True):
+        g, p = case["goal"], case["pose"]
+        goal = control.Goal(
+            g["x"], g["y"], W, H, box_h=g["boxH"], target_height_m=g["targetHeightM"],
+            heading=g["heading"],
+        )  # fmt: skip
+        bearing = control.pixel_bearing(goal.x, goal.w, profile.hfov)
+        assert got["bearing"] == pytest.approx(bearing, abs=1e-12), case
+        if goal.box_h is not None:
+            expected_range = control.target_range(goal.box_h, 0.24, goal.w, profile.hfov)
+            assert got["range"] == pytest.approx(expected_range, abs=1e-12), case
+        linear, angular = control.onboard_law(goal, control.Pose(**p), profile)
+        assert got["command"]["linear"] == pytest.approx(linear, abs=1e-12), case
+        assert got["command"]["angular"] == pytest.approx(angular, abs=1e-12), case

@@ -22,7 +22,7 @@ from tests.vehicle_agent.pilot_sequences import ROBOTS, SEQUENCES, goal, run
 pytestmark = [pytest.mark.browser]
 
 # The pilot as pages/vehicle.js builds it, fed one sequence: each step's records, next tick,
-# mode and operator.
+# mode, operator and search status.
 RUN_JS = """([steps, constants, freshness, limits, profile]) => {
   const law = new control.ControlLaw(constants);
   const driven = new pilot.Pilot(law, law.profiles[profile], {
@@ -33,7 +33,7 @@ RUN_JS = """([steps, constants, freshness, limits, profile]) => {
   });
   const feed = (kind, t, args) => {
     switch (kind) {
-      case 'goal': return driven.goal(args[0], t);
+      case 'goal': return driven.goal(args[0], t, args[1] ?? null);
       case 'stop': return driven.stop(t);
       case 'mode': return driven.modeChange(args[0], args[1], t);
       case 'drive': return driven.drive(args[0], args[1], args[2], t);
@@ -46,7 +46,7 @@ RUN_JS = """([steps, constants, freshness, limits, profile]) => {
   };
   return steps.map(([kind, t, args]) => {
     const records = feed(kind, t, args);
-    return [records, driven.nextTick(t), driven.mode, driven.operator];
+    return [records, driven.nextTick(t), driven.mode, driven.operator, driven.search];
   });
 }"""
 
@@ -122,3 +122,22 @@ def test_goals_while_manual_are_dropped_why_manual_and_never_steer(page: Page) -
         {"ev": "goal_dropped", "seq": 1, "frame": 101, "why": "manual", "t": 0.2}
     ]
     assert not any(r["ev"] == "twist" for answer in answers[2:] for r in answer[0])
+
+
+def test_the_onboard_law_turns_to_a_face_and_searches_where_it_left(page: Page) -> None:
+    # The rule, not only the agreement: a face right of centre turns the robot clockwise
+    # (negative), and once it is gone the search turns right, then runs out and stops.
+    steps = [
+        ("pose", 0.0, [1.0, 3.0, 0.0]),
+        goal(1, 0.05, x=560.0, y=240.0, box_h=60.0),
+        *[("pose", round(0.05 + 0.1 * k, 2), [1.0, 3.0, 0.0]) for k in range(1, 80)],
+    ]
+    answers = run_js(page, steps, "onboard", "diffdrive")
+    records = [r for answer in answers for r in answer[0]]
+    first = next(r for r in records if r["ev"] == "twist")
+    assert first["angular"] < 0 and first["seq"] == 1
+    searches = [r for r in records if r["ev"] in ("search", "search_ended")]
+    assert [r["ev"] for r in searches] == ["search", "search_ended"]
+    assert searches[0]["side"] == "right" and searches[1]["why"] == "timed_out"
+    last = records[-1]
+    assert last["ev"] == "twist" and (last["linear"], last["angular"]) == (0, 0)

@@ -40,6 +40,7 @@ from app.supervise import Backoff
 from vehicle_agent.capture_times import CaptureTimes
 from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose, Twist
 from vehicle_agent.events import EventLog
+from vehicle_agent.frame_times import FrameTimes
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.pilot import Pilot
 from vehicle_agent.signaling import SignalingClient, SignalingError
@@ -69,7 +70,8 @@ class AgentConfig:
     # Turn the turtle to face "up" (θ = π/2) at start, as the thesis's vehicle does (a
     # turtlesim only: no other robot has teleport_absolute).
     spawn_step: bool = True
-    # The robot driven: its limits, and whether it is a turtlesim (``--robot``).
+    # The robot driven: its limits, its camera's field of view (the onboard law's), and whether
+    # it is a turtlesim (``--robot``).
     robot: Robot = TURTLESIM
     ice_servers: list[RTCIceServer] = field(default_factory=list)
     # A vehicle token for the room (``autopilot token``), when the server asks for one.
@@ -98,6 +100,9 @@ class Agent:
         self.video = video
         self.turtle = turtle
         self.events = events or EventLog()
+        # The camera's frame times, so that a goal's bearing is taken at its frame's heading.
+        self.frame_times = FrameTimes()
+        self.events.listeners.append(self.frame_times.on_event)
         self.pilot = Pilot(profile, limits=config.robot.limits)
         self.pose: Pose | None = None
         self._first_pose: asyncio.Future[Pose] | None = None
@@ -437,7 +442,8 @@ class Agent:
         return channels.Error(reason=reason, ref=ref)
 
     def _on_goal(self, relay: str, goal: channels.Goal) -> None:
-        self._act(self.pilot.goal(goal, time.monotonic()))
+        captured_at = self.frame_times.captured_at(goal.frame)
+        self._act(self.pilot.goal(goal, time.monotonic(), captured_at))
 
     def _on_stop(self, relay: str, message: channels.Stop) -> None:
         log.info("piloting stopped by %r", relay)
@@ -508,7 +514,12 @@ class Agent:
                 age = None if age_s is None else age_s * 1000
                 sent = link.send_state(
                     channels.Pose(
-                        x=pose.x, y=pose.y, theta=pose.theta, t=time.time() * 1000, goalAgeMs=age
+                        x=pose.x,
+                        y=pose.y,
+                        theta=pose.theta,
+                        t=time.time() * 1000,
+                        goalAgeMs=age,
+                        search=self.pilot.search,
                     )
                 )
             self.events.emit(ev.PoseReport(x=pose.x, y=pose.y, theta=pose.theta, sent=sent, t=now))
@@ -526,4 +537,8 @@ class Agent:
                 self.turtle.publish(twist)
                 if twist.is_zero and twist.seq is None:
                     log.info("turtle stopped")
+            elif isinstance(event, ev.SearchStarted):
+                log.info("target lost: searching to the %s", event.side)
+            elif isinstance(event, ev.SearchEnded):
+                log.info("search ended after %.1f s: %s", event.after_s, event.why)
             self.events.emit(event)

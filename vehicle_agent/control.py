@@ -11,16 +11,21 @@ Coordinate conventions: image pixels have their origin at the top-left corner wi
 downward; the turtlesim terrain has its origin at the bottom-left corner with y growing upward.
 A goal pixel is therefore flipped vertically when mapped to the terrain: a face in the top half
 of the frame is a target in the upper half of the terrain, i.e. the turtle looks "up" (θ > 0).
+That is the fixed camera's geometry (the rotate and follow laws). A camera the vehicle carries
+(the onboard law) turns with it: a goal pixel is a bearing, positive to the left as θ is
+counter-clockwise, and the target's box height against its real height is a range.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from app.protocol.angles import wrap_angle
 from app.protocol.control import (
+    HEADING_MEMORY_S,
     MIN_TARGET_DISTANCE_M,
     PROFILES,
     SPAWN_THETA,
@@ -46,7 +51,10 @@ __all__ = [
     "angular_command",
     "follow_command",
     "follow_law",
+    "onboard_law",
+    "pixel_bearing",
     "pixel_to_terrain",
+    "target_range",
     "rotate_law",
     "steering_error",
     "wall_clearance",
@@ -65,7 +73,12 @@ class Pose:
 
 @dataclass(frozen=True)
 class Goal:
-    """A target pixel of a ``w``×``h`` frame, as sent by the relay."""
+    """A target pixel of a ``w``×``h`` frame, as sent by the relay; ``box_h`` its box's height
+    (pixels) and ``target_height_m`` the real height the box spans, when the relay sent them.
+
+    ``heading`` is the vehicle's heading when the goal's frame was taken, or else when the goal
+    arrived (the controller sets it): a bearing is relative to the heading the vehicle had then.
+    """
 
     x: float
     y: float
@@ -73,6 +86,9 @@ class Goal:
     h: int
     seq: int | None = None
     frame: int | None = None
+    box_h: float | None = None
+    target_height_m: float | None = None
+    heading: float | None = None
 
 
 @dataclass(frozen=True)
@@ -185,11 +201,57 @@ def follow_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
     return follow_command(tx, ty, pose, profile)
 
 
+def _focal_px(w: float, hfov: float) -> float:
+    """The focal length in pixels of a camera ``hfov`` radians across a frame ``w`` wide."""
+    return (w / 2) / math.tan(hfov / 2)
+
+
+def pixel_bearing(x: float, w: float, hfov: float) -> float:
+    """The bearing (rad) of pixel column ``x`` of a frame ``w`` wide seen by a camera ``hfov``
+    across, from the camera's axis: positive to the left, as θ counter-clockwise, so a target
+    right of the image centre has a negative bearing."""
+    return -math.atan((x - w / 2) / _focal_px(w, hfov))
+
+
+def target_range(box_h: float, height_m: float, w: float, hfov: float) -> float:
+    """The distance (m) at which something ``height_m`` high spans ``box_h`` pixels, seen by a
+    camera ``hfov`` across a frame ``w`` wide (square pixels): ``f · H / h``."""
+    return _focal_px(w, hfov) * height_m / box_h
+
+
+def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+    """The onboard law: turn the target's bearing toward zero, and drive to the standoff from
+    it as much as the vehicle faces it.
+
+    The bearing is the goal pixel's, less how far the vehicle has turned since its frame was
+    taken (or since the goal arrived, when the vehicle does not know when that was): what it
+    turned while the frame was on its way and between goals keeps the command current. The
+    range comes from the box's height; without a box or a real height the vehicle only turns.
+    """
+    if profile.hfov <= 0:
+        return 0.0, 0.0
+    bearing = pixel_bearing(goal.x, goal.w, profile.hfov)
+    if goal.heading is not None:
+        bearing = wrap_angle(bearing - wrap_angle(pose.theta - goal.heading))
+    # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
+    if not math.isfinite(bearing):
+        return 0.0, 0.0
+    angular = angular_command(bearing, profile)
+    if goal.box_h is None or goal.target_height_m is None:
+        return 0.0, angular
+    distance = target_range(goal.box_h, goal.target_height_m, goal.w, profile.hfov)
+    linear = profile.linear_gain * (distance - profile.standoff_m)
+    linear = _clamp(linear, -profile.max_linear, profile.max_linear)
+    # Full speed facing the target, none at ``slow_bearing`` off it: turn first, then drive.
+    linear *= max(0.0, 1.0 - abs(bearing) / profile.slow_bearing)
+    return linear, angular
+
+
 # A control law: the (linear, angular) command that steers from ``pose`` toward ``goal``.
 ControlLaw = Callable[[Goal, Pose, Profile], tuple[float, float]]
 # The laws a profile can name (``Profile.law``); a new law is a function and an entry here (and
 # its twin in control.js).
-LAWS: dict[Law, ControlLaw] = {"rotate": rotate_law, "follow": follow_law}
+LAWS: dict[Law, ControlLaw] = {"rotate": rotate_law, "follow": follow_law, "onboard": onboard_law}
 
 
 class Controller:
@@ -203,8 +265,10 @@ class Controller:
     cap (``min_interval_s`` since the previous Twist) allows, and between goals answer pose
     updates every ``period_s``. The thesis profile publishes on its own clock. After a goal
     timeout or :meth:`stop` exactly one zero Twist is returned, then nothing until the next
-    goal. The follow profile turns in place to search when no goal came for
-    ``search_after_s``. ``law`` replaces the profile's (:data:`LAWS`).
+    goal. The searching profiles (follow, onboard) stop driving and turn in place when no goal
+    came for ``search_after_s``, toward the side the target was last seen on, until a goal
+    comes back (:attr:`search_since` says since when) or the goal timeout stops the search.
+    ``law`` replaces the profile's (:data:`LAWS`).
     """
 
     def __init__(self, profile: Profile, law: ControlLaw | None = None) -> None:
@@ -217,7 +281,21 @@ class Controller:
         # The side the target was last seen on (+1 left, −1 right): where a search turns first.
         self._last_side = 1.0
         self._pose: Pose | None = None
+        # The headings of the last HEADING_MEMORY_S, oldest first: (time, theta).
+        self._headings: deque[tuple[float, float]] = deque()
         self._last_publish: float | None = None
+        # When the search under way began (its first search Twist), None when not searching.
+        self._search_since: float | None = None
+
+    @property
+    def search_since(self) -> float | None:
+        """When the search under way began (its first Twist went out), None when none is."""
+        return self._search_since
+
+    @property
+    def last_side(self) -> float:
+        """The side the target was last seen on, +1 left or −1 right: where a search turns."""
+        return self._last_side
 
     @property
     def active(self) -> bool:
@@ -228,16 +306,23 @@ class Controller:
         """True while the follow profile has lost its target and turns to find it."""
         return self._goal is not None and self._lost(now)
 
-    def goal(self, goal: Goal, now: float) -> Twist | None:
-        """Take a new goal and answer it now when the profile's timing allows."""
-        self._goal = goal
+    def goal(self, goal: Goal, now: float, captured_at: float | None = None) -> Twist | None:
+        """Take a new goal and answer it now when the profile's timing allows; it ends a
+        search. ``captured_at``: when its frame was taken, on ``now``'s clock, if known."""
+        self._goal = replace(
+            goal, heading=self._heading_at(now if captured_at is None else captured_at)
+        )
         self._goal_at = now
         self._unanswered = True
+        self._search_since = None
         return self._due(now)
 
     def pose(self, pose: Pose, now: float) -> Twist | None:
         """Take a pose update; closed-loop profiles answer with a Twist when one is due."""
         self._pose = pose
+        self._headings.append((now, pose.theta))
+        while self._headings[0][0] < now - HEADING_MEMORY_S:
+            self._headings.popleft()
         timed_out = self._check_timeout(now)
         if timed_out is not None:
             return timed_out
@@ -257,7 +342,20 @@ class Controller:
         self._goal = None
         self._unanswered = False
         self._last_publish = None
+        self._search_since = None
         return ZERO_TWIST
+
+    def _heading_at(self, t: float) -> float | None:
+        """The vehicle's heading at ``t``: the last pose's at or before it (the oldest one
+        remembered for an earlier ``t``), None before any pose."""
+        if not self._headings:
+            return None
+        heading = self._headings[0][1]
+        for at, theta in self._headings:
+            if at > t:
+                break
+            heading = theta
+        return heading
 
     def _lost(self, now: float) -> bool:
         return now - self._goal_at > self.profile.search_after_s
@@ -297,10 +395,15 @@ class Controller:
                 self._last_publish = last + profile.period_s
             else:
                 self._last_publish = now
+        answers_goal = self._unanswered
         self._unanswered = False
         if self._lost(now):
+            if self._search_since is None:
+                self._search_since = now
             return Twist(0.0, self._last_side * profile.search_angular)
         linear, angular = self.law(goal, pose, profile)
-        if angular != 0.0:
+        # Where the goal put the target, not where the turns since have left the estimate: a
+        # vehicle that turned past a target that left by the right must still search right.
+        if answers_goal and angular != 0.0:
             self._last_side = 1.0 if angular > 0 else -1.0
         return Twist(linear, angular, seq=goal.seq, frame=goal.frame)

@@ -11,6 +11,10 @@ dropped), then the controller (:class:`~vehicle_agent.control.Controller`, with 
 its profile names); every Twist, the operator's too, then passes the robot's limiter
 (:class:`~vehicle_agent.limits.Limiter`: clamped to its top speeds, ramped within its
 accelerations, a stop at once). A lost link, a mode change and a stop command halt the turtle.
+The searching profiles record when a search for a lost target starts
+(:class:`~app.protocol.events.SearchStarted`, and which way it turns) and how it ends
+(:class:`~app.protocol.events.SearchEnded`: the target found, the search's time run out and the
+vehicle stopped, or piloting stopped).
 
 The adapters only move bytes: ``vehicle_agent/agent.py`` (aiortc, rosbridge or the in-process
 simulator, the event log) and the browser vehicle page (``app/static/js/pages/vehicle.js``)
@@ -23,7 +27,7 @@ feed their pilot and act on its answers. The page's pilot is this module's twin,
 from __future__ import annotations
 
 from app.protocol import channels
-from app.protocol.channels import Mode
+from app.protocol.channels import Mode, SearchStatus
 from app.protocol.control import DEADMAN_S, TICK_S
 from app.protocol.events import (
     DriveReceived,
@@ -31,6 +35,10 @@ from app.protocol.events import (
     GoalDropped,
     ModeChanged,
     PilotEvent,
+    SearchEnd,
+    SearchEnded,
+    SearchStarted,
+    Side,
     TwistSent,
 )
 from app.protocol.robot import TURTLESIM, Limits
@@ -68,6 +76,8 @@ class Pilot:
         self.gate = GoalGate() if freshness is None else GoalGate(freshness)
         # When the last goal was applied on this link (its age rides the pose: link health).
         self._last_goal_at: float | None = None
+        # A search ran out and stopped the vehicle, and nothing has steered it since.
+        self._search_timed_out = False
 
     @property
     def mode(self) -> Mode:
@@ -84,20 +94,38 @@ class Pilot:
         """True while goals steer the turtle (between the first goal and a stop)."""
         return self.controller.active
 
+    @property
+    def search(self) -> SearchStatus | None:
+        """How the search for a lost target stands, as the vehicle's pose tells the client:
+        the side it turns to, ``timed_out`` once it ran out and stopped the vehicle (until a
+        goal, a stop or a mode change), None when there is none."""
+        if self.controller.search_since is not None:
+            return self._search_side()
+        return "timed_out" if self._search_timed_out else None
+
+    def _search_side(self) -> Side:
+        return "left" if self.controller.last_side > 0 else "right"
+
     def goal_age(self, now: float) -> float | None:
         """Seconds since the last goal applied on this link, None before the first."""
         return None if self._last_goal_at is None else now - self._last_goal_at
 
     # --- what the relay says ---------------------------------------------------------------
 
-    def goal(self, goal: channels.Goal, now: float) -> list[PilotEvent]:
-        """A goal: dropped while manual, or by the freshness gate; else it steers."""
+    def goal(
+        self, goal: channels.Goal, now: float, captured_at: float | None = None
+    ) -> list[PilotEvent]:
+        """A goal: dropped while manual, or by the freshness gate; else it steers.
+        ``captured_at``: when the frame it was found in was taken, on ``now``'s clock, when the
+        vehicle knows (its own camera's frame tags)."""
         if self.manual.manual:
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why="manual", t=now)]
         verdict = self.gate.admit(goal.seq, goal.t, now)
         if verdict != "fresh":
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why=verdict, t=now)]
         self._last_goal_at = now
+        self._search_timed_out = False
+        searching = self.controller.search_since
         applied = GoalApplied(
             seq=goal.seq,
             op=goal.op,
@@ -108,12 +136,25 @@ class Pilot:
             h=goal.h,
             t=now,
         )
-        target = Goal(goal.x, goal.y, goal.w, goal.h, goal.seq, goal.frame)
-        return [applied, *self._sent(self.controller.goal(target, now), now)]
+        target = Goal(
+            goal.x,
+            goal.y,
+            goal.w,
+            goal.h,
+            goal.seq,
+            goal.frame,
+            box_h=goal.boxH,
+            target_height_m=goal.targetHeightM,
+        )
+        twist = self.controller.goal(target, now, captured_at)
+        return [applied, *self._searched(searching, "found", now), *self._sent(twist, now)]
 
     def stop(self, now: float) -> list[PilotEvent]:
         """The relay stopped piloting: the autopilot's turtle stops."""
-        return self._sent(self.controller.stop(), now)
+        searching = self.controller.search_since
+        twist = self.controller.stop()
+        self._search_timed_out = False
+        return [*self._searched(searching, "stopped", now), *self._sent(twist, now)]
 
     def mode_change(self, mode: Mode, operator: str | None, now: float) -> list[PilotEvent]:
         """The relay's mode. Whichever way it changes, the turtle stops first: the autopilot's
@@ -121,9 +162,11 @@ class Pilot:
         stopped = self.manual.set_mode(mode, operator)
         if stopped is None:
             return []
+        searching = self.controller.search_since
         self.controller.stop()
+        self._search_timed_out = False
         changed = ModeChanged(mode=mode, operator=self.manual.operator, t=now)
-        return [changed, *self._sent(stopped, now)]
+        return [changed, *self._searched(searching, "stopped", now), *self._sent(stopped, now)]
 
     def drive(self, seq: int, linear: float, angular: float, now: float) -> list[PilotEvent]:
         """An operator's drive command: it steers in manual mode when it is the newest."""
@@ -135,17 +178,21 @@ class Pilot:
     # --- what the vehicle itself sees --------------------------------------------------------
 
     def pose(self, pose: Pose, now: float) -> list[PilotEvent]:
-        """The turtle's pose: closed-loop profiles answer it."""
-        return self._sent(self.controller.pose(pose, now), now)
+        """The turtle's pose: closed-loop profiles answer it (a search starts on it)."""
+        searching = self.controller.search_since
+        twist = self.controller.pose(pose, now)
+        return [*self._searched(searching, "timed_out", now), *self._sent(twist, now)]
 
     def tick(self, now: float) -> list[PilotEvent]:
         """The clock: the goal timeout, the clock-driven profile's period, the dead-man, and the
         next step of a ramp under way."""
+        searching = self.controller.search_since
         done = [
             *self._sent(self.controller.tick(now), now),
             *self._sent(self.manual.tick(now), now),
         ]
-        return done or _record(self.limiter.tick(now), now)
+        searched = self._searched(searching, "timed_out", now)
+        return [*searched, *(done or _record(self.limiter.tick(now), now))]
 
     def next_tick(self, now: float) -> float:
         """Seconds from ``now`` until :meth:`tick` is due: every ``tick_s``, and at once when
@@ -167,10 +214,20 @@ class Pilot:
     def halt(self, now: float) -> list[PilotEvent]:
         """Stop at once, autopilot or operator: the link that carried the commands is gone (or
         the vehicle is stopping). Back in auto mode."""
-        stopped = self.controller.stop()
-        if not self.manual.manual:
-            return self._sent(stopped, now)
-        return self.mode_change("auto", None, now)
+        if self.manual.manual:
+            return self.mode_change("auto", None, now)
+        return self.stop(now)
+
+    def _searched(self, before: float | None, end: SearchEnd, now: float) -> list[PilotEvent]:
+        """The record of a search that started or ended since the controller's search began at
+        ``before`` (None: none was under way); ``end`` says how one that ended did."""
+        since = self.controller.search_since
+        if before is None and since is not None:
+            return [SearchStarted(side=self._search_side(), t=now)]
+        if before is not None and since is None:
+            self._search_timed_out = end == "timed_out"
+            return [SearchEnded(why=end, after_s=now - before, t=now)]
+        return []
 
     def _sent(self, twist: Twist | None, now: float) -> list[PilotEvent]:
         """The record of publishing ``twist`` (None: nothing to publish) within the limits."""

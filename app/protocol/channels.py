@@ -49,6 +49,10 @@ Count = Annotated[int, Field(ge=0)]
 # A frame wider or taller than this is not a camera frame (8K is 7680 wide).
 MAX_FRAME_SIDE: Final = 16_384
 Size = Annotated[int, Field(gt=0, le=MAX_FRAME_SIDE)]
+# A box's side in pixels (a colour region's may be fractional once scaled).
+BoxSide = Annotated[float, Field(gt=0, le=MAX_FRAME_SIDE, allow_inf_nan=False)]
+# A target's real height (m): no operation finds anything taller than a building.
+Height = Annotated[float, Field(gt=0, le=100, allow_inf_nan=False)]
 OpId = Annotated[str, Field(min_length=1, max_length=64)]
 
 
@@ -57,7 +61,13 @@ class _Message(BaseModel):
 
 
 class Goal(_Message):
-    """relay→vehicle: steer toward pixel (x, y) of a w×h frame; ``t`` is the relay's ms clock."""
+    """relay→vehicle: steer toward pixel (x, y) of a w×h frame; ``t`` is the relay's ms clock.
+
+    ``boxW``×``boxH`` is the target's box in pixels of that frame, and ``targetHeightM`` the real
+    height its operation declares for what the box spans (``app/vision/operations.json``): with
+    the camera's field of view they give a camera carried by the vehicle the target's range
+    (the onboard law). A relay that sends neither leaves that law turning without driving.
+    """
 
     type: Literal["goal"] = "goal"
     seq: Annotated[int, Field(ge=1)]
@@ -69,10 +79,20 @@ class Goal(_Message):
     t: Finite
     # The frame tag of the analysed frame, when the video carries one.
     frame: Count | None = None
+    boxW: BoxSide | None = None  # noqa: N815 -- the wire name
+    boxH: BoxSide | None = None  # noqa: N815 -- the wire name
+    targetHeightM: Height | None = None  # noqa: N815 -- the wire name
+
+
+# What a vehicle's search for a lost target is doing (the onboard and follow profiles): turning
+# toward the side the target was last seen on, or ``timed_out``: it ran out and the vehicle
+# stopped, and waits for the target (until a goal, a stop or a mode change).
+SearchStatus = Literal["left", "right", "timed_out"]
 
 
 class Pose(_Message):
-    """vehicle→relay, and relay→client as forwarded: the turtle's pose in terrain metres."""
+    """vehicle→relay, and relay→client as forwarded: the turtle's pose in terrain metres, and
+    how its search for a lost target stands (None: not searching)."""
 
     type: Literal["pose"] = "pose"
     x: Finite
@@ -81,6 +101,7 @@ class Pose(_Message):
     t: Finite | None = None
     # Milliseconds since the vehicle last applied a goal (None: none on this link yet).
     goalAgeMs: NonNegative | None = None  # noqa: N815 -- the wire name
+    search: SearchStatus | None = None
 
 
 class FrameTime(_Message):

@@ -23,7 +23,11 @@ MIN_TARGET_DISTANCE_M = 0.05
 # The spawn step of the thesis's vehicle (section 5.7.6): turtle1 first turns to face "up".
 SPAWN_THETA = math.pi / 2
 
-Law = Literal["rotate", "follow"]
+# How far back a controller remembers the vehicle's heading, to take a goal's bearing from the
+# heading its frame was taken at: longer than a fresh goal takes from its camera to the vehicle.
+HEADING_MEMORY_S = 1.0
+
+Law = Literal["rotate", "follow", "onboard"]
 
 # The operator's console (manual override). A vehicle that was moving on a drive command and has
 # had none for DEADMAN_S stops; a held key or stick resends its command every DRIVE_REPEAT_S, so a
@@ -44,7 +48,9 @@ class Profile:
     """
 
     name: str
-    # "rotate": turn in place to face the target; "follow": also drive to a standoff from it.
+    # "rotate": turn in place to face the target; "follow": also drive to a standoff from it;
+    # "onboard": the camera turns with the vehicle, so steer the target's bearing to zero and
+    # its range (from its box's height) to the standoff.
     law: Law
     # Minimum time between two Twists computed on pose updates (or on the clock, see on_pose).
     period_s: float
@@ -74,9 +80,16 @@ class Profile:
     # Whether the walls are known: turtlesim's terrain has them; any other robot's surroundings
     # are not the terrain, so the follow law neither aims inside it nor slows near its walls.
     walls: bool = True
-    # No goal for this long: the target counts as lost and the vehicle turns in place to search.
+    # No goal for this long: the target counts as lost and the vehicle turns in place to search,
+    # toward the side it was last seen on, until the goal timeout stops it.
     search_after_s: float = math.inf
     search_angular: float = 0.0
+    # --- onboard only ------------------------------------------------------------------------
+    # The camera's horizontal field of view (rad): the robot's (0: no camera described).
+    hfov: float = 0.0
+    # The bearing (rad) at which the forward speed has fallen to zero: the vehicle drives while
+    # it faces the target and turns first when it does not.
+    slow_bearing: float = math.inf
     # --- manual override ---------------------------------------------------------------------
     # An operator's full key or stick deflection (a drive command of 1) is this speed.
     manual_linear: float = 1.5
@@ -131,9 +144,30 @@ PROFILES: dict[str, Profile] = {
         search_after_s=1.0,
         search_angular=1.0,
     ),
+    # A camera carried by the vehicle (a robot's own): steer the target's bearing to zero and
+    # hold a standoff from it, its range read from its box's height. A target lost for a moment
+    # is searched for toward the side it left by, a turn and a half at most, then the vehicle
+    # stops.
+    "onboard": replace(
+        _DEFAULT,
+        name="onboard",
+        law="onboard",
+        gain=4.0,
+        max_angular=2.5,
+        deadband=0.02,
+        # A walker at 0.6 m/s is trailed 0.6 / 2.5 m beyond the standoff.
+        linear_gain=2.5,
+        max_linear=1.0,
+        standoff_m=1.2,
+        slow_bearing=0.45,
+        search_after_s=0.3,
+        search_angular=1.6,
+        goal_timeout_s=0.3 + 3 * math.pi / 1.6,
+    ),
 }
 __all__ = [
     "DEADMAN_S",
+    "HEADING_MEMORY_S",
     "DEFAULT_PROFILE",
     "DRIVE_REPEAT_S",
     "PROFILES",
@@ -159,15 +193,18 @@ def with_standoff(profile: Profile, standoff_m: float | None) -> Profile:
 
 def for_robot(profile: Profile, robot: Robot) -> Profile:
     """``profile`` fitted to ``robot``: an operator's full deflection is at most the robot's top
-    speed (so the stick spans the robot's range rather than saturating early), and the follow
-    law knows of walls on a turtlesim only. Every command is clamped to the limits as well, by
-    the pilot's limiter."""
+    speed (so the stick spans the robot's range rather than saturating early), the follow law
+    knows of walls on a turtlesim only, and the onboard law sees through the robot's camera
+    (its field of view turns a pixel into a bearing; no camera, no bearing). Every command is
+    clamped to the limits as well, by the pilot's limiter."""
     limits = robot.limits
+    camera = robot.camera
     return replace(
         profile,
         manual_linear=min(profile.manual_linear, limits.max_linear),
         manual_angular=min(profile.manual_angular, limits.max_angular),
         walls=robot.turtlesim,
+        hfov=0.0 if camera is None else math.radians(camera.hfov_deg),
     )
 
 
@@ -182,6 +219,7 @@ class ControlConfig:
     deadman_s: float
     drive_repeat_s: float
     tick_s: float
+    heading_memory_s: float
     profiles: dict[str, Profile]
 
 
@@ -195,5 +233,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         deadman_s=DEADMAN_S,
         drive_repeat_s=DRIVE_REPEAT_S,
         tick_s=TICK_S,
+        heading_memory_s=HEADING_MEMORY_S,
         profiles=PROFILES if profiles is None else profiles,
     )

@@ -3,7 +3,8 @@
 An event log line is ``{"ev": kind, <the fields>, "t": seconds}`` (:func:`record`); ``t`` is the
 recording process's clock, given by whoever made the event (the agent's ``time.monotonic()``,
 comparable across processes of one machine; the vehicle page's ``performance.now() / 1000``).
-The pilot's kinds (:data:`PilotEvent`: goal, goal_dropped, mode, drive, twist) are made by the
+The pilot's kinds (:data:`PilotEvent`: goal, goal_dropped, mode, drive, twist, search,
+search_ended) are made by the
 pilot core of each vehicle (``vehicle_agent/pilot.py`` and its twin
 ``app/static/js/core/pilot.js``), so both vehicles record the same records.
 
@@ -120,6 +121,32 @@ class TwistSent(Event):
     angular: float
 
 
+# Which way a search turns: toward the side the target was last seen on.
+Side = Literal["left", "right"]
+# How a search ended: a goal came back (``found``), its time ran out and the vehicle stopped
+# (``timed_out``), or piloting stopped meanwhile (``stopped``: the relay's stop, a mode change, a
+# lost link).
+SearchEnd = Literal["found", "timed_out", "stopped"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SearchStarted(Event):
+    """The target was lost (no goal for the profile's ``search_after_s``): the vehicle stopped
+    driving and turns toward the ``side`` it was last seen on to find it."""
+
+    kind: ClassVar[str] = "search"
+    side: Side
+
+
+@dataclass(frozen=True, kw_only=True)
+class SearchEnded(Event):
+    """A search ended, ``after_s`` after it started, and how (:data:`SearchEnd`)."""
+
+    kind: ClassVar[str] = "search_ended"
+    why: SearchEnd
+    after_s: float
+
+
 @dataclass(frozen=True, kw_only=True)
 class PoseReport(Event):
     """The turtle's pose as the vehicle saw it; ``sent`` when it went to the relay as
@@ -184,6 +211,8 @@ AnyEvent = (
     | ModeChanged
     | DriveReceived
     | TwistSent
+    | SearchStarted
+    | SearchEnded
     | PoseReport
     | LinkChanged
     | SpawnStep
@@ -191,7 +220,15 @@ AnyEvent = (
 )
 KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
 # What a vehicle's pilot makes, in both languages (vehicle_agent/pilot.py, core/pilot.js).
-PilotEvent = GoalApplied | GoalDropped | ModeChanged | DriveReceived | TwistSent
+PilotEvent = (
+    GoalApplied
+    | GoalDropped
+    | ModeChanged
+    | DriveReceived
+    | TwistSent
+    | SearchStarted
+    | SearchEnded
+)
 
 
 E = TypeVar("E", bound=Event)

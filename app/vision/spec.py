@@ -41,6 +41,10 @@ def _cascade_dir() -> Path:
 
 CASCADE_DIR = _cascade_dir()
 
+# Taller than any target an operation finds (a person, a vehicle): a larger declared height is a
+# unit mistake (millimetres, centimetres), refused at start-up.
+MAX_TARGET_HEIGHT_M = 10.0
+
 
 class SpecError(ValueError):
     """The operations spec cannot be used; the message names the file and the entry."""
@@ -101,6 +105,10 @@ class _OperationBase(_Model, Generic[P]):
     label: str
     description: str
     module: str = Field(pattern=r"^[a-z][a-z0-9_]*\.js$")
+    # The real height (m) of what the operation's box spans (a face's box, a flame): a vehicle
+    # that carries its camera reads the target's range from its box's apparent height
+    # (vehicle_agent/control.py, the onboard law). Goals carry it with the box.
+    target_height_m: float = Field(gt=0.0, le=MAX_TARGET_HEIGHT_M, allow_inf_nan=False, strict=True)
     params: P
     # Parameter overrides for the relay's thesis profile (full resolution, tutorial values).
     thesis: dict[str, Any] = Field(default_factory=dict)

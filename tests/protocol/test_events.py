@@ -16,6 +16,8 @@ SAMPLES: list[ev.AnyEvent] = [
     ev.ModeChanged(mode="manual", operator="ann", t=1.3),
     ev.DriveReceived(seq=4, applied=True, moving=False, t=1.4),
     ev.TwistSent(seq=None, frame=None, linear=0.0, angular=-0.5, t=1.5),
+    ev.SearchStarted(side="right", t=1.55),
+    ev.SearchEnded(why="timed_out", after_s=5.9, t=1.56),
     ev.PoseReport(x=5.5, y=5.25, theta=1.57, sent=False, t=1.6),
     ev.LinkChanged(
         state="up",

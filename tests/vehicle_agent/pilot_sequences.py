@@ -3,11 +3,13 @@
 must answer every input with the same event records, and the same wake-up for the next tick.
 
 A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``goal`` (the goal message
-as the relay sends it), ``stop`` (), ``mode`` (mode, operator), ``drive`` (seq, linear,
-angular), ``pose`` (x, y, theta), ``tick`` (), ``new_link`` (), ``halt`` ().
+as the relay sends it, and when its frame was taken if the vehicle knows), ``stop`` (), ``mode``
+(mode, operator), ``drive`` (seq, linear, angular), ``pose`` (x, y, theta), ``tick`` (),
+``new_link`` (), ``halt`` ().
 
 Every sequence runs with every profile on every robot preset (:data:`ROBOTS`): turtlesim's limits
-change nothing, a Burger's clamp and ramp the commands (the last sequences are about that).
+change nothing, a Burger's clamp and ramp the commands (the last sequences are about that); the
+onboard profile sees through the robot's camera (none on a turtlesim: it only searches).
 """
 
 from __future__ import annotations
@@ -27,10 +29,24 @@ Step = tuple[str, float, list[Any]]
 RELAY_CLOCK_MS = 5_000_000.0
 
 
-def goal(seq: int, t: float, x: float = 100.0, y: float = 120.0, late_s: float = 0.0) -> Step:
+# A face's real height as the operations spec declares it (goals with a box carry it).
+FACE_HEIGHT_M = 0.24
+
+
+def goal(
+    seq: int,
+    t: float,
+    x: float = 100.0,
+    y: float = 120.0,
+    late_s: float = 0.0,
+    box_h: float | None = None,
+    captured: float | None = None,
+) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
-    ``late_s`` earlier (it waited that much longer on the way)."""
-    message = {
+    ``late_s`` earlier (it waited that much longer on the way); with a face's box ``box_h``
+    pixels high when given, and ``captured``: when the vehicle's camera took its frame, when
+    the vehicle knows."""
+    message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
         "op": "face",
@@ -41,7 +57,9 @@ def goal(seq: int, t: float, x: float = 100.0, y: float = 120.0, late_s: float =
         "t": RELAY_CLOCK_MS + (t - late_s) * 1000,
         "frame": 100 + seq,
     }
-    return ("goal", t, [message])
+    if box_h is not None:
+        message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
+    return ("goal", t, [message] if captured is None else [message, captured])
 
 
 CENTRE_POSE: Step = ("pose", 0.0, [TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0])
@@ -50,6 +68,17 @@ CENTRE_POSE: Step = ("pose", 0.0, [TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0])
 def at(step: Step, t: float) -> Step:
     """``step`` at another time."""
     return (step[0], t, step[2])
+
+
+def odom(t: float, theta: float, x: float = 1.0, y: float = 3.0) -> Step:
+    """A robot's odometry pose at ``t`` (its room's metres)."""
+    return ("pose", t, [x, y, theta])
+
+
+def poses(start: float, end: float, every: float, theta: float = 0.0) -> list[Step]:
+    """Odometry every ``every`` s from ``start`` to ``end``, the robot not turning."""
+    count = round((end - start) / every)
+    return [odom(round(start + k * every, 6), theta) for k in range(count + 1)]
 
 
 SEQUENCES: dict[str, list[Step]] = {
@@ -130,6 +159,55 @@ SEQUENCES: dict[str, list[Step]] = {
         *[("tick", round(0.1 + 0.05 * k, 2), []) for k in range(1, 60)],
         at(CENTRE_POSE, 3.1),
     ],
+    # A face with its box (the onboard law's range): right of centre and far, then turned to,
+    # then centred at the standoff, then too close.
+    "a face's box: turn to it, drive to the standoff, back off": [
+        odom(0.0, 0.0),
+        goal(1, 0.1, x=480.0, y=240.0, box_h=40.0),
+        odom(0.13, -0.1),
+        odom(0.16, -0.2),
+        goal(2, 0.2, x=321.0, y=240.0, box_h=40.0),
+        odom(0.26, -0.2),
+        goal(3, 0.3, x=320.0, y=240.0, box_h=111.0),
+        goal(4, 0.4, x=330.0, y=250.0, box_h=200.0),
+        goal(5, 0.5, x=40.0, y=250.0, box_h=60.0),
+        ("tick", 0.55, []),
+    ],
+    # Goals whose frames were taken 0.15 s before they arrived, the robot turning meanwhile:
+    # their bearings are taken from the heading it had then, not on arrival.
+    "a face's bearing from the heading its frame was taken at": [
+        odom(0.0, 0.0),
+        odom(0.05, 0.0),
+        odom(0.1, -0.05),
+        odom(0.15, -0.1),
+        goal(1, 0.2, x=480.0, y=240.0, box_h=60.0, captured=0.05),
+        odom(0.21, -0.15),
+        odom(0.25, -0.2),
+        goal(2, 0.3, x=400.0, y=240.0, box_h=60.0, captured=0.16),
+        odom(0.31, -0.25),
+        # Taken before the oldest heading remembered: the oldest one stands in for it.
+        goal(3, 0.4, x=330.0, y=240.0, box_h=60.0, captured=-5.0),
+        goal(4, 0.5, x=330.0, y=240.0, box_h=60.0),
+    ],
+    # The face leaves by the left: a search turns left, and finds it again.
+    "a face lost on the left is searched for and found": [
+        odom(0.0, 0.0),
+        goal(1, 0.12, x=60.0, y=200.0, box_h=80.0),
+        *poses(0.15, 1.23, 0.06, theta=0.3),
+        ("tick", 1.21, []),
+        goal(2, 1.25, x=500.0, y=200.0, box_h=80.0),
+        odom(1.3, 0.3),
+    ],
+    # The face leaves by the right and stays away: the search turns right until its time runs
+    # out, then the vehicle stops.
+    "a face lost on the right: the search runs out and stops": [
+        odom(0.0, 0.0),
+        goal(1, 0.11, x=600.0, y=200.0, box_h=80.0),
+        *poses(0.2, 8.0, 0.2, theta=-0.5),
+        *[("tick", 8.0 + 0.5 * k, []) for k in range(1, 5)],
+        goal(2, 10.5, x=620.0, y=200.0, box_h=80.0),
+        ("stop", 10.6, []),
+    ],
     "an operator's commands ramped, then stopped at once": [
         CENTRE_POSE,
         ("mode", 0.0, ["manual", "ann"]),
@@ -180,7 +258,8 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
     """One step's input to ``driven``; its answer."""
     match kind:
         case "goal":
-            return list(driven.goal(channels.Goal.model_validate(args[0]), t))
+            captured = args[1] if len(args) > 1 else None
+            return list(driven.goal(channels.Goal.model_validate(args[0]), t, captured))
         case "stop":
             return list(driven.stop(t))
         case "mode":
@@ -200,10 +279,10 @@ def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEven
 
 def run(steps: list[Step], profile: str, robot: str = "turtlesim") -> list[Any]:
     """Each step's answer: its records (log-line objects), the seconds to the next tick, the
-    mode and the operator."""
+    mode, the operator and the search status the pose tells the client."""
     driven = pilot(profile, robot)
     out: list[Any] = []
     for kind, t, args in steps:
         records = [ev.record(event) for event in feed(driven, kind, t, args)]
-        out.append([records, driven.next_tick(t), driven.mode, driven.operator])
+        out.append([records, driven.next_tick(t), driven.mode, driven.operator, driven.search])
     return out

@@ -11,6 +11,7 @@ import contextlib
 import math
 import statistics
 from collections.abc import AsyncIterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -19,7 +20,16 @@ from playwright.async_api import Error as PlaywrightError
 from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
-from app.protocol.events import AnyEvent, GoalApplied, LinkChanged, TwistSent
+from app.protocol.events import (
+    AnyEvent,
+    GoalApplied,
+    LinkChanged,
+    SearchEnded,
+    SearchStarted,
+    TwistSent,
+    of_kind,
+)
+from app.protocol.robot import TURTLESIM, Camera, Robot
 from app.relay.service import RelayService
 from app.server.serve import RunningServer
 from tests.helpers.waiting import eventually
@@ -98,7 +108,10 @@ class Scene:
 
 @contextlib.asynccontextmanager
 async def scene(
-    server: RunningServer, browser: Browser, profile: str = "default"
+    server: RunningServer,
+    browser: Browser,
+    profile: str = "default",
+    robot: Robot = TURTLESIM,
 ) -> AsyncIterator[Scene]:
     events: list[AnyEvent] = []
     log = EventLog()
@@ -106,7 +119,7 @@ async def scene(
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
     turtle = SimTurtle()
     agent = Agent(
-        AgentConfig(server=server.url, profile=profile),
+        AgentConfig(server=server.url, profile=profile, robot=robot),
         SyntheticVideo(W, H, fps=15, path=path),
         turtle,
         log,
@@ -332,6 +345,59 @@ async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame
         # The fire operation keeps pointing at the flame, never back at the face.
         await asyncio.sleep(1.0)
         assert goal_near(flame)
+
+
+SEARCH_TEXT_JS = "() => document.querySelector('[data-testid=search]').textContent"
+
+
+async def search_reads(s: Scene, words: str, timeout: float) -> None:
+    """Wait until the client's search line says ``words``."""
+    await page_until(
+        s.client, f"() => ({SEARCH_TEXT_JS})().includes({words!r})", timeout, f"'{words}'"
+    )
+
+
+async def test_onboard_searches_where_the_face_left_then_stops_and_the_client_is_told(
+    server: RunningServer, module_browser: Browser
+) -> None:
+    """Issue 36: the face leaves the view by the right; the vehicle (a camera 60° across, as if
+    the turtle carried it) turns right to find it, gives up after a turn and a half at 1.6 rad/s
+    and stops; the client's page says each; the face back, it steers again."""
+    robot = replace(TURTLESIM, camera=Camera("/camera", "sensor_msgs/CompressedImage", 60.0))
+    async with scene(server, module_browser, profile="onboard", robot=robot) as s:
+        s.path.x = 0.8  # right of the image centre: a bearing of about -16°
+        await s.start_piloting()
+        await eventually(
+            lambda: (t := s.last_twist()) is not None and t.seq is not None and t.angular < 0,
+            90,
+            "the turtle to turn right (clockwise) toward the face",
+        )
+        await search_reads(s, "not searching", 5)
+        s.path.x = 1.6  # out of the frame by the right
+        await search_reads(s, "searching to the right", 10)
+        started = of_kind(s.events, SearchStarted)
+        assert [e.side for e in started] == ["right"]
+        before = s.heading_deg()
+        await asyncio.sleep(0.5)
+        turned = (s.heading_deg() - before + 180) % 360 - 180
+        assert turned < -10, turned  # clockwise, at about 90°/s
+
+        await search_reads(s, "the search ran out, the robot stopped", 15)
+        [ended] = of_kind(s.events, SearchEnded)
+        assert ended.why == "timed_out"
+        # A turn and a half at 1.6 rad/s is 5.9 s (with room for a loaded machine's late tick).
+        assert 5.0 < ended.after_s < 7.0, ended
+        last = s.last_twist()
+        assert last is not None and (last.linear, last.angular) == (0.0, 0.0)
+        settled = s.heading_deg()
+        await asyncio.sleep(1.0)
+        assert s.heading_deg() == pytest.approx(settled, abs=0.01)
+
+        s.path.x = 0.5  # back in view: goals steer again, and the search is over
+        await search_reads(s, "not searching", 30)
+        await eventually(
+            lambda: (t := s.last_twist()) is not None and t.seq is not None, 10, "goals steering"
+        )
 
 
 async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted(

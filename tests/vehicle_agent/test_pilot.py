@@ -4,16 +4,18 @@ shared sequences that pilot.js must answer alike (e2e/test_pilot_js.py)."""
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import pytest
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE
+from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.robot import PRESETS
 from tests.vehicle_agent import pilot_sequences
 from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal
-from vehicle_agent.control import Goal, Pose, Profile
+from vehicle_agent.control import Goal, Pose, Profile, pixel_bearing, target_range
 from vehicle_agent.pilot import Pilot
 
 DEFAULT = PROFILES["default"]
@@ -182,7 +184,226 @@ def test_the_shared_sequences_give_records_the_event_log_reads_back(
 ) -> None:
     answers = pilot_sequences.run(SEQUENCES[name], profile, robot)
     assert len(answers) == len(SEQUENCES[name])
-    for records, next_tick, mode, _ in answers:
+    for records, next_tick, mode, _, search in answers:
         for record in records:
             assert ev.record(ev.from_json(json.dumps(record))) == record
         assert 0 <= next_tick <= 0.05 and mode in ("auto", "manual")
+        # What the pose tells the client is a value the wire accepts.
+        channels.Pose(x=1.0, y=2.0, theta=0.0, search=search)
+
+
+# --- the onboard law: a camera the vehicle carries --------------------------------------------
+
+# The diffdrive robot's camera: 60° across a 640-pixel frame, so f = 320 / tan 30° = 554.26 px.
+# The law alone: the profile as the diffdrive robot gets it, without the robot's limiter.
+ONBOARD = for_robot(PROFILES["onboard"], PRESETS["diffdrive"])
+ODOM = Pose(1.0, 3.0, 0.0)
+FOCAL_PX = 320 / math.tan(math.radians(30))
+
+
+def face(seq: int, t: float, x: float, range_m: float | None = None) -> channels.Goal:
+    """A face at column ``x`` of a 640×480 frame, its box as high as a 0.24 m face ``range_m``
+    away looks (no box when None)."""
+    message = goal(seq, t, x=x, y=240.0)[2][0]
+    if range_m is not None:
+        box_h = FOCAL_PX * 0.24 / range_m
+        message |= {"boxW": box_h, "boxH": box_h, "targetHeightM": 0.24}
+    return channels.Goal.model_validate(message)
+
+
+def onboard(pose: Pose = ODOM) -> Pilot:
+    pilot = Pilot(ONBOARD)
+    pilot.pose(pose, 0.0)
+    return pilot
+
+
+def _command(pilot: Pilot, goal_: channels.Goal, t: float) -> ev.TwistSent:
+    twists = _twists(pilot.goal(goal_, t))
+    assert twists, "the goal was not answered"
+    return twists[-1]
+
+
+def test_the_bearing_is_positive_to_the_left_and_half_the_field_of_view_at_the_edge() -> None:
+    hfov = math.radians(60)
+    assert pixel_bearing(320, 640, hfov) == 0.0
+    # A target right of the image centre has a negative bearing (θ is counter-clockwise).
+    assert math.degrees(pixel_bearing(480, 640, hfov)) == pytest.approx(-16.10, abs=0.01)
+    assert math.degrees(pixel_bearing(160, 640, hfov)) == pytest.approx(16.10, abs=0.01)
+    assert math.degrees(pixel_bearing(640, 640, hfov)) == pytest.approx(-30.0)
+    assert math.degrees(pixel_bearing(0, 640, hfov)) == pytest.approx(30.0)
+
+
+def test_the_range_is_the_focal_length_times_the_real_height_over_the_box_height() -> None:
+    hfov = math.radians(60)
+    # A 0.24 m face 110.85 px high through a 554.26 px focal length is 1.2 m away.
+    assert target_range(110.85, 0.24, 640, hfov) == pytest.approx(1.2, abs=1e-3)
+    assert target_range(55.43, 0.24, 640, hfov) == pytest.approx(2.4, abs=1e-3)
+
+
+def test_a_face_right_of_centre_turns_the_robot_clockwise_and_left_of_it_counter() -> None:
+    assert _command(onboard(), face(1, 0.0, x=500.0), 0.0).angular < 0
+    assert _command(onboard(), face(1, 0.0, x=140.0), 0.0).angular > 0
+
+
+def test_a_face_within_about_a_degree_of_centre_is_not_turned_to() -> None:
+    # 10 px off centre is 1.03°: inside the dead band; 25 px (2.6°) is outside it.
+    assert _command(onboard(), face(1, 0.0, x=330.0), 0.0).angular == 0.0
+    assert _command(onboard(), face(1, 0.0, x=310.0), 0.0).angular == 0.0
+    assert _command(onboard(), face(1, 0.0, x=345.0), 0.0).angular < 0
+    assert _command(onboard(), face(1, 0.0, x=295.0), 0.0).angular > 0
+
+
+def test_turning_is_bounded() -> None:
+    edge = _command(onboard(), face(1, 0.0, x=0.0), 0.0)
+    assert 0 < edge.angular <= 2.5
+
+
+def test_the_turn_since_the_goal_is_taken_off_its_bearing() -> None:
+    # A face 16° to the right; once the robot has turned 16° right the command is no turn.
+    pilot = onboard()
+    assert _command(pilot, face(1, 0.0, x=480.0), 0.0).angular < 0
+    turned = _twists(pilot.pose(Pose(1.0, 3.0, math.radians(-16.10)), 0.06))
+    assert turned and turned[-1].angular == 0.0
+
+
+def test_the_bearing_is_taken_from_the_heading_the_frame_was_taken_at() -> None:
+    # A face 16.10° to the right in a frame taken at 0.0; by the time its goal arrives (0.15)
+    # the robot has turned 0.2 rad (11.46°) right: 4.64° are left to turn, at 4 (rad/s)/rad.
+    def turned_pilot() -> Pilot:
+        pilot = onboard(Pose(1.0, 3.0, 0.0))
+        pilot.pose(Pose(1.0, 3.0, -0.1), 0.05)
+        pilot.pose(Pose(1.0, 3.0, -0.2), 0.1)
+        return pilot
+
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.0))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 11.46), abs=1e-3)
+    # Taken at 0.07: the heading then was the pose of 0.05's, −0.1 rad (5.73°).
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.07))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 5.73), abs=1e-3)
+    # Not known: the heading on arrival, the whole 16.10° still to turn.
+    pilot = turned_pilot()
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15))[-1]
+    assert twist.angular == pytest.approx(4.0 * math.radians(-16.10), abs=1e-3)
+
+
+def test_the_standoff_is_held_far_drives_near_backs_off() -> None:
+    far = _command(onboard(), face(1, 0.0, x=320.0, range_m=3.0), 0.0)
+    assert far.linear > 0 and far.angular == 0.0
+    at_standoff = _command(onboard(), face(1, 0.0, x=320.0, range_m=1.2), 0.0)
+    assert at_standoff.linear == pytest.approx(0.0, abs=1e-9)
+    near = _command(onboard(), face(1, 0.0, x=320.0, range_m=0.6), 0.0)
+    assert near.linear < 0
+    # 0.2 m too far: 2.5 (m/s)/m, so that a walker at 0.6 m/s is trailed 0.24 m beyond the
+    # standoff, not 0.6 m.
+    a_little_far = _command(onboard(), face(1, 0.0, x=320.0, range_m=1.4), 0.0)
+    assert a_little_far.linear == pytest.approx(0.5, abs=1e-6)
+    # Bounded both ways, at 1 m/s.
+    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=20.0), 0.0).linear == 1.0
+    assert _command(onboard(), face(1, 0.0, x=320.0, range_m=0.2), 0.0).linear == -1.0
+
+
+def test_forward_speed_falls_as_the_bearing_grows_and_stops_well_off_it() -> None:
+    speeds = [
+        _command(onboard(), face(1, 0.0, x=x, range_m=3.0), 0.0).linear
+        for x in (320.0, 400.0, 480.0, 560.0, 640.0)
+    ]
+    assert speeds[0] > speeds[1] > speeds[2] > speeds[3] >= 0
+    # At the frame's edge (30° off) the robot turns first.
+    assert speeds[4] == 0.0
+
+
+def test_without_a_box_the_robot_only_turns() -> None:
+    twist = _command(onboard(), face(1, 0.0, x=500.0), 0.0)
+    assert twist.linear == 0.0 and twist.angular < 0
+
+
+def test_without_a_camera_the_onboard_law_never_moves_the_robot() -> None:
+    pilot = Pilot(PROFILES["onboard"])  # no field of view: no bearing
+    pilot.pose(ODOM, 0.0)
+    assert not _moving(pilot.goal(face(1, 0.0, x=500.0, range_m=3.0), 0.0))
+
+
+def _lost_after(side_x: float) -> tuple[Pilot, list[Any]]:
+    """An onboard pilot that saw a face at column ``side_x`` at 0 and nothing since, fed
+    odometry every 30 ms for 10 s (the robot not turning); every answer, in order."""
+    pilot = onboard()
+    _command(pilot, face(1, 0.0, x=side_x, range_m=2.0), 0.0)
+    answers: list[Any] = []
+    for k in range(1, 334):
+        now = 0.03 * k
+        answers += pilot.pose(ODOM, now)
+        answers += pilot.tick(now + 0.001)
+    return pilot, answers
+
+
+@pytest.mark.parametrize(("x", "side", "sign"), [(40.0, "left", 1), (600.0, "right", -1)])
+def test_a_lost_face_is_searched_for_toward_the_side_it_was_last_seen(
+    x: float, side: str, sign: int
+) -> None:
+    _, answers = _lost_after(x)
+    started = ev.of_kind(answers, ev.SearchStarted)
+    assert len(started) == 1 and started[0].side == side
+    # A short gap is not a loss: it starts under half a second after the last goal.
+    assert 0.2 <= started[0].t <= 0.5
+    searching = [t for t in _twists(answers) if started[0].t <= t.t and t.seq is None]
+    # It stops driving and turns toward that side, at a bounded rate.
+    assert searching[0].linear == 0.0 and sign * searching[0].angular > 0
+    assert all(abs(t.angular) <= 2.5 for t in searching)
+
+
+def test_a_search_stops_after_its_bound_and_says_so() -> None:
+    pilot, answers = _lost_after(600.0)
+    started = ev.of_kind(answers, ev.SearchStarted)[0]
+    ended = ev.of_kind(answers, ev.SearchEnded)
+    assert len(ended) == 1 and ended[0].why == "timed_out"
+    assert ended[0].after_s == pytest.approx(ended[0].t - started.t)
+    # Bounded: stopped within 8 s of losing the face, having turned at most a turn and a half.
+    assert ended[0].t <= 8.0
+    searching = [t for t in _twists(answers) if started.t <= t.t < ended[0].t]
+    turned = sum(abs(t.angular) * 0.03 for t in searching)
+    assert turned <= 3 * math.pi + 0.2
+    # Stopped, with the record first, and nothing more.
+    last = _twists(answers)[-1]
+    assert (last.linear, last.angular, last.t) == (0.0, 0.0, ended[0].t)
+    assert not pilot.active and not _twists(pilot.tick(12.0))
+    # The client hears of it until something steers the robot again.
+    assert pilot.search == "timed_out"
+    _command(pilot, face(2, 12.5, x=320.0), 12.5)
+    assert pilot.search is None
+
+
+def test_a_face_found_again_ends_the_search() -> None:
+    pilot = onboard()
+    _command(pilot, face(1, 0.0, x=40.0, range_m=2.0), 0.0)
+    assert pilot.search is None
+    search = pilot.pose(ODOM, 0.5)
+    assert ev.of_kind(search, ev.SearchStarted) and pilot.search == "left"
+    found = pilot.goal(face(2, 1.5, x=300.0, range_m=2.0), 1.5)
+    assert ev.of_kind(found, ev.SearchEnded) == [ev.SearchEnded(why="found", after_s=1.0, t=1.5)]
+    assert _twists(found)[-1].seq == 2  # the face steers again
+    assert pilot.search is None
+
+
+def test_stopping_piloting_during_a_search_ends_it() -> None:
+    pilot = onboard()
+    _command(pilot, face(1, 0.0, x=40.0), 0.0)
+    pilot.pose(ODOM, 0.5)
+    assert pilot.search == "left"
+    stopped = pilot.stop(0.7)
+    assert ev.of_kind(stopped, ev.SearchEnded)[0].why == "stopped" and _stops(stopped)
+    assert pilot.search is None
+
+
+def test_a_robot_that_turned_past_a_face_lost_on_the_right_still_searches_right() -> None:
+    # The face left by the right edge; the robot, turning after it, overshot what the last goal
+    # said: the face is still to the right of where it was last seen.
+    pilot = onboard()
+    _command(pilot, face(1, 0.0, x=600.0), 0.0)
+    answers: list[Any] = []
+    for k in range(1, 20):
+        answers += pilot.pose(Pose(1.0, 3.0, -0.6), 0.03 * k)
+    started = ev.of_kind(answers, ev.SearchStarted)
+    assert [s.side for s in started] == ["right"] and pilot.search == "right"
+    assert _twists(answers)[-1].angular < 0

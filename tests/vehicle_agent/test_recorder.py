@@ -79,6 +79,8 @@ async def _record(settings: RecordSettings, seconds: float) -> FlightRecorder:
     events.emit(ev.GoalDropped(seq=3, frame=3, why="old", t=1.0))
     events.emit(ev.ModeChanged(mode="manual", operator="ann", t=1.0))
     events.emit(ev.DriveReceived(seq=1, applied=True, moving=True, t=1.0))
+    events.emit(ev.SearchStarted(side="left", t=1.0))
+    events.emit(ev.SearchEnded(why="found", after_s=0.5, t=1.5))
     events.emit(
         ev.LinkChanged(state="up", relay="relay", local_candidates=("host",), selected="host", t=1)
     )
@@ -126,7 +128,8 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
     assert counts[GOALS] == 5
     assert counts[EVENT_CHANNELS[ev.TwistSent].topic] == 5
     assert counts[EVENT_CHANNELS[ev.PoseReport].topic] == 5
-    for kind in (ev.GoalDropped, ev.ModeChanged, ev.DriveReceived, ev.LinkChanged):
+    once = (ev.GoalDropped, ev.ModeChanged, ev.DriveReceived, ev.SearchStarted, ev.SearchEnded)
+    for kind in (*once, ev.LinkChanged):
         assert counts[EVENT_CHANNELS[kind].topic] == 1, kind
     # 1.5 s of a 30 fps camera at 10 images a second (fewer if a loaded machine delays frames).
     assert 5 <= counts[IMAGE_TOPIC] <= 16, counts

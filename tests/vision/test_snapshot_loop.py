@@ -120,6 +120,10 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
         assert abs(goal["x"] - cx) < FACE_SIZE / 4 and abs(goal["y"] - cy) < FACE_SIZE / 4, goal
         assert (goal["w"], goal["h"]) == (WIDTH, HEIGHT)
         assert goal["frame"] == 1000 + i  # the frame tag read back
+        # The face's box (the cascade's, a little inside the pasted photo) and the real height
+        # the face operation declares for it: a robot's camera reads the range from the two.
+        assert FACE_SIZE * 0.5 < goal["boxH"] <= FACE_SIZE and goal["targetHeightM"] == 0.24
+        assert goal["boxW"] == pytest.approx(goal["boxH"], rel=0.2), goal
         assert goal["t"] == 1.7e12 + (i + 1) * FRAME_STEP_MS
         goals.append(goal)
 
@@ -142,8 +146,8 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
 # t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
 # each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; the lock
 # messages the loop announced (the lock is the analyzer's worker's: another test's goes first);
-# and the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
-# and reason of the lock message a click led to.
+# the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
+# and reason of the lock message a click led to; and the goals' box heights.
 LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
   const pixels = frames.map((b64) => new Uint8ClampedArray(fromBase64(b64).buffer));
@@ -158,23 +162,26 @@ LOCK_STEPS = """async ({ frames, steps, profile }) => {
   loop.addEventListener('lock', (event) => messages.push(event.detail));
   loop.start();
   const outcomes = [];
+  const boxHeights = [];
   const details = [];
   for (const [kind, t, arg] of steps) {
     now = t * 1000;
     if (kind === 'click') {
       outcomes.push(await loop.lockAt(arg[0], arg[1]));
+      boxHeights.push(null);
       const { state, box, reason } = messages.at(-1);
       details.push({ state, box, reason });
       continue;
     }
     const outcome = await loop.frame({ width: %d, height: %d, data: pixels[arg] });
     outcomes.push([outcome.goal && [outcome.goal.x, outcome.goal.y], loop.lock.state]);
+    boxHeights.push(outcome.goal && outcome.goal.boxH);
     const { boxes, candidates, locked } = outcome.detections;
     details.push([boxes, candidates, locked]);
   }
   loop.stop();
   await window.analyzer.unlock();
-  return { outcomes, details, announced: messages.map((m) => m.state), messages };
+  return { outcomes, details, boxHeights, announced: messages.map((m) => m.state), messages };
 }""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
 
 
@@ -245,6 +252,10 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
     assert on(outcomes[0][0], large) and outcomes[0][1] == "none"
     assert outcomes[1] is True
     assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
+    # The goal's box is the locked face's, not the largest's: the range is the target's.
+    heights = got["boxHeights"]
+    assert 100 < heights[0] <= 200 and 65 < heights[2] <= 130, heights
+    assert heights[2] < heights[0] * 0.75, heights
     assert outcomes[3] == [None, "lost"]
     assert outcomes[4] == [None, "searching"]
     assert on(outcomes[5][0], small_elsewhere) and outcomes[5][1] == "locked"

@@ -47,6 +47,13 @@ def test_shipped_spec_has_the_issue_operations() -> None:
     assert "largest" in face.description
 
 
+def test_each_operation_declares_the_real_height_of_what_it_finds() -> None:
+    # A face's box as the simulated room's faces are scaled (docs/simulated-room.md), a flame's
+    # as the room's flame stands, a standing person's.
+    heights = {o.id: o.target_height_m for o in load_spec(SPEC).operations}
+    assert heights == {"face": 0.24, "face_small": 0.24, "body": 1.7, "fire": 0.5}
+
+
 def test_thesis_profile_overrides_only_what_it_names() -> None:
     face = load_spec(SPEC).op("face")
     thesis = face.params_for("thesis")
@@ -97,6 +104,12 @@ def test_unknown_module_is_refused(tmp_path: Path) -> None:
         (lambda raw: op(raw, "face")["params"].update(scaleFactor=1.0), "scaleFactor"),
         (lambda raw: op(raw, "fire").update(kind="smell"), "kind"),
         (lambda raw: op(raw, "fire")["thesis"].update(minArea=0), "minArea"),
+        # The real height the onboard law reads a range from: required, positive, in metres.
+        (lambda raw: op(raw, "face").pop("targetHeightM"), "targetHeightM"),
+        (lambda raw: op(raw, "face").update(targetHeightM=0), "targetHeightM"),
+        (lambda raw: op(raw, "fire").update(targetHeightM=-0.5), "targetHeightM"),
+        (lambda raw: op(raw, "body").update(targetHeightM=170), "targetHeightM"),
+        (lambda raw: op(raw, "body").update(targetHeightM="1.7"), "targetHeightM"),
     ],
 )
 def test_invalid_entries_are_refused_naming_the_field(
@@ -131,6 +144,7 @@ def check_routes(client: httpx.Client) -> None:
     assert [o["id"] for o in served["operations"]] == ["face", "face_small", "body", "fire"]
     # Defaults are filled in, so the browser never has to know them.
     assert served["operations"][0]["params"]["maxSize"] == [0, 0]
+    assert served["operations"][0]["targetHeightM"] == 0.24
     xml = client.get("/cascades/haarcascade_fullbody.xml")
     assert xml.status_code == 200
     assert xml.content == (CASCADE_DIR / "haarcascade_fullbody.xml").read_bytes()

@@ -132,6 +132,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " the room against the empty room (camera.md)",
     )
     parser.add_argument(
+        "--onboard",
+        action="store_true",
+        help="measure the onboard law instead: the simulated diffdrive robot follows the walker"
+        " with its own camera over the real stack (onboard.md)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -171,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
         return asyncio.run(_relay_cost(args))
     if args.opencv_builds:
         return asyncio.run(_opencv_builds(args))
+    if args.onboard:
+        return asyncio.run(_onboard(args))
     obj = asyncio.run(_bench(args))
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
@@ -245,6 +253,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv += ["--baseline", "--rounds", str(args.rounds)]
     if args.opencv_builds:
         argv.append("--opencv-builds")
+    if args.onboard:
+        argv.append("--onboard")
     if args.frames is not None:
         argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -252,6 +262,42 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
+
+
+async def _onboard(args: argparse.Namespace) -> int:
+    """The onboard law over the simulated room: print the figures, write onboard.md; 1 when a
+    figure could not be measured."""
+    from playwright.async_api import async_playwright
+
+    from app.chromium import launch_options
+    from app.server.config import Settings
+    from app.server.serve import start_in_thread
+    from app.tools.bench import onboard
+
+    seconds = args.seconds or (onboard.QUICK_S if args.quick else onboard.FULL_S)
+    run_info: dict[str, Any] = _provenance(args)
+    load_before = os.getloadavg()[0]
+    server = start_in_thread(Settings(robot="diffdrive"))
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                with tempfile.TemporaryDirectory(prefix="autopilot-bench-onboard-") as tmp:
+                    found = await onboard.run(browser, server.url, seconds, args.fps, Path(tmp))
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    # Other work on the machine slows every stage: the report says how busy it was.
+    run_info |= {
+        "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+    }
+    log.info("onboard report: %s", onboard.write_report(args.out, found, run_info))
+    if args.json:
+        shown = {key: found.get(key) for key in onboard.FIGURE_KEYS}
+        sys.stdout.write(json.dumps(shown | {"problems": found["problems"]}) + "\n")
+    return 1 if found["problems"] else 0
 
 
 async def _recorder(args: argparse.Namespace) -> int:
@@ -524,6 +570,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--relay-cost")
     if args.baseline:
         parts.append(f"--baseline --rounds {args.rounds}")
+    if args.onboard:
+        parts.append("--onboard")
     if args.opencv_builds:
         parts.append("--opencv-builds")
     if args.frames is not None:

@@ -7,7 +7,10 @@
 //
 // Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
 // its origin bottom-left with y growing upward. A goal pixel is flipped vertically when mapped
-// to the terrain: a face in the top half of the frame is a target in the upper half.
+// to the terrain: a face in the top half of the frame is a target in the upper half. That is the
+// fixed camera's geometry (rotate, follow); a camera the vehicle carries (onboard) turns with it:
+// a goal pixel is a bearing, positive to the left as θ is counter-clockwise, and the target's
+// box height against its real height is a range.
 // Times are seconds, as in Python, so both sides compute the same doubles.
 
 /** `angle` wrapped into (−π, π]. */
@@ -22,6 +25,11 @@ function clamp(value, low, high) {
   return Math.max(low, Math.min(high, value));
 }
 
+// The focal length in pixels of a camera `hfov` radians across a frame `w` wide.
+function focalPx(w, hfov) {
+  return w / 2 / Math.tan(hfov / 2);
+}
+
 // JSON has no infinity: the config sends null for "no limit" / "never".
 function profileFrom(constants) {
   const unbounded = (value) => (value === null ? Infinity : value);
@@ -29,6 +37,7 @@ function profileFrom(constants) {
     ...constants,
     maxAngular: unbounded(constants.maxAngular),
     searchAfterS: unbounded(constants.searchAfterS),
+    slowBearing: unbounded(constants.slowBearing),
   });
 }
 
@@ -39,6 +48,7 @@ export class ControlLaw {
     this.terrainCentre = constants.terrainCentre;
     this.minTargetDistanceM = constants.minTargetDistanceM;
     this.spawnTheta = constants.spawnTheta;
+    this.headingMemoryS = constants.headingMemoryS;
     this.profiles = Object.freeze(
       Object.fromEntries(
         Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)]),
@@ -130,12 +140,52 @@ export class ControlLaw {
   }
 
   /**
+   * The bearing (rad) of pixel column x of a frame w wide seen by a camera hfov across, from
+   * the camera's axis: positive to the left, so a target right of the centre is negative.
+   */
+  pixelBearing(x, w, hfov) {
+    return -Math.atan((x - w / 2) / focalPx(w, hfov));
+  }
+
+  /** The distance (m) at which something heightM high spans boxH pixels: f · H / h. */
+  targetRange(boxH, heightM, w, hfov) {
+    return (focalPx(w, hfov) * heightM) / boxH;
+  }
+
+  /**
+   * The onboard law: turn the target's bearing toward zero, and drive to the standoff from it
+   * as much as the vehicle faces it. The bearing is the goal pixel's less how far the vehicle
+   * has turned since its frame was taken, or since it arrived when that is not known
+   * (`goal.heading`); the range comes from the box's height, and without a box or a real height
+   * the vehicle only turns.
+   */
+  onboard(goal, pose, profile) {
+    if (!(profile.hfov > 0)) return { linear: 0, angular: 0 };
+    let bearing = this.pixelBearing(goal.x, goal.w, profile.hfov);
+    if (goal.heading !== null && goal.heading !== undefined)
+      bearing = wrapAngle(bearing - wrapAngle(pose.theta - goal.heading));
+    // A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
+    if (!Number.isFinite(bearing)) return { linear: 0, angular: 0 };
+    const angular = this.angularCommand(bearing, profile);
+    if (goal.boxH == null || goal.targetHeightM == null) return { linear: 0, angular };
+    const distance = this.targetRange(goal.boxH, goal.targetHeightM, goal.w, profile.hfov);
+    let linear = clamp(
+      profile.linearGain * (distance - profile.standoffM),
+      -profile.maxLinear,
+      profile.maxLinear,
+    );
+    // Full speed facing the target, none at `slowBearing` off it: turn first, then drive.
+    linear *= Math.max(0, 1 - Math.abs(bearing) / profile.slowBearing);
+    return { linear, angular };
+  }
+
+  /**
    * The control law `profile.law` names, as a function (goal, pose, profile) -> {linear,
    * angular}: the laws of vehicle_agent/control.py's LAWS. A new law is a method here, an
    * entry below and its Python twin.
    */
   lawOf(profile) {
-    const laws = { rotate: this.rotate, follow: this.follow };
+    const laws = { rotate: this.rotate, follow: this.follow, onboard: this.onboard };
     const law = laws[profile.law];
     if (law === undefined) throw new Error(`no control law ${profile.law}`);
     return law.bind(this);
@@ -151,8 +201,10 @@ export const ZERO_TWIST = Object.freeze({ linear: 0, angular: 0, seq: null, fram
  * clock); each returns the Twist to publish now, or null. Closed-loop profiles answer a new
  * goal at once (rate-capped by `minIntervalS`) and pose updates every `periodS`; the thesis
  * profile publishes on its own clock. After a goal timeout or `stop` exactly one zero Twist
- * comes back, then nothing until the next goal. The follow profile turns in place to search
- * when no goal came for `searchAfterS`.
+ * comes back, then nothing until the next goal. The searching profiles (follow, onboard) stop
+ * driving and turn in place when no goal came for `searchAfterS`, toward the side the target
+ * was last seen on, until a goal comes back (`searchSince` says since when) or the goal timeout
+ * stops the search.
  */
 export class Controller {
   #goal = null;
@@ -160,11 +212,24 @@ export class Controller {
   #unanswered = false;
   #lastSide = 1;
   #pose = null;
+  #headings = []; // the headings of the last headingMemoryS, oldest first: [time, theta]
   #lastPublish = null;
+  #searchSince = null; // when the search under way began (its first Twist), null when none is
 
   constructor(controlLaw, profile, law = null) {
     this.profile = profile;
+    this.headingMemoryS = controlLaw.headingMemoryS;
     this.law = law ?? controlLaw.lawOf(profile);
+  }
+
+  /** When the search under way began (its first Twist went out), null when none is. */
+  get searchSince() {
+    return this.#searchSince;
+  }
+
+  /** The side the target was last seen on, +1 left or −1 right: where a search turns. */
+  get lastSide() {
+    return this.#lastSide;
   }
 
   /** True while goals are arriving. */
@@ -177,15 +242,22 @@ export class Controller {
     return this.#goal !== null && this.#lost(now);
   }
 
-  goal(goal, now) {
-    this.#goal = goal;
+  /**
+   * Take a new goal and answer it now when the profile's timing allows; it ends a search.
+   * `capturedAt`: when its frame was taken, on `now`'s clock, if known.
+   */
+  goal(goal, now, capturedAt = null) {
+    this.#goal = { ...goal, heading: this.#headingAt(capturedAt ?? now) };
     this.#goalAt = now;
     this.#unanswered = true;
+    this.#searchSince = null;
     return this.#due(now);
   }
 
   pose(pose, now) {
     this.#pose = pose;
+    this.#headings.push([now, pose.theta]);
+    while (this.#headings[0][0] < now - this.headingMemoryS) this.#headings.shift();
     return this.#checkTimeout(now) ?? (this.profile.onPose ? this.#due(now) : null);
   }
 
@@ -193,11 +265,24 @@ export class Controller {
     return this.#checkTimeout(now) ?? (this.profile.onPose ? null : this.#due(now));
   }
 
+  // The heading at `t`: the last pose's at or before it (the oldest remembered for an earlier
+  // `t`), null before any pose.
+  #headingAt(t) {
+    if (this.#headings.length === 0) return null;
+    let heading = this.#headings[0][1];
+    for (const [at, theta] of this.#headings) {
+      if (at > t) break;
+      heading = theta;
+    }
+    return heading;
+  }
+
   stop() {
     if (this.#goal === null) return null;
     this.#goal = null;
     this.#unanswered = false;
     this.#lastPublish = null;
+    this.#searchSince = null;
     return ZERO_TWIST;
   }
 
@@ -238,11 +323,16 @@ export class Controller {
       this.#lastPublish =
         last !== null && now - last < 2 * profile.periodS ? last + profile.periodS : now;
     }
+    const answersGoal = this.#unanswered;
     this.#unanswered = false;
-    if (this.#lost(now))
+    if (this.#lost(now)) {
+      if (this.#searchSince === null) this.#searchSince = now;
       return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
+    }
     const { linear, angular } = this.law(goal, pose, profile);
-    if (angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
+    // Where the goal put the target, not where the turns since have left the estimate: a vehicle
+    // that turned past a target that left by the right must still search right.
+    if (answersGoal && angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
     return { linear, angular, seq: goal.seq ?? null, frame: goal.frame ?? null };
   }
 }

@@ -13,6 +13,9 @@
 // with the control law the profile names); every Twist, the operator's too, then passes the
 // robot's limiter (core/limits.js: clamped to its top speeds, ramped within its accelerations, a
 // stop at once). A lost link, a mode change and a stop halt the turtle.
+// The searching profiles record when a search for a lost target starts (`search`, and the side
+// it turns to) and how it ends (`search_ended`: found, timed_out when its time ran out and the
+// vehicle stopped, or stopped when piloting did).
 import { Controller } from './control.js';
 import { GoalGate } from './freshness.js';
 import { Limiter } from './limits.js';
@@ -34,6 +37,7 @@ function record(twist, now) {
 
 export class Pilot {
   #lastGoalAt = null; // when the last goal was applied on this link (link health)
+  #searchTimedOut = false; // a search ran out and stopped the vehicle; nothing steered it since
 
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
@@ -69,13 +73,27 @@ export class Pilot {
     return this.controller.active;
   }
 
+  /**
+   * How the search for a lost target stands, as the vehicle's pose tells the client: the side
+   * it turns to ('left', 'right'), 'timed_out' once it ran out and stopped the vehicle (until a
+   * goal, a stop or a mode change), null when there is none.
+   */
+  get search() {
+    if (this.controller.searchSince !== null)
+      return this.controller.lastSide > 0 ? 'left' : 'right';
+    return this.#searchTimedOut ? 'timed_out' : null;
+  }
+
   /** Seconds since the last goal applied on this link, null before the first. */
   goalAge(now) {
     return this.#lastGoalAt === null ? null : now - this.#lastGoalAt;
   }
 
-  /** A goal (validated against the protocol's Goal model): dropped, or it steers. */
-  goal(goal, now) {
+  /**
+   * A goal (validated against the protocol's Goal model): dropped, or it steers. `capturedAt`:
+   * when the frame it was found in was taken, on `now`'s clock, when the vehicle knows.
+   */
+  goal(goal, now, capturedAt = null) {
     const frame = goal.frame ?? null;
     if (this.manual.manual)
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: 'manual', t: now }];
@@ -84,14 +102,30 @@ export class Pilot {
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: verdict, t: now }];
     }
     this.#lastGoalAt = now;
+    this.#searchTimedOut = false;
+    const searching = this.controller.searchSince;
     const { seq, op, x, y, w, h } = goal;
     const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
-    return [applied, ...this.#sent(this.controller.goal({ x, y, w, h, seq, frame }, now), now)];
+    const target = {
+      x,
+      y,
+      w,
+      h,
+      seq,
+      frame,
+      boxH: goal.boxH ?? null,
+      targetHeightM: goal.targetHeightM ?? null,
+    };
+    const twist = this.controller.goal(target, now, capturedAt);
+    return [applied, ...this.#searched(searching, 'found', now), ...this.#sent(twist, now)];
   }
 
   /** The relay stopped piloting: the autopilot's turtle stops. */
   stop(now) {
-    return this.#sent(this.controller.stop(), now);
+    const searching = this.controller.searchSince;
+    const twist = this.controller.stop();
+    this.#searchTimedOut = false;
+    return [...this.#searched(searching, 'stopped', now), ...this.#sent(twist, now)];
   }
 
   /**
@@ -101,9 +135,11 @@ export class Pilot {
   modeChange(mode, operator, now) {
     const stopped = this.manual.setMode(mode, operator);
     if (stopped === null) return [];
+    const searching = this.controller.searchSince;
     this.controller.stop();
+    this.#searchTimedOut = false;
     const changed = { ev: 'mode', mode, operator: this.manual.operator, t: now };
-    return [changed, ...this.#sent(stopped, now)];
+    return [changed, ...this.#searched(searching, 'stopped', now), ...this.#sent(stopped, now)];
   }
 
   /** An operator's drive command: it steers in manual mode when it is the newest. */
@@ -114,9 +150,11 @@ export class Pilot {
     return [received, ...this.#sent(twist, now)];
   }
 
-  /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it. */
+  /** The turtle's pose ({x, y, theta}): closed-loop profiles answer it (a search starts on it). */
   pose(pose, now) {
-    return this.#sent(this.controller.pose(pose, now), now);
+    const searching = this.controller.searchSince;
+    const twist = this.controller.pose(pose, now);
+    return [...this.#searched(searching, 'timed_out', now), ...this.#sent(twist, now)];
   }
 
   /**
@@ -124,11 +162,13 @@ export class Pilot {
    * step of a ramp under way.
    */
   tick(now) {
+    const searching = this.controller.searchSince;
     const done = [
       ...this.#sent(this.controller.tick(now), now),
       ...this.#sent(this.manual.tick(now), now),
     ];
-    return done.length > 0 ? done : record(this.limiter.tick(now), now);
+    const searched = this.#searched(searching, 'timed_out', now);
+    return [...searched, ...(done.length > 0 ? done : record(this.limiter.tick(now), now))];
   }
 
   /**
@@ -157,9 +197,24 @@ export class Pilot {
    * page is leaving). Back in auto mode.
    */
   halt(now) {
-    const stopped = this.controller.stop();
-    if (!this.manual.manual) return this.#sent(stopped, now);
-    return this.modeChange('auto', null, now);
+    if (this.manual.manual) return this.modeChange('auto', null, now);
+    return this.stop(now);
+  }
+
+  /**
+   * The record of a search that started or ended since the controller's search began at
+   * `before` (null: none was under way); `end` says how one that ended did.
+   */
+  #searched(before, end, now) {
+    const since = this.controller.searchSince;
+    if (before === null && since !== null) {
+      return [{ ev: 'search', side: this.controller.lastSide > 0 ? 'left' : 'right', t: now }];
+    }
+    if (before !== null && since === null) {
+      this.#searchTimedOut = end === 'timed_out';
+      return [{ ev: 'search_ended', why: end, after_s: now - before, t: now }];
+    }
+    return [];
   }
 
   // The record of publishing `twist` (null: nothing to publish) within the limits.

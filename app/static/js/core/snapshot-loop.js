@@ -11,7 +11,8 @@ import { RelayStats } from './relay-stats.js';
 
 /**
  * Events (CustomEvent detail):
- *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?}) once sent
+ *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?, boxW?,
+ *                 boxH?, targetHeightM?}) once sent
  *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms,
  *                 goalsPerS, locked: the locked target's box or null, candidates: the last
  *                 full scan's boxes})
@@ -152,6 +153,12 @@ export class SnapshotLoop extends EventTarget {
         t: this.wallClock(),
       };
       if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
+      // The target's box and real height: a camera the vehicle carries reads its range from
+      // them (the onboard law).
+      if (result.targetBox) {
+        [goal.boxW, goal.boxH] = result.targetBox.slice(2);
+        goal.targetHeightM = result.targetHeightM;
+      }
       if (this.sendGoal(goal)) {
         this.stats.goalSent(this.clock());
         this.lastGoal = goal;

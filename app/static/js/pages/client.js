@@ -17,6 +17,7 @@ import {
   FIGURES_PERIOD_MS,
   fmt,
   Log,
+  searchText,
   show,
   throttle,
 } from '../view/ui.js';
@@ -66,6 +67,7 @@ const status = {
   pose: null,
   poses: 0,
   routeM: 0, // metres the turtle drove while this page watched (the drawn route)
+  search: null, // the vehicle's search for a lost target: 'left', 'right', 'timed_out' or null
   videoTracks: 0, // how many times a (new) relayed video track arrived
   // The person asked to pilot (Start) and has not asked to stop: a relay that replaces a lost
   // one (a relay pool taking the room over) is asked to start again on its first state.
@@ -197,6 +199,10 @@ function onPose(msg) {
   const pose = { x: msg.x, y: msg.y, theta: msg.theta };
   status.pose = pose;
   if (msg.goalAgeMs !== undefined) health.goalAgeMs = msg.goalAgeMs;
+  const search = msg.search ?? null;
+  // At once, not with the throttled figures: a person needs to know the robot gave up.
+  if (search !== status.search) show('search', searchText(search));
+  status.search = search;
   status.poses += 1;
   mapView.addPose(pose);
   status.routeM = mapView.routeLength;

@@ -342,12 +342,15 @@ function onLockChanged(message) {
 
 // ---------------------------------------------------------------- vehicle
 
-/** Forward the vehicle's pose (validated by serveChannel) to every client. */
+/**
+ * Forward the vehicle's pose (validated by serveChannel) to every client, with its goal age and
+ * its search for a lost target when it tells them.
+ */
 function onPose(msg) {
   const pose = { type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() };
-  session.links.broadcast(
-    msg.goalAgeMs === undefined ? pose : { ...pose, goalAgeMs: msg.goalAgeMs },
-  );
+  if (msg.goalAgeMs !== undefined) pose.goalAgeMs = msg.goalAgeMs;
+  if (msg.search !== undefined) pose.search = msg.search;
+  session.links.broadcast(pose);
 }
 
 /** Once a period: the vehicle → relay link's figures, to every client (link health). */

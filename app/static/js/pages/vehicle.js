@@ -13,7 +13,7 @@ import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
 import { pickTypes } from '../core/rosflavour.js';
 import { poseOf, velocityMessage } from '../core/robot.js';
-import { byTestId, fmt, Log, show } from '../view/ui.js';
+import { byTestId, fmt, Log, searchText, show } from '../view/ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
 const ROS_RETRY_MS = 2000;
@@ -37,7 +37,7 @@ const now = () => performance.now() / 1000;
 /** The page's one session object, read-only for tests and benchmarks. */
 const status = {
   // The pilot's records, as the agent's event log has them: counted by kind, the latest kept.
-  events: { goal: 0, goal_dropped: 0, mode: 0, drive: 0, twist: 0 },
+  events: { goal: 0, goal_dropped: 0, mode: 0, drive: 0, twist: 0, search: 0, search_ended: 0 },
   records: [],
   goalsReceived: 0, // goals applied
   lastGoal: null,
@@ -258,10 +258,17 @@ function act(records, why) {
       case 'twist':
         publish(record, why);
         break;
+      case 'search':
+        log.info(`target lost: searching to the ${record.side}`);
+        break;
+      case 'search_ended':
+        log.info(`search ended after ${fmt(record.after_s, 1)} s: ${record.why}`);
+        break;
       default:
         log.error(`the pilot made an unknown record ${record.ev}`);
     }
   }
+  show('search', searchText(pilot.search));
 }
 
 function halt(reason) {
@@ -288,8 +295,8 @@ robotLink.onPose = (pose) => {
   if (t - session.lastPoseSent < POSE_FORWARD_MS / 1000) return;
   const age = pilot.goalAge(t);
   const goalAgeMs = age === null ? null : age * 1000;
-  if (sendJson(session.stateChannel, { type: 'pose', ...pose, t: Date.now(), goalAgeMs }))
-    session.lastPoseSent = t;
+  const telemetry = { type: 'pose', ...pose, t: Date.now(), goalAgeMs, search: pilot.search };
+  if (sendJson(session.stateChannel, telemetry)) session.lastPoseSent = t;
 };
 
 function tick() {

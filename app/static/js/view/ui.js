@@ -65,6 +65,16 @@ export function fmt(value, digits = 1) {
   return value == null || Number.isNaN(value) ? '–' : value.toFixed(digits);
 }
 
+/**
+ * A vehicle's search for a lost target (its pose's `search`: 'left', 'right', 'timed_out' or
+ * null), in words, as the vehicle and client pages show it.
+ */
+export function searchText(search) {
+  if (search === null || search === undefined) return 'not searching';
+  if (search === 'timed_out') return 'target lost: the search ran out, the robot stopped';
+  return `target lost: searching to the ${search}`;
+}
+
 // The role pages redraw their figures at most this often: a person reads a few changes a
 // second, and every redraw costs a layout, a paint and the compositor.
 export const FIGURES_PERIOD_MS = 250;

@@ -141,6 +141,8 @@ function instanceFor(opId, profile) {
   const windowed = op.kind === 'cascade';
   instance = {
     op: session.modules.get(op.module).create(session.cv, spec, session.files),
+    // What the operation's box spans, in metres: goals carry it for the onboard law's range.
+    targetHeightM: op.targetHeightM,
     windowed,
     tracker: new session.window.Tracker(windowed ? params.fullScanEvery : 1),
   };
@@ -362,10 +364,13 @@ async function analyze({
   const { found, scan, fullScan } = detectIn(instance, frame, track, around, choose, query);
   const { boxes, region = null } = found;
   const locked = query === null ? null : choose(boxes);
-  let { target } = found;
-  if (query !== null)
+  // The target's box: the operation's own choice (an operation that names none gives no box).
+  let { target, targetBox = null } = found;
+  if (query !== null) {
     target =
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
+    targetBox = locked;
+  }
   const lock = at === null ? null : followed(instance, query, locked, boxes, fullScan, at);
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (frame-tag.js).
@@ -376,6 +381,8 @@ async function analyze({
     op: opId,
     boxes,
     target,
+    targetBox,
+    targetHeightM: instance.targetHeightM,
     w: width,
     h: height,
     ms: done - detectStarted,

@@ -79,7 +79,9 @@ export async function createAnalyzer() {
      * that set it, per operation and profile; around: a full-frame box [x, y, w, h] whose
      * window alone is searched (parity); at: the snapshot's time in seconds, for the relay's
      * snapshots, which follow the worker's target lock (lock.js) instead of the largest box.
-     * Resolves to {op, boxes, target, w, h, ms, workMs, frame, scan: 'full' | 'window', region:
+     * Resolves to {op, boxes, target, targetBox: the target's box [x, y, w, h] or null,
+     * targetHeightM: the real height the operation declares for it, w, h, ms, workMs, frame,
+     * scan: 'full' | 'window', region:
      * the window searched in detection-image pixels or null, locked: the locked target's box on
      * this snapshot or null, lock: with `at`, the lock after this snapshot {state, box, changed:
      * the new state or null, reason} (else null), converted: how many of the frame's pixels

@@ -60,11 +60,15 @@ export function create(cv, spec) {
         if (best === 0 || area > stats.intAt(best, cv.CC_STAT_AREA)) best = label;
       }
       if (best === 0 || stats.intAt(best, cv.CC_STAT_AREA) < p.minArea) {
-        return { boxes: [], target: null };
+        return { boxes: [], target: null, targetBox: null };
       }
-      const box = [0, 1, 2, 3].map((c) => stats.intAt(best, c));
+      const box = scaleBox(
+        [0, 1, 2, 3].map((c) => stats.intAt(best, c)),
+        factor,
+      );
       return {
-        boxes: [scaleBox(box, factor)],
+        boxes: [box],
+        targetBox: box,
         target: {
           x: centroids.doubleAt(best, 0) * factor,
           y: centroids.doubleAt(best, 1) * factor,

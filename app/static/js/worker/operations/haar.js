@@ -42,11 +42,16 @@ export function sortBoxes(boxes) {
   return boxes.sort((a, b) => a[0] - b[0] || a[1] - b[1] || a[2] - b[2] || a[3] - b[3]);
 }
 
-/** Centre of the largest box (first of equal areas), or null. */
-export function centreOfLargest(boxes) {
+/** The largest box (first of equal areas), or null. */
+export function largestBox(boxes) {
   let best = null;
   for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
-  return best === null ? null : { x: best[0] + best[2] / 2, y: best[1] + best[3] / 2 };
+  return best;
+}
+
+/** The centre {x, y} of box [x, y, w, h], or null for none. */
+export function centreOf(box) {
+  return box === null ? null : { x: box[0] + box[2] / 2, y: box[1] + box[3] / 2 };
 }
 
 /**
@@ -140,10 +145,11 @@ export function createCascadeOperation(cv, spec, files) {
 
   return {
     /**
-     * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point or null, and the window
-     * searched (detection-image pixels) or null. `around`: a full-frame box whose window alone
-     * is searched, or null for the whole frame; `fullResolution`: that window of the frame as it
-     * is, not of the reduced detection image (a target locked at full resolution, lock.js).
+     * Boxes [x, y, w, h] in full-frame pixels, sorted, the target point and its box (the
+     * largest) or null, and the window searched (detection-image pixels) or null. `around`: a
+     * full-frame box whose window alone is searched, or null for the whole frame;
+     * `fullResolution`: that window of the frame as it is, not of the reduced detection image (a
+     * target locked at full resolution, lock.js).
      */
     detect(rgba, around = null, { fullResolution = false } = {}) {
       let region = null;
@@ -156,7 +162,7 @@ export function createCascadeOperation(cv, spec, files) {
       } else {
         const plan = windowPlan(rgba.cols, rgba.rows, around, fullResolution);
         ({ factor, region } = plan);
-        if (region === null) return { boxes: [], target: null, region };
+        if (region === null) return { boxes: [], target: null, targetBox: null, region };
         const sizes = searchSizes(around, factor, p.windowSizeRatio, p.minSize, p.maxSize);
         sizeMin = new cv.Size(...sizes.min);
         sizeMax = new cv.Size(...sizes.max);
@@ -169,7 +175,8 @@ export function createCascadeOperation(cv, spec, files) {
         if (region !== null) searched.delete();
       }
       const searchedBox = region && [region.x, region.y, region.width, region.height];
-      return { boxes, target: centreOfLargest(boxes), region: searchedBox };
+      const largest = largestBox(boxes);
+      return { boxes, target: centreOf(largest), targetBox: largest, region: searchedBox };
     },
     /**
      * Search `region` ([x, y, w, h], full-frame pixels) at full resolution, for objects of every
@@ -180,7 +187,8 @@ export function createCascadeOperation(cv, spec, files) {
       const [x, y, width, height] = region;
       grayOf(rgba, { x, y, width, height });
       const boxes = cascades(gray, x, y, 1, minSize, maxSize);
-      return { boxes, target: centreOfLargest(boxes), region };
+      const largest = largestBox(boxes);
+      return { boxes, target: centreOf(largest), targetBox: largest, region };
     },
     /**
      * The part {x, y, width, height} of a width×height frame that detect(frame, around,
