@@ -1,8 +1,8 @@
-"""``autopilot demo --robot diffdrive`` end to end in the browser: the server's room with its
-diffdrive robot, the agent filming through the robot's own camera topic and driving it through
-``/rosbridge`` by its description, the relay finding a face in that video, and the client page
-showing the camera's video, the room's map, the robot where its odometry puts it, and the robot
-moving once piloting starts.
+"""``autopilot demo --robot diffdrive --profile onboard`` end to end in the browser: the
+server's room with its diffdrive robot, the agent filming through the robot's own camera topic and
+driving it through ``/rosbridge`` by its description, the relay finding a face in that video, and
+the client page showing the camera's video, the room's map, the robot where its odometry puts it,
+and the robot moving once piloting starts.
 
 Run inside the private network namespace, as the other demo tests.
 """
@@ -59,7 +59,8 @@ def demo(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Queue[str]]]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    argv = [sys.executable, "-m", "app.cli", "demo", "--robot", "diffdrive", "--port", str(port)]
+    argv = [sys.executable, "-m", "app.cli", "demo", "--robot", "diffdrive", "--profile", "onboard"]
+    argv += ["--port", str(port)]
     process = subprocess.Popen(
         [*argv, "--state-dir", str(tmp_path)],
         cwd=REPO,
