@@ -56,6 +56,8 @@ HEALTHY_RUN_S = 60.0
 DEMO_TOKEN_TTL_S = 30 * 24 * 3600
 # The agent's --video values the demo offers.
 DEMO_VIDEOS = (SYNTHETIC, TWO_FACES)
+# The agent's --video for a robot that carries its camera: the topic its description names.
+ROBOT_CAMERA = "ros"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,7 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=DEMO_VIDEOS,
         default=DEMO_VIDEOS[0],
         help="the agent's synthetic video: a face sweeping across (synthetic, the default) or"
-        " two faces drifting, to try the target lock (two-faces)",
+        " two faces drifting, to try the target lock (two-faces); with --robot diffdrive the"
+        " video is the robot's own camera",
     )
     add_robot_argument(parser)
     tls.add_arguments(parser)
@@ -108,8 +111,11 @@ def children_for(
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the
     agent as they are (the flight recorder's options). The agent drives the server's ``robot``
-    (its description's topics and limits)."""
+    (its description's topics and limits): turtlesim's turtle filmed by ``video``, or the room's
+    diffdrive robot, whose video is its own camera's topic."""
     python = sys.executable
+    if robot == "diffdrive":
+        video = ROBOT_CAMERA
     rosbridge = base_url.replace("http", "ws", 1) + "/rosbridge"
     common = ["--server", base_url, "--room", room]
     if ca_file is not None:

@@ -239,3 +239,5 @@ def test_demo_agent_drives_the_servers_robot(robot: SimulatedRobot) -> None:
     agent_cli.add_arguments(parser)
     args = parser.parse_args(vehicle.argv[vehicle.argv.index("vehicle") + 1 :])
     assert args.robot.name == robot
+    # The room's robot films itself: the agent's video is its description's camera topic.
+    assert (args.video == "ros") == (robot == "diffdrive")
