@@ -58,8 +58,15 @@ def ros(server: RunningServer) -> Iterator[roslibpy.Ros]:
 
 
 def advertise(ros: roslibpy.Ros, topic: str, kind: str) -> roslibpy.Topic:
+    """Advertise ``topic`` and wait until the server's rosapi names its type: a camera that
+    asked before the advertisement arrived would learn no type (or another's)."""
     publisher = roslibpy.Topic(ros, topic, kind)
     publisher.advertise()
+    name = kind.rsplit("/", 1)[-1]
+    deadline = time.monotonic() + WAIT_S
+    while not str(ros.get_topic_type(topic)).endswith("/" + name):
+        assert time.monotonic() < deadline, f"{topic} never advertised as {kind}"
+        time.sleep(0.05)
     return publisher
 
 
