@@ -9,19 +9,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import re
 import signal
-import socket
 import ssl
 import subprocess
 import sys
-import threading
 import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
-from queue import Empty, Queue
+from queue import Queue
 from typing import Any
 
 import pytest
@@ -33,12 +29,11 @@ from app.recording import EVENT_CHANNELS, IMAGE_TOPIC
 from app.relay import cli as relay_cli
 from app.server.config import SimulatedRobot
 from app.tools.demo import children_for
+from tests.helpers.demo import REPO, running_demo, wait_for_line
 from tests.helpers.processes import descendants, wait_all_gone
 from vehicle_agent import cli as agent_cli
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def turtle_theta(base: str, token: str, context: ssl.SSLContext | None = None) -> float:
@@ -63,58 +58,9 @@ RECORDED_PILOTING_S = 3.0
 def demo(
     request: pytest.FixtureRequest, tmp_path: Path
 ) -> Iterator[tuple[subprocess.Popen[str], Queue[str], Path]]:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
     extra = [arg.format(dir=tmp_path) for arg in SETUPS[request.param]]
-    extra += ["--state-dir", str(tmp_path)]
-    process = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "demo", "--port", str(port), *extra],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    lines: Queue[str] = Queue()
-
-    def pump() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            lines.put(line)
-
-    threading.Thread(target=pump, daemon=True).start()
-    try:
+    with running_demo([*extra, "--state-dir", str(tmp_path)]) as (process, lines):
         yield process, lines, tmp_path
-    finally:
-        if process.poll() is None:
-            for pid in descendants(process.pid):
-                with_suppressed_kill(pid)
-            process.kill()
-        process.wait(timeout=30)
-        assert process.stdout is not None
-        process.stdout.close()
-
-
-def with_suppressed_kill(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-
-
-def wait_for_line(lines: Queue[str], pattern: str, timeout: float) -> re.Match[str]:
-    deadline = time.monotonic() + timeout
-    seen: list[str] = []
-    while time.monotonic() < deadline:
-        try:
-            line = lines.get(timeout=max(0.0, deadline - time.monotonic()))
-        except Empty:
-            break
-        seen.append(line)
-        found = re.search(pattern, line)
-        if found:
-            return found
-    raise AssertionError(f"no line matching {pattern!r} in {timeout:g} s:\n{''.join(seen[-40:])}")
 
 
 def test_demo_runs_pilots_and_ends_every_child_on_sigterm(

@@ -11,10 +11,7 @@ from __future__ import annotations
 
 import math
 import signal
-import socket
 import subprocess
-import sys
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 from queue import Queue
@@ -31,13 +28,12 @@ from app.diffdrive.camera import Pinhole, Renderer, encode_jpeg
 from app.diffdrive.robot import CAMERA_HFOV
 from app.diffdrive.room import ROOM
 from app.diffdrive.sim import RoomSim
+from tests.helpers.demo import running_demo, wait_for_line
 from tests.helpers.processes import descendants, wait_all_gone
 from tests.helpers.waiting import wait_until
-from tests.tools.test_demo import wait_for_line, with_suppressed_kill
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 
-REPO = Path(__file__).resolve().parents[2]
 # Generous: the demo starts Chromium for its relay and the machine is shared; every wait ends
 # as soon as its condition holds.
 START_S = 120.0
@@ -56,36 +52,9 @@ COLOUR_TOLERANCE = 12.0
 
 @pytest.fixture
 def demo(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Queue[str]]]:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    argv = [sys.executable, "-m", "app.cli", "demo", "--robot", "diffdrive", "--profile", "onboard"]
-    argv += ["--port", str(port)]
-    process = subprocess.Popen(
-        [*argv, "--state-dir", str(tmp_path)],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    lines: Queue[str] = Queue()
-
-    def pump() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            lines.put(line)
-
-    threading.Thread(target=pump, daemon=True).start()
-    try:
-        yield process, lines
-    finally:
-        if process.poll() is None:
-            for pid in descendants(process.pid):
-                with_suppressed_kill(pid)
-            process.kill()
-        process.wait(timeout=30)
-        assert process.stdout is not None
-        process.stdout.close()
+    args = ["--robot", "diffdrive", "--profile", "onboard", "--state-dir", str(tmp_path)]
+    with running_demo(args) as running:
+        yield running
 
 
 def status(page: Page) -> dict[str, Any]:
