@@ -4,9 +4,7 @@ line, and every process it started killed when the test ends."""
 from __future__ import annotations
 
 import contextlib
-import os
 import re
-import signal
 import socket
 import subprocess
 import sys
@@ -16,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from queue import Empty, Queue
 
-from tests.helpers.processes import descendants
+from tests.helpers.processes import kill_tree
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -47,12 +45,7 @@ def running_demo(args: list[str]) -> Iterator[tuple[subprocess.Popen[str], Queue
     try:
         yield process, lines
     finally:
-        if process.poll() is None:
-            for pid in descendants(process.pid):
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-            process.kill()
-        process.wait(timeout=30)
+        kill_tree(process)
         assert process.stdout is not None
         process.stdout.close()
 

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -65,3 +68,13 @@ def wait_all_gone(pids: set[int], timeout: float = 15.0) -> list[int]:
             return []
         time.sleep(0.1)
     return sorted(pid for pid in pids if alive(pid))
+
+
+def kill_tree(process: subprocess.Popen[str] | subprocess.Popen[bytes]) -> None:
+    """Kill ``process`` and every process below it, if it is still running, and reap it."""
+    if process.poll() is None:
+        for pid in descendants(process.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        process.kill()
+    process.wait(timeout=30)

@@ -4,7 +4,6 @@ the demo's own relay and vehicle, and Debian's Prometheus scrapes (``up`` = 1,
 
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import subprocess
@@ -15,7 +14,7 @@ import pytest
 
 from app.supervise import free_port
 from tests.helpers.metrics import peers
-from tests.helpers.processes import descendants, wait_all_gone
+from tests.helpers.processes import descendants, kill_tree, wait_all_gone
 from tests.helpers.waiting import wait_until
 from tests.server.test_prometheus import PROMETHEUS, api, running_prometheus, wait_for_scrape
 
@@ -53,9 +52,4 @@ def test_demo_metrics_count_its_children_and_prometheus_scrapes_them(tmp_path: P
         assert process.wait(timeout=60) == 0
         assert wait_all_gone(children) == []
     finally:
-        if process.poll() is None:
-            for pid in descendants(process.pid):
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-            process.kill()
-            process.wait(timeout=30)
+        kill_tree(process)
