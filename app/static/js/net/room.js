@@ -160,6 +160,23 @@ export class RoomSession extends EventTarget {
     return this.problem === null ? where : `${where} · ${this.problem}`;
   }
 
+  /**
+   * The state line's parts for a page that talks to the room's relay (client and vehicle):
+   * `describe()` without the roster, then the relay seat (`relayConnected`: this page's own
+   * channel to it is open).
+   */
+  describeWithRelay(relayConnected) {
+    const parts = [this.describe({ withRoster: false })];
+    if (this.phase !== 'joined') return parts;
+    const relay = this.relay;
+    if (relay === undefined) parts.push('waiting for a relay');
+    else
+      parts.push(
+        relayConnected ? `relay ${relay.name} connected` : `connecting to relay ${relay.name}`,
+      );
+    return parts;
+  }
+
   #chosenName() {
     const input = byTestId('name');
     if (!input.value.trim()) {

@@ -413,17 +413,7 @@ function updateControls() {
 }
 
 function showState() {
-  const parts = [room.describe({ withRoster: false })];
-  if (room.phase === 'joined') {
-    const relay = room.relay;
-    if (relay === undefined) parts.push('waiting for a relay');
-    else
-      parts.push(
-        session.control !== null
-          ? `relay ${relay.name} connected`
-          : `connecting to relay ${relay.name}`,
-      );
-  }
+  const parts = room.describeWithRelay(session.control !== null);
   if (status.relay !== null && session.control !== null) {
     parts.push(status.relay.vehicle ? `vehicle ${status.relay.vehicle}` : 'no vehicle yet');
     parts.push(status.relay.piloting ? `piloting with ${status.relay.op}` : 'not piloting');

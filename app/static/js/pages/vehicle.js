@@ -363,17 +363,7 @@ function setupPeer(peer, stream) {
 }
 
 function showState() {
-  const parts = [room.describe({ withRoster: false })];
-  if (room.phase === 'joined') {
-    const relay = room.relay;
-    if (relay === undefined) parts.push('waiting for a relay');
-    else
-      parts.push(
-        status.relayChannelOpen
-          ? `relay ${relay.name} connected`
-          : `connecting to relay ${relay.name}`,
-      );
-  }
+  const parts = room.describeWithRelay(status.relayChannelOpen);
   show('state', parts.join(' · '));
 }
 
