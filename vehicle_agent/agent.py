@@ -43,8 +43,8 @@ from vehicle_agent.events import EventLog
 from vehicle_agent.frame_times import FrameTimes
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.pilot import Pilot
+from vehicle_agent.robotlink import RobotLink, RobotLinkError
 from vehicle_agent.signaling import SignalingClient, SignalingError
-from vehicle_agent.turtle import Turtle, TurtleError
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +87,7 @@ class Agent:
         self,
         config: AgentConfig,
         video: MediaStreamTrack,
-        turtle: Turtle,
+        turtle: RobotLink,
         events: EventLog | None = None,
     ) -> None:
         if config.profile not in PROFILES:
@@ -113,9 +113,6 @@ class Agent:
         # The session's token as last renewed (the next login uses it), and the renewal's timer.
         self.token = config.token
         self._renewal: asyncio.TimerHandle | None = None
-        # Who else proves the token beside the turtle (the ROS camera's rosbridge connection):
-        # each is given every fresh token.
-        self.token_renewed: list[Callable[[str], None]] = []
         self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
         self._link_backoff = Backoff()
         self._retry: asyncio.TimerHandle | None = None
@@ -263,8 +260,6 @@ class Agent:
             return
         self.token = renewed.token
         self.turtle.renew(renewed.token)
-        for listener in self.token_renewed:
-            listener(renewed.token)
         log.debug("token renewed; next renewal in %.0f s", renewed.renewIn)
         self._renew_after(renewed.renewIn)
 
@@ -488,7 +483,7 @@ class Agent:
         pose = await self._first_pose
         try:
             await self.turtle.teleport(pose.x, pose.y, SPAWN_THETA)
-        except TurtleError as exc:
+        except RobotLinkError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
             self.events.emit(ev.SpawnStep(ok=False, reason=str(exc), t=time.monotonic()))
