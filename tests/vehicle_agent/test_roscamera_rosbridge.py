@@ -3,7 +3,7 @@ client, JSON with base64 data) publishes test pictures of both camera types and 
 the agent's camera track subscribes in CBOR and in JSON, over the agent's own rosbridge client.
 
 roslibpy's Twisted reactor starts once per process and stays running (see
-tests/turtlesim/test_rosbridge_roslibpy.py), so the publishers here are module-scoped.
+tests/rosbridge/test_roslibpy.py), so the publishers here are module-scoped.
 """
 
 from __future__ import annotations
