@@ -29,7 +29,7 @@ from twisted.internet import ssl as twisted_ssl
 from app.protocol.robot import TURTLESIM, Robot, RobotTypes, detect, pose_of, velocity_message
 from app.protocol.ros import AUTO, DETECT_TIMEOUT_S, ROS_SETTINGS, TYPES, RosSetting
 from app.turtlesim.sim import TurtleSim
-from vehicle_agent.control import Pose, Twist
+from vehicle_agent.control import Pose
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +48,8 @@ class Turtle(Protocol):
     async def start(self, on_pose: PoseCallback) -> None:
         """Connect; ``on_pose`` is then called on the event loop for every pose update."""
 
-    def publish(self, twist: Twist) -> None:
-        """Send a velocity command (``cmd_vel``)."""
+    def publish(self, linear: float, angular: float) -> None:
+        """Send a velocity command (``cmd_vel``): forward m/s, counter-clockwise rad/s."""
 
     async def teleport(self, x: float, y: float, theta: float) -> None:
         """Put the turtle at (x, y) facing theta (``teleport_absolute``); raises TurtleError."""
@@ -88,9 +88,9 @@ class SimTurtle:
                 start, ticks = time.monotonic(), 0
             await asyncio.sleep(max(0.0, delay))
 
-    def publish(self, twist: Twist) -> None:
+    def publish(self, linear: float, angular: float) -> None:
         """Command the simulated turtle."""
-        self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
+        self.sim.cmd_vel(self.name, linear, angular)
 
     async def teleport(self, x: float, y: float, theta: float) -> None:
         """Teleport the simulated turtle."""
@@ -227,7 +227,7 @@ class RosbridgeTurtle:
         kind = reply.get("type") if isinstance(reply, Mapping) else None  # a UserDict
         return kind if isinstance(kind, str) and kind else None
 
-    def publish(self, twist: Twist) -> None:
+    def publish(self, linear: float, angular: float) -> None:
         """Publish on the velocity topic in its type (roslibpy hands it to its network thread)."""
         types = self.types
         if self._cmd_vel is None or types is None:
@@ -235,8 +235,8 @@ class RosbridgeTurtle:
         message = velocity_message(
             types.velocity_kind,
             types.flavour,
-            twist.linear_x,
-            twist.angular_z,
+            linear,
+            angular,
             self.wall_clock(),
             self.robot.velocity.frame_id,
         )

@@ -1,4 +1,4 @@
-"""The agent's spawn step against the simulator's rosbridge, through roslibpy (issue 12)."""
+"""The agent's spawn step against the simulator's rosbridge, through roslibpy."""
 
 from __future__ import annotations
 

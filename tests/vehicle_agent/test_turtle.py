@@ -11,7 +11,7 @@ import pytest
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from vehicle_agent.control import Pose, Twist
+from vehicle_agent.control import Pose
 from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 
 
@@ -45,9 +45,9 @@ async def turn_and_stop(turtle: Turtle) -> None:
         # Keep commanding (turtlesim drops a command after 1 s) until the turtle faces up.
         async with asyncio.timeout(20):
             while watch.poses[-1].theta < math.pi / 4:
-                turtle.publish(Twist(0.0, 1.5))
+                turtle.publish(0.0, 1.5)
                 await asyncio.sleep(0.1)
-        turtle.publish(Twist(0.0, 0.0))
+        turtle.publish(0.0, 0.0)
         await asyncio.sleep(0.3)  # let the zero Twist reach the turtle
         stopped = watch.poses[-1].theta
         await asyncio.sleep(0.5)
