@@ -22,7 +22,7 @@ from typing import Any, Final, Protocol
 from app.protocol.robot import TURTLESIM, Robot, RobotTypes, detect, pose_of, velocity_message
 from app.protocol.ros import AUTO, ROS_SETTINGS, RosSetting
 from app.turtlesim.sim import TurtleSim
-from vehicle_agent.control import Pose, Twist
+from vehicle_agent.control import Pose
 from vehicle_agent.rosbridge_client import (
     CallFailed,
     Publication,
@@ -49,8 +49,8 @@ class RobotLink(Protocol):
     async def start(self, on_pose: PoseCallback) -> None:
         """Connect; ``on_pose`` is then called on the event loop for every pose update."""
 
-    def publish(self, twist: Twist) -> None:
-        """Send a velocity command."""
+    def publish(self, linear: float, angular: float) -> None:
+        """Send a velocity command (``cmd_vel``): forward m/s, counter-clockwise rad/s."""
 
     async def teleport(self, x: float, y: float, theta: float) -> None:
         """Put a turtle at (x, y) facing theta (``teleport_absolute``); raises RobotLinkError."""
@@ -89,9 +89,9 @@ class SimLink:
                 start, ticks = time.monotonic(), 0
             await asyncio.sleep(max(0.0, delay))
 
-    def publish(self, twist: Twist) -> None:
+    def publish(self, linear: float, angular: float) -> None:
         """Command the simulated turtle."""
-        self.sim.cmd_vel(self.name, twist.linear_x, twist.angular_z)
+        self.sim.cmd_vel(self.name, linear, angular)
 
     async def teleport(self, x: float, y: float, theta: float) -> None:
         """Teleport the simulated turtle."""
@@ -191,7 +191,7 @@ class RosbridgeLink:
             )
         return types
 
-    def publish(self, twist: Twist) -> None:
+    def publish(self, linear: float, angular: float) -> None:
         """Publish on the velocity topic in its type (dropped while the connection is down)."""
         types = self.types
         if types is None:
@@ -199,8 +199,8 @@ class RosbridgeLink:
         message: dict[str, Any] = velocity_message(
             types.velocity_kind,
             types.flavour,
-            twist.linear_x,
-            twist.angular_z,
+            linear,
+            angular,
             self.wall_clock(),
             self.robot.velocity.frame_id,
         )

@@ -294,7 +294,7 @@ async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None
 async def test_a_renewing_agent_keeps_its_session_and_media_past_several_token_lifetimes(
     start_server: Callable[[Settings], RunningServer],
 ) -> None:
-    """Issue 37.4: the agent renews before its vehicle token expires, on ``/ws`` and on the
+    """The agent renews before its vehicle token expires, on ``/ws`` and on the
     server's ``/rosbridge``, without dropping its link: the same peer connection carries video
     and goals through several lifetimes of its tokens, and goals still drive the turtle."""
     secret = "agent-renewal-test-secret"

@@ -13,7 +13,7 @@ from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from tests.helpers.sockets import rosbridge_url
-from vehicle_agent.control import Pose, Twist
+from vehicle_agent.control import Pose
 from vehicle_agent.robotlink import RobotLink, RobotLinkError, RosbridgeLink, SimLink
 from vehicle_agent.rosbridge_client import RosbridgeClient
 
@@ -48,9 +48,9 @@ async def turn_and_stop(turtle: RobotLink) -> None:
         # Keep commanding (turtlesim drops a command after 1 s) until the turtle faces up.
         async with asyncio.timeout(20):
             while watch.poses[-1].theta < math.pi / 4:
-                turtle.publish(Twist(0.0, 1.5))
+                turtle.publish(0.0, 1.5)
                 await asyncio.sleep(0.1)
-        turtle.publish(Twist(0.0, 0.0))
+        turtle.publish(0.0, 0.0)
         await asyncio.sleep(0.3)  # let the zero Twist reach the turtle
         stopped = watch.poses[-1].theta
         await asyncio.sleep(0.5)
