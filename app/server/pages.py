@@ -23,7 +23,6 @@ from app.protocol.control import (
     PROFILES,
     ControlConfig,
     control_config,
-    for_robot,
     with_standoff,
 )
 from app.protocol.page import (
@@ -67,7 +66,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         auto=query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
         profile=profile.relay_profile if role == "relay" else profile.name,
-        control=_control(query.get("standoff"), robot),
+        control=_control(query.get("standoff")),
         # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended);
         # no robot but a turtlesim has the step.
         spawn_step=robot.turtlesim and query.get("spawn") not in ("0", "false", "no"),
@@ -115,11 +114,12 @@ def _robot(name: str | None) -> tuple[Robot, str | None]:
     return PRESETS[DEFAULT_ROBOT], f"no robot preset named {name!r} (robot= is one of {known})"
 
 
-def _control(standoff: str | None, robot: Robot) -> ControlConfig:
-    """The control law's numbers for ``control.js``, each profile fitted to ``robot``;
-    ``?standoff=M`` sets the follow distance."""
-    profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
-    return control_config({name: for_robot(p, robot) for name, p in profiles.items()})
+def _control(standoff: str | None) -> ControlConfig:
+    """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance.
+    The page's pilot fits its profile to the robot (``core/pilot.js``)."""
+    return control_config(
+        {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
+    )
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:
