@@ -40,7 +40,7 @@ from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.vision.reference import Detection, detect
-from app.vision.spec import CascadeOperation, ColourOperation, Spec, load_spec
+from app.vision.spec import AnyOperation, CascadeOperation, Spec, load_spec
 
 log = logging.getLogger(__name__)
 
@@ -298,7 +298,7 @@ def _decoded_here(data: bytes) -> np.ndarray[Any, np.dtype[np.uint8]] | None:
 
 
 def _reference(
-    op: CascadeOperation | ColourOperation,
+    op: AnyOperation,
     rgba: np.ndarray[Any, np.dtype[np.uint8]],
     pixels: str,
     profile: Profile,
