@@ -87,14 +87,17 @@ def letterbox(region: Box, input_size: int) -> Letterbox:
     )
 
 
-def passes(width: int, height: int, tile: int, overlap: float) -> list[Box]:
+def passes(width: int, height: int, tile: float, overlap: float) -> list[Box]:
     """The parts of a ``width`` × ``height`` frame one detection searches: the whole frame,
-    then square tiles ``tile`` pixels wide (0: none) overlapping by ``overlap`` of a tile, laid
-    evenly from edge to edge (a frame no larger than a tile gets no tiles)."""
+    then square tiles ``tile`` of the frame's width wide (0: none), overlapping by ``overlap``
+    of a tile, laid evenly from edge to edge (a frame no larger than a tile gets no tiles). A
+    tile is a share of the frame, not a number of pixels, so a larger frame costs as many
+    passes and finds the same faces relative to its size."""
     parts: list[Box] = [(0, 0, width, height)]
-    if tile <= 0 or (width <= tile and height <= tile):
+    wanted = math.floor(tile * width + 0.5)
+    if wanted <= 0 or (width <= wanted and height <= wanted):
         return parts
-    side = min(tile, width, height)
+    side = min(wanted, width, height)
     xs = _starts(width, side, overlap)
     ys = _starts(height, side, overlap)
     parts.extend((x, y, side, side) for y in ys for x in xs)

@@ -264,7 +264,7 @@ def _dnn_detection(faces: list[blazeface.Face], region: Box | None) -> Detection
 def _detect_dnn(params: DnnParams, rgba: Rgba, around: Box | None) -> Detection:
     height, width = rgba.shape[:2]
     if around is None:
-        parts = blazeface.passes(width, height, params.tile_size, params.tile_overlap)
+        parts = blazeface.passes(width, height, params.tile_fraction, params.tile_overlap)
         return _dnn_detection(_dnn_faces(params, _rgb(rgba), parts), None)
     region = blazeface.around(around, params.window_margin, width, height)
     if region is None:
@@ -276,7 +276,7 @@ def _search_dnn(params: DnnParams, rgba: Rgba, region: Box) -> Detection:
     x, y, w, h = region
     parts = [
         (px + x, py + y, pw, ph)
-        for px, py, pw, ph in blazeface.passes(w, h, params.tile_size, params.tile_overlap)
+        for px, py, pw, ph in blazeface.passes(w, h, params.tile_fraction, params.tile_overlap)
     ]
     return _dnn_detection(_dnn_faces(params, _rgb(rgba), parts), region)
 

@@ -121,10 +121,10 @@ class DnnParams(_Model):
     nms_threshold: float = Field(0.3, gt=0.0, le=1.0)
     # Boxes less tall than this are dropped (before NMS).
     min_box_size: int = Field(0, ge=0)
-    # A full scan is the whole frame letterboxed into the input, then square tiles this wide
-    # (0: none) overlapping by tile_overlap of a tile, where faces too small for the whole-frame
-    # pass are at the model's scale (docs/performance.md says why these).
-    tile_size: int = Field(0, ge=0)
+    # A full scan is the whole frame letterboxed into the input, then square tiles this share of
+    # the frame's width wide (0: none) overlapping by tile_overlap of a tile, where faces too
+    # small for the whole-frame pass are at the model's scale (docs/performance.md says why).
+    tile_fraction: float = Field(0.0, ge=0.0, le=1.0)
     tile_overlap: float = Field(0.25, ge=0.0, lt=1.0)
     # Detect, then track (app/vision/window.py): between full scans one forward pass over a
     # square around the last target, window_margin of its size on each side.

@@ -31,9 +31,10 @@ def _raw(anchor: int, values: dict[int, float], count: int) -> list[float]:
 
 # The rule itself. Anchors: short range 16x16x2 + 8x8x6 = 896, full range 48x48 = 2304, centred
 # in their cells. A 640x480 frame in a 128 input: scale 0.2, 128x96 written. The passes of a
-# 640x480 frame with 224-px tiles overlapping by 0.3: the frame, then 4 x 3 tiles from edge to
-# edge. Around a 40x40 box at (300, 200) with margin 0.5: an 80-px square centred on it, moved
-# inside the frame near an edge. A logit of 0 scores 0.5; anchor 0 (centre (4, 4)) with dx 4,
+# 640x480 frame with tiles 0.35 of its width (224 px) overlapping by 0.3: the frame, then 4 x 3
+# tiles from edge to edge; a 1280x960 frame the same tiles twice as large; a frame within one
+# tile, none. Around a 40x40 box at (300, 200) with margin 0.5: an 80-px square centred on it,
+# moved inside the frame near an edge. A logit of 0 scores 0.5; anchor 0 (centre (4, 4)) with dx 4,
 # dy 2, w 20, h 10 in a 0.2 letterbox is the box (-10, 5, 100, 50) on the frame (it may cross
 # the edge), and a keypoint at (+1, -1) the point (25, 15); a tile at (100, 50) moves both.
 RULE: dict[str, Any] = {
@@ -47,12 +48,17 @@ RULE: dict[str, Any] = {
     ],
     "passes": [
         [
-            [640, 480, 224, 0.3],
+            [640, 480, 0.35, 0.3],
             [[0, 0, 640, 480]]
             + [[x, y, 224, 224] for y in (0, 128, 256) for x in (0, 139, 277, 416)],
         ],
-        [[200, 150, 224, 0.3], [[0, 0, 200, 150]]],
-        [[640, 480, 0, 0.3], [[0, 0, 640, 480]]],
+        [
+            [1280, 960, 0.35, 0.3],
+            [[0, 0, 1280, 960]]
+            + [[x, y, 448, 448] for y in (0, 256, 512) for x in (0, 277, 555, 832)],
+        ],
+        [[200, 150, 1.0, 0.3], [[0, 0, 200, 150]]],
+        [[640, 480, 0.0, 0.3], [[0, 0, 640, 480]]],
     ],
     "around": [
         [[[300, 200, 40, 40], 0.5, 640, 480], [280, 180, 80, 80]],

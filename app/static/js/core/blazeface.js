@@ -51,11 +51,12 @@ function starts(length, side, overlap) {
 }
 
 /** The parts [x, y, w, h] of a width×height frame a full scan searches: the whole frame, then
- * square tiles `tile` wide (0: none) overlapping by `overlap` of a tile. */
+ * square tiles `tile` of the frame's width wide (0: none) overlapping by `overlap` of a tile. */
 export function passes(width, height, tile, overlap) {
   const parts = [[0, 0, width, height]];
-  if (tile <= 0 || (width <= tile && height <= tile)) return parts;
-  const side = Math.min(tile, width, height);
+  const wanted = round(tile * width);
+  if (wanted <= 0 || (width <= wanted && height <= wanted)) return parts;
+  const side = Math.min(wanted, width, height);
   const xs = starts(width, side, overlap);
   for (const y of starts(height, side, overlap)) {
     for (const x of xs) parts.push([x, y, side, side]);

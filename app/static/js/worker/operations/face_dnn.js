@@ -74,7 +74,7 @@ export function create(cv, spec, files) {
      */
     detect(rgba, around_ = null) {
       if (around_ === null) {
-        return detectParts(rgba, passes(rgba.cols, rgba.rows, p.tileSize, p.tileOverlap), null);
+        return detectParts(rgba, passes(rgba.cols, rgba.rows, p.tileFraction, p.tileOverlap), null);
       }
       const region = around(around_, p.windowMargin, rgba.cols, rgba.rows);
       if (region === null) return { boxes: [], scores: [], target: null, targetBox: null, region };
@@ -84,7 +84,7 @@ export function create(cv, spec, files) {
      * box, lock.js clickWindow). */
     searchIn(rgba, region) {
       const [x, y, w, h] = region;
-      const parts = passes(w, h, p.tileSize, p.tileOverlap).map(([px, py, pw, ph]) => [
+      const parts = passes(w, h, p.tileFraction, p.tileOverlap).map(([px, py, pw, ph]) => [
         px + x,
         py + y,
         pw,
