@@ -47,12 +47,17 @@ RULE = page_rule(PAGE_RULE)
 RUN_JS = """([events, rule]) => {
   const target = new lock.TargetLock(rule);
   let last = [];
+  let robotSearching = false;
   return events.map(([kind, t, arg]) => {
+    if (kind === 'search') {
+      robotSearching = lock.robotSearching(arg);
+      return [target.state];
+    }
     if (kind === 'snapshot') {
       last = arg;
       const query = target.query(t);
       const chosen = lock.chooser(query, rule)(last);
-      const changed = target.update(query, chosen, t);
+      const changed = target.update(query, chosen, t, robotSearching);
       return [query && query.box, query && query.anywhere, chosen, target.state, changed];
     }
     if (kind === 'click') return [target.lock(arg[0], arg[1], last, t), target.state];
@@ -94,6 +99,22 @@ def test_a_clicked_small_face_stays_the_target_beside_a_larger_one(page: Page) -
     got = lock_sequences.decisions(events, page.evaluate(RUN_JS, [events, PAGE_RULE]))
     for i, ((event, want), have) in enumerate(zip(lock_sequences.TWO_FACES, got, strict=True)):
         assert have == want, (i, event)
+
+
+def test_the_lock_holds_through_the_vehicles_search(page: Page) -> None:
+    # The rule as written out in lock_sequences.THROUGH_SEARCH (search after 1.0 s unseen,
+    # release after 3.0 s unless the vehicle searches; its search lasts up to 6.19 s).
+    assert (RULE.search_after_s, RULE.release_after_s) == (1.0, 3.0)
+    events = [event for event, _ in lock_sequences.THROUGH_SEARCH]
+    got = lock_sequences.decisions(events, page.evaluate(RUN_JS, [events, PAGE_RULE]))
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.THROUGH_SEARCH, got, strict=True)):
+        assert have == want, (i, event)
+    # The same snapshots with no word of a search: released at 3.5 s, as lock.py does.
+    alone = lock_sequences.WITHOUT_SEARCH
+    assert page.evaluate(RUN_JS, [alone, PAGE_RULE]) == lock_sequences.run(alone, RULE)
+    assert page.evaluate(
+        "() => ['left', 'right', 'timed_out', null, undefined].map(lock.robotSearching)"
+    ) == [True, True, False, False, False]
 
 
 def test_scripted_sequences_take_the_same_decisions(page: Page) -> None:

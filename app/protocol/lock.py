@@ -17,8 +17,11 @@ neither side more than ``max_scale`` times the locked box's, nor less than its `
 the one that overlaps it most; when none overlaps, the one whose centre is nearest to its centre,
 within ``reach`` times its longer side. Ties go to the first box found. A locked target not seen
 for ``search_after_s`` is searched for in the whole frame (any similar box, nearest first); not
-seen for ``release_after_s``, the lock is released and the largest box is the target again.
-Switching the operation releases the lock.
+seen for ``release_after_s``, the lock is released and the largest box is the target again --
+unless the vehicle says it is turning to search for the target (its pose's ``search``: ``left``
+or ``right``): then the lock holds, and lets go at the first snapshot after the search ended
+(``timed_out``, or none). A target that comes back during the search is found by the whole-frame
+search and locked again with no click. Switching the operation releases the lock.
 
 Python applies the rule in :mod:`app.vision.lock`, the relay page in ``js/core/lock.js``, which gets
 these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py and

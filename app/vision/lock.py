@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from app.protocol.channels import LockState
+from app.protocol.channels import LockState, SearchStatus
 from app.protocol.lock import LockRule
 from app.vision.window import Box, Choose, largest
 
@@ -179,21 +179,35 @@ class TargetLock:
         anywhere = now - self.seen_at > self.rule.search_after_s
         return Query(self.box, anywhere, self.epoch, self.fine)
 
-    def update(self, query: Query | None, chosen: Box | None, now: float) -> LockState | None:
+    def update(
+        self,
+        query: Query | None,
+        chosen: Box | None,
+        now: float,
+        robot_searching: bool = False,
+    ) -> LockState | None:
         """The outcome of the snapshot asked with ``query``: the box chosen, or None when the
-        target was not found. Returns the new state when it changed."""
+        target was not found; ``robot_searching``: the vehicle says it is turning to search for
+        the target (its pose's ``search``), and the lock holds until that search ends. Returns
+        the new state when it changed."""
         if query is None or query.epoch != self.epoch:
             return None
         before = self.state
         if chosen is not None:
             self.box, self.seen_at, self.state = chosen, now, "locked"
-        elif now - self.seen_at > self.rule.release_after_s:
+        elif now - self.seen_at > self.rule.release_after_s and not robot_searching:
             self.release()
         elif now - self.seen_at > self.rule.search_after_s:
             self.state = "searching"
         else:
             self.state = "lost"
         return self.state if self.state != before else None
+
+
+def robot_searching(search: SearchStatus | None) -> bool:
+    """Whether a vehicle whose pose says ``search`` is turning to search for its lost target
+    (a search that ran out, or none, is not). lock.js ``robotSearching`` is its twin."""
+    return search is not None and search != "timed_out"
 
 
 Search = Callable[[Box], Sequence[Box]]

@@ -2,7 +2,9 @@
 
 A script is a list of events ``[kind, t, arg]`` (JSON-ready, so the page gets the very same):
 ``snapshot`` with the boxes found (each drawn from one of three tracks that wander, change size a
-little and are now and then missed), ``click`` at a point, ``unlock``. The small track vanishes
+little and are now and then missed), ``click`` at a point, ``unlock``, and ``search``: what the
+vehicle's pose says of its search for the lost target (``left``, ``right``, ``timed_out``, or None
+when it does not search). The small track vanishes
 twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock is released).
 """
 
@@ -68,6 +70,37 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
         [[142, 121, 48, 48], "locked"],
     ),
 ]
+
+
+# The lock holds through the vehicle's search, written out: the rule's numbers are a search of
+# the whole frame after 1.0 s unseen (search_after_s) and a release after 3.0 s (release_after_s)
+# -- unless the vehicle is searching for the target, and the onboard vehicle's search lasts up
+# to 0.3 + 3π/1.6 = 6.19 s. The walker (60 px) is clicked, leaves the view, the vehicle turns to
+# search for it, and it comes back 5 s after it was last seen at another place and size (70 px):
+# it is locked again with no click, and the bystander (150 px, too large to be taken for it) is
+# not. It leaves again; this time the vehicle's search runs out (timed_out) and the lock lets go
+# at the next snapshot, when the largest face is the target again.
+WALKER, BYSTANDER = [300, 200, 60, 60], [500, 100, 150, 150]
+THROUGH_SEARCH: list[tuple[Event, list[Any]]] = [
+    (["snapshot", 0.0, [WALKER]], [WALKER, "none"]),
+    (["click", 0.01, [330.0, 230.0]], [True, "locked"]),
+    (["snapshot", 0.05, [[304, 202, 60, 60]]], [[304, 202, 60, 60], "locked"]),
+    (["snapshot", 0.5, []], [None, "lost"]),
+    (["search", 0.6, "left"], ["lost"]),
+    (["snapshot", 1.2, []], [None, "searching"]),
+    (["snapshot", 3.5, []], [None, "searching"]),  # past release_after_s: the vehicle searches
+    (["snapshot", 5.0, [[100, 210, 70, 70], BYSTANDER]], [[100, 210, 70, 70], "locked"]),
+    (["search", 5.05, None], ["locked"]),  # a goal came: the vehicle's search is over
+    (["snapshot", 5.5, [BYSTANDER]], [None, "lost"]),
+    (["search", 5.6, "right"], ["lost"]),
+    (["snapshot", 9.0, [BYSTANDER]], [None, "searching"]),
+    (["search", 11.2, "timed_out"], ["searching"]),
+    (["snapshot", 11.25, [BYSTANDER]], [None, "none"]),
+    (["snapshot", 11.3, [BYSTANDER]], [BYSTANDER, "none"]),
+]
+# The same without the vehicle's word: the lock lets go at 3.5 s, 3.45 s after the walker was
+# last seen, and the walker coming back is not the target.
+WITHOUT_SEARCH = [event for event, _ in THROUGH_SEARCH if event[0] != "search"]
 
 
 # The click rule itself (near = 0.5 of a box's own size; a click window 0.6 of the shorter
@@ -147,16 +180,20 @@ def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
 
 def run(events: list[Event], rule: lock.LockRule) -> list[list[Any]]:
     """What lock.py does with each event: for a snapshot [box asked, anywhere, box chosen,
-    state, state changed]; for a click [locked, state]; for unlock [state]."""
+    state, state changed]; for a click [locked, state]; for unlock and search [state]."""
     target = lock.TargetLock(rule)
     last: list[Box] = []
     out: list[list[Any]] = []
+    robot_searching = False
     for kind, t, arg in events:
-        if kind == "snapshot":
+        if kind == "search":
+            robot_searching = lock.robot_searching(arg)
+            out.append([target.state])
+        elif kind == "snapshot":
             last = [(b[0], b[1], b[2], b[3]) for b in arg]
             query = target.query(t)
             chosen = lock.chooser(query, rule)(last)
-            changed = target.update(query, chosen, t)
+            changed = target.update(query, chosen, t, robot_searching)
             out.append(
                 [
                     None if query is None else list(query.box),

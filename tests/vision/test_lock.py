@@ -136,6 +136,33 @@ def test_a_clicked_small_face_stays_the_target_beside_a_larger_one() -> None:
         assert have == want, (i, event)
 
 
+def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_its_search_ends() -> None:
+    # The rule's numbers this sequence is written for (lock_sequences.THROUGH_SEARCH).
+    assert (RULE.search_after_s, RULE.release_after_s) == (1.0, 3.0)
+    events = [event for event, _ in lock_sequences.THROUGH_SEARCH]
+    got = lock_sequences.decisions(events, lock_sequences.run(events, RULE))
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.THROUGH_SEARCH, got, strict=True)):
+        assert have == want, (i, event)
+    # Without the vehicle's word the same snapshots release the walker at 3.5 s, and the walker
+    # coming back at 5 s is not the target: only a click would lock it again.
+    alone = lock_sequences.run(lock_sequences.WITHOUT_SEARCH, RULE)
+    at = {
+        event[1]: outcome
+        for event, outcome in zip(lock_sequences.WITHOUT_SEARCH, alone, strict=True)
+    }
+    assert at[3.5][3] == "none"
+    assert at[5.0][2:4] == [lock_sequences.BYSTANDER, "none"]
+
+
+def test_only_a_turning_search_holds_the_lock() -> None:
+    assert [lock.robot_searching(s) for s in ("left", "right", "timed_out", None)] == [
+        True,
+        True,
+        False,
+        False,
+    ]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     events, owners = lock_sequences.script(seed)

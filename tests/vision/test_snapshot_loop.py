@@ -34,8 +34,9 @@ WIDTH, HEIGHT = 640, 480
 FACE_SIZE = 200
 FRAME_STEP_MS = 50  # the injected clock advances this much per frame
 
-# Feeds the frames in order (a null entry stops the loop), then two at once to see the second
-# skipped while the first is analysed. Returns what the loop emitted and resolved to.
+# Feeds the frames in order (a null entry stops the loop), then three at once: the first is
+# analysed, the second waits and is skipped when the third comes, the third waits and is analysed
+# next. Returns what the loop emitted and resolved to.
 DRIVE = """async ({ frames, profile, stepMs }) => {
   const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
   await window.analyzer.unlock(); // another test's lock
@@ -59,7 +60,7 @@ DRIVE = """async ({ frames, profile, stepMs }) => {
     now += stepMs;
     outcomes.push(await loop.frame(rgba(frame)));
   }
-  const together = await Promise.all([loop.frame(rgba(frames[0])), loop.frame(rgba(frames[0]))]);
+  const together = await Promise.all([0, 1, 2].map(() => loop.frame(rgba(frames[0]))));
   loop.stop();
   const afterStop = await loop.frame(rgba(frames[0]));
   return { beforeStart, outcomes, together, afterStop, sent, emitted,
@@ -134,16 +135,20 @@ def test_goals_follow_the_face_in_order_and_nothing_comes_without_one(page: Page
     # Goals per second over the 2 s window of the injected clock: three goals in 250 ms.
     assert got["outcomes"][-1]["detections"]["goalsPerS"] == pytest.approx(3 / 2)
 
-    first, second = got["together"]
+    first, second, third = got["together"]
     assert first is not None and first["goal"]["seq"] == 4
-    assert got["sent"] == got["emitted"]["goal"] == [*goals, first["goal"]]
-    assert second is None  # one snapshot in flight at a time: the other frame is skipped
+    # One snapshot in flight at a time; the freshest frame offered meanwhile is analysed next,
+    # and an older one waiting is skipped.
+    assert second is None
+    assert third is not None and third["goal"]["seq"] == 5
+    assert got["sent"] == got["emitted"]["goal"] == [*goals, first["goal"], third["goal"]]
     assert got["afterStop"] is None
-    assert (got["snapshots"], got["goalsSent"]) == (len(layout) + 1, 4)
+    assert (got["snapshots"], got["goalsSent"]) == (len(layout) + 2, 5)
 
 
 # Steps [kind, t, arg] on the relay's loop (tracking on, as the relay runs it) with the clock at
-# t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg. Returns, for
+# t seconds: "frame" analyses frames[arg], "click" locks at the frame point arg, "search" is the
+# vehicle's pose saying how its search stands (arg: 'left', 'timed_out', null). Returns, for
 # each, the goal's [x, y] (or null) and the lock's state, or whether the click locked; the lock
 # messages the loop announced (the lock is the analyzer's worker's: another test's goes first);
 # the details of each step: a snapshot's boxes, candidates and locked box, or the state, box
@@ -166,6 +171,13 @@ LOCK_STEPS = """async ({ frames, steps, profile }) => {
   const details = [];
   for (const [kind, t, arg] of steps) {
     now = t * 1000;
+    if (kind === 'search') {
+      loop.vehicleSearch(arg);
+      outcomes.push(null);
+      boxHeights.push(null);
+      details.push(null);
+      continue;
+    }
     if (kind === 'click') {
       outcomes.push(await loop.lockAt(arg[0], arg[1]));
       boxHeights.push(null);
@@ -355,3 +367,48 @@ def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_pyt
         o[1] == "locked" and on(o[4], scene.tiny_centre(indices[3 - k % 2]))
         for k, o in enumerate(followed)
     )
+
+
+def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_the_search_ends(
+    page: Page,
+) -> None:
+    # The smaller face is clicked and leaves; the vehicle's poses say it turns to search for it.
+    # Past the release time (3 s unseen) the lock still holds, and the face coming back is the
+    # target again with no click. It leaves again, the vehicle's search runs out (timed_out):
+    # the lock lets go once the release time has passed, and the larger face is the target.
+    large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
+    frames = [faces([large, small], 1), faces([large, small_elsewhere], 2), faces([large], 3)]
+    small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
+    steps = [
+        ["frame", 0.05, 0],
+        ["click", 0.07, small_centre],
+        ["frame", 0.1, 0],
+        ["frame", 0.15, 2],  # gone: lost
+        ["search", 0.5, "left"],
+        ["frame", 4.3, 2],  # unseen for over 3 s: held, the vehicle searches
+        ["frame", 4.35, 1],  # back: the target again, no click
+        ["search", 4.4, None],
+        ["frame", 4.45, 2],
+        ["search", 4.8, "right"],
+        ["search", 7.9, "timed_out"],
+        ["frame", 7.95, 2],  # unseen since 4.35 and the search is over: released
+        ["frame", 8.0, 2],
+    ]
+    got: dict[str, Any] = page.evaluate(
+        LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
+    )
+    outcomes = got["outcomes"]
+
+    def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
+        x, y, size = face
+        return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
+
+    assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
+    assert outcomes[3] == [None, "lost"]
+    assert outcomes[5] == [None, "searching"]
+    assert on(outcomes[6][0], small_elsewhere) and outcomes[6][1] == "locked"
+    assert outcomes[8] == [None, "lost"]
+    assert outcomes[11] == [None, "none"]
+    assert on(outcomes[12][0], large)
+    assert got["announced"] == ["locked", "lost", "searching", "locked", "lost", "none"]
+    assert "the robot is not searching" in got["messages"][-1]["reason"]

@@ -180,16 +180,19 @@ export class TargetLock {
     };
   }
 
-  /** The outcome of the snapshot asked with `query`: the box chosen or null; the new state, if
-   * it changed. */
-  update(query, chosen, now) {
+  /**
+   * The outcome of the snapshot asked with `query`: the box chosen or null; the new state, if
+   * it changed. `searching`: the vehicle says it is turning to search for the target (its
+   * pose's `search`), and the lock holds until that search ends.
+   */
+  update(query, chosen, now, searching = false) {
     if (query === null || query.epoch !== this.epoch) return null;
     const before = this.state;
     if (chosen !== null) {
       this.box = chosen;
       this.seenAt = now;
       this.state = 'locked';
-    } else if (now - this.seenAt > this.rule.releaseAfterS) {
+    } else if (now - this.seenAt > this.rule.releaseAfterS && !searching) {
       this.release();
     } else if (now - this.seenAt > this.rule.searchAfterS) {
       this.state = 'searching';
@@ -198,6 +201,14 @@ export class TargetLock {
     }
     return this.state !== before ? this.state : null;
   }
+}
+
+/**
+ * Whether a vehicle whose pose says `search` ('left', 'right', 'timed_out'; null or undefined:
+ * none) is turning to search for its lost target. lock.py's robot_searching is its twin.
+ */
+export function robotSearching(search) {
+  return search !== null && search !== undefined && search !== 'timed_out';
 }
 
 /** The rule that picks the target among a snapshot's boxes: the locked one's track, or the

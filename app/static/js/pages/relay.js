@@ -350,6 +350,8 @@ function onPose(msg) {
   const pose = { type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() };
   if (msg.goalAgeMs !== undefined) pose.goalAgeMs = msg.goalAgeMs;
   if (msg.search !== undefined) pose.search = msg.search;
+  // While the vehicle searches for the locked target, the lock holds.
+  session.loop?.vehicleSearch(msg.search ?? null);
   session.links.broadcast(pose);
 }
 
@@ -384,6 +386,8 @@ session.links.addEventListener('vehicletrack', ({ detail: track }) => {
   view.vehicleTrack(track);
 });
 session.links.addEventListener('vehicle', ({ detail: name }) => {
+  // A vehicle gone searches no more; one that comes says so in its poses.
+  if (name === null) session.loop?.vehicleSearch(null);
   if (name !== null && session.operator.holder !== null) {
     session.links.sendToVehicle(session.operator.modeMessage('an operator holds the wheel'));
   }

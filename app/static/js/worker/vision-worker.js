@@ -4,7 +4,8 @@
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'}
 //                   | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, at}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, at,
+//                    robotSearching}
 //                   | {type: 'lock', id, x, y, at} | {type: 'unlock', id}
 //                   | {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
@@ -346,6 +347,7 @@ async function analyze({
   track = false,
   around = null,
   at = null,
+  robotSearching = false,
 }) {
   const started = performance.now();
   let instance;
@@ -371,7 +373,8 @@ async function analyze({
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
     targetBox = locked;
   }
-  const lock = at === null ? null : followed(instance, query, locked, boxes, fullScan, at);
+  const lock =
+    at === null ? null : followed(instance, query, locked, boxes, fullScan, at, robotSearching);
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (frame-tag.js).
   const { decodeFrameTag, tagBlockSize } = session.frameTag;
@@ -403,17 +406,20 @@ async function analyze({
 /**
  * The relay's snapshot at `at` (s) with `instance` chose `locked` (null: not found) for the
  * lock's `query`: update the lock and keep the boxes a click is looked up in (`fullScan`: the
- * boxes of the full scan it ran, or null). Returns {state, box, changed: the new state or null,
- * reason: why it changed, or null}.
+ * boxes of the full scan it ran, or null); `robotSearching`: the vehicle searches for the target,
+ * and the lock holds. Returns {state, box, changed: the new state or null, reason: why it
+ * changed, or null}.
  */
-function followed(instance, query, locked, boxes, fullScan, at) {
+function followed(instance, query, locked, boxes, fullScan, at, robotSearching) {
   session.lastInstance = instance;
   session.lastBoxes = boxes;
   if (fullScan !== null) session.lastFullScanBoxes = fullScan;
   const { target } = session;
-  const changed = target.update(query, locked, at);
+  const changed = target.update(query, locked, at, robotSearching);
   const reason =
-    changed === 'none' ? `not seen for more than ${PROTOCOL.lock.releaseAfterS} s` : null;
+    changed === 'none'
+      ? `not seen for more than ${PROTOCOL.lock.releaseAfterS} s, and the robot is not searching`
+      : null;
   return { state: target.state, box: target.box, changed, reason };
 }
 
