@@ -154,7 +154,7 @@ const analyzerReady = createAnalyzer()
       if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
       status.analyzerReady = true;
       status.opencvBuild = created.build;
-      status.op = created.defaultOp;
+      status.op = session.loop.op;
       view.operation(status.op);
       const ops = created.ops.map((op) => op.id).join(', ');
       log.info(`OpenCV.js (${created.build} build) ready: operations ${ops}`);
@@ -172,7 +172,10 @@ function createLoop(analyzer) {
   const loop = new SnapshotLoop({
     analyzer,
     profile: config.profile,
-    op: analyzer.defaultOp,
+    // The vehicle profile's operation (config.operation), else the spec's default.
+    op: analyzer.ops.some((op) => op.id === config.operation)
+      ? config.operation
+      : analyzer.defaultOp,
     // Between full scans, search only around the last target (the spec's fullScanEvery).
     track: true,
     sendGoal: (goal) => session.links.sendToVehicle(goal, { lossy: true }),
