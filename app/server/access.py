@@ -1,4 +1,4 @@
-"""Who may do what on ``/rosbridge``, ``/turtlesim/state`` and ``/room/state``, decided by
+"""Who may do what on ``/rosbridge``, ``/turtlesim/state`` and ``/arena/state``, decided by
 room/role tokens.
 
 Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bearer`` header) and

@@ -18,7 +18,7 @@ from app.server.turn import TurnSettings
 __all__ = ["IceServer", "Settings", "SimulatedRobot", "describe_settings_error"]
 
 # The robots the server can simulate: turtlesim's turtle (one for the whole server), or a
-# differential-drive robot with an onboard camera in a walled room (one per room).
+# differential-drive robot with an onboard camera in a walled arena (one per room).
 SimulatedRobot = Literal["turtlesim", "diffdrive"]
 SIMULATED_ROBOTS: tuple[SimulatedRobot, ...] = get_args(SimulatedRobot)
 

@@ -18,9 +18,9 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
+from app.diffdrive.arena import ARENA
+from app.diffdrive.arenamap import arena_map
 from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.room import ROOM
-from app.diffdrive.roommap import room_map
 from app.protocol.control import (
     DEFAULT_PROFILE,
     PROFILES,
@@ -30,9 +30,9 @@ from app.protocol.control import (
     with_standoff,
 )
 from app.protocol.page import (
+    ArenaMap,
     BaseConfig,
     PageConfig,
-    RoomMap,
     page_protocol,
     robot_config,
     to_json,
@@ -84,7 +84,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         rosbridge_error=insecure_rosbridge(rosbridge, request.url.scheme),
         ros=ros if ros in ROS_SETTINGS else AUTO,
         ros_types=ROS_CONFIG,
-        room_map=_room_map(request.app.state.settings),
+        arena_map=_arena_map(request.app.state.settings),
         robot=robot_config(robot),
         robot_error=robot_error,
         protocol=page_protocol(),
@@ -93,11 +93,11 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
     return converted
 
 
-def _room_map(settings: Settings) -> RoomMap | None:
-    """The simulated room for the client's map, when the server simulates one."""
+def _arena_map(settings: Settings) -> ArenaMap | None:
+    """The simulated arena for the client's map, when the server simulates one."""
     if settings.robot != "diffdrive":
         return None
-    return room_map(ROOM, CAMERA_HFOV)
+    return arena_map(ARENA, CAMERA_HFOV)
 
 
 def base_config() -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""WebSocket ``/rosbridge``, ``GET /turtlesim/state`` and ``GET /room/state``, plus the tasks that
+"""WebSocket ``/rosbridge``, ``GET /turtlesim/state`` and ``GET /arena/state``, plus the tasks that
 step the simulated robots and film their cameras.
 
 The rules live in :mod:`app.rosbridge.protocol` and each robot's hub; :mod:`app.server.websocket`
@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any, Final
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 from pydantic import TypeAdapter, ValidationError
 
+from app.diffdrive.arenamap import STATE_PATH, arena_state
 from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.roommap import STATE_PATH, room_state
 from app.diffdrive.rosbridge import DiffDriveHub
-from app.diffdrive.sim import RoomSim, Scene
+from app.diffdrive.sim import ArenaSim, Scene
 from app.protocol.close_codes import CloseCode
 from app.protocol.jsonedge import oversize
 from app.protocol.page import to_json
@@ -88,7 +88,7 @@ class RoomRobot:
     """One room's differential-drive robot, its hub, and the task that films its camera."""
 
     def __init__(self, ros: RosFlavour) -> None:
-        self.sim = RoomSim()
+        self.sim = ArenaSim()
         self.hub = DiffDriveHub(self.sim, ros)
         self.filming: asyncio.Task[None] | None = None
 
@@ -310,7 +310,7 @@ def _renderer() -> Renderer:
     """The camera of the diffdrive robot over its room (in the camera thread)."""
     from app.diffdrive.camera import Pinhole, Renderer
 
-    return Renderer(RoomSim().room, Pinhole(hfov=CAMERA_HFOV))
+    return Renderer(ArenaSim().arena, Pinhole(hfov=CAMERA_HFOV))
 
 
 def _shoot(renderer: Renderer, scene: Scene) -> bytes:
@@ -344,7 +344,7 @@ async def turtlesim_state(request: Request) -> dict[str, Any]:
 
 
 @router.get(STATE_PATH)
-async def room_state_view(request: Request) -> dict[str, Any]:
+async def arena_state_view(request: Request) -> dict[str, Any]:
     """Where the billboards of a room stand now, for the client's map: the room its token names
     (a token of any role), or without access control the one ``?room=R`` names."""
     settings: Settings = request.app.state.settings
@@ -366,8 +366,8 @@ async def room_state_view(request: Request) -> dict[str, Any]:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"the server simulates {simulator.robot}")
     scene = simulator.room_scene(room)
     if scene is None:  # no connection has made the room's robot yet: it stands at its start
-        scene = RoomSim().scene()
-    converted: dict[str, Any] = to_json(room_state(scene))
+        scene = ArenaSim().scene()
+    converted: dict[str, Any] = to_json(arena_state(scene))
     return converted
 
 

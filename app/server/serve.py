@@ -53,7 +53,7 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
         "--robot",
         choices=SIMULATED_ROBOTS,
         help="the simulated robot: turtlesim's turtle, one for the whole server, or diffdrive, a"
-        " differential-drive robot with a camera in a walled room, one per room"
+        " differential-drive robot with a camera in a walled arena, one per room"
         " (default: AUTOPILOT_ROBOT or turtlesim)",
     )
 
