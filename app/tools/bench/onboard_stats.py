@@ -89,6 +89,12 @@ def standoff_errors_m(track: Sequence[Sighting], hfov: float, standoff_m: float)
     return [s.distance - standoff_m for s in after_acquisition(track) if in_view(s, hfov)]
 
 
+def min_distance_m(track: Sequence[Sighting]) -> float | None:
+    """The walker's least distance from the camera over the whole track, in view or not (None
+    for no sighting)."""
+    return min((s.distance for s in track), default=None)
+
+
 def reacquisitions(track: Sequence[Sighting], hfov: float) -> list[Reacquisition]:
     """Every time the walker left the view after the first acquisition, and how long it took
     to be back within :data:`ACQUIRED_DEG` of the axis."""
