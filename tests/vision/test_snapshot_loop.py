@@ -74,13 +74,15 @@ def page() -> Iterator[Page]:
         yield opened
 
 
-def faces(at: list[tuple[int, int, int]], tag: int) -> str:
+def faces(at: list[tuple[int, int, int]], tag: int, who: dict[int, str] | None = None) -> str:
     """Base64 RGBA of a grey frame with a face of side ``size`` at each ``(x, y, size)`` (its
-    top-left corner) and a frame tag."""
+    top-left corner) and a frame tag; ``who``: whose photo the face at an index is (Obama's
+    unless said)."""
     frame = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
-    for x, y, size in at:
+    for i, (x, y, size) in enumerate(at):
+        photo = face_crop((who or {}).get(i, "obama.jpg"))
         frame[y : y + size, x : x + size] = cv2.resize(
-            face_crop(), (size, size), interpolation=cv2.INTER_AREA
+            photo, (size, size), interpolation=cv2.INTER_AREA
         )
     frametag.stamp(frame, tag)
     rgba = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA)
@@ -372,12 +374,19 @@ def test_candidates_a_click_near_a_face_and_one_on_a_face_the_scan_misses_as_pyt
 def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_the_search_ends(
     page: Page,
 ) -> None:
-    # The smaller face is clicked and leaves; the vehicle's poses say it turns to search for it.
-    # Past the release time (3 s unseen) the lock still holds, and the face coming back is the
-    # target again with no click. It leaves again, the vehicle's search runs out (timed_out):
-    # the lock lets go once the release time has passed, and the larger face is the target.
-    large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
-    frames = [faces([large, small], 1), faces([large, small_elsewhere], 2), faces([large], 3)]
+    # Two people: the smaller face (Obama's) is clicked and leaves; the vehicle's poses say it
+    # turns to search for it. Past the release time (3 s unseen) the lock still holds, and the
+    # face coming back much nearer (more than max_scale, 1.4 times the size: its size and place
+    # no longer tell it) is recognised by its look and is the target again with no click, while
+    # the other person's face (Biden's) never is. It leaves again, the vehicle's search runs out
+    # (timed_out): the lock lets go, and the larger face is the target.
+    large, small, small_back = (40, 100, 200), (420, 200, 130), (380, 150, 220)
+    biden = {0: "biden.jpg"}
+    frames = [
+        faces([large, small], 1, biden),
+        faces([large, small_back], 2, biden),
+        faces([large], 3, biden),
+    ]
     small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
     steps = [
         ["frame", 0.05, 0],
@@ -406,7 +415,7 @@ def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_the_search_e
     assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
     assert outcomes[3] == [None, "lost"]
     assert outcomes[5] == [None, "searching"]
-    assert on(outcomes[6][0], small_elsewhere) and outcomes[6][1] == "locked"
+    assert on(outcomes[6][0], small_back) and outcomes[6][1] == "locked"
     assert outcomes[8] == [None, "lost"]
     assert outcomes[11] == [None, "none"]
     assert on(outcomes[12][0], large)

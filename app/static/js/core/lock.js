@@ -131,6 +131,7 @@ export class TargetLock {
     this.state = 'none';
     this.epoch = 0; // bumped by every lock and release
     this.fine = false; // found by a full-resolution search: followed at full resolution
+    this.look = null; // the target's look, from the first snapshot that followed it
   }
 
   /**
@@ -155,6 +156,7 @@ export class TargetLock {
     this.seenAt = now;
     this.state = 'locked';
     this.fine = fine;
+    this.look = null;
     this.epoch += 1;
   }
 
@@ -163,21 +165,38 @@ export class TargetLock {
     this.box = null;
     this.state = 'none';
     this.fine = false;
+    this.look = null;
     this.epoch += 1;
   }
 
   /**
-   * What the next snapshot follows, {box, anywhere, epoch, fine}, or null for the default
-   * choice.
+   * What the next snapshot follows, {box, anywhere, epoch, fine, look, anySize}, or null for the
+   * default choice. Once the target's look is known, a box found by the whole-frame search, or
+   * while the vehicle searches (`searching`), must look like it (`look`, else null); while the
+   * vehicle searches, of any size (`anySize`).
    */
-  query(now) {
+  query(now, searching = false) {
     if (this.box === null) return null;
+    const anywhere = now - this.seenAt > this.rule.searchAfterS;
     return {
       box: this.box,
-      anywhere: now - this.seenAt > this.rule.searchAfterS,
+      anywhere,
       epoch: this.epoch,
       fine: this.fine,
+      look: anywhere || searching ? this.look : null,
+      anySize: searching,
     };
+  }
+
+  /** Whether the box the snapshot asked with `query` chose is to give the target's look: the
+   * first one after a lock. */
+  needsLook(query) {
+    return query !== null && query.epoch === this.epoch && this.look === null;
+  }
+
+  /** The target's look (needsLook). */
+  remember(look) {
+    this.look = look;
   }
 
   /**
@@ -211,11 +230,62 @@ export function robotSearching(search) {
   return search !== null && search !== undefined && search !== 'timed_out';
 }
 
-/** The rule that picks the target among a snapshot's boxes: the locked one's track, or the
- * largest. */
-export function chooser(lock, rule) {
-  if (lock === null) return largest;
-  return (boxes) => associate(lock.box, boxes, lock.anywhere, rule);
+/**
+ * The pixels a look is taken from: box [x, y, w, h] grown to whole pixels and clipped to the
+ * `width` × `height` frame, as {x, y, width, height} (empty when the box is outside it).
+ */
+export function lookRect([x, y, w, h], width, height) {
+  const x0 = Math.min(Math.max(0, Math.floor(x)), width);
+  const y0 = Math.min(Math.max(0, Math.floor(y)), height);
+  const x1 = Math.min(Math.max(x0, Math.ceil(x + w)), width);
+  const y1 = Math.min(Math.max(y0, Math.ceil(y + h)), height);
+  return { x: x0, y: y0, width: x1 - x0, height: y1 - y0 };
+}
+
+/** How alike two looks (normalised histograms) are: their Bhattacharyya coefficient. */
+export function likeness(a, b) {
+  if (a.length !== b.length) throw new Error('looks of different sizes');
+  let sum = 0;
+  for (let i = 0; i < a.length; i += 1) sum += Math.sqrt(a[i] * b[i]);
+  return sum;
+}
+
+/** The box of any size most like the target (`alike(box)`), when at least `rule.minLikeness`
+ * alike; the first of equal likeness. */
+export function recognise(boxes, alike, rule) {
+  let best = null;
+  let bestLikeness = rule.minLikeness;
+  for (const b of boxes) {
+    const value = alike(b);
+    if (value >= bestLikeness && (best === null || value > bestLikeness)) {
+      best = b;
+      bestLikeness = value;
+    }
+  }
+  return best;
+}
+
+/**
+ * The rule that picks the target among a snapshot's boxes: the locked one's track, or the
+ * largest. When the query gives the target's look and `lookOf(box)` each box's, a box must look
+ * like the target: while the vehicle searches the most alike of any size is it (recognise),
+ * else the track is continued among the alike boxes (associate). The twin of lock.py's chooser.
+ */
+export function chooser(query, rule, lookOf = null) {
+  if (query === null) return largest;
+  const { look } = query;
+  if (look === null || look === undefined || lookOf === null) {
+    return (boxes) => associate(query.box, boxes, query.anywhere, rule);
+  }
+  const alike = (b) => likeness(lookOf(b), look);
+  if (query.anySize) return (boxes) => recognise(boxes, alike, rule);
+  return (boxes) =>
+    associate(
+      query.box,
+      boxes.filter((b) => alike(b) >= rule.minLikeness),
+      query.anywhere,
+      rule,
+    );
 }
 
 /**

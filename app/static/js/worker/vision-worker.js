@@ -360,9 +360,11 @@ async function analyze({
   const frame = await readPixels(source);
   const detectStarted = performance.now();
   // From here to the lock's update nothing waits, so no click or release comes in between.
-  const query = at === null ? null : session.target.query(at);
-  // Locked (lock.js): the target is the centre of the box that continues the locked track.
-  const choose = session.lock.chooser(query, PROTOCOL.lock);
+  const query = at === null ? null : session.target.query(at, robotSearching);
+  // Locked (lock.js): the target is the centre of the box that continues the locked track, or
+  // while the vehicle searches, the box that looks like it.
+  const lookOf = (box) => lookIn(frame, box);
+  const choose = session.lock.chooser(query, PROTOCOL.lock, lookOf);
   const { found, scan, fullScan } = detectIn(instance, frame, track, around, choose, query);
   const { boxes, region = null } = found;
   const locked = query === null ? null : choose(boxes);
@@ -373,6 +375,7 @@ async function analyze({
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
     targetBox = locked;
   }
+  if (locked !== null && session.target.needsLook(query)) session.target.remember(lookOf(locked));
   const lock =
     at === null ? null : followed(instance, query, locked, boxes, fullScan, at, robotSearching);
   const { cols: width, rows: height } = frame;
@@ -401,6 +404,41 @@ async function analyze({
   };
   if (returnPixels) result.rgba = new Uint8ClampedArray(frame.data);
   return result;
+}
+
+/**
+ * The look of `box` (full-frame pixels) in the frame Mat: its hue × saturation histogram
+ * (`PROTOCOL.lock.lookBins`, OpenCV's 8-bit HSV), normalised to sum 1 (all 0 for no pixels), as
+ * app/vision/reference.py's look.
+ */
+function lookIn(frame, box) {
+  const { cv } = session;
+  const rect = session.lock.lookRect(box, frame.cols, frame.rows);
+  const [hueBins, saturationBins] = PROTOCOL.lock.lookBins;
+  if (rect.width === 0 || rect.height === 0) return new Array(hueBins * saturationBins).fill(0);
+  ensurePixels(frame, rect);
+  const roi = frame.roi(new cv.Rect(rect.x, rect.y, rect.width, rect.height));
+  const rgb = new cv.Mat();
+  const hsv = new cv.Mat();
+  const planes = new cv.MatVector();
+  const mask = new cv.Mat();
+  const hist = new cv.Mat();
+  try {
+    cv.cvtColor(roi, rgb, cv.COLOR_RGBA2RGB);
+    cv.cvtColor(rgb, hsv, cv.COLOR_RGB2HSV);
+    planes.push_back(hsv);
+    cv.calcHist(planes, [0, 1], mask, hist, [hueBins, saturationBins], [0, 180, 0, 256]);
+    const counts = Array.from(hist.data32F);
+    const total = counts.reduce((sum, c) => sum + c, 0);
+    return counts.map((c) => c / total);
+  } finally {
+    roi.delete();
+    rgb.delete();
+    hsv.delete();
+    planes.delete();
+    mask.delete();
+    hist.delete();
+  }
 }
 
 /**
