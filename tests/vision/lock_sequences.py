@@ -2,10 +2,11 @@
 
 A script is a list of events ``[kind, t, arg]`` (JSON-ready, so the page gets the very same):
 ``snapshot`` with the boxes found (each drawn from one of three tracks that wander, change size a
-little and are now and then missed) and, as a fourth element, each box's look when given, ``click`` at a point, ``unlock``, and ``search``: what the
-vehicle's pose says of its search for the lost target (``left``, ``right``, ``timed_out``, or None
-when it does not search). The small track vanishes
-twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock is released).
+little and are now and then missed) and, as a fourth element, each box's look when given;
+``click`` at a point; ``unlock``; ``search``: what the vehicle's pose says of its search for the
+lost target (``left``, ``right``, ``timed_out``, or None when it does not search). The small
+track vanishes twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock
+is released).
 """
 
 from __future__ import annotations
@@ -191,7 +192,7 @@ def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
 
 def _looks(boxes: list[Box], looks: list[list[float]]) -> Callable[[Box], list[float]]:
     """The look of each of a snapshot's boxes, as given with it."""
-    table = {box: look for box, look in zip(boxes, looks, strict=True)}
+    table = dict(zip(boxes, looks, strict=True))
     return table.__getitem__
 
 
