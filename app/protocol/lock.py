@@ -24,10 +24,13 @@ or ``right``): then the lock holds, and lets go at the first snapshot after the 
 search and locked again with no click. The target's look is the hue × saturation histogram
 (``look_bins``, of OpenCV's 8-bit HSV, normalised) of its box on the first snapshot that followed
 it after the lock; a box looks like it when their Bhattacharyya coefficient is at least
-``min_likeness``. In the whole-frame search only a box that looks like the target may continue
-its track (a face of the same size is not the same person). The vehicle has turned away while it
-searches, and the target may come back nearer or farther: then the box of any size that looks
-most like it is the target. Switching the operation releases the lock.
+``min_likeness``. Once its look is known, a box of a similar size that overlaps the locked box
+continues the track (the one overlapping most); else, wherever it is in the frame, the box of a
+similar size that looks most like the target (a vehicle that turns moves the target across its
+camera's frame faster than ``reach``; a face of the same size is not the same person). The
+vehicle has turned away while it searches, and the target may come back nearer or farther: then
+the box of any size that looks most like it is the target. Switching the operation releases the
+lock.
 
 Python applies the rule in :mod:`app.vision.lock`, the relay page in ``js/core/lock.js``, which gets
 these numbers from its config (``config.protocol.lock``); tests/vision/test_lock.py and
@@ -54,4 +57,4 @@ class LockRule:
     # and the least likeness (Bhattacharyya coefficient, 1 the same) of a box taken for it while
     # the vehicle searches.
     look_bins: tuple[int, int] = (16, 16)
-    min_likeness: float = 0.85
+    min_likeness: float = 0.9

@@ -156,8 +156,8 @@ class Query:
     """What one snapshot is asked to follow: the locked box, whether to accept it anywhere in
     the frame, the lock's ``epoch`` then (an answer to an older lock is not news), whether
     the target was found at full resolution (``fine``: it is followed at full resolution), the
-    target's look when a box must look like it (``look``: in the whole-frame search, else None),
-    and whether a box of any size may be it (``any_size``: while the vehicle searches)."""
+    target's look (``look``: None until known), and whether a box of any size may be it
+    (``any_size``: while the vehicle searches)."""
 
     box: Box
     anywhere: bool
@@ -172,9 +172,10 @@ def chooser(
 ) -> Choose:
     """The rule that picks the target among a snapshot's boxes (``window.step``): the locked
     target's track, or the largest box when nothing is locked. When the query gives the
-    target's look and ``look_of(box)`` each box's, a box must look like the target: while the
-    vehicle searches the most alike of any size is it (:func:`recognise`), else the track is
-    continued among the alike boxes (:func:`associate`)."""
+    target's look and ``look_of(box)`` each box's, a box of a similar size that overlaps the
+    locked one continues its track (the one overlapping most); else the box that looks most
+    like the target (:func:`recognise`) among those of a similar size, of any size while the
+    vehicle searches, wherever it is in the frame."""
     if query is None:
         return largest
     look = query.look
@@ -184,11 +185,14 @@ def chooser(
     def alike(box: Box) -> float:
         return likeness(look_of(box), look)
 
-    if query.any_size:
-        return lambda boxes: recognise(boxes, alike, rule)
-    return lambda boxes: associate(
-        query.box, [b for b in boxes if alike(b) >= rule.min_likeness], query.anywhere, rule
-    )
+    def choose(boxes: Sequence[Box]) -> Box | None:
+        similar_boxes = [b for b in boxes if similar(b, query.box, rule.max_scale)]
+        overlapping = [b for b in similar_boxes if overlap(b, query.box) > 0]
+        if overlapping:
+            return associate(query.box, overlapping, False, rule)
+        return recognise(boxes if query.any_size else similar_boxes, alike, rule)
+
+    return choose
 
 
 @dataclass
@@ -227,14 +231,13 @@ class TargetLock:
         self.epoch += 1
 
     def query(self, now: float, robot_searching: bool = False) -> Query | None:
-        """What the next snapshot follows, or None for the default choice. Once the target's
-        look is known, a box found by the whole-frame search, or while the vehicle searches
-        (``robot_searching``), must look like it; while the vehicle searches, of any size."""
+        """What the next snapshot follows, or None for the default choice: once the target's
+        look is known, by its look (:func:`chooser`), of any size while the vehicle searches
+        (``robot_searching``)."""
         if self.box is None:
             return None
         anywhere = now - self.seen_at > self.rule.search_after_s
-        look = self.look if anywhere or robot_searching else None
-        return Query(self.box, anywhere, self.epoch, self.fine, look, robot_searching)
+        return Query(self.box, anywhere, self.epoch, self.fine, self.look, robot_searching)
 
     def needs_look(self, query: Query | None) -> bool:
         """Whether the box the snapshot asked with ``query`` chose is to give the target's

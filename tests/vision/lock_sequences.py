@@ -77,15 +77,15 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
 # The lock holds through the vehicle's search, written out: the rule's numbers are a search of
 # the whole frame after 1.0 s unseen (search_after_s) and a release after 3.0 s (release_after_s)
 # -- unless the vehicle is searching for the target, and the onboard vehicle's search lasts up
-# to 0.3 + 3π/1.6 = 6.19 s. While it searches, a box is the target when it looks like it: at
-# least 0.85 alike (min_likeness, the Bhattacharyya coefficient of the looks). A snapshot may
+# to 0.3 + 3π/1.6 = 6.19 s. Once its look is known, a box that does not overlap the target's is
+# the target when it looks like it: at least 0.9 alike (min_likeness, the Bhattacharyya coefficient of the looks). A snapshot may
 # give each box's look (a fourth element; two-bin looks here). The walker (60 px) is clicked, its
 # look taken on the next snapshot; it leaves the view, the vehicle turns to search for it, and it
 # comes back 5 s after it was last seen, farther (30 px: too small to be taken for it by size),
-# beside the bystander (150 px, another look): it is locked again with no click. It leaves
-# again; the bystander alone stays in view, never taken for it, and this time the vehicle's
-# search runs out (timed_out): the lock lets go at the next snapshot, and the largest face is
-# the target again.
+# beside the bystander (150 px, another look): it is locked again with no click, and followed
+# by its look as the turning vehicle sweeps it across the frame. It leaves again; the bystander
+# alone stays in view, never taken for it, and this time the vehicle's search runs out
+# (timed_out): the lock lets go at the next snapshot, and the largest face is the target again.
 WALKER, BYSTANDER = [300, 200, 60, 60], [500, 100, 150, 150]
 WALKER_FAR = [100, 210, 30, 30]
 WALKER_LOOK, WALKER_FAR_LOOK, BYSTANDER_LOOK = [0.98, 0.02], [0.95, 0.05], [0.1, 0.9]
@@ -102,6 +102,12 @@ THROUGH_SEARCH: list[tuple[Event, list[Any]]] = [
         [WALKER_FAR, "locked"],
     ),
     (["search", 5.05, None], ["locked"]),  # a goal came: the vehicle's search is over
+    # The vehicle turns to it: the walker moves 300 px across the frame, ten times its size
+    # (reach: 1), and is followed by its look.
+    (
+        ["snapshot", 5.1, [[400, 212, 30, 30], BYSTANDER], [WALKER_FAR_LOOK, BYSTANDER_LOOK]],
+        [[400, 212, 30, 30], "locked"],
+    ),
     (["snapshot", 5.5, [BYSTANDER], [BYSTANDER_LOOK]], [None, "lost"]),
     (["search", 5.6, "right"], ["lost"]),
     (["snapshot", 6.0, [BYSTANDER], [BYSTANDER_LOOK]], [None, "lost"]),

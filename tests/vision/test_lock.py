@@ -145,7 +145,7 @@ def test_a_clicked_small_face_stays_the_target_beside_a_larger_one() -> None:
 
 def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_its_search_ends() -> None:
     # The rule's numbers this sequence is written for (lock_sequences.THROUGH_SEARCH).
-    assert (RULE.search_after_s, RULE.release_after_s, RULE.min_likeness) == (1.0, 3.0, 0.85)
+    assert (RULE.search_after_s, RULE.release_after_s, RULE.min_likeness) == (1.0, 3.0, 0.9)
     events = [event for event, _ in lock_sequences.THROUGH_SEARCH]
     got = lock_sequences.decisions(events, lock_sequences.run(events, RULE))
     for i, ((event, want), have) in enumerate(zip(lock_sequences.THROUGH_SEARCH, got, strict=True)):
@@ -254,7 +254,7 @@ def test_a_face_too_small_for_the_reduced_scan_is_locked_by_a_click_and_followed
 def test_the_walker_looks_like_itself_near_and_far_and_unlike_the_bystander() -> None:
     # The arena's walker seen by the robot's camera from 0.8 to 4 m, and the bystander from two
     # places: each face as face_small finds it, its look as the relay's worker takes it. The
-    # walker's looks are all at least min_likeness (0.85) alike; the bystander's, less.
+    # walker's looks are all at least min_likeness (0.9) alike; the bystander's, less.
     op = spec.load_spec(OPERATIONS_SPEC).op("face_small")
     renderer = Renderer(ARENA, Pinhole(hfov=CAMERA_HFOV))
     bystander_at = ARENA.billboard("bystander").pose

@@ -24,6 +24,8 @@ axis and its distance at each pose (``onboard_stats``). The figures:
   side to behind it once a round) to back within 5° of the axis; a departure not reacquired
   before the run ends leaves the figure missing, with the reason;
 - ``goals_per_s``: the relay's goals over the window;
+- ``snapshots_per_s`` and ``snapshot_ms_p50``: the frames the relay analysed, and each
+  snapshot's time from taken to goal sent (what bounds the goals);
 - ``frame_to_twist_ms_p50``: a camera frame's capture (its header stamp, on the agent's clock)
   to the first Twist the agent published from the goal the relay found in it;
 - ``min_distance_m``: the walker's least distance from the robot's camera over the window;
@@ -90,7 +92,7 @@ RELOCK_CLICK_TIMEOUT_S: Final = 2.0
 LOCKED_TIMEOUT_S: Final = 30.0
 CLICK_AGAIN_S: Final = 5.0
 # The figures the run counts itself rather than reading the agent's event log.
-RUN_KEYS: Final = ("goals_per_s", "clicks_after_first")
+RUN_KEYS: Final = ("goals_per_s", "clicks_after_first", "snapshots_per_s", "snapshot_ms_p50")
 _LOCKED_JS = "() => window.autopilotStatus.lock?.state === 'locked'"
 
 TARGETS: Final = (
@@ -111,6 +113,8 @@ FIGURE_KEYS: Final = (
     "reacquire_s",
     "clicks_after_first",
     "goals_per_s",
+    "snapshots_per_s",
+    "snapshot_ms_p50",
     "frame_to_twist_ms_p50",
 )
 
@@ -221,7 +225,14 @@ async def run(
     window = measured.window
     if window is None:
         return found | {"problems": dict.fromkeys(FIGURE_KEYS, "nothing was measured")}
-    found["goals_per_s"] = round(measured.relay_goals / (window[1] - window[0]), 2)
+    span = window[1] - window[0]
+    found["goals_per_s"] = round(measured.relay_goals / span, 2)
+    # What bounds the goals: how many of the camera's frames the relay analysed, and how long
+    # each snapshot took (taken -> goal sent).
+    found["snapshots_per_s"] = round(measured.snapshots / span, 2)
+    snapshot_ms = summarize([ms for t, ms in measured.processing if window[0] <= t <= window[1]])
+    if snapshot_ms is not None:
+        found["snapshot_ms_p50"] = round(snapshot_ms.p50, 1)
     found["relocks_s"] = [round(t - window[0], 2) for t in relocks if t >= window[0]]
     # Every click after the first lock, before the window or in it.
     found["clicks_after_first"] = len(relocks)

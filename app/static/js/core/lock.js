@@ -171,19 +171,17 @@ export class TargetLock {
 
   /**
    * What the next snapshot follows, {box, anywhere, epoch, fine, look, anySize}, or null for the
-   * default choice. Once the target's look is known, a box found by the whole-frame search, or
-   * while the vehicle searches (`searching`), must look like it (`look`, else null); while the
-   * vehicle searches, of any size (`anySize`).
+   * default choice: once the target's look is known (`look`, else null), by its look (chooser),
+   * of any size while the vehicle searches (`searching`).
    */
   query(now, searching = false) {
     if (this.box === null) return null;
-    const anywhere = now - this.seenAt > this.rule.searchAfterS;
     return {
       box: this.box,
-      anywhere,
+      anywhere: now - this.seenAt > this.rule.searchAfterS,
       epoch: this.epoch,
       fine: this.fine,
-      look: anywhere || searching ? this.look : null,
+      look: this.look,
       anySize: searching,
     };
   }
@@ -267,9 +265,10 @@ export function recognise(boxes, alike, rule) {
 
 /**
  * The rule that picks the target among a snapshot's boxes: the locked one's track, or the
- * largest. When the query gives the target's look and `lookOf(box)` each box's, a box must look
- * like the target: while the vehicle searches the most alike of any size is it (recognise),
- * else the track is continued among the alike boxes (associate). The twin of lock.py's chooser.
+ * largest. When the query gives the target's look and `lookOf(box)` each box's, a box of a
+ * similar size that overlaps the locked one continues its track (the one overlapping most); else
+ * the box that looks most like the target (recognise) among those of a similar size, of any size
+ * while the vehicle searches, wherever it is in the frame. The twin of lock.py's chooser.
  */
 export function chooser(query, rule, lookOf = null) {
   if (query === null) return largest;
@@ -278,14 +277,12 @@ export function chooser(query, rule, lookOf = null) {
     return (boxes) => associate(query.box, boxes, query.anywhere, rule);
   }
   const alike = (b) => likeness(lookOf(b), look);
-  if (query.anySize) return (boxes) => recognise(boxes, alike, rule);
-  return (boxes) =>
-    associate(
-      query.box,
-      boxes.filter((b) => alike(b) >= rule.minLikeness),
-      query.anywhere,
-      rule,
-    );
+  return (boxes) => {
+    const similarBoxes = boxes.filter((b) => similar(b, query.box, rule.maxScale));
+    const overlapping = similarBoxes.filter((b) => overlap(b, query.box) > 0);
+    if (overlapping.length > 0) return associate(query.box, overlapping, false, rule);
+    return recognise(query.anySize ? boxes : similarBoxes, alike, rule);
+  };
 }
 
 /**
