@@ -78,8 +78,9 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
 # the whole frame after 1.0 s unseen (search_after_s) and a release after 3.0 s (release_after_s)
 # -- unless the vehicle is searching for the target, and the onboard vehicle's search lasts up
 # to 0.3 + 3π/1.6 = 6.19 s. Once its look is known, a box that does not overlap the target's is
-# the target when it looks like it: at least 0.9 alike (min_likeness, the Bhattacharyya coefficient of the looks). A snapshot may
-# give each box's look (a fourth element; two-bin looks here). The walker (60 px) is clicked, its
+# the target when it looks like it: at least 0.9 alike (min_likeness, the Bhattacharyya
+# coefficient of the looks). A snapshot may give each box's look (a fourth element; two-bin
+# looks here). The walker (60 px) is clicked, its
 # look taken on the next snapshot; it leaves the view, the vehicle turns to search for it, and it
 # comes back 5 s after it was last seen, farther (30 px: too small to be taken for it by size),
 # beside the bystander (150 px, another look): it is locked again with no click, and followed
