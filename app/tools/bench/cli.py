@@ -154,6 +154,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " with its own camera over the real stack (onboard.md)",
     )
     parser.add_argument(
+        "--ops",
+        metavar="OP[,OP...]",
+        help="with --onboard: the operations to follow the walker with, one walk each, side by"
+        " side in one report (default: face_small, and face_dnn when the relay offers it)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -178,6 +184,15 @@ def run(args: argparse.Namespace) -> int:
     if args.photos is not None and not args.faces:
         log.error("--photos goes with --faces")
         return 2
+    if args.ops is not None and not args.onboard:
+        log.error("--ops goes with --onboard")
+        return 2
+    if args.onboard:
+        try:
+            args.ops = ",".join(_onboard_ops(args.ops))
+        except ValueError as exc:
+            log.error("%s", exc)
+            return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
@@ -317,7 +332,7 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     if args.opencv_builds:
         argv.append("--opencv-builds")
     if args.onboard:
-        argv.append("--onboard")
+        argv += ["--onboard", "--ops", args.ops]
     if args.frames is not None:
         argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -327,9 +342,29 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
 
 
+def _onboard_ops(asked: str | None) -> list[str]:
+    """The operations ``--ops`` names (comma-separated), each one the relay offers; by default
+    those of :data:`onboard.COMPARED` it offers. ValueError names an unknown one."""
+    from app.resources import OPERATIONS_SPEC
+    from app.tools.bench.onboard import COMPARED
+    from app.vision.spec import load_spec
+
+    offered = [op.id for op in load_spec(OPERATIONS_SPEC).operations]
+    if asked is None:
+        return [op for op in COMPARED if op in offered]
+    ops = [op.strip() for op in asked.split(",") if op.strip()]
+    unknown = [op for op in ops if op not in offered]
+    if unknown or not ops:
+        raise ValueError(
+            f"--ops {asked!r}: {', '.join(unknown) or 'no operation'} is not one the relay offers"
+            f" ({', '.join(offered)})"
+        )
+    return list(dict.fromkeys(ops))
+
+
 async def _onboard(args: argparse.Namespace) -> int:
-    """The onboard law over the simulated arena: print the figures, write onboard.md; 1 when a
-    figure could not be measured."""
+    """The onboard law over the simulated arena, one walk per operation of ``--ops``: print
+    the figures, write onboard.md; 1 when a figure could not be measured."""
     from playwright.async_api import async_playwright
 
     from app.chromium import launch_options
@@ -346,7 +381,10 @@ async def _onboard(args: argparse.Namespace) -> int:
             browser = await playwright.chromium.launch(**launch_options())
             try:
                 with tempfile.TemporaryDirectory(prefix="autopilot-bench-onboard-") as tmp:
-                    found = await onboard.run(browser, server.url, seconds, args.fps, Path(tmp))
+                    runs = {
+                        op: await onboard.run(browser, server.url, seconds, args.fps, Path(tmp), op)
+                        for op in args.ops.split(",")
+                    }
             finally:
                 await browser.close()
     finally:
@@ -356,11 +394,15 @@ async def _onboard(args: argparse.Namespace) -> int:
         "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
-    log.info("onboard report: %s", onboard.write_report(args.out, found, run_info))
+    log.info("onboard report: %s", onboard.write_report(args.out, runs, run_info))
     if args.json:
-        shown = {key: found.get(key) for key in onboard.FIGURE_KEYS}
-        sys.stdout.write(json.dumps(shown | {"problems": found["problems"]}) + "\n")
-    return 1 if found["problems"] else 0
+        shown = {
+            op: {key: found.get(key) for key in onboard.FIGURE_KEYS}
+            | {"problems": found["problems"]}
+            for op, found in runs.items()
+        }
+        sys.stdout.write(json.dumps(shown) + "\n")
+    return 1 if any(found["problems"] for found in runs.values()) else 0
 
 
 async def _recorder(args: argparse.Namespace) -> int:
@@ -634,7 +676,7 @@ def _command(args: argparse.Namespace) -> str:
     if args.baseline:
         parts.append(f"--baseline --rounds {args.rounds}")
     if args.onboard:
-        parts.append("--onboard")
+        parts.append(f"--onboard --ops {args.ops}")
     if args.opencv_builds:
         parts.append("--opencv-builds")
     if args.faces:
