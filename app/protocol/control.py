@@ -26,6 +26,9 @@ SPAWN_THETA = math.pi / 2
 # How far back a controller remembers the vehicle's heading, to take a goal's bearing from the
 # heading its frame was taken at: longer than a fresh goal takes from its camera to the vehicle.
 HEADING_MEMORY_S = 1.0
+# How many of its camera's latest frames a vehicle remembers the capture time of, for the goals
+# found in them: more than a second of a 30 fps camera, and goals older than that are stale.
+KEPT_FRAMES = 120
 
 Law = Literal["rotate", "follow", "onboard"]
 
@@ -181,6 +184,7 @@ PROFILES: dict[str, Profile] = {
 __all__ = [
     "DEADMAN_S",
     "HEADING_MEMORY_S",
+    "KEPT_FRAMES",
     "DEFAULT_PROFILE",
     "DRIVE_REPEAT_S",
     "PROFILES",
@@ -233,6 +237,7 @@ class ControlConfig:
     drive_repeat_s: float
     tick_s: float
     heading_memory_s: float
+    kept_frames: int
     profiles: dict[str, Profile]
 
 
@@ -247,5 +252,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         drive_repeat_s=DRIVE_REPEAT_S,
         tick_s=TICK_S,
         heading_memory_s=HEADING_MEMORY_S,
+        kept_frames=KEPT_FRAMES,
         profiles=PROFILES if profiles is None else profiles,
     )

@@ -47,6 +47,10 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
 # bench --relay-cost: seconds measured.
 RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
+# bench --faces --quick: photos of the set.
+QUICK_PHOTOS = 4
+# The shared face set, in a source checkout.
+FACES_DIR = APP_DIR.parent / "tests" / "data" / "faces"
 FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "lock_s": 60.0, "frames": 43}
 
 
@@ -126,6 +130,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f" {QUICK['frames']:g})",
     )
     parser.add_argument(
+        "--faces",
+        action="store_true",
+        help="measure face recall instead: the shared face set's photos at 24-192 px, upright and"
+        " tilted, and face-free frames, through face, face_small and face_dnn (faces.md)",
+    )
+    parser.add_argument(
+        "--photos",
+        type=positive_integer,
+        metavar="N",
+        help=f"with --faces: the first N photos of the set (default all, --quick {QUICK_PHOTOS})",
+    )
+    parser.add_argument(
         "--camera",
         action="store_true",
         help="measure the simulated robot's camera instead: render and JPEG encode per frame,"
@@ -165,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
     if args.frames is not None and not args.opencv_builds:
         log.error("--frames goes with --opencv-builds")
         return 2
+    if args.photos is not None and not args.faces:
+        log.error("--photos goes with --faces")
+        return 2
     if args.ops is not None and not args.onboard:
         log.error("--ops goes with --onboard")
         return 2
@@ -182,6 +201,8 @@ def run(args: argparse.Namespace) -> int:
         return _field(args)
     if args.camera:
         return _camera(args)
+    if args.faces:
+        return asyncio.run(_faces(args))
     if _can_enter_netns():
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
@@ -236,6 +257,48 @@ def _camera(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
     return 0
+
+
+async def _faces(args: argparse.Namespace) -> int:
+    """Face recall in the relay's analyzer: no WebRTC, so no namespace. 1 when a target of
+    face_dnn is not met."""
+    from playwright.async_api import async_playwright
+
+    from app.chromium import launch_options
+    from app.server.serve import start_in_thread
+    from app.tools.bench import faces
+
+    photos = faces.photos(FACES_DIR)[: args.photos or (QUICK_PHOTOS if args.quick else None)]
+    cases = faces.face_cases(photos) + faces.face_free_frames()
+    load_before = os.getloadavg()[0]
+    provenance = _provenance(args)
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                outcomes, build = await faces.measure(browser, server.url, cases)
+                browser_version = browser.version
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    figures = faces.figures(outcomes)
+    found: dict[str, Any] = provenance | {
+        "chromium": browser_version,
+        "opencv": build,
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+        "photos": len(photos),
+        "sizes": list(faces.SIZES),
+        "tilts": list(faces.TILTS),
+        "free_frames": sum(case.truth is None for case in cases),
+        "ops": figures,
+        "targets": faces.targets(figures),
+    }
+    log.info("faces report: %s", faces.write_report(args.out, found))
+    if args.json:
+        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    return 0 if all(check["met"] for check in found["targets"]) else 1
 
 
 def _can_enter_netns() -> bool:
@@ -616,6 +679,10 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--onboard --ops {args.ops}")
     if args.opencv_builds:
         parts.append("--opencv-builds")
+    if args.faces:
+        parts.append("--faces")
+    if args.photos is not None:
+        parts.append(f"--photos {args.photos}")
     if args.frames is not None:
         parts.append(f"--frames {args.frames}")
     if args.soak:

@@ -1,4 +1,4 @@
-"""``autopilot bench --onboard``: a robot that carries its camera follows the walker (issue 36).
+"""``autopilot bench --onboard``: a robot that carries its camera follows the walker.
 
 The real stack over the simulated arena (docs/simulated-arena.md): the server simulating the
 diffdrive robot (``--robot diffdrive``: its camera rendered from its own pose and published on

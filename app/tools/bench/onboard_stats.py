@@ -1,5 +1,5 @@
 """Pure figures of ``autopilot bench --onboard``: a robot that carries its camera, following the
-walker of the simulated room. No I/O, no clocks: the run collects the samples, these read them.
+walker of the simulated arena. No I/O, no clocks: the run collects the samples, these read them.
 
 The truth is the robot's pose (its odometry, as the agent received it) against where the walker
 stood at the same instant (:class:`Sighting`): the walker's true bearing from the camera's axis

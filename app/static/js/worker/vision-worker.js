@@ -62,7 +62,7 @@ const session = {
   lastFullScanBoxes: [],
   lastInstance: null, // the operation instance of the last such snapshot (a click's search)
   frameTag: null, // the imported frame-tag.js (the frame number stamped into its pixels)
-  files: [], // cascade files written to the Emscripten FS
+  files: [], // cascade and model files written to the Emscripten FS
   canvas: null,
   ctx: null,
   frame: null, // cv.Mat CV_8UC4 reused while the frame size stays the same
@@ -105,8 +105,19 @@ async function init() {
       for (const name of params.cascades ?? []) cascades.add(name);
     }
   }
-  for (const name of cascades) {
-    const bytes = new Uint8Array(await (await fetchOk(`/cascades/${name}`)).arrayBuffer());
+  // DNN models (vendored, app/static/vendor): written once per worker, read by cv.readNet.
+  const models = new Set();
+  for (const op of session.spec.operations) {
+    for (const params of Object.values(op.paramsByProfile)) {
+      if (params.model) models.add(params.model);
+    }
+  }
+  const urls = [
+    ...[...cascades].map((name) => [name, `/cascades/${name}`]),
+    ...[...models].map((name) => [name, `/static/vendor/${name}`]),
+  ];
+  for (const [name, url] of urls) {
+    const bytes = new Uint8Array(await (await fetchOk(url)).arrayBuffer());
     session.cv.FS_createDataFile('/', name, bytes, true, false, false);
     session.files.push(name);
   }
@@ -138,8 +149,8 @@ function instanceFor(opId, profile) {
   const params = op.paramsByProfile[profile];
   if (!params) throw new Error(`unknown profile "${profile}"`);
   const spec = { ...op, params };
-  // Cascade operations search a window around the last target between full scans.
-  const windowed = op.kind === 'cascade';
+  // Cascade and DNN operations search a window around the last target between full scans.
+  const windowed = op.kind === 'cascade' || op.kind === 'dnn';
   instance = {
     op: session.modules.get(op.module).create(session.cv, spec, session.files),
     // What the operation's box spans, in metres: goals carry it for the onboard law's range.
@@ -392,6 +403,8 @@ async function analyze({
   const result = {
     op: opId,
     boxes,
+    // Each box's score (0..1) for operations that score them (DNN), else null.
+    scores: found.scores ?? null,
     target,
     targetBox,
     targetHeightM: instance.targetHeightM,
