@@ -49,9 +49,9 @@ def test_shipped_spec_has_the_issue_operations() -> None:
 
 
 def test_each_operation_declares_the_real_height_of_what_it_finds() -> None:
-    # A face's box as the simulated room's faces are scaled (docs/simulated-room.md; BlazeFace's
+    # A face's box as the simulated arena's faces are scaled (docs/simulated-arena.md; BlazeFace's
     # box is a little shorter than Haar's on the same face, docs/operations.md), a flame's as the
-    # room's flame stands, a standing person's.
+    # arena's flame stands, a standing person's.
     heights = {o.id: o.target_height_m for o in load_spec(SPEC).operations}
     assert heights == {
         "face": 0.24,
