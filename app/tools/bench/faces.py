@@ -7,7 +7,7 @@ The face's box on the photo is the truth: the largest face the Python reference 
 finds on the photo at its own resolution (a large, upright face, which it finds in every photo
 of the set); scaled and moved with the photo, it is the truth on the frame. A detection finds
 the face when its centre is inside the truth's box and its height within a factor of
-``HEIGHT_RATIO`` of the truth's. Face-free frames are the simulated room's walls (every
+``HEIGHT_RATIO`` of the truth's. Face-free frames are the simulated arena's walls (every
 billboard but the flame taken away: empty walls, floor and ceiling, and the flame where it is
 in view) from ``FREE_VIEWS`` headings, and ``FLAME_FRAMES`` frames of the agent's synthetic
 flame scene with its face out of view.
@@ -36,9 +36,9 @@ import cv2
 import numpy as np
 from playwright.async_api import Browser
 
+from app.diffdrive.arena import ARENA, Flame
 from app.diffdrive.camera import Pinhole, Renderer
 from app.diffdrive.robot import RobotState
-from app.diffdrive.room import ROOM, Flame
 from app.diffdrive.sim import Placed, Scene
 from app.resources import OPERATIONS_SPEC
 from app.tools.bench.jsnative import LOAD_JS, Rgba, parity_page
@@ -52,7 +52,7 @@ TILTS: Final = (-45, -30, 0, 30, 45)
 OPS: Final = ("face", "face_small", "face_dnn")
 # A detection finds the face when its height is within this factor of the truth's.
 HEIGHT_RATIO: Final = 2.0
-# Headings (degrees) of the robot's camera for the face-free frames, from the room's start.
+# Headings (degrees) of the robot's camera for the face-free frames, from the arena's start.
 FREE_VIEWS: Final = tuple(range(0, 360, 30))
 # Frames of the agent's flame scene (the flame flickers from frame to frame).
 FLAME_FRAMES: Final = 8
@@ -169,19 +169,20 @@ def face_cases(
 def face_free_frames(
     views: Sequence[int] = FREE_VIEWS, flame_frames: int = FLAME_FRAMES
 ) -> list[Case]:
-    """The simulated room from its start, one frame per heading in ``views``, with every
+    """The simulated arena from its start, one frame per heading in ``views``, with every
     billboard but the flame taken away; then ``flame_frames`` frames of the agent's synthetic
     scene, its face out of view (the flame alone)."""
-    room = replace(ROOM, billboards=tuple(b for b in ROOM.billboards if isinstance(b.look, Flame)))
+    flames = tuple(b for b in ARENA.billboards if isinstance(b.look, Flame))
+    arena = replace(ARENA, billboards=flames)
     camera = Pinhole(width=FRAME_SIZE[0], height=FRAME_SIZE[1])
-    renderer = Renderer(room, camera)
+    renderer = Renderer(arena, camera)
     cases = []
     for i, heading in enumerate(views):
-        robot = RobotState(room.start.x, room.start.y, math.radians(heading), 0.0, 0.0)
-        placed = tuple(Placed(b, b.placed(0.0, (robot.x, robot.y))) for b in room.billboards)
+        robot = RobotState(arena.start.x, arena.start.y, math.radians(heading), 0.0, 0.0)
+        placed = tuple(Placed(b, b.placed(0.0, (robot.x, robot.y))) for b in arena.billboards)
         bgr = renderer.render(Scene(0.0, robot, placed, i))
         rgba = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGBA), np.uint8)
-        cases.append(Case(f"room heading {heading}°", 0, 0, rgba, None))
+        cases.append(Case(f"arena heading {heading}°", 0, 0, rgba, None))
     scene = SyntheticVideo(*FRAME_SIZE, path=FixedPath(-10.0, -10.0))
     for frame in range(flame_frames):
         rgba = np.asarray(cv2.cvtColor(scene.render(frame), cv2.COLOR_RGB2RGBA), np.uint8)
@@ -312,7 +313,7 @@ def report_text(found: dict[str, Any]) -> str:
         f"{found['photos']} photos of the shared face set, each in a 640×480 frame with its face"
         f" {', '.join(str(s) for s in found['sizes'])} px tall and tilted"
         f" {', '.join(f'{t}°' for t in found['tilts'])}; {found['free_frames']} face-free frames"
-        " (the simulated room's walls and its flame). Each frame once through the relay's"
+        " (the simulated arena's walls and its flame). Each frame once through the relay's"
         " analyzer per operation, a full scan. A face is found when a box's centre is inside its"
         f" box and the box's height within ×{HEIGHT_RATIO:g} of its height.",
         "",
