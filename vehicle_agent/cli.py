@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
 import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -22,9 +23,10 @@ from app.arguments import (
 from app.metrics import add_metrics_arguments
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.tokens import SECRET_ENV
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import on_stop_signals
-from vehicle_agent import recorder
+from vehicle_agent import foxglove, recorder
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -143,6 +145,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
     )
     recorder.add_arguments(parser)
+    foxglove.add_arguments(parser)
     add_metrics_arguments(parser)
 
 
@@ -191,7 +194,10 @@ async def _main(args: argparse.Namespace) -> int:
     )
     camera = None
     metrics = None
+    live = None
+    viewer = None
     try:
+        live = foxglove.start(args, robot, secret_set=bool(os.environ.get(SECRET_ENV)))
         video = await _open_video(args, events, rosbridge_token)
         turtle: Turtle = SimTurtle()
         if args.rosbridge:
@@ -217,6 +223,9 @@ async def _main(args: argparse.Namespace) -> int:
         if flight is not None:
             events.listeners.append(flight.on_event)
             camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
+        if live is not None:
+            events.listeners.append(live.on_event)
+            viewer = asyncio.create_task(live.stream_video(agent.camera_tap()), name="foxglove")
         metrics = serve_agent_metrics(args, events)
         task = asyncio.create_task(agent.run())
         on_stop_signals(task.cancel)
@@ -225,6 +234,10 @@ async def _main(args: argparse.Namespace) -> int:
     finally:
         if camera is not None:
             camera.cancel()
+        if viewer is not None:
+            viewer.cancel()
+        if live is not None:
+            await foxglove.close(live)
         if flight is not None:
             # Also when setting up failed: the recorder's writer thread would keep the process.
             await _close_recorder(flight, events)

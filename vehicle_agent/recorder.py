@@ -232,6 +232,21 @@ def frame_tag(frame: av.VideoFrame) -> int | None:
     return frametag.read(pixels.reshape(rows, frame.width, channels))
 
 
+def encode_jpeg(frame: av.VideoFrame, quality: int) -> bytes:
+    """``frame`` as a JPEG of ``quality`` (1-100); also the live Foxglove view's."""
+    # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
+    # packed RGB's channels is faster in OpenCV (the synthetic camera's frames).
+    if frame.format.name == "rgb24":
+        rgb = frame.to_ndarray(format="rgb24")
+        bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
+    else:
+        bgr = np.asarray(frame.to_ndarray(format="bgr24"), np.uint8)
+    ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return bytes(jpeg.tobytes())
+
+
 class FlightRecorder:
     """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
 
@@ -470,22 +485,12 @@ class FlightRecorder:
             self._dropped_failing += 1
 
     def _image(self, held: _Held, log_ns: int) -> dict[str, Any]:
-        # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
-        # packed RGB's channels is faster in OpenCV (the synthetic camera's frames).
-        if held.frame.format.name == "rgb24":
-            rgb = held.frame.to_ndarray(format="rgb24")
-            bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
-        else:
-            bgr = np.asarray(held.frame.to_ndarray(format="bgr24"), np.uint8)
-        quality = [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality]
-        ok, jpeg = cv2.imencode(".jpg", bgr, quality)
-        if not ok:
-            raise RuntimeError("JPEG encoding failed")
+        jpeg = encode_jpeg(held.frame, self.settings.jpeg_quality)
         return {
             "timestamp": {"sec": log_ns // 1_000_000_000, "nsec": log_ns % 1_000_000_000},
             "frame_id": "camera",
             "format": "jpeg",
-            "data": base64.b64encode(jpeg.tobytes()).decode("ascii"),
+            "data": base64.b64encode(jpeg).decode("ascii"),
             "frame": held.tag,
         }
 

@@ -1,0 +1,275 @@
+"""``autopilot vehicle --foxglove``: the official client (``@foxglove/ws-protocol`` in Node, as
+Foxglove connects) reads a running agent's every channel, each message valid against
+``@foxglove/schemas`` or its channel's JSON Schema; the image decodes at the camera's size, the
+annotations fall inside it, the transforms chain ``camera`` → ``base_link`` → ``odom`` and each
+Twist turns toward its goal's side. No viewer can publish, a viewer that never reads does not
+stop the vehicle, and the server refuses to face the network when tokens are asked for and it
+cannot check one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import shutil
+import time
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+
+from app.protocol import channels
+from app.protocol import events as ev
+from app.protocol.robot import PRESETS
+from app.recording import EVENT_CHANNELS
+from app.server.serve import RunningServer
+from tests.helpers.waiting import eventually
+from vehicle_agent import foxglove
+from vehicle_agent.agent import Agent, AgentConfig
+from vehicle_agent.events import EventLog
+from vehicle_agent.foxglove import Address, FoxgloveLive
+from vehicle_agent.turtle import SimTurtle
+from vehicle_agent.video import SyntheticVideo
+
+HERE = Path(__file__).parent
+REPO = HERE.parents[1]
+W, H = 320, 240
+# The robot has a camera (so a calibration too), as the diffdrive room's robot does.
+ROBOT = PRESETS["diffdrive"]
+BOX = (40.0, 50.0)
+GOAL = EVENT_CHANNELS[ev.GoalApplied].topic
+TWIST = EVENT_CHANNELS[ev.TwistSent].topic
+MODE = EVENT_CHANNELS[ev.ModeChanged].topic
+POSE = EVENT_CHANNELS[ev.PoseReport].topic
+EVERY_TOPIC = [
+    foxglove.IMAGE_TOPIC,
+    foxglove.ANNOTATIONS_TOPIC,
+    foxglove.CALIBRATION_TOPIC,
+    foxglove.POSE_TOPIC,
+    foxglove.TF_TOPIC,
+    foxglove.LOG_TOPIC,
+    foxglove.HEALTH_TOPIC,
+    GOAL,
+    TWIST,
+    MODE,
+    POSE,
+]
+SCHEMAS = {
+    foxglove.IMAGE_TOPIC: "foxglove.CompressedImage",
+    foxglove.ANNOTATIONS_TOPIC: "foxglove.ImageAnnotations",
+    foxglove.CALIBRATION_TOPIC: "foxglove.CameraCalibration",
+    foxglove.POSE_TOPIC: "foxglove.PoseInFrame",
+    foxglove.TF_TOPIC: "foxglove.FrameTransforms",
+    foxglove.LOG_TOPIC: "foxglove.Log",
+    foxglove.HEALTH_TOPIC: "autopilot.Health",
+}
+
+
+class Piloted:
+    """A real agent logged in to the test's server, its synthetic camera's face answered by a
+    goal per frame as a relay would (30 ms later), the mode toggled to manual and back every
+    second (the log's events), and its Foxglove server on a free loopback port."""
+
+    def __init__(self, server: RunningServer) -> None:
+        self.events = EventLog()
+        self.goals: list[int] = []  # the seqs of the goals sent
+        self.twists: set[int] = set()
+        # The goals the pilot applied or dropped (manual mode): the ones the loop handled.
+        self.handled: set[int] = set()
+        self.video = SyntheticVideo(W, H, fps=15, on_frame=self._answer)
+        # The onboard law: the camera rides on the robot, so a goal left of centre turns it left.
+        config = AgentConfig(server=server.url, robot=ROBOT, profile="onboard", spawn_step=False)
+        self.agent = Agent(config, self.video, SimTurtle(), self.events)
+        self.live = FoxgloveLive(Address("127.0.0.1", 0), ROBOT)
+        self.events.listeners.append(self.live.on_event)
+        self.events.listeners.append(self._count)
+
+    def _answer(self, sent: ev.FrameSent) -> None:
+        self.events.emit(sent)
+        if sent.face_x is None or sent.face_y is None:
+            return
+        goal = channels.Goal(
+            seq=sent.frame + 1, op="face", x=sent.face_x, y=sent.face_y, w=W, h=H,
+            t=time.time() * 1000, frame=sent.frame, boxW=BOX[0], boxH=BOX[1],
+        )  # fmt: skip
+        text = channels.dump(goal)
+        asyncio.get_running_loop().call_later(0.03, self.agent.handle_channel_message, text, "r")
+        self.goals.append(goal.seq)
+
+    def _count(self, event: ev.AnyEvent) -> None:
+        if isinstance(event, ev.TwistSent) and event.seq is not None:
+            self.twists.add(event.seq)
+        if isinstance(event, ev.GoalApplied | ev.GoalDropped):
+            self.handled.add(event.seq)
+
+    async def _toggle_mode(self) -> None:
+        for mode in ("manual", "auto") * 1000:
+            await asyncio.sleep(0.1 if mode == "auto" else 1.0)
+            self.agent.handle_channel_message(channels.dump(channels.ModeChange(mode=mode)), "r")
+
+    @contextlib.asynccontextmanager
+    async def running(self) -> AsyncIterator[FoxgloveLive]:
+        tasks = [
+            asyncio.create_task(self.agent.run()),
+            asyncio.create_task(self.live.stream_video(self.agent.camera_tap())),
+            asyncio.create_task(self._toggle_mode()),
+        ]
+        try:
+            await asyncio.wait_for(self.agent.logged_in.wait(), 10)
+            yield self.live
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            await foxglove.close(self.live)
+
+
+async def view(url: str, timeout_s: float = 10, twists: int = 3, flood: int = 0) -> dict[str, Any]:
+    """What the official client saw (foxglove_viewer.mjs)."""
+    node = shutil.which("node")
+    assert node is not None, "Node.js runs the official Foxglove client"
+    options = {
+        "url": url,
+        "topics": EVERY_TOPIC,
+        "timeoutS": timeout_s,
+        "twists": twists,
+        "flood": flood,
+        "goalTopic": GOAL,
+        "twistTopic": TWIST,
+    }
+    process = await asyncio.create_subprocess_exec(
+        node,
+        str(HERE / "foxglove_viewer.mjs"),
+        json.dumps(options),
+        cwd=REPO,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    out, err = await asyncio.wait_for(process.communicate(), timeout_s + 10)
+    assert process.returncode == 0, err.decode()
+    result: dict[str, Any] = json.loads(out.decode().splitlines()[-1])
+    return result
+
+
+def check_view(result: dict[str, Any]) -> None:
+    """Every channel arrived, every message valid, and what they show is consistent."""
+    assert result["error"] is None, result
+    topics = result["topics"]
+    for topic in EVERY_TOPIC:
+        assert topics[topic]["messages"] > 0, (topic, topics)
+    for topic, entry in topics.items():
+        assert entry["problems"] == [], (topic, entry)
+    for topic, schema in SCHEMAS.items():
+        assert topics[topic]["schema"] == schema
+    # Typed channels go as protobuf (Foxglove's own), the recording's as JSON with JSON Schema.
+    assert topics[foxglove.IMAGE_TOPIC]["encoding"] == "protobuf"
+    assert topics[TWIST]["encoding"] == topics[GOAL]["encoding"] == "json"
+    assert result["imageSizes"] == [f"{W}x{H}"]
+    points = result["annotationPoints"]
+    assert points
+    for point in points:
+        assert 0 <= point.get("x", 0) <= W and 0 <= point.get("y", 0) <= H, point
+    assert result["cameraChain"] == ["camera", "base_link", "odom"]
+    sides = result["twistSides"]
+    assert len(sides) >= 3
+    for side in sides:
+        assert (side["angular"] > 0) == side["left"], side
+
+
+async def test_the_official_client_reads_every_channel_valid(server: RunningServer) -> None:
+    async with Piloted(server).running() as live:
+        result = await view(live.url)
+    check_view(result)
+    # No capability: a viewer can neither publish nor call anything, so it cannot drive.
+    assert result["capabilities"] == []
+
+
+async def test_nothing_is_encoded_for_a_channel_without_a_viewer(server: RunningServer) -> None:
+    piloted = Piloted(server)
+    async with piloted.running() as live:
+        await eventually(lambda: bool(piloted.twists), 10, "a Twist")
+        await asyncio.sleep(0.5)
+        assert live.images == 0
+        result = await view(live.url)
+        check_view(result)
+        assert live.images > 0
+
+
+async def test_hostile_viewers_do_not_stop_the_vehicle(server: RunningServer) -> None:
+    """A viewer that subscribes to everything and never reads, and one that floods subscribe and
+    unsubscribe: the vehicle still handles every goal, and a fair viewer still reads everything."""
+    piloted = Piloted(server)
+    async with piloted.running() as live:
+        protocols: Any = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+        # The client library reads a frame or so ahead, then leaves the socket unread.
+        async with connect(live.url, subprotocols=protocols, max_queue=1) as stuck:
+            advertised = await _advertised(stuck)
+            subscribe = [{"id": i, "channelId": c} for i, c in enumerate(advertised)]
+            await stuck.send(json.dumps({"op": "subscribe", "subscriptions": subscribe}))
+            # From here the stuck viewer reads nothing; its socket's buffers fill.
+            before = len(piloted.goals)
+            result = await view(live.url, flood=200)
+            await asyncio.sleep(0.5)
+            # Goals arrive 30 ms after their frame: all but the last few were handled.
+            sent = piloted.goals[before:-3]
+            assert len(sent) >= 10
+            assert set(sent) <= piloted.handled
+    check_view(result)
+
+
+async def _advertised(ws: Any) -> list[int]:
+    """The channel ids the server advertises first (after its serverInfo)."""
+    ids: list[int] = []
+    deadline = time.monotonic() + 5
+    while len(ids) < len(EVERY_TOPIC) and time.monotonic() < deadline:
+        message = json.loads(await asyncio.wait_for(ws.recv(), 5))
+        if message.get("op") == "advertise":
+            ids += [channel["id"] for channel in message["channels"]]
+    return ids
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("8765", Address("127.0.0.1", 8765)),
+        ("0.0.0.0:9000", Address("0.0.0.0", 9000)),
+        ("[::1]:9000", Address("::1", 9000)),
+        ("localhost:0", Address("localhost", 0)),
+    ],
+)
+def test_address_is_host_and_port_on_loopback_by_default(text: str, expected: Address) -> None:
+    assert foxglove.address(text) == expected
+
+
+@pytest.mark.parametrize("text", ["", ":80", "host:", "host:70000", "x"])
+def test_a_malformed_address_is_refused(text: str) -> None:
+    with pytest.raises(argparse.ArgumentTypeError):
+        foxglove.address(text)
+
+
+def test_loopback_is_always_served_and_the_network_only_without_a_secret() -> None:
+    loopback, network = Address("127.0.0.1", 1), Address("0.0.0.0", 1)
+    assert foxglove.exposure_error(loopback, secret_set=True, tls=False) is None
+    assert foxglove.exposure_error(network, secret_set=False, tls=False) is None
+    for tls in (False, True):
+        refused = foxglove.exposure_error(network, secret_set=True, tls=tls)
+        assert refused is not None and "AUTOPILOT_SECRET" in refused and "127.0.0.1" in refused
+
+
+def test_the_vehicle_refuses_the_network_with_a_secret_set(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from vehicle_agent import cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(["--foxglove", "0.0.0.0:0"])
+    with pytest.raises(OSError, match="AUTOPILOT_SECRET"):
+        foxglove.start(args, ROBOT, secret_set=True)
+    half = parser.parse_args(["--foxglove", "0", "--foxglove-certfile", str(tmp_path / "c")])
+    with pytest.raises(OSError, match="go together"):
+        foxglove.start(half, ROBOT, secret_set=False)
