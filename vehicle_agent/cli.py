@@ -187,7 +187,11 @@ async def _main(args: argparse.Namespace) -> int:
     events = EventLog(args.events)
     record = recorder.settings_from(args, args.room)
     # A folder that cannot be written is said now, not at the first write.
-    flight = None if record is None else recorder.FlightRecorder(record)
+    flight = (
+        None
+        if record is None
+        else recorder.FlightRecorder(record, extra=foxglove.recorded_channels())
+    )
     # The token goes only to the server's own /rosbridge.
     rosbridge_token = (
         args.token if args.rosbridge and same_server(args.server, args.rosbridge) else None
@@ -222,6 +226,7 @@ async def _main(args: argparse.Namespace) -> int:
             agent.token_renewed.append(video.renew)
         if flight is not None:
             events.listeners.append(flight.on_event)
+            events.listeners.append(foxglove.recording_scene(flight, robot).on_event)
             camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
         if live is not None:
             events.listeners.append(live.on_event)

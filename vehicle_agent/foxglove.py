@@ -39,6 +39,7 @@ import argparse
 import asyncio
 import collections
 import ipaddress
+import json
 import logging
 import math
 import threading
@@ -59,7 +60,7 @@ from app.arguments import port
 from app.protocol import events as ev
 from app.protocol.robot import Robot
 from vehicle_agent.frame_times import FrameTimes
-from vehicle_agent.recorder import encode_jpeg, frame_tag
+from vehicle_agent.recorder import ExtraChannel, FlightRecorder, encode_jpeg, frame_tag
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +130,24 @@ JSON_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
     **{topic: schema for topic, schema in recording.channels() if topic != IMAGE_TOPIC},
     HEALTH_TOPIC: HEALTH_SCHEMA,
 }
+
+
+def recorded_channels() -> list[ExtraChannel]:
+    """The channels the flight recorder adds for Foxglove: the typed ones (protobuf, the SDK's
+    schemas, as served live) and the health (JSON); the rest it records already."""
+    typed = [
+        ExtraChannel(topic, schema.name, schema.encoding, schema.data, "protobuf")
+        for topic, schema in TYPED_SCHEMAS.items()
+    ]
+    schema = json.dumps(HEALTH_SCHEMA).encode()
+    health = ExtraChannel(HEALTH_TOPIC, HEALTH_SCHEMA["title"], "jsonschema", schema, "json")
+    return [*typed, health]
+
+
+def recording_scene(flight: FlightRecorder, robot: Robot) -> Scene:
+    """The scene's every message into ``flight`` (made with :func:`recorded_channels`)."""
+    return Scene(robot, flight.record, lambda topic: True)
+
 
 # Where a message goes: its topic, its log time (Unix ns) and the message (an SDK message, or a
 # JSON object for a JSON channel).
@@ -392,8 +411,10 @@ class Scene:
                 self._frames.popleft()
         elif isinstance(event, ev.GoalApplied):
             self._last_goal = event.t
+            # The camera's size until a frame says: the goal's frame's (the recorder's case).
+            self.image_size = self.image_size or (round(event.w), round(event.h))
             if self._wants(ANNOTATIONS_TOPIC):
-                size = self.image_size or (round(event.w), round(event.h))
+                size = self.image_size
                 stamp = self.stamp_ns(event.frame, event.t)
                 self._emit(ANNOTATIONS_TOPIC, stamp, image_annotations(event, size, stamp))
         elif isinstance(event, ev.TwistSent):

@@ -49,7 +49,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -104,6 +104,17 @@ class RecordSettings:
     max_files: int = 20
     # What the writer holds before it writes a chunk: at most what a crash or a full disk loses.
     chunk_bytes: int = 1024 * 1024
+
+
+@dataclass(frozen=True)
+class ExtraChannel:
+    """A channel beside the recording's own: its topic, schema and encodings."""
+
+    topic: str
+    schema: str
+    schema_encoding: str
+    schema_data: bytes
+    encoding: str
 
 
 class RecorderError(Exception):
@@ -250,11 +261,18 @@ def encode_jpeg(frame: av.VideoFrame, quality: int) -> bytes:
 class FlightRecorder:
     """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
 
-    def __init__(self, settings: RecordSettings, clock: Callable[[], int] = time.time_ns) -> None:
+    def __init__(
+        self,
+        settings: RecordSettings,
+        clock: Callable[[], int] = time.time_ns,
+        extra: Sequence[ExtraChannel] = (),
+    ) -> None:
         """``clock``: wall-clock nanoseconds, the recording's one clock (log times, image
-        timestamps, file names and ages). :class:`RecorderError` when the folder cannot be
-        written, found by opening the first file."""
+        timestamps, file names and ages). ``extra``: more channels, written by :meth:`record`
+        (the Foxglove view's, ``vehicle_agent/foxglove.py``). :class:`RecorderError` when the
+        folder cannot be written, found by opening the first file."""
         self.settings = settings
+        self._extra = tuple(extra)
         self._clock = clock
         self.files: list[Path] = []
         self.images = 0
@@ -306,6 +324,14 @@ class FlightRecorder:
             self._put("event", event)
         if isinstance(event, GoalApplied):
             self._image_for_goal(event)
+        self._loop_cpu_s += time.thread_time() - started
+
+    def record(self, topic: str, log_ns: int, message: Any) -> None:
+        """Queue ``message`` for one of the ``extra`` channels: a JSON object, or anything with
+        ``encode()`` (an SDK message); ``log_ns`` is the message's own time (its log time is when
+        it was queued, so that log times never go back)."""
+        started = time.thread_time()
+        self._put("extra", (topic, message))
         self._loop_cpu_s += time.thread_time() - started
 
     async def record_video(self, track: MediaStreamTrack) -> None:
@@ -362,7 +388,7 @@ class FlightRecorder:
         self._put("image", held, held.arrived_ns)
 
     def _put(
-        self, kind: Literal["image", "event"], payload: Any, log_ns: int | None = None
+        self, kind: Literal["image", "event", "extra"], payload: Any, log_ns: int | None = None
     ) -> None:
         if not self._thread.is_alive():  # closed, or stopped by a fault it logged
             self.dropped += 1
@@ -440,6 +466,9 @@ class FlightRecorder:
                 if kind == "image":
                     self._write(recording.IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
                     self.images += 1
+                elif kind == "extra":
+                    topic, message = payload
+                    self._write(topic, log_ns, message)
                 else:
                     topic = recording.EVENT_CHANNELS[type(payload)].topic
                     self._write(topic, log_ns, recording.message(payload))
@@ -494,9 +523,12 @@ class FlightRecorder:
             "frame": held.tag,
         }
 
-    def _write(self, topic: str, log_ns: int, message: dict[str, Any]) -> None:
+    def _write(self, topic: str, log_ns: int, message: Any) -> None:
         writer = self._writer_for(log_ns)
-        data = json.dumps(message, separators=(",", ":")).encode()
+        if isinstance(message, dict):
+            data = json.dumps(message, separators=(",", ":")).encode()
+        else:
+            data = message.encode()
         writer.add_message(self._channels[topic], log_time=log_ns, data=data, publish_time=log_ns)
         self.messages += 1
         self._bytes += len(data)
@@ -533,6 +565,13 @@ class FlightRecorder:
                 )
                 channels[topic] = writer.register_channel(
                     topic=topic, message_encoding="json", schema_id=schema_id
+                )
+            for extra in self._extra:
+                schema_id = writer.register_schema(
+                    name=extra.schema, encoding=extra.schema_encoding, data=extra.schema_data
+                )
+                channels[extra.topic] = writer.register_channel(
+                    topic=extra.topic, message_encoding=extra.encoding, schema_id=schema_id
                 )
             file.flush()
         except OSError:

@@ -11,36 +11,32 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import json
 import shutil
-import time
-from collections.abc import AsyncIterator
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import pytest
-from websockets.asyncio.client import connect
 
-from app.protocol import channels
+from app import recording
 from app.protocol import events as ev
 from app.protocol.robot import PRESETS
 from app.recording import EVENT_CHANNELS
 from app.server.serve import RunningServer
+from app.tools.bench.foxglove import PilotedAgent, stuck_viewer
+from tests.helpers.recordings import record
 from tests.helpers.waiting import eventually
 from vehicle_agent import foxglove
-from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.events import EventLog
-from vehicle_agent.foxglove import Address, FoxgloveLive
-from vehicle_agent.turtle import SimTurtle
-from vehicle_agent.video import SyntheticVideo
+from vehicle_agent.foxglove import Address
+from vehicle_agent.recorder import FlightRecorder, RecordSettings
 
 HERE = Path(__file__).parent
 REPO = HERE.parents[1]
 W, H = 320, 240
-# The robot has a camera (so a calibration too), as the diffdrive room's robot does.
+# The robot has a camera (so a calibration too), as the diffdrive room's robot does: the
+# PilotedAgent's.
 ROBOT = PRESETS["diffdrive"]
-BOX = (40.0, 50.0)
 GOAL = EVENT_CHANNELS[ev.GoalApplied].topic
 TWIST = EVENT_CHANNELS[ev.TwistSent].topic
 MODE = EVENT_CHANNELS[ev.ModeChanged].topic
@@ -67,65 +63,6 @@ SCHEMAS = {
     foxglove.LOG_TOPIC: "foxglove.Log",
     foxglove.HEALTH_TOPIC: "autopilot.Health",
 }
-
-
-class Piloted:
-    """A real agent logged in to the test's server, its synthetic camera's face answered by a
-    goal per frame as a relay would (30 ms later), the mode toggled to manual and back every
-    second (the log's events), and its Foxglove server on a free loopback port."""
-
-    def __init__(self, server: RunningServer) -> None:
-        self.events = EventLog()
-        self.goals: list[int] = []  # the seqs of the goals sent
-        self.twists: set[int] = set()
-        # The goals the pilot applied or dropped (manual mode): the ones the loop handled.
-        self.handled: set[int] = set()
-        self.video = SyntheticVideo(W, H, fps=15, on_frame=self._answer)
-        # The onboard law: the camera rides on the robot, so a goal left of centre turns it left.
-        config = AgentConfig(server=server.url, robot=ROBOT, profile="onboard", spawn_step=False)
-        self.agent = Agent(config, self.video, SimTurtle(), self.events)
-        self.live = FoxgloveLive(Address("127.0.0.1", 0), ROBOT)
-        self.events.listeners.append(self.live.on_event)
-        self.events.listeners.append(self._count)
-
-    def _answer(self, sent: ev.FrameSent) -> None:
-        self.events.emit(sent)
-        if sent.face_x is None or sent.face_y is None:
-            return
-        goal = channels.Goal(
-            seq=sent.frame + 1, op="face", x=sent.face_x, y=sent.face_y, w=W, h=H,
-            t=time.time() * 1000, frame=sent.frame, boxW=BOX[0], boxH=BOX[1],
-        )  # fmt: skip
-        text = channels.dump(goal)
-        asyncio.get_running_loop().call_later(0.03, self.agent.handle_channel_message, text, "r")
-        self.goals.append(goal.seq)
-
-    def _count(self, event: ev.AnyEvent) -> None:
-        if isinstance(event, ev.TwistSent) and event.seq is not None:
-            self.twists.add(event.seq)
-        if isinstance(event, ev.GoalApplied | ev.GoalDropped):
-            self.handled.add(event.seq)
-
-    async def _toggle_mode(self) -> None:
-        for mode in ("manual", "auto") * 1000:
-            await asyncio.sleep(0.1 if mode == "auto" else 1.0)
-            self.agent.handle_channel_message(channels.dump(channels.ModeChange(mode=mode)), "r")
-
-    @contextlib.asynccontextmanager
-    async def running(self) -> AsyncIterator[FoxgloveLive]:
-        tasks = [
-            asyncio.create_task(self.agent.run()),
-            asyncio.create_task(self.live.stream_video(self.agent.camera_tap())),
-            asyncio.create_task(self._toggle_mode()),
-        ]
-        try:
-            await asyncio.wait_for(self.agent.logged_in.wait(), 10)
-            yield self.live
-        finally:
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            await foxglove.close(self.live)
 
 
 async def view(url: str, timeout_s: float = 10, twists: int = 3, flood: int = 0) -> dict[str, Any]:
@@ -181,7 +118,7 @@ def check_view(result: dict[str, Any]) -> None:
 
 
 async def test_the_official_client_reads_every_channel_valid(server: RunningServer) -> None:
-    async with Piloted(server).running() as live:
+    async with PilotedAgent(server.url, toggle_mode=True).running() as live:
         result = await view(live.url)
     check_view(result)
     # No capability: a viewer can neither publish nor call anything, so it cannot drive.
@@ -189,7 +126,7 @@ async def test_the_official_client_reads_every_channel_valid(server: RunningServ
 
 
 async def test_nothing_is_encoded_for_a_channel_without_a_viewer(server: RunningServer) -> None:
-    piloted = Piloted(server)
+    piloted = PilotedAgent(server.url, toggle_mode=True)
     async with piloted.running() as live:
         await eventually(lambda: bool(piloted.twists), 10, "a Twist")
         await asyncio.sleep(0.5)
@@ -199,37 +136,21 @@ async def test_nothing_is_encoded_for_a_channel_without_a_viewer(server: Running
         assert live.images > 0
 
 
+@pytest.mark.slow
 async def test_hostile_viewers_do_not_stop_the_vehicle(server: RunningServer) -> None:
     """A viewer that subscribes to everything and never reads, and one that floods subscribe and
     unsubscribe: the vehicle still handles every goal, and a fair viewer still reads everything."""
-    piloted = Piloted(server)
+    piloted = PilotedAgent(server.url, toggle_mode=True)
     async with piloted.running() as live:
-        protocols: Any = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
-        # The client library reads a frame or so ahead, then leaves the socket unread.
-        async with connect(live.url, subprotocols=protocols, max_queue=1) as stuck:
-            advertised = await _advertised(stuck)
-            subscribe = [{"id": i, "channelId": c} for i, c in enumerate(advertised)]
-            await stuck.send(json.dumps({"op": "subscribe", "subscriptions": subscribe}))
-            # From here the stuck viewer reads nothing; its socket's buffers fill.
+        async with stuck_viewer(live.url, len(EVERY_TOPIC)):
             before = len(piloted.goals)
-            result = await view(live.url, flood=200)
+            result = await view(live.url, flood=50)
             await asyncio.sleep(0.5)
             # Goals arrive 30 ms after their frame: all but the last few were handled.
             sent = piloted.goals[before:-3]
             assert len(sent) >= 10
             assert set(sent) <= piloted.handled
     check_view(result)
-
-
-async def _advertised(ws: Any) -> list[int]:
-    """The channel ids the server advertises first (after its serverInfo)."""
-    ids: list[int] = []
-    deadline = time.monotonic() + 5
-    while len(ids) < len(EVERY_TOPIC) and time.monotonic() < deadline:
-        message = json.loads(await asyncio.wait_for(ws.recv(), 5))
-        if message.get("op") == "advertise":
-            ids += [channel["id"] for channel in message["channels"]]
-    return ids
 
 
 @pytest.mark.parametrize(
@@ -273,3 +194,35 @@ def test_the_vehicle_refuses_the_network_with_a_secret_set(
     half = parser.parse_args(["--foxglove", "0", "--foxglove-certfile", str(tmp_path / "c")])
     with pytest.raises(OSError, match="go together"):
         foxglove.start(half, ROBOT, secret_set=False)
+
+
+def test_a_recording_has_the_same_channels_and_an_outside_reader_validates_them(
+    tmp_path: Path,
+) -> None:
+    settings = RecordSettings(tmp_path, room="test", fps=10)
+    flight = FlightRecorder(settings, extra=foxglove.recorded_channels())
+    scene = foxglove.recording_scene(flight, ROBOT)
+    asyncio.run(record(settings, 1.2, flight, listeners=[scene.on_event]))
+    node = shutil.which("node")
+    assert node is not None
+    done = subprocess.run(
+        [node, str(HERE / "mcap_reader.mjs"), *map(str, flight.files)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == 0, done.stderr
+    topics = json.loads(done.stdout.splitlines()[-1])
+    # The live view's channels, with the same schemas (and the recording's own, as before).
+    for topic, schema in SCHEMAS.items():
+        assert topics[topic]["schema"] == schema, topic
+    for topic in (foxglove.ANNOTATIONS_TOPIC, foxglove.CALIBRATION_TOPIC, foxglove.POSE_TOPIC):
+        assert topics[topic]["messages"] > 0, topic
+    for topic in (foxglove.TF_TOPIC, foxglove.HEALTH_TOPIC, foxglove.IMAGE_TOPIC, GOAL, TWIST):
+        assert topics[topic]["messages"] > 0, topic
+    for topic, entry in topics.items():
+        assert entry["problems"] == [], (topic, entry)
+    # autopilot replay still reads it: its goals and images by frame tag.
+    assert any(True for _ in recording.events(flight.files))
+    assert any(frame is not None for frame, _ in recording.images(flight.files))
