@@ -409,7 +409,7 @@ class Scene:
     def on_event(self, event: ev.AnyEvent) -> None:
         """Emit what ``event`` shows."""
         if isinstance(event, ev.FrameSent):
-            self.frame_times.on_event(event)
+            self.frame_times.add(event.frame, event.t)
             self._frames.append(event.t)
             while self._frames[0] < event.t - 1.0:
                 self._frames.popleft()

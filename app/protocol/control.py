@@ -15,7 +15,7 @@ from typing import Literal
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.protocol.relay_profiles import Profile as RelayProfile
 from app.protocol.robot import Robot
-from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
+from app.protocol.turtlesim_world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).
@@ -26,6 +26,9 @@ SPAWN_THETA = math.pi / 2
 # How far back a controller remembers the vehicle's heading, to take a goal's bearing from the
 # heading its frame was taken at: longer than a fresh goal takes from its camera to the vehicle.
 HEADING_MEMORY_S = 1.0
+# How many of its camera's latest frames a vehicle remembers the capture time of, for the goals
+# found in them: more than a second of a 30 fps camera, and goals older than that are stale.
+KEPT_FRAMES = 120
 
 Law = Literal["rotate", "follow", "onboard"]
 
@@ -175,6 +178,7 @@ PROFILES: dict[str, Profile] = {
 __all__ = [
     "DEADMAN_S",
     "HEADING_MEMORY_S",
+    "KEPT_FRAMES",
     "DEFAULT_PROFILE",
     "DRIVE_REPEAT_S",
     "PROFILES",
@@ -227,6 +231,7 @@ class ControlConfig:
     drive_repeat_s: float
     tick_s: float
     heading_memory_s: float
+    kept_frames: int
     profiles: dict[str, Profile]
 
 
@@ -241,5 +246,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         drive_repeat_s=DRIVE_REPEAT_S,
         tick_s=TICK_S,
         heading_memory_s=HEADING_MEMORY_S,
+        kept_frames=KEPT_FRAMES,
         profiles=PROFILES if profiles is None else profiles,
     )

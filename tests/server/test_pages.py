@@ -169,15 +169,12 @@ def test_the_vehicle_page_drives_the_robot_it_is_given(server: RunningServer) ->
         "angularAccel": 3.2,
     }
     assert burger["robot"]["types"]["pose"]["1"] == "nav_msgs/Odometry"
-    # No spawn step (it is turtlesim's), however asked; the operator's full stick is its top
-    # speed; the follow law knows no walls.
+    # No spawn step (it is turtlesim's), however asked; not a turtlesim, so the page's pilot
+    # fits its profile to a robot without the terrain's walls (core/pilot.js, with the limits
+    # above). The profiles come as the protocol has them, whatever the robot.
     assert burger["spawnStep"] is False
-    profiles = burger["control"]["profiles"]
-    assert profiles["default"]["manualLinear"] == 0.22
-    assert (profiles["follow"]["walls"], default["control"]["profiles"]["follow"]["walls"]) == (
-        False,
-        True,
-    )
+    assert (burger["robot"]["turtlesim"], default["robot"]["turtlesim"]) == (False, True)
+    assert burger["control"]["profiles"] == default["control"]["profiles"]
 
 
 def test_an_unknown_robot_is_an_error_on_the_page(server: RunningServer) -> None:

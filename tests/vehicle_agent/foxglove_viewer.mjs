@@ -145,9 +145,9 @@ function finish(error) {
     cameraChain: chain('camera'),
     twistSides: twistSides(),
   };
-  process.stdout.write(JSON.stringify(result) + '\n');
   client.close();
-  process.exit(0);
+  // Exit once the line is out: a pipe takes it in pieces.
+  process.stdout.write(JSON.stringify(result) + '\n', () => process.exit(0));
 }
 
 const timer = setTimeout(() => finish('timed out'), options.timeoutS * 1000);

@@ -14,6 +14,7 @@ import asyncio
 import json
 import shutil
 import subprocess
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -65,13 +66,19 @@ SCHEMAS = {
 }
 
 
-async def view(url: str, timeout_s: float = 10, twists: int = 3, flood: int = 0) -> dict[str, Any]:
-    """What the official client saw (foxglove_viewer.mjs)."""
+async def view(
+    url: str,
+    timeout_s: float = 10,
+    twists: int = 3,
+    flood: int = 0,
+    topics: Sequence[str] = EVERY_TOPIC,
+) -> dict[str, Any]:
+    """What the official client saw (foxglove_viewer.mjs), once every one of ``topics`` came."""
     node = shutil.which("node")
     assert node is not None, "Node.js runs the official Foxglove client"
     options = {
         "url": url,
-        "topics": EVERY_TOPIC,
+        "topics": list(topics),
         "timeoutS": timeout_s,
         "twists": twists,
         "flood": flood,
@@ -92,11 +99,15 @@ async def view(url: str, timeout_s: float = 10, twists: int = 3, flood: int = 0)
     return result
 
 
-def check_view(result: dict[str, Any]) -> None:
-    """Every channel arrived, every message valid, and what they show is consistent."""
+def check_view(
+    result: dict[str, Any], expected: Sequence[str] = EVERY_TOPIC, size: tuple[int, int] = (W, H)
+) -> None:
+    """Every channel expected arrived, every message valid, and what they show is consistent
+    (the camera's ``size``)."""
+    width, height = size
     assert result["error"] is None, result
     topics = result["topics"]
-    for topic in EVERY_TOPIC:
+    for topic in expected:
         assert topics[topic]["messages"] > 0, (topic, topics)
     for topic, entry in topics.items():
         assert entry["problems"] == [], (topic, entry)
@@ -105,11 +116,11 @@ def check_view(result: dict[str, Any]) -> None:
     # Typed channels go as protobuf (Foxglove's own), the recording's as JSON with JSON Schema.
     assert topics[foxglove.IMAGE_TOPIC]["encoding"] == "protobuf"
     assert topics[TWIST]["encoding"] == topics[GOAL]["encoding"] == "json"
-    assert result["imageSizes"] == [f"{W}x{H}"]
+    assert result["imageSizes"] == [f"{width}x{height}"]
     points = result["annotationPoints"]
     assert points
     for point in points:
-        assert 0 <= point.get("x", 0) <= W and 0 <= point.get("y", 0) <= H, point
+        assert 0 <= point.get("x", 0) <= width and 0 <= point.get("y", 0) <= height, point
     assert result["cameraChain"] == ["camera", "base_link", "odom"]
     sides = result["twistSides"]
     assert len(sides) >= 3

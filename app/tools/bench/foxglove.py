@@ -31,7 +31,7 @@ from vehicle_agent import foxglove
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
 from vehicle_agent.foxglove import Address, FoxgloveLive
-from vehicle_agent.turtle import SimTurtle
+from vehicle_agent.robotlink import SimLink
 from vehicle_agent.video import SyntheticVideo
 
 # A goal comes this long after its frame, as from a relay on a quiet link.
@@ -70,7 +70,7 @@ class PilotedAgent:
         self.video = SyntheticVideo(*size, fps=fps, on_frame=self._answer)
         # The onboard law: the camera rides on the robot, so a goal left of centre turns it left.
         config = AgentConfig(server=server_url, robot=robot, profile="onboard", spawn_step=False)
-        self.agent = Agent(config, self.video, SimTurtle(), self.events)
+        self.agent = Agent(config, self.video, SimLink(), self.events)
         self.live = FoxgloveLive(Address("127.0.0.1", 0), robot)
         self.events.listeners += [self.live.on_event, self._count]
 
