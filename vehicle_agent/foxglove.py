@@ -49,7 +49,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, get_args
 
 import av
 import foxglove
@@ -93,20 +93,13 @@ TARGET_COLOUR: Final = (0.0, 1.0, 0.0, 1.0)
 LABEL_BACKGROUND: Final = (0.0, 0.0, 0.0, 0.6)
 NO_FILL: Final = (0.0, 0.0, 0.0, 0.0)
 POINT_DIAMETER_PX: Final = 8.0
-# The typed channels and the SDK's class for each (their schemas are the SDK's own).
-TYPED_CHANNELS: Final[dict[str, type[Any]]] = {
-    ANNOTATIONS_TOPIC: fc.ImageAnnotationsChannel,
-    CALIBRATION_TOPIC: fc.CameraCalibrationChannel,
-    POSE_TOPIC: fc.PoseInFrameChannel,
-    TF_TOPIC: fc.FrameTransformsChannel,
-    LOG_TOPIC: fc.LogChannel,
-}
-TYPED_SCHEMAS: Final[dict[str, foxglove.Schema]] = {
-    ANNOTATIONS_TOPIC: fm.ImageAnnotations.get_schema(),
-    CALIBRATION_TOPIC: fm.CameraCalibration.get_schema(),
-    POSE_TOPIC: fm.PoseInFrame.get_schema(),
-    TF_TOPIC: fm.FrameTransforms.get_schema(),
-    LOG_TOPIC: fm.Log.get_schema(),
+# The typed channels: the SDK's channel and message classes of each (their schemas are the SDK's).
+TYPED_CHANNELS: Final[dict[str, tuple[type[Any], type[Any]]]] = {
+    ANNOTATIONS_TOPIC: (fc.ImageAnnotationsChannel, fm.ImageAnnotations),
+    CALIBRATION_TOPIC: (fc.CameraCalibrationChannel, fm.CameraCalibration),
+    POSE_TOPIC: (fc.PoseInFrameChannel, fm.PoseInFrame),
+    TF_TOPIC: (fc.FrameTransformsChannel, fm.FrameTransforms),
+    LOG_TOPIC: (fc.LogChannel, fm.Log),
 }
 _STAMP: Final = {
     "type": "object",
@@ -119,7 +112,7 @@ HEALTH_SCHEMA: Final[dict[str, Any]] = {
         "timestamp": _STAMP,
         "link": {
             "type": "string",
-            "enum": ["none", "offer", "up", "down"],
+            "enum": ["none", *get_args(ev.LinkState)],
             "description": "the link to the relay",
         },
         "relay": {"type": ["string", "null"]},
@@ -139,9 +132,10 @@ JSON_SCHEMAS: Final[dict[str, dict[str, Any]]] = {
 def recorded_channels() -> list[ExtraChannel]:
     """The channels the flight recorder adds for Foxglove: the typed ones (protobuf, the SDK's
     schemas, as served live) and the health (JSON); the rest it records already."""
+    schemas = {topic: message.get_schema() for topic, (_, message) in TYPED_CHANNELS.items()}
     typed = [
         ExtraChannel(topic, schema.name, schema.encoding, schema.data, "protobuf")
-        for topic, schema in TYPED_SCHEMAS.items()
+        for topic, schema in schemas.items()
     ]
     schema = json.dumps(HEALTH_SCHEMA).encode()
     health = ExtraChannel(HEALTH_TOPIC, HEALTH_SCHEMA["title"], "jsonschema", schema, "json")
@@ -496,7 +490,7 @@ class FoxgloveLive:
         # what viewers cost the loop, measured directly (``autopilot bench --foxglove``).
         self.loop_cpu_s = 0.0
         self._image = fc.CompressedImageChannel(IMAGE_TOPIC, context=self.context)
-        self._typed = {t: cls(t, context=self.context) for t, cls in TYPED_CHANNELS.items()}
+        self._typed = {t: cls(t, context=self.context) for t, (cls, _) in TYPED_CHANNELS.items()}
         self._json = {
             t: foxglove.Channel(t, schema=s, context=self.context) for t, s in JSON_SCHEMAS.items()
         }
