@@ -233,6 +233,13 @@ def test_a_recording_has_the_same_channels_and_an_outside_reader_validates_them(
         assert topics[topic]["messages"] > 0, topic
     for topic, entry in topics.items():
         assert entry["problems"] == [], (topic, entry)
-    # autopilot replay still reads it: its goals and images by frame tag.
+    # autopilot replay still reads it: its goals and images by frame tag, its JSON messages,
+    # and every channel counted.
     assert any(True for _ in recording.events(flight.files))
     assert any(frame is not None for frame, _ in recording.images(flight.files))
+    json_topics = {topic for topic, _, _ in recording.messages(flight.files)}
+    assert foxglove.HEALTH_TOPIC in json_topics and foxglove.POSE_TOPIC not in json_topics
+    counted = recording.summary(flight.files)["channels"]
+    assert {t: c["messages"] for t, c in counted.items()} == {
+        t: e["messages"] for t, e in topics.items() if e["messages"]
+    }
