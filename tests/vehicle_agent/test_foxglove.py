@@ -28,6 +28,7 @@ from app.server.serve import RunningServer
 from app.tools.bench.foxglove import PilotedAgent, stuck_viewer
 from tests.helpers.recordings import record
 from tests.helpers.waiting import eventually
+from vehicle_agent import cli as agent_cli
 from vehicle_agent import foxglove
 from vehicle_agent.foxglove import Address
 from vehicle_agent.recorder import FlightRecorder, RecordSettings
@@ -191,13 +192,9 @@ def test_loopback_is_always_served_and_the_network_only_without_a_secret() -> No
         assert refused is not None and "AUTOPILOT_SECRET" in refused and "127.0.0.1" in refused
 
 
-def test_the_vehicle_refuses_the_network_with_a_secret_set(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
-    from vehicle_agent import cli
-
+def test_the_vehicle_refuses_the_network_with_a_secret_set(tmp_path: Path) -> None:
     parser = argparse.ArgumentParser()
-    cli.add_arguments(parser)
+    agent_cli.add_arguments(parser)
     args = parser.parse_args(["--foxglove", "0.0.0.0:0"])
     with pytest.raises(OSError, match="AUTOPILOT_SECRET"):
         foxglove.start(args, ROBOT, secret_set=True)
