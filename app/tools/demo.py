@@ -28,7 +28,6 @@ from app.arguments import add_vehicle_profile, port
 from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol import tokens
-from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings, describe_settings_error
@@ -42,7 +41,7 @@ from app.server.serve import (
 )
 from app.simulators import SimulatorName
 from app.supervise import Backoff, on_stop_signals, sleep_unless
-from vehicle_agent import recorder
+from vehicle_agent import foxglove, recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
 
 log = logging.getLogger(__name__)
@@ -84,6 +83,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_robot_argument(parser)
     tls.add_arguments(parser)
     recorder.add_arguments(parser)
+    parser.add_argument(
+        "--foxglove-port",
+        type=port,
+        default=foxglove.DEFAULT_PORT,
+        help=f"the agent serves Foxglove on 127.0.0.1 at this port (default"
+        f" {foxglove.DEFAULT_PORT}; docs/foxglove.md)",
+    )
     # The server's metrics (the relay's and the agent's are each their own process's).
     add_metrics_arguments(parser)
 
@@ -133,18 +139,11 @@ def children_for(
         }
 
     return [
-        # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+        # The relay paces its snapshots by the relay profile this vehicle profile pairs with, and
+        # starts with its operation.
         Child(
             "relay",
-            [
-                python,
-                "-m",
-                "app.cli",
-                "relay",
-                *common,
-                "--profile",
-                PROFILES[profile].relay_profile,
-            ],
+            [python, "-m", "app.cli", "relay", *common, "--profile", profile],
             token_env("relay"),
         ),
         Child(
@@ -283,7 +282,7 @@ async def _main(
         settings.secret,
         ca_file,
         args.video,
-        recorder.arguments_of(args),
+        [*recorder.arguments_of(args), "--foxglove", f"127.0.0.1:{args.foxglove_port}"],
         settings.robot,
     )
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
@@ -297,6 +296,7 @@ async def _main(
     sys.stdout.write(
         f"\nwebrtc-autopilot demo is running. Open the client page:\n\n{urls}\n\n"
         f"then press Connect, Join Room and Start Piloting. Ctrl-C stops everything.\n\n"
+        f"Foxglove (Open connection, Foxglove WebSocket): ws://127.0.0.1:{args.foxglove_port}\n\n"
     )
     sys.stdout.flush()
     await asyncio.gather(*tasks)

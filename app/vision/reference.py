@@ -15,6 +15,7 @@ from cv2.typing import MatLike
 
 from app.protocol.relay_profiles import PROFILES, Profile
 from app.vision import blazeface, window
+from app.vision.lock import look_rect
 from app.vision.spec import (
     CASCADE_DIR,
     MODEL_DIR,
@@ -325,3 +326,18 @@ def search(
     if isinstance(op, DnnOperation):
         return _search_dnn(op.params_for(profile), rgba, region)
     return _search_cascade(op.params_for(profile), rgba, region)
+
+
+def look(rgba: Rgba, box: window.Box, bins: tuple[int, int]) -> list[float]:
+    """The look of ``box`` in an RGBA frame, as the relay's worker takes it (``lookIn``): the
+    hue × saturation histogram of the pixels under it (:func:`app.vision.lock.look_rect`) with
+    ``bins`` bins each way, of OpenCV's 8-bit HSV, normalised to sum 1 (all 0 for no pixels)."""
+    height, width = rgba.shape[:2]
+    x, y, w, h = look_rect(box, width, height)
+    if w == 0 or h == 0:
+        return [0.0] * (bins[0] * bins[1])
+    rgb = cv2.cvtColor(np.ascontiguousarray(rgba[y : y + h, x : x + w]), cv2.COLOR_RGBA2RGB)
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    hist = cv2.calcHist([hsv], [0, 1], None, list(bins), [0, 180, 0, 256]).flatten()
+    total = float(hist.sum())
+    return [float(v) / total for v in hist]

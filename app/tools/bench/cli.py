@@ -45,6 +45,8 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 # The follow run spans three cycles of the synthetic face's path (20 s each).
 # bench --recorder: seconds per run (with and without recording).
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
+# bench --foxglove: seconds in all (both phases, every round).
+FOXGLOVE_QUICK_S, FOXGLOVE_FULL_S = 18.0, 60.0
 # bench --relay-cost: seconds measured.
 RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
 # bench --faces --quick: photos of the set.
@@ -96,6 +98,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="measure the flight recorder's cost instead: the agent's CPU and latency without"
         " and with --record",
+    )
+    parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="measure instead whether a Foxglove viewer that never reads slows the agent: goal"
+        " → Twist without and with one, alternating in one run (foxglove.md)",
     )
     parser.add_argument(
         "--relay-cost",
@@ -154,6 +162,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " with its own camera over the real stack (onboard.md)",
     )
     parser.add_argument(
+        "--ops",
+        metavar="OP[,OP...]",
+        help="with --onboard: the operations to follow the walker with, one walk each, side by"
+        " side in one report (default: face_small, and face_dnn when the relay offers it)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
     )
     parser.add_argument(
@@ -178,6 +192,15 @@ def run(args: argparse.Namespace) -> int:
     if args.photos is not None and not args.faces:
         log.error("--photos goes with --faces")
         return 2
+    if args.ops is not None and not args.onboard:
+        log.error("--ops goes with --onboard")
+        return 2
+    if args.onboard:
+        try:
+            args.ops = ",".join(_onboard_ops(args.ops))
+        except ValueError as exc:
+            log.error("%s", exc)
+            return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
@@ -186,6 +209,8 @@ def run(args: argparse.Namespace) -> int:
         return _field(args)
     if args.camera:
         return _camera(args)
+    if args.foxglove:  # no WebRTC: loopback sockets only
+        return asyncio.run(_foxglove(args))
     if args.faces:
         return asyncio.run(_faces(args))
     if _can_enter_netns():
@@ -317,7 +342,7 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     if args.opencv_builds:
         argv.append("--opencv-builds")
     if args.onboard:
-        argv.append("--onboard")
+        argv += ["--onboard", "--ops", args.ops]
     if args.frames is not None:
         argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -327,9 +352,29 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
 
 
+def _onboard_ops(asked: str | None) -> list[str]:
+    """The operations ``--ops`` names (comma-separated), each one the relay offers; by default
+    those of :data:`onboard.COMPARED` it offers. ValueError names an unknown one."""
+    from app.resources import OPERATIONS_SPEC
+    from app.tools.bench.onboard import COMPARED
+    from app.vision.spec import load_spec
+
+    offered = [op.id for op in load_spec(OPERATIONS_SPEC).operations]
+    if asked is None:
+        return [op for op in COMPARED if op in offered]
+    ops = [op.strip() for op in asked.split(",") if op.strip()]
+    unknown = [op for op in ops if op not in offered]
+    if unknown or not ops:
+        raise ValueError(
+            f"--ops {asked!r}: {', '.join(unknown) or 'no operation'} is not one the relay offers"
+            f" ({', '.join(offered)})"
+        )
+    return list(dict.fromkeys(ops))
+
+
 async def _onboard(args: argparse.Namespace) -> int:
-    """The onboard law over the simulated arena: print the figures, write onboard.md; 1 when a
-    figure could not be measured."""
+    """The onboard law over the simulated arena, one walk per operation of ``--ops``: print
+    the figures, write onboard.md; 1 when a figure could not be measured."""
     from playwright.async_api import async_playwright
 
     from app.chromium import launch_options
@@ -346,7 +391,10 @@ async def _onboard(args: argparse.Namespace) -> int:
             browser = await playwright.chromium.launch(**launch_options())
             try:
                 with tempfile.TemporaryDirectory(prefix="autopilot-bench-onboard-") as tmp:
-                    found = await onboard.run(browser, server.url, seconds, args.fps, Path(tmp))
+                    runs = {
+                        op: await onboard.run(browser, server.url, seconds, args.fps, Path(tmp), op)
+                        for op in args.ops.split(",")
+                    }
             finally:
                 await browser.close()
     finally:
@@ -356,11 +404,15 @@ async def _onboard(args: argparse.Namespace) -> int:
         "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
-    log.info("onboard report: %s", onboard.write_report(args.out, found, run_info))
+    log.info("onboard report: %s", onboard.write_report(args.out, runs, run_info))
     if args.json:
-        shown = {key: found.get(key) for key in onboard.FIGURE_KEYS}
-        sys.stdout.write(json.dumps(shown | {"problems": found["problems"]}) + "\n")
-    return 1 if found["problems"] else 0
+        shown = {
+            op: {key: found.get(key) for key in onboard.FIGURE_KEYS}
+            | {"problems": found["problems"]}
+            for op, found in runs.items()
+        }
+        sys.stdout.write(json.dumps(shown) + "\n")
+    return 1 if any(found["problems"] for found in runs.values()) else 0
 
 
 async def _recorder(args: argparse.Namespace) -> int:
@@ -387,6 +439,25 @@ async def _recorder(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
     return 1 if figures["problems"] or "agent_cpu_increase_pct" not in figures else 0
+
+
+async def _foxglove(args: argparse.Namespace) -> int:
+    """A Foxglove viewer that never reads, and goal → Twist: print the figures, write
+    foxglove.md; 1 if not measured."""
+    from app.server.serve import start_in_thread
+    from app.tools.bench import foxglove
+
+    seconds = args.seconds or (FOXGLOVE_QUICK_S if args.quick else FOXGLOVE_FULL_S)
+    server = start_in_thread()
+    try:
+        figures = await foxglove.run(server.url, seconds, args.fps)
+    finally:
+        server.stop()
+    path = foxglove.write_report(args.out, figures)
+    log.info("Foxglove report: %s", path)
+    if args.json:
+        sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
+    return 0 if "p50_increase_pct" in figures else 1
 
 
 async def _relay_cost(args: argparse.Namespace) -> int:
@@ -634,7 +705,7 @@ def _command(args: argparse.Namespace) -> str:
     if args.baseline:
         parts.append(f"--baseline --rounds {args.rounds}")
     if args.onboard:
-        parts.append("--onboard")
+        parts.append(f"--onboard --ops {args.ops}")
     if args.opencv_builds:
         parts.append("--opencv-builds")
     if args.faces:
