@@ -85,3 +85,35 @@ def test_glass_to_glass_pairs_frames_either_way(server: RunningServer, browser: 
     assert found["emptySummary"] is None
     assert found["bounded"] == [50]
     assert found["quantiles"] == [2.5, pytest.approx(4.8), None]
+
+
+STALE = """(t0) => {
+  const { GlassToGlass } = window['glass-to-glass'];
+  const g = new GlassToGlass();
+  const out = { before: g.stale(t0) };
+  g.captured(1, t0);
+  g.presented(1, t0 + 40);
+  // Shown at t0 + 40: live for 2 s after, stale once no frame has been measured for longer.
+  out.live = [g.stale(t0 + 40), g.stale(t0 + 2040)];
+  out.stale = g.stale(t0 + 2041);
+  // A frame timed but never shown measures nothing: the figure stays stale.
+  g.captured(2, t0 + 2100);
+  out.timedOnly = g.stale(t0 + 2200);
+  g.presented(2, t0 + 2150);
+  out.again = g.stale(t0 + 2200);
+  return out;
+}"""
+
+
+def test_the_figure_is_stale_two_seconds_after_the_last_frame_measured(
+    server: RunningServer, browser: Browser
+) -> None:
+    with module_page(server, browser, "core/glass-to-glass") as page:
+        found: dict[str, Any] = page.evaluate(STALE, T0)
+    assert found == {
+        "before": True,
+        "live": [False, False],
+        "stale": True,
+        "timedOnly": True,
+        "again": False,
+    }

@@ -19,6 +19,11 @@ export const WAITING = 300;
  * numbers its frames from 0 again), and make no sample.
  */
 export const SAME_FRAME_WITHIN_MS = 10_000;
+/**
+ * The figure is stale once no frame has been measured for this long (the camera stopped, or
+ * the link): it speaks of frames that are no longer coming, so it is not shown as live.
+ */
+export const STALE_AFTER_MS = 2000;
 
 /** The `q`-quantile (0..1) of `values`, interpolated between the nearest ranks; null if none. */
 export function quantile(values, q) {
@@ -42,6 +47,7 @@ export class GlassToGlass {
     /** Frames measured so far. */
     this.count = 0;
     this.last = null;
+    this.lastShownAt = null; // when the last frame measured was shown, Unix ms (client clock)
   }
 
   /** The vehicle captured frame number `frame` at `tMs`. */
@@ -82,9 +88,15 @@ export class GlassToGlass {
     };
   }
 
+  /** True when no frame has been measured for STALE_AFTER_MS before `nowMs` (or none ever). */
+  stale(nowMs) {
+    return this.lastShownAt === null || nowMs - this.lastShownAt > STALE_AFTER_MS;
+  }
+
   #measure(capturedAt, shownAt) {
     const ms = shownAt - capturedAt;
     if (Math.abs(ms) > SAME_FRAME_WITHIN_MS) return;
+    this.lastShownAt = Math.max(this.lastShownAt ?? shownAt, shownAt);
     this.count += 1;
     this.last = ms;
     this.samples.push(ms);
