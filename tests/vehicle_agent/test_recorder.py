@@ -24,6 +24,7 @@ from app.protocol import events as ev
 from app.protocol import frametag
 from app.recording import EVENT_CHANNELS, IMAGE_SCHEMA, IMAGE_TOPIC
 from tests.helpers.agent import Vehicle
+from tests.helpers.recordings import record_for
 from vehicle_agent import cli as agent_cli
 from vehicle_agent import recorder
 from vehicle_agent.control import PROFILES
@@ -274,13 +275,7 @@ async def _record_with_goals(settings: RecordSettings, seconds: float) -> Flight
         if sent.frame % 2 == 0:
             loop.call_later(0.06, lambda: events.emit(_goal(sent.frame, t=sent.t + 0.06)))
 
-    video = SyntheticVideo(fps=FPS, on_frame=goal_later)
-    camera = asyncio.create_task(recorder.record_video(video))
-    await asyncio.sleep(seconds)
-    camera.cancel()
-    video.stop()
-    await recorder.close()
-    return recorder
+    return await record_for(recorder, SyntheticVideo(fps=FPS, on_frame=goal_later), seconds)
 
 
 def test_the_images_kept_are_the_frames_goals_were_sent_for(tmp_path: Path) -> None:

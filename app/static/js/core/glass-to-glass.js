@@ -9,21 +9,21 @@
 import { SampleRing } from './relay-stats.js';
 
 /** Samples kept for a reader that polls (the bench): a minute at 30 frames/s. */
-export const KEPT_SAMPLES = 2000;
+const KEPT_SAMPLES = 2000;
 /** The live figure is the median and 95th percentile of this many latest samples. */
-export const RECENT_SAMPLES = 90;
+const RECENT_SAMPLES = 90;
 /** Frames waiting for their other half: ten seconds at 30 frames/s. */
-export const WAITING = 300;
+const WAITING = 300;
 /**
  * A capture and a presentation this far apart are not the same frame (a vehicle that restarted
  * numbers its frames from 0 again), and make no sample.
  */
-export const SAME_FRAME_WITHIN_MS = 10_000;
+const SAME_FRAME_WITHIN_MS = 10_000;
 /**
  * The figure is stale once no frame has been measured for this long (the camera stopped, or
  * the link): it speaks of frames that are no longer coming, so it is not shown as live.
  */
-export const STALE_AFTER_MS = 2000;
+const STALE_AFTER_MS = 2000;
 
 /** The `q`-quantile (0..1) of `values`, interpolated between the nearest ranks; null if none. */
 export function quantile(values, q) {

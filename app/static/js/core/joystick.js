@@ -5,12 +5,12 @@
 // e2e/test_joystick_js.py.
 
 /** An axis nearer the centre than this reads 0: a resting finger or stick wobbles. */
-export const STICK_DEADZONE = 0.1;
+const STICK_DEADZONE = 0.1;
 /**
  * The pad's commands move in steps of 1/STICK_STEPS: a finger resting on glass jitters by a
  * pixel or two, and every change of command is sent at once.
  */
-export const STICK_STEPS = 20;
+const STICK_STEPS = 20;
 
 /** One stick axis as a command axis: 0 within the dead zone, held to [−1, 1] beyond. */
 export function stickAxis(value) {

@@ -39,7 +39,7 @@ export function videoCodecs(sdp) {
 }
 
 /** Whether two codecs (of `videoCodecs`) are the same encoding: name, clock rate, parameters. */
-export function sameCodec(a, b) {
+function sameCodec(a, b) {
   return (
     a.mimeType.toLowerCase() === b.mimeType.toLowerCase() &&
     a.clockRate === b.clockRate &&
@@ -48,7 +48,7 @@ export function sameCodec(a, b) {
 }
 
 /** The codec a sender of this SDP's video encodes with: its first one that is not a carrier. */
-export function sentCodec(codecs) {
+function sentCodec(codecs) {
   return codecs.find((codec) => !CARRIERS.has(codec.mimeType.slice(6).toLowerCase())) ?? null;
 }
 

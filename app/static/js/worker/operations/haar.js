@@ -38,19 +38,19 @@ export function scaleBox([x, y, w, h], factor) {
 }
 
 /** Boxes in the order Python's list.sort() gives tuples. */
-export function sortBoxes(boxes) {
+function sortBoxes(boxes) {
   return boxes.sort((a, b) => a[0] - b[0] || a[1] - b[1] || a[2] - b[2] || a[3] - b[3]);
 }
 
 /** The largest box (first of equal areas), or null. */
-export function largestBox(boxes) {
+function largestBox(boxes) {
   let best = null;
   for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
   return best;
 }
 
 /** The centre {x, y} of box [x, y, w, h], or null for none. */
-export function centreOf(box) {
+function centreOf(box) {
   return box === null ? null : { x: box[0] + box[2] / 2, y: box[1] + box[3] / 2 };
 }
 
