@@ -26,7 +26,7 @@ const SAME_FRAME_WITHIN_MS = 10_000;
 const STALE_AFTER_MS = 2000;
 
 /** The `q`-quantile (0..1) of `values`, interpolated between the nearest ranks; null if none. */
-export function quantile(values, q) {
+function quantile(values, q) {
   if (values.length === 0) return null;
   const sorted = [...values].sort((a, b) => a - b);
   const at = (sorted.length - 1) * q;

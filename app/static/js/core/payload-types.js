@@ -76,7 +76,7 @@ export function passesThrough(pt, vehicle, client) {
 }
 
 /** `sdp` with payload types `a` and `b` exchanged everywhere in its first video section. */
-export function swapPayloadTypes(sdp, a, b) {
+function swapPayloadTypes(sdp, a, b) {
   const eol = sdp.includes('\r\n') ? '\r\n' : '\n';
   const lines = sdp.split(/\r?\n/);
   const section = videoSection(lines);
