@@ -15,7 +15,7 @@ from typing import Literal
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.protocol.relay_profiles import Profile as RelayProfile
 from app.protocol.robot import Robot
-from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
+from app.protocol.turtlesim_world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).

@@ -147,7 +147,7 @@ class PageProtocol:
 
 @dataclass(frozen=True)
 class BillboardMark:
-    """A billboard of the simulated room as the client's map draws it: a picture ``width``
+    """A billboard of the simulated arena as the client's map draws it: a picture ``width``
     metres wide where it starts (``x``, ``y``, facing ``yaw``), and the closed path it walks
     (empty when it stands still)."""
 
@@ -161,8 +161,8 @@ class BillboardMark:
 
 
 @dataclass(frozen=True)
-class RoomMap:
-    """The simulated room, for the client's map, when the server simulates one: its size, the
+class ArenaMap:
+    """The simulated arena, for the client's map, when the server simulates one: its size, the
     robot's radius and camera's field of view (the wedge drawn from its pose), the billboards,
     and where to read their places now (``GET state_path?room=R``, every ``state_period_ms``)."""
 
@@ -177,7 +177,7 @@ class RoomMap:
 
 @dataclass(frozen=True)
 class PlacedMark:
-    """Where one billboard stands now (``GET /room/state``)."""
+    """Where one billboard stands now (``GET /arena/state``)."""
 
     name: str
     x: float
@@ -186,8 +186,8 @@ class PlacedMark:
 
 
 @dataclass(frozen=True)
-class RoomState:
-    """What ``GET /room/state`` answers: the room's time (s) and its billboards' places."""
+class ArenaState:
+    """What ``GET /arena/state`` answers: the arena's time (s) and its billboards' places."""
 
     t: float
     billboards: tuple[PlacedMark, ...]
@@ -235,8 +235,8 @@ class PageConfig:
     # The fallback when the robot's rosapi cannot name its types.
     ros: RosSetting
     ros_types: RosConfig
-    # The simulated room the client draws instead of turtlesim's terrain; None: no room.
-    room_map: RoomMap | None
+    # The simulated arena the client draws instead of turtlesim's terrain; None: no arena.
+    arena_map: ArenaMap | None
     robot: RobotConfig
     # Why the robot asked for (``?robot=``) cannot be driven, or None.
     robot_error: str | None

@@ -18,9 +18,6 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.room import ROOM
-from app.diffdrive.roommap import room_map
 from app.protocol.control import (
     DEFAULT_PROFILE,
     PROFILES,
@@ -31,7 +28,6 @@ from app.protocol.control import (
 from app.protocol.page import (
     BaseConfig,
     PageConfig,
-    RoomMap,
     page_protocol,
     robot_config,
     to_json,
@@ -40,7 +36,6 @@ from app.protocol.robot import DEFAULT_ROBOT, PRESETS, Robot
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import AUTO, ROS_CONFIG, ROS_SETTINGS
 from app.resources import TEMPLATES_DIR
-from app.server.config import Settings
 from app.server.tls import insecure_rosbridge
 
 router = APIRouter()
@@ -82,20 +77,14 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         rosbridge_error=insecure_rosbridge(rosbridge, request.url.scheme),
         ros=ros if ros in ROS_SETTINGS else AUTO,
         ros_types=ROS_CONFIG,
-        room_map=_room_map(request.app.state.settings),
+        # The simulated arena for the client's map, when the server simulates one.
+        arena_map=request.app.state.simulator.simulation.arena_map(),
         robot=robot_config(robot),
         robot_error=robot_error,
         protocol=page_protocol(),
     )
     converted: dict[str, Any] = to_json(config)
     return converted
-
-
-def _room_map(settings: Settings) -> RoomMap | None:
-    """The simulated room for the client's map, when the server simulates one."""
-    if settings.robot != "diffdrive":
-        return None
-    return room_map(ROOM, CAMERA_HFOV)
 
 
 def base_config() -> dict[str, Any]:

@@ -31,7 +31,7 @@ from app.protocol import tokens
 from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
-from app.server.config import Settings, SimulatedRobot, describe_settings_error
+from app.server.config import Settings, describe_settings_error
 from app.server.serve import (
     ANY_ADDRESS,
     RunningServer,
@@ -40,6 +40,7 @@ from app.server.serve import (
     settings_from,
     start_in_thread,
 )
+from app.simulators import SimulatorName
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
@@ -106,7 +107,7 @@ def children_for(
     ca_file: Path | None = None,
     video: str = DEMO_VIDEOS[0],
     vehicle_args: Sequence[str] = (),
-    robot: SimulatedRobot = "turtlesim",
+    robot: SimulatorName = "turtlesim",
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the

@@ -27,7 +27,7 @@ from app.chromium import launch_options
 from app.protocol import events as ev
 from app.recording import EVENT_CHANNELS, IMAGE_TOPIC
 from app.relay import cli as relay_cli
-from app.server.config import SimulatedRobot
+from app.simulators import SimulatorName
 from app.tools.demo import children_for
 from tests.helpers.demo import REPO, running_demo, wait_for_line
 from tests.helpers.processes import descendants, wait_all_gone
@@ -179,7 +179,7 @@ def test_demo_two_faces_video_reaches_the_agent() -> None:
 
 
 @pytest.mark.parametrize("robot", ["turtlesim", "diffdrive"])
-def test_demo_agent_drives_the_servers_robot(robot: SimulatedRobot) -> None:
+def test_demo_agent_drives_the_servers_robot(robot: SimulatorName) -> None:
     _, vehicle = children_for("http://127.0.0.1:8000", "r", "default", robot=robot)
     parser = argparse.ArgumentParser()
     agent_cli.add_arguments(parser)

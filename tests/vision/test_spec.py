@@ -48,8 +48,8 @@ def test_shipped_spec_has_the_issue_operations() -> None:
 
 
 def test_each_operation_declares_the_real_height_of_what_it_finds() -> None:
-    # A face's box as the simulated room's faces are scaled (docs/simulated-room.md), a flame's
-    # as the room's flame stands, a standing person's.
+    # A face's box as the simulated arena's faces are scaled (docs/simulated-arena.md), a flame's
+    # as the arena's flame stands, a standing person's.
     heights = {o.id: o.target_height_m for o in load_spec(SPEC).operations}
     assert heights == {"face": 0.24, "face_small": 0.24, "body": 1.7, "fire": 0.5}
 

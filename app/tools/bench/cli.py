@@ -129,7 +129,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--camera",
         action="store_true",
         help="measure the simulated robot's camera instead: render and JPEG encode per frame,"
-        " the room against the empty room (camera.md)",
+        " the arena against the empty arena (camera.md)",
     )
     parser.add_argument(
         "--onboard",
@@ -265,7 +265,7 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
 
 
 async def _onboard(args: argparse.Namespace) -> int:
-    """The onboard law over the simulated room: print the figures, write onboard.md; 1 when a
+    """The onboard law over the simulated arena: print the figures, write onboard.md; 1 when a
     figure could not be measured."""
     from playwright.async_api import async_playwright
 

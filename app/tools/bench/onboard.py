@@ -1,6 +1,6 @@
 """``autopilot bench --onboard``: a robot that carries its camera follows the walker.
 
-The real stack over the simulated room (docs/simulated-room.md): the server simulating the
+The real stack over the simulated arena (docs/simulated-arena.md): the server simulating the
 diffdrive robot (``--robot diffdrive``: its camera rendered from its own pose and published on
 its camera topic through the server's ``/rosbridge``), the relay page in headless Chromium, the
 Python agent as it would run on a robot (``--robot diffdrive --profile onboard --video
@@ -12,8 +12,8 @@ then, as that person would, the client clicks the walker again once it is in vie
 in the report).
 
 The truth: the robot's odometry as the agent received it (its event log's pose reports) and
-where the walker stood at the same instant (the room's time, read from ``GET /room/state``
-every :data:`ROOM_POLL_S`, and the walker's path): the walker's true bearing from the camera's
+where the walker stood at the same instant (the arena's time, read from ``GET /arena/state``
+every :data:`ARENA_POLL_S`, and the walker's path): the walker's true bearing from the camera's
 axis and its distance at each pose (``onboard_stats``). The figures:
 
 - ``bearing_err_deg_p50`` / ``_p95``: the walker's bearing off the axis while in view, after
@@ -43,8 +43,8 @@ from typing import TYPE_CHECKING, Any, Final
 import httpx
 from playwright.async_api import Error as PlaywrightError
 
+from app.diffdrive.arena import ARENA, FACE_CENTRE_HEIGHT_M
 from app.diffdrive.robot import CAMERA_HEIGHT_M
-from app.diffdrive.room import FACE_CENTRE_HEIGHT_M, ROOM
 from app.protocol.control import PROFILES
 from app.protocol.events import FrameSent, PoseReport, SearchEnded, SearchStarted, TwistSent
 from app.protocol.robot import PRESETS
@@ -71,12 +71,12 @@ PROFILE: Final = "onboard"
 ROBOT: Final = PRESETS["diffdrive"]
 # One round of the walker (28.9 s) and a little at --quick, three rounds at full length.
 QUICK_S, FULL_S = 35.0, 90.0
-# The operation that finds the walker wherever it goes in the room: `face` finds a face up to
+# The operation that finds the walker wherever it goes in the arena: `face` finds a face up to
 # about 2 m away, and the walker's round takes it 3 m from a robot that follows it
-# (docs/simulated-room.md); `face_small` finds it at 4 m.
+# (docs/simulated-arena.md); `face_small` finds it at 4 m.
 OPERATION: Final = "face_small"
 SWITCH_TIMEOUT_S: Final = 30.0
-ROOM_POLL_S: Final = 0.1
+ARENA_POLL_S: Final = 0.1
 RELOCK_POLL_S: Final = 0.5
 RELOCK_CLICK_TIMEOUT_S: Final = 2.0
 LOCKED_TIMEOUT_S: Final = 30.0
@@ -102,13 +102,13 @@ FIGURE_KEYS: Final = (
 
 
 @dataclass
-class RoomClock:
-    """The room's time against this machine's monotonic clock, from ``GET /room/state``."""
+class ArenaClock:
+    """The arena's time against this machine's monotonic clock, from ``GET /arena/state``."""
 
     readings: list[tuple[float, float]] = field(default_factory=list)
 
-    def room_time(self, t: float) -> float | None:
-        """The room's time at monotonic ``t``, between two readings (None outside them)."""
+    def arena_time(self, t: float) -> float | None:
+        """The arena's time at monotonic ``t``, between two readings (None outside them)."""
         pairs = zip(self.readings, self.readings[1:], strict=False)
         for (t0, r0), (t1, r1) in pairs:
             if t0 <= t <= t1:
@@ -116,36 +116,36 @@ class RoomClock:
         return None
 
     def now(self) -> float | None:
-        """The room's time at the latest reading, None before any."""
+        """The arena's time at the latest reading, None before any."""
         return self.readings[-1][1] if self.readings else None
 
     def walker(self) -> Callable[[float], tuple[float, float] | None]:
-        """Where the walker stood at a monotonic time (None when the room's time is unknown)."""
-        walk = ROOM.billboard("walker").walk
+        """Where the walker stood at a monotonic time (None when the arena's time is unknown)."""
+        walk = ARENA.billboard("walker").walk
         if walk is None:
-            raise ValueError("the room's walker does not walk")
+            raise ValueError("the arena's walker does not walk")
 
         def at(t: float) -> tuple[float, float] | None:
-            room_t = self.room_time(t)
-            return None if room_t is None else walk.at(room_t)
+            arena_t = self.arena_time(t)
+            return None if arena_t is None else walk.at(arena_t)
 
         return at
 
 
-async def poll_room(server_url: str, room: str, clock: RoomClock, stop: asyncio.Event) -> None:
-    """Read the room's time every :data:`ROOM_POLL_S` until ``stop``, each reading stamped at
-    the middle of its request."""
+async def poll_arena(server_url: str, room: str, clock: ArenaClock, stop: asyncio.Event) -> None:
+    """Read the arena's time in ``room`` every :data:`ARENA_POLL_S` until ``stop``, each reading
+    stamped at the middle of its request."""
     # Ten requests a second: httpx's log line for each would drown the run's.
     logging.getLogger("httpx").setLevel(logging.WARNING)
     async with httpx.AsyncClient(base_url=server_url, timeout=5.0) as client:
         while not stop.is_set():
             before = time.monotonic()
-            answer = await client.get("/room/state", params={"room": room})
+            answer = await client.get("/arena/state", params={"room": room})
             after = time.monotonic()
             answer.raise_for_status()
             clock.readings.append(((before + after) / 2, float(answer.json()["t"])))
             try:
-                await asyncio.wait_for(stop.wait(), ROOM_POLL_S)
+                await asyncio.wait_for(stop.wait(), ARENA_POLL_S)
             except TimeoutError:
                 pass
 
@@ -158,13 +158,13 @@ async def run(
     workdir: Path,
     video: str | None = None,
 ) -> dict[str, Any]:
-    """Run the stack over the room for ``seconds``: the figures, the track the report plots,
+    """Run the stack over the arena for ``seconds``: the figures, the track the report plots,
     and the reason for each figure missing. ``video``: the agent's ``--video`` (default: the
     robot's camera topic)."""
     if ROBOT.camera is None:
         raise ValueError("the diffdrive robot has no camera")
     room = f"bench-{PROFILE}"
-    clock = RoomClock()
+    clock = ArenaClock()
     stop = asyncio.Event()
     pollers: list[asyncio.Task[None]] = []
     stop_relocking = asyncio.Event()
@@ -172,7 +172,7 @@ async def run(
     relocks: list[float] = []
 
     async def lock_the_walker(relay: Page, client: Page) -> None:
-        pollers.append(asyncio.create_task(poll_room(server_url, room, clock, stop)))
+        pollers.append(asyncio.create_task(poll_arena(server_url, room, clock, stop)))
         await _set_operation(relay, client)
         await _lock_on_the_target(relay, client)
         relocker.append(asyncio.create_task(_keep_locked(client, clock, stop_relocking, relocks)))
@@ -211,11 +211,11 @@ async def run(
 
 
 async def _keep_locked(
-    client: Page, clock: RoomClock, stop: asyncio.Event, relocks: list[float]
+    client: Page, clock: ArenaClock, stop: asyncio.Event, relocks: list[float]
 ) -> None:
     """As a person watching the client would: when the lock has let the walker go (unseen for
     longer than the lock's release time) and the walker is in view again, click it."""
-    walk = ROOM.billboard("walker").walk
+    walk = ARENA.billboard("walker").walk
     assert walk is not None
     while not stop.is_set():
         try:
@@ -227,10 +227,10 @@ async def _keep_locked(
             "() => ({ lock: window.autopilotStatus.lock?.state ?? 'none',"
             " pose: window.autopilotStatus.pose })"
         )
-        room_t = clock.now()
-        if status["lock"] != "none" or status["pose"] is None or room_t is None:
+        arena_t = clock.now()
+        if status["lock"] != "none" or status["pose"] is None or arena_t is None:
             continue
-        pixel = walker_pixel(status["pose"], walk.at(room_t))
+        pixel = walker_pixel(status["pose"], walk.at(arena_t))
         if pixel is None:
             continue
         video = client.get_by_test_id("video")
