@@ -33,8 +33,8 @@ from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
 from vehicle_agent.pilot import Pilot
+from vehicle_agent.robotlink import RobotLink, RobotLinkError
 from vehicle_agent.session import SignalingSession
-from vehicle_agent.turtle import Turtle, TurtleError
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +75,7 @@ class Agent:
         self,
         config: AgentConfig,
         video: MediaStreamTrack,
-        turtle: Turtle,
+        turtle: RobotLink,
         events: EventLog | None = None,
     ) -> None:
         if config.profile not in PROFILES:
@@ -104,9 +104,8 @@ class Agent:
             tls=config.tls,
             ice_servers=config.ice_servers,
         )
-        # Who proves the session's token beside the turtle (the ROS camera's connection).
-        self.token_renewed = self.session.token_renewed
-        self.token_renewed.append(turtle.renew)
+        # The robot's rosbridge connection (the camera's too) proves each renewed token.
+        self.session.token_renewed.append(turtle.renew)
         self.logged_in = self.session.logged_in
         self._last_telemetry = 0.0
         # The camera's tagged frames (its frame_sent events), batched for the relay's clients.
@@ -218,7 +217,7 @@ class Agent:
         pose = await self._first_pose
         try:
             await self.turtle.teleport(pose.x, pose.y, SPAWN_THETA)
-        except TurtleError as exc:
+        except RobotLinkError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
             self.events.emit(ev.SpawnStep(ok=False, reason=str(exc), t=time.monotonic()))

@@ -2,7 +2,7 @@
 room, each room's tokens reaching only its own, and the camera's JPEG frames flowing.
 
 roslibpy runs Twisted's reactor in a daemon thread that is started once per process and left
-running (see tests/turtlesim/test_rosbridge_roslibpy.py); every client here shares it.
+running (see tests/rosbridge/test_roslibpy.py); every client here shares it.
 """
 
 from __future__ import annotations

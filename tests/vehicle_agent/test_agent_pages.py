@@ -36,8 +36,8 @@ from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import pixel_to_terrain
 from vehicle_agent.events import EventLog
+from vehicle_agent.robotlink import SimLink
 from vehicle_agent.signaling import LoginRefused
-from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 # One Chromium for the module's client pages (tests/conftest.py), on the module's event loop
@@ -70,7 +70,7 @@ class Scene:
     def __init__(
         self,
         agent: Agent,
-        turtle: SimTurtle,
+        turtle: SimLink,
         path: FixedPath,
         relay: RelayService,
         client: Page,
@@ -117,7 +117,7 @@ async def scene(
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
-    turtle = SimTurtle()
+    turtle = SimLink()
     agent = Agent(
         AgentConfig(server=server.url, profile=profile, robot=robot),
         SyntheticVideo(W, H, fps=15, path=path),
@@ -422,7 +422,7 @@ async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted
         second = Agent(
             AgentConfig(server=server.url, name="vehicle-2"),
             SyntheticVideo(W, H, fps=15, path=FixedPath(0.8, 0.42)),
-            SimTurtle(),
+            SimLink(),
             second_log,
         )
         second_task = asyncio.create_task(second.run())

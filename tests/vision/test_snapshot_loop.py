@@ -185,6 +185,50 @@ LOCK_STEPS = """async ({ frames, steps, profile }) => {
 }""" % (WIDTH, HEIGHT)  # noqa: UP031 -- the JS template has braces of its own
 
 
+# An analyzer whose snapshots the test finishes by hand: the loop is stopped while one is being
+# analysed, then it comes back with a target. A snapshot finished while running is the control.
+STOP_IN_FLIGHT = """async () => {
+  const { SnapshotLoop } = await import('/static/js/core/snapshot-loop.js');
+  let finish = null;
+  const analyzer = {
+    analyze: () => new Promise((resolve) => { finish = resolve; }),
+    lockAt: async () => ({ locked: false, state: 'none', box: null, reason: null }),
+    unlock: async () => ({ released: false }),
+  };
+  const found = { op: 'face', target: { x: 320, y: 240 }, targetBox: null, frame: 7, w: 640,
+    h: 480, boxes: [[300, 220, 40, 40]], candidates: [], ms: 1, workMs: 1,
+    lock: { state: 'none', box: null, changed: null, reason: null } };
+  const sent = [];
+  const emitted = { goal: [], detections: [] };
+  const loop = new SnapshotLoop({ analyzer, profile: 'default', op: 'face',
+    sendGoal: (goal) => { sent.push(goal); return true; } });
+  for (const type of Object.keys(emitted)) {
+    loop.addEventListener(type, (event) => emitted[type].push(event.detail));
+  }
+  const frame = () => ({ width: 1, height: 1, data: new Uint8ClampedArray(4) });
+  loop.start();
+  let pending = loop.frame(frame());
+  finish(found);
+  const running = await pending;
+  pending = loop.frame(frame());
+  const busy = loop.busy;
+  loop.stop();
+  finish(found);
+  const stopped = await pending;
+  return { running: running && running.goal.seq, busy, stopped, goals: sent.length,
+           emitted: [emitted.goal.length, emitted.detections.length], after: loop.busy };
+}"""
+
+
+def test_a_snapshot_in_flight_when_the_loop_stops_sends_no_goal(page: Page) -> None:
+    got = page.evaluate(STOP_IN_FLIGHT)
+    # The control: the same answer while running is goal 1, sent and told.
+    assert got["running"] == 1
+    # Stopped mid-analysis: the answer comes back with a target and is dropped whole.
+    assert got["busy"] is True and got["stopped"] is None
+    assert got["goals"] == 1 and got["emitted"] == [1, 1] and got["after"] is False
+
+
 def test_a_locked_face_that_jumped_is_found_by_the_whole_frame_search(page: Page) -> None:
     # The face is clicked, then shows up far from where it was (beyond the lock's reach: a
     # person who walked behind something and out the other side). Near it is looked for first,
