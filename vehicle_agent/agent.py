@@ -69,13 +69,14 @@ class AgentConfig:
 
 
 class Agent:
-    """The Python vehicle: streams ``video`` to the relay and drives ``turtle`` from goals."""
+    """The Python vehicle: streams ``video`` to the relay and drives the robot through
+    ``robot_link`` from goals."""
 
     def __init__(
         self,
         config: AgentConfig,
         video: MediaStreamTrack,
-        turtle: RobotLink,
+        robot_link: RobotLink,
         events: EventLog | None = None,
     ) -> None:
         if config.profile not in PROFILES:
@@ -85,7 +86,7 @@ class Agent:
             profile = replace(profile, goal_timeout_s=config.goal_timeout_s)
         self.config = config
         self.video = video
-        self.turtle = turtle
+        self.robot_link = robot_link
         self.events = events or EventLog()
         self.pilot = Pilot(with_standoff(profile, config.standoff_m), robot=config.robot)
         self.pose: Pose | None = None
@@ -105,7 +106,7 @@ class Agent:
             ice_servers=config.ice_servers,
         )
         # The robot's rosbridge connection (the camera's too) proves each renewed token.
-        self.session.token_renewed.append(turtle.renew)
+        self.session.token_renewed.append(robot_link.renew)
         self.logged_in = self.session.logged_in
         self._last_telemetry = 0.0
         # The camera's tagged frames (its frame_sent events), batched for the relay's clients.
@@ -137,7 +138,7 @@ class Agent:
     async def run(self) -> None:
         """Run until cancelled; raises :class:`SignalingError` if the first login fails."""
         self._first_pose = asyncio.get_running_loop().create_future()
-        await self.turtle.start(self._on_pose)
+        await self.robot_link.start(self._on_pose)
         ticker = asyncio.create_task(self._tick(), name="control-tick")
         spawn = (
             asyncio.create_task(self._spawn_step(), name="spawn-step")
@@ -150,7 +151,7 @@ class Agent:
             ticker.cancel()
             if spawn is not None:
                 spawn.cancel()
-            await self.turtle.close()
+            await self.robot_link.close()
             self.video.stop()
 
     # --- data channel ----------------------------------------------------------------------
@@ -159,7 +160,7 @@ class Agent:
         """Act on one data-channel message from ``relay``; returns the error reply, if any.
 
         Every frame goes through the JSON edge and the channel's models, so no input raises: it
-        drives the turtle or is refused with a reason. Both channels to the relay accept what
+        drives the robot or is refused with a reason. Both channels to the relay accept what
         ``autopilot`` does (the state channel carries goals only).
         """
         message = channels.parse(text, AUTOPILOT_CHANNEL, "vehicle")
@@ -209,14 +210,14 @@ class Agent:
             # State, like pose: a lost batch is a few frames without a figure.
             link.send_state(batch)
 
-    # --- turtle ------------------------------------------------------------------------------
+    # --- the robot ---------------------------------------------------------------------------
 
     async def _spawn_step(self) -> None:
         """The thesis's spawn step (section 5.7.6): turn turtle1 to face "up" where it stands."""
         assert self._first_pose is not None
         pose = await self._first_pose
         try:
-            await self.turtle.teleport(pose.x, pose.y, SPAWN_THETA)
+            await self.robot_link.teleport(pose.x, pose.y, SPAWN_THETA)
         except RobotLinkError as exc:
             # The robot may not offer teleport_absolute; driving works without the step.
             log.warning("spawn step failed: %s", exc)
@@ -262,9 +263,9 @@ class Agent:
         """Carry out what the pilot did: publish its Twists, log its records, in order."""
         for event in done:
             if isinstance(event, ev.TwistSent):
-                self.turtle.publish(event.linear, event.angular)
+                self.robot_link.publish(event.linear, event.angular)
                 if event.linear == event.angular == 0.0 and event.seq is None:
-                    log.info("turtle stopped")
+                    log.info("robot stopped")
             elif isinstance(event, ev.SearchStarted):
                 log.info("target lost: searching to the %s", event.side)
             elif isinstance(event, ev.SearchEnded):

@@ -69,6 +69,9 @@ class Profile:
     goal_timeout_s: float
     # The relay profile (snapshot pacing and detector parameters) this vehicle profile pairs with.
     relay_profile: RelayProfile
+    # The operation (app/vision/operations.json) a relay started for this profile runs until a
+    # client sets another; None: the spec's default.
+    operation: str | None = None
     # --- follow only -------------------------------------------------------------------------
     # Forward speed per metre beyond the standoff, and its limit (m/s).
     linear_gain: float = 0.0
@@ -173,6 +176,9 @@ PROFILES: dict[str, Profile] = {
         search_after_s=0.3,
         search_angular=1.6,
         goal_timeout_s=0.3 + 3 * math.pi / 1.6,
+        # The detector the onboard bench measures better at following the walker, whose round
+        # takes it 3 m from the robot (docs/performance.md, "A robot that carries its camera").
+        operation="face_small",
     ),
 }
 __all__ = [

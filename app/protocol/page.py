@@ -221,6 +221,9 @@ class PageConfig:
     auto: bool
     # The vehicle profile, or on the relay page the relay profile it pairs with.
     profile: str
+    # The operation the relay starts with for the vehicle profile asked (None: the spec's
+    # default).
+    operation: str | None
     # The control law's numbers, the world's geometry among them.
     control: ControlConfig
     # The vehicle page's spawn step (turn to face up at start; a turtlesim's only).

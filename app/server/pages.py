@@ -66,6 +66,7 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         auto=query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
         profile=profile.relay_profile if role == "relay" else profile.name,
+        operation=profile.operation,
         control=_control(query.get("standoff")),
         # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended);
         # no robot but a turtlesim has the step.

@@ -5,17 +5,16 @@ The rules live in :mod:`app.rosbridge.protocol` and each robot's hub; :mod:`app.
 moves the frames with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge).
 The server simulates one kind of robot (``autopilot serve --robot``, named by
 :mod:`app.simulators`), which it knows only as a :class:`~app.rosbridge.simulated.Simulation`:
-one robot for the whole server (turtlesim), or one per signaling room (diffdrive), made when a
-connection first names the room (at most :data:`MAX_ROOMS` at once; the robots of rooms nobody is
-connected to make way for new ones). A connection is bound to the room
-its token names (``auth``, or the handshake's bearer token); with no access control, to the room
-its URL asks for (``/rosbridge?room=R``, else the default room). A room's tokens reach only its
-robot.
+one robot for the whole server, or one per signaling room, made when a connection first names
+the room (at most :data:`MAX_ROOMS` at once; the robots of rooms nobody is connected to make way
+for new ones). A connection is bound to the room its token names (``auth``, or the handshake's
+bearer token); with no access control, to the room its URL asks for (``/rosbridge?room=R``, else
+the default room). A room's tokens reach only its robot.
 
 Every tick each robot steps and each connection's writer is woken; a writer that is free then
 takes its session's publications (the latest of each subscription), so the tick costs the same
 whatever the clients subscribe to, and a client that does not read is sent nothing and slows no
-one. The tick is the simulation's own (16 ms, turtlesim's): the simulators advance that much per
+one. The tick is the simulation's own (turtlesim's 16 ms): the simulators advance that much per
 step, so pacing the loop any other way would only change the robots' speed. A robot's camera is
 filmed at its own pace by a task of its own, rendered in a worker thread (one for every room, so
 the renders of many rooms queue rather than take every core), and only while someone subscribes:

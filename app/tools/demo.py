@@ -28,7 +28,6 @@ from app.arguments import add_vehicle_profile, port
 from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol import tokens
-from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings, describe_settings_error
@@ -133,18 +132,11 @@ def children_for(
         }
 
     return [
-        # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+        # The relay paces its snapshots by the relay profile this vehicle profile pairs with, and
+        # starts with its operation.
         Child(
             "relay",
-            [
-                python,
-                "-m",
-                "app.cli",
-                "relay",
-                *common,
-                "--profile",
-                PROFILES[profile].relay_profile,
-            ],
+            [python, "-m", "app.cli", "relay", *common, "--profile", profile],
             token_env("relay"),
         ),
         Child(

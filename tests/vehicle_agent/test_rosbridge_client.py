@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 from collections.abc import AsyncIterator
 
 import cbor2
@@ -166,6 +167,25 @@ async def test_a_status_about_a_subscription_goes_to_it(stub: StubRosbridge) -> 
         client.subscribe("/cam", "t", lambda _: None, compression=CBOR, on_status=statuses.append)
         await eventually(lambda: bool(statuses), 5, "the refusal")
     assert (statuses[0].level, statuses[0].msg) == ("warning", "unknown compression cbor")
+
+
+async def test_any_other_warning_is_said_once(
+    stub: StubRosbridge, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="vehicle_agent.rosbridge_client")
+    refused = {"op": "status", "level": "warning", "id": "advertise:/x", "msg": "not allowed"}
+    marks: list[Publication] = []
+    async with connected(stub) as client:
+        client.subscribe("/mark", "t", marks.append)
+        await eventually(lambda: bool(stub.subscribes), 5, "the subscription")
+        for _ in range(3):
+            await stub.send(json.dumps(refused))
+        await stub.send(json.dumps({**refused, "level": "info", "msg": "fine"}))
+        # Frames are read in order: once this one is in, the statuses before it were read.
+        await stub.publish("/mark", {}, binary=False)
+        await eventually(lambda: bool(marks), 5, "the mark")
+    said = [r.message for r in caplog.records if "says" in r.message]
+    assert said == [f"rosbridge at {stub.url} says not allowed"]
 
 
 async def test_a_call_returns_the_services_values_and_fails_clearly_otherwise(
