@@ -43,14 +43,14 @@ function sortBoxes(boxes) {
 }
 
 /** The largest box (first of equal areas), or null. */
-function largestBox(boxes) {
+export function largestBox(boxes) {
   let best = null;
   for (const b of boxes) if (best === null || b[2] * b[3] > best[2] * best[3]) best = b;
   return best;
 }
 
 /** The centre {x, y} of box [x, y, w, h], or null for none. */
-function centreOf(box) {
+export function centreOf(box) {
   return box === null ? null : { x: box[0] + box[2] / 2, y: box[1] + box[3] / 2 };
 }
 
