@@ -67,6 +67,8 @@ class Goal(_Message):
     height its operation declares for what the box spans (``app/vision/operations.json``): with
     the camera's field of view they give a camera carried by the vehicle the target's range
     (the onboard law). A relay that sends neither leaves that law turning without driving.
+    ``locked``: the target is the one the operator locked on, not the largest box (a relay that
+    does not say is taken as unlocked).
     """
 
     type: Literal["goal"] = "goal"
@@ -82,6 +84,7 @@ class Goal(_Message):
     boxW: BoxSide | None = None  # noqa: N815 -- the wire name
     boxH: BoxSide | None = None  # noqa: N815 -- the wire name
     targetHeightM: Height | None = None  # noqa: N815 -- the wire name
+    locked: bool = False
 
 
 # What a vehicle's search for a lost target is doing (the onboard and follow profiles): turning

@@ -80,6 +80,8 @@ class GoalApplied(Event):
     # The target's box in pixels of the w×h frame, when the relay sent one.
     box_w: float | None = None
     box_h: float | None = None
+    # The target is the one the operator locked on (the relay's goal said so).
+    locked: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -40,10 +40,12 @@ def goal(
     y: float = 120.0,
     late_s: float = 0.0,
     box_h: float | None = None,
+    locked: bool | None = None,
 ) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
     ``late_s`` earlier (it waited that much longer on the way), found in frame ``100 + seq``;
-    with a face's box ``box_h`` pixels high when given."""
+    with a face's box ``box_h`` pixels high when given, and ``locked`` when given (an older
+    relay says nothing)."""
     message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
@@ -57,6 +59,8 @@ def goal(
     }
     if box_h is not None:
         message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
+    if locked is not None:
+        message["locked"] = locked
     return ("goal", t, [message])
 
 
@@ -91,9 +95,10 @@ SEQUENCES: dict[str, list[Step]] = {
         at(CENTRE_POSE, 0.116),
         at(CENTRE_POSE, 0.132),
         at(CENTRE_POSE, 0.2),
-        goal(2, 0.21, x=600.0, y=300.0),
+        goal(2, 0.21, x=600.0, y=300.0, box_h=60.0, locked=True),
         ("tick", 0.25, []),
         at(CENTRE_POSE, 0.3),
+        goal(3, 0.31, locked=False),
     ],
     "old and stale goals are dropped": [
         CENTRE_POSE,

@@ -74,6 +74,14 @@ def test_a_goal_is_recorded_and_steers_the_turtle_toward_it() -> None:
     assert twist.t == applied.t == 0.0  # the time given, not a clock read inside
 
 
+def test_a_goal_is_recorded_locked_only_when_its_relay_says_so() -> None:
+    pilot = Pilot(DEFAULT)
+    for seq, locked in ((1, None), (2, True), (3, False)):
+        message = channels.Goal.model_validate(goal(seq, seq / 10, locked=locked)[2][0])
+        applied = ev.of_kind(pilot.goal(message, seq / 10), ev.GoalApplied)
+        assert [a.locked for a in applied] == [locked is True], seq
+
+
 def test_goals_while_manual_are_dropped_why_manual_and_never_steer() -> None:
     pilot = steering()
     taken = pilot.mode_change("manual", "ann", 0.1)

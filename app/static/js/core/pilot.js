@@ -135,7 +135,20 @@ export class Pilot {
     this.#searchTimedOut = false;
     const searching = this.controller.searchSince;
     const { seq, op, x, y, w, h } = goal;
-    const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
+    const applied = {
+      ev: 'goal',
+      seq,
+      op,
+      frame,
+      x,
+      y,
+      w,
+      h,
+      box_w: goal.boxW ?? null,
+      box_h: goal.boxH ?? null,
+      locked: goal.locked ?? false,
+      t: now,
+    };
     const target = {
       x,
       y,
