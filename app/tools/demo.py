@@ -32,8 +32,8 @@ from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings, SimulatedRobot, describe_settings_error
+from app.server.hosts import ANY_ADDRESS
 from app.server.serve import (
-    ANY_ADDRESS,
     RunningServer,
     add_robot_argument,
     reachable_hosts,
