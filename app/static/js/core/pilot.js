@@ -42,7 +42,7 @@ export class Pilot {
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
    * @param profile one of `controlLaw.profiles` (fitted to the robot by the server)
-   * @param {{deadmanS: number, tickS: number, freshness: {maxAgeS: number, windowS: number},
+   * @param {{deadmanS: number, tickS: number, freshness: object,
    *   limits: Object, law?: Function}} rules the protocol's numbers (`config.control`,
    *   `config.protocol.goalFreshness`) and the robot's limits (`config.robot.description.limits`);
    *   `law` replaces the profile's control law
