@@ -229,7 +229,7 @@ class Outboxes(Generic[K]):
         ``waiting`` until :meth:`authenticated`. Makes way for it first (see the module)."""
         if waiting:
             self._make_way(address)
-        elif self._live() >= self.limit:
+        elif self._live() >= self.limit and self._waiting:
             self._evict(next(iter(self._waiting)))
         outbox = Outbox(
             self.policy.outbox_messages, self.policy.outbox_bytes, self._slow_reader, pull
