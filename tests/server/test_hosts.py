@@ -3,6 +3,7 @@ HTTP and WebSocket alike, with one log line saying how to allow a name."""
 
 from __future__ import annotations
 
+import argparse
 import base64
 import logging
 import os
@@ -13,7 +14,7 @@ import pytest
 
 from app.server.config import Settings
 from app.server.hosts import allowed_hosts, host_name
-from app.server.serve import RunningServer, start_in_thread
+from app.server.serve import RunningServer, settings_from, start_in_thread
 from tests.helpers.sockets import TIMEOUT_S
 
 SECRET = "hosts-test-secret-0123456789"
@@ -90,3 +91,9 @@ def secured(start_server: Callable[[Settings], RunningServer]) -> Iterator[Runni
 def test_with_a_secret_any_name_is_answered_its_token_decides(secured: RunningServer) -> None:
     assert status(secured, "evil.example") == 200
     assert status(secured, "evil.example", "/rosbridge", upgrade=True) == 101
+
+
+def test_serve_s_host_option_is_a_name_the_server_answers() -> None:
+    # `autopilot serve --host 172.30.0.10`, as the field lab starts it.
+    settings = settings_from(argparse.Namespace(host="172.30.0.10", ros=None, robot=None))
+    assert "172.30.0.10" in allowed_hosts(settings.host, settings.allowed_hosts)
