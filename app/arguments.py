@@ -4,8 +4,8 @@
 never expire and a port of 70000 fails deep inside the server. These types turn such a value
 into argparse's one-line usage error instead. The ``--profile``, ``--robot`` and ``--token``
 options are declared here too, so that every command lists the same profiles and robots with
-the same defaults and reads its token the same way. Imports only the protocol core, so the agent
-and the tools can all use it.
+the same defaults and reads its token the same way. Imports only the protocol core and the
+robot file reader, so the agent and the tools can all use it.
 """
 
 from __future__ import annotations
@@ -13,7 +13,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from collections.abc import Sequence
+from typing import Any
 
+from app import robot_file
 from app.protocol import control, relay_profiles, robot, tokens
 from app.protocol.rooms import Role
 
@@ -76,20 +79,30 @@ def add_vehicle_profile(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def robot_argument(text: str) -> robot.Robot:
-    """A robot preset's name or a description file: the robot, or argparse's one-line error
-    naming the file's bad key (exit status 2, before anything starts)."""
-    try:
-        return robot.robot_named(text)
-    except robot.RobotError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+class RobotOption(argparse.Action):
+    """``--robot NAME|FILE`` read into the robot it names. A bad one ends the command with exit
+    status 2 and the one line naming the file's bad key: as a ``type`` error, argparse would put
+    its whole usage block before that line."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        try:
+            chosen = robot_file.robot_named(str(values))
+        except robot.RobotError as exc:
+            parser.exit(2, f"{parser.prog}: error: argument {option_string}: {exc}\n")
+        setattr(namespace, self.dest, chosen)
 
 
 def add_robot_option(parser: argparse.ArgumentParser, purpose: str) -> None:
     """``--robot NAME|FILE``: a preset of :data:`app.protocol.robot.PRESETS` or a TOML file."""
     parser.add_argument(
         "--robot",
-        type=robot_argument,
+        action=RobotOption,
         default=robot.PRESETS[robot.DEFAULT_ROBOT],
         metavar="NAME|FILE",
         help=f"{purpose}: {', '.join(robot.PRESETS)} or a TOML description file"

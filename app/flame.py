@@ -1,4 +1,4 @@
-"""The flame of the generated scenes: the agent's synthetic video and the simulated room's
+"""The flame of the generated scenes: the agent's synthetic video and the simulated arena's
 camera draw the same one, so that the fire operation finds both."""
 
 from __future__ import annotations

@@ -12,5 +12,5 @@ STATIC_DIR = APP_DIR / "static"
 TEMPLATES_DIR = APP_DIR / "templates"
 OPERATION_MODULES_DIR = STATIC_DIR / "js" / "worker" / "operations"
 OPERATIONS_SPEC = APP_DIR / "vision" / "operations.json"
-# Face photos (with their licence) for the synthetic video and the simulated room.
+# Face photos (with their licence) for the synthetic video and the simulated arena.
 FACES_DIR = APP_DIR / "assets"

@@ -38,6 +38,8 @@ def page_rule(rule: dict[str, float]) -> lock.LockRule:
         reach=rule["reach"],
         near=rule["near"],
         click_search=rule["clickSearch"],
+        look_bins=tuple(rule["lookBins"]),
+        min_likeness=rule["minLikeness"],
     )
 
 
@@ -47,12 +49,21 @@ RULE = page_rule(PAGE_RULE)
 RUN_JS = """([events, rule]) => {
   const target = new lock.TargetLock(rule);
   let last = [];
-  return events.map(([kind, t, arg]) => {
+  let robotSearching = false;
+  return events.map(([kind, t, arg, looks]) => {
+    if (kind === 'search') {
+      robotSearching = lock.robotSearching(arg);
+      return [target.state];
+    }
     if (kind === 'snapshot') {
       last = arg;
-      const query = target.query(t);
-      const chosen = lock.chooser(query, rule)(last);
-      const changed = target.update(query, chosen, t);
+      const lookOf = looks === undefined ? null : (box) => looks[last.indexOf(box)];
+      const query = target.query(t, robotSearching);
+      const chosen = lock.chooser(query, rule, lookOf)(last);
+      if (chosen !== null && lookOf !== null && target.needsLook(query)) {
+        target.remember(lookOf(chosen));
+      }
+      const changed = target.update(query, chosen, t, robotSearching);
       return [query && query.box, query && query.anywhere, chosen, target.state, changed];
     }
     if (kind === 'click') return [target.lock(arg[0], arg[1], last, t), target.state];
@@ -94,6 +105,59 @@ def test_a_clicked_small_face_stays_the_target_beside_a_larger_one(page: Page) -
     got = lock_sequences.decisions(events, page.evaluate(RUN_JS, [events, PAGE_RULE]))
     for i, ((event, want), have) in enumerate(zip(lock_sequences.TWO_FACES, got, strict=True)):
         assert have == want, (i, event)
+
+
+def test_the_lock_holds_through_the_vehicles_search(page: Page) -> None:
+    # The rule as written out in lock_sequences.THROUGH_SEARCH (search after 1.0 s unseen,
+    # release after 3.0 s unless the vehicle searches; its search lasts up to 6.19 s).
+    assert (RULE.search_after_s, RULE.release_after_s, RULE.min_likeness) == (1.0, 3.0, 0.9)
+    events = [event for event, _ in lock_sequences.THROUGH_SEARCH]
+    got = lock_sequences.decisions(events, page.evaluate(RUN_JS, [events, PAGE_RULE]))
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.THROUGH_SEARCH, got, strict=True)):
+        assert have == want, (i, event)
+    # The same snapshots with no word of a search: released at 3.5 s, as lock.py does.
+    alone = lock_sequences.WITHOUT_SEARCH
+    assert page.evaluate(RUN_JS, [alone, PAGE_RULE]) == lock_sequences.run(alone, RULE)
+    assert page.evaluate(
+        "() => ['left', 'right', 'timed_out', null, undefined].map(lock.robotSearching)"
+    ) == [True, True, False, False, False]
+
+
+def test_looks_likeness_and_recognition_agree_with_python(page: Page) -> None:
+    rng = random.Random(11)
+
+    def look() -> list[float]:
+        counts = [rng.random() ** 3 for _ in range(64)]
+        return [c / sum(counts) for c in counts]
+
+    looks = [look() for _ in range(12)]
+    boxes = [[rng.uniform(-50, 600), rng.uniform(-50, 450), rng.uniform(5, 200), 80] for _ in looks]
+    js: dict[str, Any] = page.evaluate(
+        """([looks, boxes, rule]) => ({
+             likeness: looks.flatMap((a) => looks.map((b) => lock.likeness(a, b))),
+             recognised: looks.map((target) => lock.recognise(
+               boxes, (box) => lock.likeness(looks[boxes.indexOf(box)], target), rule)),
+             rects: boxes.map((box) => lock.lookRect(box, 640, 480)),
+           })""",
+        [looks, boxes, PAGE_RULE],
+    )
+    assert js["likeness"] == pytest.approx(
+        [lock.likeness(a, b) for a in looks for b in looks], abs=1e-12
+    )
+    table = {tuple(b): look for b, look in zip(boxes, looks, strict=True)}
+    want = [
+        lock.recognise(
+            [tuple(b) for b in boxes],  # type: ignore[misc]
+            lambda box, target=target: lock.likeness(table[box], target),
+            RULE,
+        )
+        for target in looks
+    ]
+    assert js["recognised"] == [None if w is None else list(w) for w in want]
+    assert [[r["x"], r["y"], r["width"], r["height"]] for r in js["rects"]] == [
+        list(lock.look_rect(tuple(b), 640, 480))  # type: ignore[arg-type]
+        for b in boxes
+    ]
 
 
 def test_scripted_sequences_take_the_same_decisions(page: Page) -> None:

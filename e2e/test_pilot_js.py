@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 from playwright.sync_api import Browser, Page
 
-from app.protocol.control import PROFILES, control_config, for_robot
-from app.protocol.page import page_protocol, to_json
+from app.protocol.control import PROFILES, control_config
+from app.protocol.page import page_protocol, robot_config, to_json
 from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
@@ -23,17 +23,17 @@ pytestmark = [pytest.mark.browser]
 
 # The pilot as pages/vehicle.js builds it, fed one sequence: each step's records, next tick,
 # mode, operator and search status.
-RUN_JS = """([steps, constants, freshness, limits, profile]) => {
+RUN_JS = """([steps, constants, freshness, robot, profile]) => {
   const law = new control.ControlLaw(constants);
-  const driven = new pilot.Pilot(law, law.profiles[profile], {
+  const driven = new pilot.Pilot(law, law.profiles[profile], robot, {
     deadmanS: constants.deadmanS,
     tickS: constants.tickS,
     freshness,
-    limits,
   });
   const feed = (kind, t, args) => {
     switch (kind) {
-      case 'goal': return driven.goal(args[0], t, args[1] ?? null);
+      case 'frame': driven.frame(args[0], t); return [];
+      case 'goal': return driven.goal(args[0], t);
       case 'stop': return driven.stop(t);
       case 'mode': return driven.modeChange(args[0], args[1], t);
       case 'drive': return driven.drive(args[0], args[1], args[2], t);
@@ -74,11 +74,10 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
 
 def run_js(page: Page, steps: list[Any], profile: str, robot: str = "turtlesim") -> Any:
     """The sequence run by pilot.js with the config a vehicle page for ``robot`` gets."""
-    described = PRESETS[robot]
-    constants = to_json(control_config({n: for_robot(p, described) for n, p in PROFILES.items()}))
+    constants = to_json(control_config())
     freshness = to_json(page_protocol().goal_freshness)
-    limits = to_json(described.limits)
-    return page.evaluate(RUN_JS, [steps, constants, freshness, limits, profile])
+    described = to_json(robot_config(PRESETS[robot]))
+    return page.evaluate(RUN_JS, [steps, constants, freshness, described, profile])
 
 
 @pytest.mark.parametrize("robot", ROBOTS)

@@ -55,3 +55,28 @@ def test_scripts_demo_sets_up_the_runtime_only() -> None:
     assert "scripts/setup --runtime" in demo
     setup = (ROOT / "scripts" / "setup").read_text()
     assert "extras=tools" in setup and "extras=dev" in setup
+
+
+# The tests' outside rosbridge client and what it runs on: none of it is the product's.
+OUTSIDE_CLIENT = ("roslibpy", "twisted", "autobahn", "txaio")
+IMPORT_ALL = """
+import importlib, json, pkgutil, sys
+import app, vehicle_agent
+for package in (app, vehicle_agent):
+    for module in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+        if not module.name.endswith("__main__"):  # that one runs the command
+            importlib.import_module(module.name)
+print(json.dumps(sorted({m.split(".")[0] for m in sys.modules})))
+"""
+
+
+def test_no_module_of_the_product_loads_roslibpy_or_twisted() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", IMPORT_ALL], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    loaded = set(json.loads(done.stdout))
+    assert "vehicle_agent" in loaded and "aiortc" in loaded
+    assert not loaded & set(OUTSIDE_CLIENT), sorted(loaded & set(OUTSIDE_CLIENT))
+    assert "roslibpy" in requirement_names("dev")
+    assert not {"roslibpy", "twisted"} & (requirement_names("agent") | requirement_names("tools"))

@@ -59,7 +59,26 @@ def test_every_vendored_file_is_recorded() -> None:
         str(path.relative_to(REPO))
         for path in [*STATIC.glob("opencv*.js"), *(STATIC / "vendor").iterdir()]
     }
-    assert on_disk == {entry["path"] for entry in vendored()["files"]}
+    files = vendored()["files"]
+    licences = {entry["licence_file"] for entry in files if "licence_file" in entry}
+    assert on_disk == {entry["path"] for entry in files} | licences
+
+
+def test_the_face_model_is_blazeface_short_range_with_its_licence() -> None:
+    """The face_dnn operation's model is the one the npm package ships, byte for byte, and the
+    Apache-2.0 text it is distributed under is beside it."""
+    (entry,) = [e for e in vendored()["files"] if e["path"].endswith(".tflite")]
+    assert entry["path"] == "app/static/vendor/face_detection_short_range.tflite"
+    assert entry["package"] == "@mediapipe/face_detection"
+    assert entry["file"] == "face_detection_short_range.tflite"
+    model = (REPO / entry["path"]).read_bytes()
+    assert (
+        hashlib.sha256(model).hexdigest()
+        == "3bc182eb9f33925d9e58b5c8d59308a760f4adea8f282370e428c51212c26633"
+    )
+    assert entry["licence"] == "Apache-2.0"
+    text = (REPO / entry["licence_file"]).read_text()
+    assert "Apache License" in text and "Version 2.0, January 2004" in text
 
 
 def test_the_record_holds_the_npm_packages_pyproject_pins() -> None:

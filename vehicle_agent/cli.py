@@ -29,10 +29,10 @@ from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.metrics import serve_agent_metrics
-from vehicle_agent.rosbridge_client import CBOR, NONE
+from vehicle_agent.robotlink import RobotLink, RobotLinkError, RosbridgeLink, SimLink
+from vehicle_agent.rosbridge_client import CBOR, NONE, RosbridgeClient, RosbridgeError
 from vehicle_agent.roscamera import CameraError, RosCamera, camera_of
 from vehicle_agent.signaling import SignalingError, ws_url
-from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
 from vehicle_agent.video import SweepPath, VideoSourceError, open_source
 
 log = logging.getLogger(__name__)
@@ -163,8 +163,6 @@ def same_server(server: str, rosbridge: str) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     """Run the agent until interrupted; a setup problem is one line and exit status 1."""
-    # Twisted (under roslibpy) narrates every reconnection attempt at INFO.
-    logging.getLogger("twisted").setLevel(logging.WARNING)
     if not args.robot.turtlesim and not args.rosbridge:
         log.error(
             "--robot %s needs --rosbridge URL: the in-process simulator is a turtlesim",
@@ -173,7 +171,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         return asyncio.run(_main(args))
-    except (SignalingError, TurtleError, VideoSourceError, recorder.RecorderError, OSError) as exc:
+    except (
+        SignalingError,
+        RobotLinkError,
+        RosbridgeError,
+        VideoSourceError,
+        recorder.RecorderError,
+        OSError,
+    ) as exc:
         log.error("%s", exc)
         return 1
 
@@ -191,13 +196,15 @@ async def _main(args: argparse.Namespace) -> int:
     )
     camera = None
     metrics = None
+    # One rosbridge connection for the robot: the link drives it, the camera borrows it.
+    client = (
+        RosbridgeClient(args.rosbridge, rosbridge_token, tls_context(args.ca_file))
+        if args.rosbridge
+        else None
+    )
     try:
-        video = await _open_video(args, events, rosbridge_token)
-        turtle: Turtle = SimTurtle()
-        if args.rosbridge:
-            turtle = RosbridgeTurtle(
-                args.rosbridge, args.ros, robot, token=rosbridge_token, ca_file=args.ca_file
-            )
+        video = await _open_video(args, events, client)
+        link: RobotLink = SimLink() if client is None else RosbridgeLink(client, args.ros, robot)
         config = AgentConfig(
             server=args.server,
             room=args.room,
@@ -211,9 +218,7 @@ async def _main(args: argparse.Namespace) -> int:
             token=args.token,
             tls=tls_context(args.ca_file),
         )
-        agent = Agent(config, video, turtle, events)
-        if isinstance(video, RosCamera):
-            agent.token_renewed.append(video.renew)
+        agent = Agent(config, video, link, events)
         if flight is not None:
             events.listeners.append(flight.on_event)
             camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
@@ -223,6 +228,8 @@ async def _main(args: argparse.Namespace) -> int:
         with contextlib.suppress(asyncio.CancelledError):
             await task
     finally:
+        if client is not None:
+            await client.close()
         if camera is not None:
             camera.cancel()
         if flight is not None:
@@ -236,25 +243,24 @@ async def _main(args: argparse.Namespace) -> int:
 
 
 async def _open_video(
-    args: argparse.Namespace, events: EventLog, rosbridge_token: str | None
+    args: argparse.Namespace, events: EventLog, client: RosbridgeClient | None
 ) -> MediaStreamTrack:
-    """The ``--video`` track; a camera topic is connected to before anything else starts."""
+    """The ``--video`` track; a camera topic is subscribed to (through ``client``, the robot's
+    one rosbridge connection) before anything else starts."""
     found = camera_of(args.video, args.robot)
     if found is None:
         return open_source(
             args.video, args.size, args.fps, on_frame=events.emit, sweep_s=args.sweep_s
         )
     topic, described = found
-    if not args.rosbridge:
+    if client is None:
         raise CameraError(f"--video {args.video} reads the camera through --rosbridge URL")
     camera = RosCamera(
-        args.rosbridge,
+        client,
         topic,
         described=described,
         size=args.size or VIDEO_SIZE,
         fps=args.fps or VIDEO_FPS,
-        token=rosbridge_token,
-        tls=tls_context(args.ca_file),
         compression=args.camera_compression,
         on_frame=events.emit,
     )

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from app.protocol import channels
 from app.protocol.channels import Mode, SearchStatus
-from app.protocol.control import DEADMAN_S, TICK_S
+from app.protocol.control import DEADMAN_S, TICK_S, for_robot
 from app.protocol.events import (
     DriveReceived,
     GoalApplied,
@@ -41,37 +41,41 @@ from app.protocol.events import (
     Side,
     TwistSent,
 )
-from app.protocol.robot import TURTLESIM, Limits
+from app.protocol.robot import TURTLESIM, Robot
 from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
+from vehicle_agent.frame_times import FrameTimes
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 from vehicle_agent.limits import Limiter
 from vehicle_agent.manual import ManualDrive
 
 
 class Pilot:
-    """One vehicle's pilot with one profile; every input answers with the records of what it
-    did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish).
+    """One vehicle's pilot with one profile for one robot; every input answers with the records
+    of what it did (a :class:`~app.protocol.events.TwistSent` is a Twist to publish).
 
-    ``profile`` is the profile as fitted to the robot (:func:`app.protocol.control.for_robot`),
-    ``limits`` the robot's (default: turtlesim's, which nothing the profiles command exceeds).
+    ``robot`` is the robot driven (default: a turtlesim): the pilot fits ``profile`` to it
+    (:func:`app.protocol.control.for_robot`) and holds every command to its limits.
     """
 
     def __init__(
         self,
         profile: Profile,
         *,
-        limits: Limits = TURTLESIM.limits,
+        robot: Robot = TURTLESIM,
         deadman_s: float = DEADMAN_S,
         tick_s: float = TICK_S,
         freshness: FreshnessRule | None = None,
         law: ControlLaw | None = None,
     ) -> None:
+        profile = for_robot(profile, robot)
         self.profile = profile
         self.tick_s = tick_s
         self.controller = Controller(profile, law)
         self.manual = ManualDrive(profile, deadman_s)
         # Between every command and the robot: its top speeds and accelerations.
-        self.limiter = Limiter(limits, tick_s)
+        self.limiter = Limiter(robot.limits, tick_s)
+        # When the vehicle's own camera took its recent frames: a goal names its frame.
+        self.frames = FrameTimes()
         # Latest-wins on the lossy goal channel; reset for every new link.
         self.gate = GoalGate() if freshness is None else GoalGate(freshness)
         # When the last goal was applied on this link (its age rides the pose: link health).
@@ -112,12 +116,14 @@ class Pilot:
 
     # --- what the relay says ---------------------------------------------------------------
 
-    def goal(
-        self, goal: channels.Goal, now: float, captured_at: float | None = None
-    ) -> list[PilotEvent]:
-        """A goal: dropped while manual, or by the freshness gate; else it steers.
-        ``captured_at``: when the frame it was found in was taken, on ``now``'s clock, when the
-        vehicle knows (its own camera's frame tags)."""
+    def frame(self, frame: int, now: float) -> None:
+        """The vehicle's own camera took its frame number ``frame`` (the number its frame tag
+        carries) at ``now``: a goal found in it later takes its bearing from the heading then."""
+        self.frames.add(frame, now)
+
+    def goal(self, goal: channels.Goal, now: float) -> list[PilotEvent]:
+        """A goal: dropped while manual, or by the freshness gate; else it steers, from the
+        heading the vehicle had when its frame was taken (when the vehicle took that frame)."""
         if self.manual.manual:
             return [GoalDropped(seq=goal.seq, frame=goal.frame, why="manual", t=now)]
         verdict = self.gate.admit(goal.seq, goal.t, now)
@@ -146,7 +152,7 @@ class Pilot:
             box_h=goal.boxH,
             target_height_m=goal.targetHeightM,
         )
-        twist = self.controller.goal(target, now, captured_at)
+        twist = self.controller.goal(target, now, self.frames.captured_at(goal.frame))
         return [applied, *self._searched(searching, "found", now), *self._sent(twist, now)]
 
     def stop(self, now: float) -> list[PilotEvent]:

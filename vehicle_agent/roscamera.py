@@ -5,8 +5,9 @@
 tag, :mod:`app.protocol.frametag`) and reported as a :class:`~app.protocol.events.FrameSent`
 whose time is when the picture was taken, so latency is still measured from the camera on. Its
 pictures come from ``sensor_msgs/CompressedImage`` or ``sensor_msgs/Image`` messages
-(:mod:`app.protocol.camera`, :mod:`vehicle_agent.rosimage`) over the agent's own rosbridge
-client, in CBOR where the server offers it (:mod:`vehicle_agent.rosbridge_client`).
+(:mod:`app.protocol.camera`, :mod:`vehicle_agent.rosimage`) over the agent's one rosbridge
+connection, the robot link's, in CBOR where the server offers it
+(:mod:`vehicle_agent.rosbridge_client`).
 
 * **Latest wins.** Messages are kept in a one-place slot (:class:`LatestSlot`): a newer one
   replaces the one waiting, which is dropped and counted, and only the one a frame takes is
@@ -26,9 +27,7 @@ client, in CBOR where the server offers it (:mod:`vehicle_agent.rosbridge_client
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-import ssl
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -49,19 +48,16 @@ from app.protocol.camera import (
 )
 from app.protocol.events import CaptureClock, FrameSent
 from app.protocol.robot import Robot
-from app.protocol.ros import DETECT_TIMEOUT_S
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
-from app.supervise import Backoff
 from vehicle_agent.rosbridge_client import (
     CBOR,
     NONE,
     Compression,
-    Incoming,
     Publication,
     RosbridgeClient,
     RosbridgeError,
     StatusOp,
-    Unreadable,
+    Subscription,
 )
 from vehicle_agent.rosimage import ImageProblem, Pixels, fit, letterbox, to_rgb
 from vehicle_agent.video import PacedVideoTrack, VideoSourceError
@@ -194,22 +190,21 @@ def blank_frame(size: tuple[int, int], topic: str) -> Pixels:
 
 
 class RosCamera(PacedVideoTrack):
-    """Frames from a ROS camera topic through rosbridge at ``url`` (see the module docstring).
+    """Frames from a ROS camera topic through the rosbridge ``client`` is connected to (see the
+    module docstring); the client is borrowed, the robot link's, and left open at the end.
 
     ``described`` is the topic's type as the robot's description names it (used when rosapi
     cannot say); ``compression`` is what to ask rosbridge for (``cbor``, falling back to JSON
-    when the server refuses, or ``none``). :meth:`start` connects before the first frame.
+    when the server refuses, or ``none``). :meth:`start` subscribes before the first frame.
     """
 
     def __init__(
         self,
-        url: str,
+        client: RosbridgeClient,
         topic: str,
         *,
         size: tuple[int, int] = VIDEO_SIZE,
         fps: float = VIDEO_FPS,
-        token: str | None = None,
-        tls: ssl.SSLContext | None = None,
         described: CameraType | None = None,
         compression: Compression = CBOR,
         on_frame: Callable[[FrameSent], None] | None = None,
@@ -217,11 +212,9 @@ class RosCamera(PacedVideoTrack):
         super().__init__(fps)
         if size[0] < 2 * frametag.LAYOUT.blocks_per_width or size[1] < 48:
             raise CameraError(f"camera video needs at least 80x48 pixels, not {size[0]}x{size[1]}")
-        self.url = url
+        self.client = client
         self.topic = topic
         self.size = size
-        self.token = token
-        self.tls = tls
         self.described = described
         self.compression: Compression = compression
         self.on_frame = on_frame
@@ -236,156 +229,78 @@ class RosCamera(PacedVideoTrack):
         self._blank = blank_frame(size, topic)
         self._picture: Picture | None = None
         self._silent_since: float | None = None
-        self._client: RosbridgeClient | None = None
-        self._reader: asyncio.Task[None] | None = None
-        self._sending: set[asyncio.Task[bool]] = set()
-        self._subscription = f"camera:{topic}"
+        self._subscription: Subscription | None = None
         self._said: set[str] = set()
 
     # -- connection ---------------------------------------------------------------------
 
     async def start(self) -> None:
-        """Connect, learn the topic's type and subscribe; :class:`CameraError` if it cannot."""
-        client = await self._connect()
+        """Connect (unless the robot link did), learn the topic's type and subscribe;
+        :class:`CameraError` if it cannot."""
+        client = self.client
         try:
-            reported = await client.call(
-                "/rosapi/topic_type", {"topic": self.topic}, DETECT_TIMEOUT_S
+            await client.connect()
+        except RosbridgeError as exc:
+            raise CameraError(f"camera {self.topic}: {exc}") from None
+        try:
+            self.message_type, source = choose_type(
+                self.topic, await client.topic_type(self.topic), self.described
             )
-            name = reported.get("type") if isinstance(reported, dict) else None
-            try:
-                self.message_type, source = choose_type(
-                    self.topic, name if isinstance(name, str) else None, self.described
-                )
-            except CameraTypeError as exc:
-                raise CameraError(str(exc)) from None
-            await self._subscribe(client)
-        except BaseException:
-            await client.close()
-            raise
+        except CameraTypeError as exc:
+            raise CameraError(str(exc)) from None
+        self._subscription = client.subscribe(
+            self.topic,
+            self.message_type,
+            self._on_message,
+            compression=self.compression,
+            # Only the newest message matters to us, on the server's side too.
+            queue_length=1,
+            on_status=self._on_status,
+        )
         described = {"rosapi": "the robot's rosapi", "description": "the robot's description"}
         log.info(
             "camera %s: %s (from %s), through %s; waiting for its first frame",
             self.topic,
             self.message_type,
             described.get(source, "the topic's name"),
-            self.url,
-        )
-        self._client = client
-        self._reader = asyncio.create_task(self._read(), name="ros-camera")
-
-    async def _connect(self) -> RosbridgeClient:
-        client = RosbridgeClient(self.url, self.token, self.tls)
-        try:
-            await client.connect()
-        except RosbridgeError as exc:
-            raise CameraError(f"camera {self.topic}: {exc}") from None
-        # Statuses about our own requests (a refused compression) come only after set_level.
-        await client.send({"op": "set_level", "level": "warning"})
-        return client
-
-    async def _subscribe(self, client: RosbridgeClient) -> None:
-        assert self.message_type is not None
-        await client.send(
-            {
-                "op": "subscribe",
-                "id": self._subscription,
-                "topic": self.topic,
-                "type": self.message_type,
-                # Only the newest message matters to us, on the server's side too.
-                "queue_length": 1,
-                "compression": self.compression,
-            }
+            client.url,
         )
 
-    def renew(self, token: str) -> None:
-        """The session's token was renewed: prove the fresh one (and use it to reconnect)."""
-        if self.token is None:
-            return
-        self.token = token
-        client = self._client
-        if client is not None:
-            task = asyncio.get_running_loop().create_task(
-                client.send({"op": "auth", "token": token}), name="ros-camera-auth"
+    def _on_message(self, publication: Publication) -> None:
+        self.slot.put(publication)
+        if publication.binary:
+            self.binary += 1
+            self._say_once("cbor", logging.INFO, "camera %s: CBOR frames", self.topic)
+        elif self.compression == CBOR:
+            self._say_once(
+                "json", logging.INFO, "camera %s: the rosbridge sends JSON (no CBOR)", self.topic
             )
-            self._sending.add(task)
-            task.add_done_callback(self._sending.discard)
 
-    async def _read(self) -> None:
-        """Read the connection until it closes, then reconnect with backoff, for ever."""
-        backoff = Backoff()
-        try:
-            while True:
-                client = self._client
-                if client is None:
-                    try:
-                        client = await self._connect()
-                        await self._subscribe(client)
-                    except CameraError as exc:
-                        self._say_once("reconnect", logging.WARNING, "%s; retrying", exc)
-                        await asyncio.sleep(backoff.next())
-                        continue
-                    log.info("camera %s: reconnected to %s", self.topic, self.url)
-                    self._said.discard("reconnect")
-                    self._client = client
-                async for item in client.incoming():
-                    backoff.reset()
-                    await self._on_item(client, item)
-                log.warning("camera %s: rosbridge connection to %s lost", self.topic, self.url)
-                self._client = None
-                await client.close()
-                await asyncio.sleep(backoff.next())
-        finally:
-            if self._client is not None:
-                await self._client.close()
-                self._client = None
-
-    async def _on_item(self, client: RosbridgeClient, item: Incoming) -> None:
-        match item:
-            case Publication(topic=topic) if topic == self.topic:
-                self.slot.put(item)
-                if item.binary:
-                    self.binary += 1
-                    self._say_once("cbor", logging.INFO, "camera %s: CBOR frames", self.topic)
-                elif self.compression == CBOR:
-                    self._say_once(
-                        "json",
-                        logging.INFO,
-                        "camera %s: the rosbridge sends JSON (no CBOR)",
-                        self.topic,
-                    )
-            case StatusOp(level="warning" | "error") if (
-                item.id == self._subscription and self.compression == CBOR and self.binary == 0
-            ):
-                # A rosbridge that does not know the compression: ask again without.
-                log.info(
-                    "camera %s: the rosbridge refused CBOR (%s); JSON with base64 instead",
-                    self.topic,
-                    item.msg,
-                )
-                self.compression = NONE
-                await self._subscribe(client)
-            case StatusOp(level="warning" | "error"):
-                self._say_once(
-                    "status",
-                    logging.WARNING,
-                    "camera %s: the rosbridge says %s",
-                    self.topic,
-                    item.msg,
-                )
-            case Unreadable():
-                self._problem(
-                    "unreadable", f"an unreadable frame from the rosbridge: {item.reason}"
-                )
-            case _:
-                log.debug("camera %s: ignoring %s", self.topic, item)
+    def _on_status(self, status: StatusOp) -> None:
+        subscription = self._subscription
+        if status.level not in ("warning", "error") or subscription is None:
+            return
+        if self.compression == CBOR and self.binary == 0:
+            # A rosbridge that does not know the compression: ask again without.
+            log.info(
+                "camera %s: the rosbridge refused CBOR (%s); JSON with base64 instead",
+                self.topic,
+                status.msg,
+            )
+            self.compression = subscription.compression = NONE
+            self.client.resubscribe(subscription)
+            return
+        self._say_once(
+            "status", logging.WARNING, "camera %s: the rosbridge says %s", self.topic, status.msg
+        )
 
     def stop(self) -> None:
-        """Stop the track and the connection; log what the camera did."""
+        """Stop the track and its subscription; log what the camera did."""
         was_live = self.readyState == "live"
         super().stop()
-        if self._reader is not None:
-            self._reader.cancel()
-            self._reader = None
+        if self._subscription is not None:
+            self.client.unsubscribe(self._subscription)
+            self._subscription = None
         if was_live:
             log.info(
                 "camera %s: %d messages (%d dropped for newer ones, %d bad), %d frames sent "
@@ -397,14 +312,6 @@ class RosCamera(PacedVideoTrack):
                 self.sent,
                 self.blanks,
             )
-
-    async def close(self) -> None:
-        """Stop, and wait until the connection is closed."""
-        reader = self._reader
-        self.stop()
-        if reader is not None:
-            with contextlib.suppress(asyncio.CancelledError):
-                await reader
 
     # -- frames -------------------------------------------------------------------------
 

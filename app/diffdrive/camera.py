@@ -1,6 +1,6 @@
 """The robot's onboard camera: a pinhole looking along the robot's heading, and a renderer.
 
-:class:`Pinhole` is the geometry: a point of the room seen from the robot's pose lands at pixel
+:class:`Pinhole` is the geometry: a point of the arena seen from the robot's pose lands at pixel
 ``u = cx - f * left / ahead``, ``v = cy - f * up / ahead``, with ``f = (w / 2) / tan(hfov / 2)``
 and pixel coordinates continuous (the first pixel spans 0 to 1, the image centre is w / 2).
 So a target's bearing, positive to the left as the robot's yaw is, is ``atan((cx - u) / f)``.
@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from app.diffdrive.arena import Arena, Face, Flame, Picture, Pose2D
 from app.diffdrive.robot import CAMERA_HEIGHT_M, CAMERA_HFOV, RobotState
-from app.diffdrive.room import Face, Flame, Picture, Pose2D, Room
 from app.diffdrive.sim import Placed, Scene
 from app.flame import draw_flame_bgr
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
@@ -48,7 +48,7 @@ FLAME_TEXTURE_PX: Final = 200
 FLAME_FRAMES: Final = 32
 
 # Colours (BGR) and shading.
-_WALLS: Final = {  # by the side of the room the wall is on
+_WALLS: Final = {  # by the side of the arena the wall is on
     "south": (170, 190, 205),
     "east": (150, 175, 200),
     "north": (185, 200, 210),
@@ -93,7 +93,7 @@ class Pinhole:
         return self.width / 2, self.height / 2
 
     def to_camera(self, robot: RobotState, x: float, y: float, z: float) -> tuple[float, ...]:
-        """A room point as (ahead, left, up) metres from the camera."""
+        """An arena point as (ahead, left, up) metres from the camera."""
         dx, dy = x - robot.x, y - robot.y
         cos, sin = math.cos(robot.yaw), math.sin(robot.yaw)
         return dx * cos + dy * sin, -dx * sin + dy * cos, z - self.mount_height
@@ -101,7 +101,7 @@ class Pinhole:
     def project(
         self, robot: RobotState, x: float, y: float, z: float
     ) -> tuple[float, float] | None:
-        """The pixel (u, v) where the room point (x, y, z) appears; None when it is behind the
+        """The pixel (u, v) where the arena point (x, y, z) appears; None when it is behind the
         camera (or in the clipping plane's way). It may lie outside the frame."""
         ahead, left, up = self.to_camera(robot, x, y, z)
         if ahead < NEAR_M:
@@ -110,7 +110,7 @@ class Pinhole:
         return cx - self.focal * left / ahead, cy - self.focal * up / ahead
 
     def bearing(self, robot: RobotState, x: float, y: float) -> float:
-        """The bearing of the room point (x, y) from the robot's heading, positive to the
+        """The bearing of the arena point (x, y) from the robot's heading, positive to the
         left, in (-π, π]."""
         ahead, left, _ = self.to_camera(robot, x, y, self.mount_height)
         return math.atan2(left, ahead)
@@ -152,7 +152,7 @@ def _pyramid(image: Image, smallest: int = 16) -> tuple[Image, ...]:
 def load_face(face: Face, faces_dir: Path = FACES_DIR) -> tuple[Image, ...]:
     """The face's photo, cropped to its face box and margin, at sizes from the face box
     :data:`FACE_TEXTURE_PX` high down; ``ValueError`` when the file is missing or is not the
-    photo the room was measured on."""
+    photo the arena was measured on."""
     path = faces_dir / face.photo.file
     loaded = cv2.imread(str(path))
     if loaded is None:
@@ -161,7 +161,7 @@ def load_face(face: Face, faces_dir: Path = FACES_DIR) -> tuple[Image, ...]:
     if (photo.shape[1], photo.shape[0]) != face.photo.size:
         raise ValueError(
             f"{path} is {photo.shape[1]}x{photo.shape[0]}, not the "
-            f"{face.photo.size[0]}x{face.photo.size[1]} photo whose face box the room knows"
+            f"{face.photo.size[0]}x{face.photo.size[1]} photo whose face box the arena knows"
         )
     x0, y0, x1, y1 = face.photo.crop
     scale = FACE_TEXTURE_PX / face.photo.face_box[3]
@@ -230,14 +230,14 @@ def visible_part(
 
 
 class Renderer:
-    """Draws what ``camera`` sees of scenes in ``room``; the textures are loaded once."""
+    """Draws what ``camera`` sees of scenes in ``arena``; the textures are loaded once."""
 
-    def __init__(self, room: Room, camera: Pinhole, faces_dir: Path = FACES_DIR) -> None:
-        self.room = room
+    def __init__(self, arena: Arena, camera: Pinhole, faces_dir: Path = FACES_DIR) -> None:
+        self.arena = arena
         self.camera = camera
         self._faces: dict[str, _Texture] = {}
         self._flames: dict[str, list[_Texture]] = {}
-        for billboard in room.billboards:
+        for billboard in arena.billboards:
             look = billboard.look
             if isinstance(look, Face):
                 self._faces[billboard.name] = _Texture(load_face(look, faces_dir))
@@ -277,7 +277,7 @@ class Renderer:
         with np.errstate(divide="ignore"):
             floor_depth = np.where(below > 0, f * cam.mount_height / below, np.inf)
             ceiling_depth = np.where(
-                below < 0, f * (self.room.wall_height - cam.mount_height) / -below, np.inf
+                below < 0, f * (self.arena.wall_height - cam.mount_height) / -below, np.inf
             )
         floor = _shade(floor_depth)[:, None] * np.array(_FLOOR, np.float64)
         ceiling = _shade(ceiling_depth)[:, None] * np.array(_CEILING, np.float64)
@@ -285,7 +285,7 @@ class Renderer:
         return np.repeat(rows[:, None, :], cam.width, axis=1).round().astype(np.uint8)
 
     def _draw_walls(self, frame: Image, robot: RobotState) -> None:
-        cam, room = self.camera, self.room
+        cam, arena = self.camera, self.arena
         cos, sin = math.cos(robot.yaw), math.sin(robot.yaw)
         # Ray per column: ahead (cos, sin) plus slope times left (-sin, cos); its parameter is
         # the depth along the optical axis.
@@ -293,10 +293,10 @@ class Renderer:
         dy = sin + self._slopes * cos
         with np.errstate(divide="ignore", invalid="ignore"):
             tx = np.where(
-                dx > 0, (room.width - robot.x) / dx, np.where(dx < 0, -robot.x / dx, np.inf)
+                dx > 0, (arena.width - robot.x) / dx, np.where(dx < 0, -robot.x / dx, np.inf)
             )
             ty = np.where(
-                dy > 0, (room.depth - robot.y) / dy, np.where(dy < 0, -robot.y / dy, np.inf)
+                dy > 0, (arena.depth - robot.y) / dy, np.where(dy < 0, -robot.y / dy, np.inf)
             )
         on_x = tx < ty  # the ray meets an east or west wall first
         depth = np.maximum(np.minimum(tx, ty), NEAR_M)
@@ -305,7 +305,7 @@ class Renderer:
         seam = np.abs(along - np.round(along)) < _SEAM_M / 2
         colours = colours * (_shade(depth) * np.where(seam, _SEAM_SHADE, 1.0))[:, None]
         cy, f = cam.centre[1], cam.focal
-        top = cy - f * (room.wall_height - cam.mount_height) / depth
+        top = cy - f * (arena.wall_height - cam.mount_height) / depth
         bottom = cy + f * cam.mount_height / depth
         mask = ((self._rows >= top) & (self._rows < bottom)).view(np.uint8)
         walls = np.broadcast_to(colours.round().astype(np.uint8)[None, :, :], frame.shape)

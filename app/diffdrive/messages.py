@@ -1,7 +1,7 @@
 """What the simulated robot publishes, as rosbridge's JSON gives it to a client.
 
-``/odom`` is a ``nav_msgs/Odometry`` in the room's frame (``odom``: its origin the room's
-south-west corner, so the pose read from it is the room's) with the heading as a quaternion
+``/odom`` is a ``nav_msgs/Odometry`` in the arena's frame (``odom``: its origin the arena's
+south-west corner, so the pose read from it is the arena's) with the heading as a quaternion
 about z; the camera is a ``sensor_msgs/CompressedImage`` with the JPEG's bytes in base64, as
 rosbridge encodes a ``uint8[]``. Stamps and headers are spelled as the ROS flavour spells them:
 ``secs``/``nsecs`` and a ``seq`` in ROS 1, ``sec``/``nanosec`` in ROS 2.
@@ -48,7 +48,7 @@ def header(flavour: RosFlavour, seconds: float, frame_id: str, seq: int) -> Json
 
 
 def odometry(flavour: RosFlavour, state: RobotState, seconds: float, seq: int) -> Json:
-    """The robot's ``nav_msgs/Odometry`` at ``seconds``: its pose in the room and the
+    """The robot's ``nav_msgs/Odometry`` at ``seconds``: its pose in the arena and the
     velocities it drives at, in its own frame."""
     return {
         "header": header(flavour, seconds, ODOM_FRAME, seq),

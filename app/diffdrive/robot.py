@@ -44,7 +44,7 @@ class RobotState:
 
 
 class DiffDrive:
-    """A differential-drive robot of radius :attr:`RADIUS_M` in a ``width`` by ``depth`` room."""
+    """A differential-drive robot of radius :attr:`RADIUS_M` in a ``width`` by ``depth`` arena."""
 
     TICK_S: Final = 0.016
     COMMAND_TIMEOUT_S: Final = 1.0
@@ -60,7 +60,7 @@ class DiffDrive:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if width <= 2 * self.RADIUS_M or depth <= 2 * self.RADIUS_M:
-            raise ValueError(f"a {width} m by {depth} m room is too small for the robot")
+            raise ValueError(f"a {width} m by {depth} m arena is too small for the robot")
         self._clock = clock
         self.width, self.depth = width, depth
         self.x, self.y = self._inside(x, width), self._inside(y, depth)

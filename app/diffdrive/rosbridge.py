@@ -1,4 +1,4 @@
-"""The rosbridge v2 protocol over one room's :class:`~app.diffdrive.sim.RoomSim`, without I/O.
+"""The rosbridge v2 protocol over one room's :class:`~app.diffdrive.sim.ArenaSim`, without I/O.
 
 :class:`DiffDriveHub` is what the protocol's sessions (:mod:`app.rosbridge.protocol`) talk to in
 one room: the robot's three topics and rosapi's answers about its graph. ``/cmd_vel`` takes a
@@ -18,7 +18,7 @@ from typing import Any, Final, Literal
 
 from app.diffdrive import messages
 from app.diffdrive.robot import DESCRIPTION
-from app.diffdrive.sim import RoomSim
+from app.diffdrive.sim import ArenaSim
 from app.protocol.ros import RosFlavour
 from app.rosbridge.hosted import Versioned
 from app.rosbridge.messages import Twist
@@ -78,7 +78,7 @@ class DiffDriveHub(Hub[Leaf]):
 
     def __init__(
         self,
-        sim: RoomSim,
+        sim: ArenaSim,
         ros: RosFlavour,
         wall_clock: Callable[[], float] = time.time,
     ) -> None:
@@ -148,7 +148,7 @@ class DiffDriveHub(Hub[Leaf]):
     # -- the owner's side ------------------------------------------------------------------
 
     def tick(self, now: float) -> None:
-        """Call after each step of the room: a new odometry message, as of ``now``."""
+        """Call after each step of the arena: a new odometry message, as of ``now``."""
         super().tick(now)
         self._odometry = None
 

@@ -1,6 +1,6 @@
-"""One room's simulation: the robot, and the room's time that moves the walking billboard.
+"""One arena's simulation: the robot, and the arena's time that moves the walking billboard.
 
-:class:`RoomSim` steps both at the robot's fixed tick; :meth:`RoomSim.scene` is what the
+:class:`ArenaSim` steps both at the robot's fixed tick; :meth:`ArenaSim.scene` is what the
 camera renders, taken at one instant, so a renderer working elsewhere (another thread) reads
 nothing that the next tick changes.
 """
@@ -11,8 +11,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from app.diffdrive.arena import ARENA, Arena, Billboard, Pose2D
 from app.diffdrive.robot import DiffDrive, RobotState
-from app.diffdrive.room import ROOM, Billboard, Pose2D, Room
 
 
 @dataclass(frozen=True)
@@ -30,26 +30,26 @@ class Scene:
     t: float
     robot: RobotState
     billboards: tuple[Placed, ...]
-    # Counts the room's ticks: tells one scene from the next (a flame flickers with it).
+    # Counts the arena's ticks: tells one scene from the next (a flame flickers with it).
     tick: int
 
 
-class RoomSim:
-    """The robot in ``room``; the room's time is its ticks times the tick."""
+class ArenaSim:
+    """The robot in ``arena``; the arena's time is its ticks times the tick."""
 
-    def __init__(self, room: Room = ROOM, clock: Callable[[], float] = time.monotonic) -> None:
-        self.room = room
-        start = room.start
-        self.robot = DiffDrive(room.width, room.depth, start.x, start.y, start.yaw, clock)
+    def __init__(self, arena: Arena = ARENA, clock: Callable[[], float] = time.monotonic) -> None:
+        self.arena = arena
+        start = arena.start
+        self.robot = DiffDrive(arena.width, arena.depth, start.x, start.y, start.yaw, clock)
         self.ticks = 0
 
     @property
     def t(self) -> float:
-        """Room time (s) since the simulation began: the billboards' walks run on it."""
+        """Arena time (s) since the simulation began: the billboards' walks run on it."""
         return self.ticks * DiffDrive.TICK_S
 
     def step(self) -> None:
-        """One tick of the robot and of the room's time."""
+        """One tick of the robot and of the arena's time."""
         self.robot.step()
         self.ticks += 1
 
@@ -57,5 +57,5 @@ class RoomSim:
         """The robot and the billboards now."""
         robot = self.robot.state()
         t = self.t
-        placed = tuple(Placed(b, b.placed(t, (robot.x, robot.y))) for b in self.room.billboards)
+        placed = tuple(Placed(b, b.placed(t, (robot.x, robot.y))) for b in self.arena.billboards)
         return Scene(t, robot, placed, self.ticks)

@@ -15,7 +15,7 @@ from typing import Literal
 from app.protocol.relay_profiles import DEFAULT_PROFILE
 from app.protocol.relay_profiles import Profile as RelayProfile
 from app.protocol.robot import Robot
-from app.protocol.world import TERRAIN_CENTRE, WORLD_SIZE
+from app.protocol.turtlesim_world import TERRAIN_CENTRE, WORLD_SIZE
 
 # Below this distance the direction to the target is meaningless (the thesis's turtle sits at
 # the terrain centre, which is where a goal in the middle of the frame lands).
@@ -26,6 +26,9 @@ SPAWN_THETA = math.pi / 2
 # How far back a controller remembers the vehicle's heading, to take a goal's bearing from the
 # heading its frame was taken at: longer than a fresh goal takes from its camera to the vehicle.
 HEADING_MEMORY_S = 1.0
+# How many of its camera's latest frames a vehicle remembers the capture time of, for the goals
+# found in them: more than a second of a 30 fps camera, and goals older than that are stale.
+KEPT_FRAMES = 120
 
 Law = Literal["rotate", "follow", "onboard"]
 
@@ -66,6 +69,9 @@ class Profile:
     goal_timeout_s: float
     # The relay profile (snapshot pacing and detector parameters) this vehicle profile pairs with.
     relay_profile: RelayProfile
+    # The operation (app/vision/operations.json) a relay started for this profile runs until a
+    # client sets another; None: the spec's default.
+    operation: str | None = None
     # --- follow only -------------------------------------------------------------------------
     # Forward speed per metre beyond the standoff, and its limit (m/s).
     linear_gain: float = 0.0
@@ -170,11 +176,15 @@ PROFILES: dict[str, Profile] = {
         search_after_s=0.3,
         search_angular=1.6,
         goal_timeout_s=0.3 + 3 * math.pi / 1.6,
+        # The detector the onboard bench measures better at following the walker, whose round
+        # takes it 3 m from the robot (docs/performance.md, "A robot that carries its camera").
+        operation="face_small",
     ),
 }
 __all__ = [
     "DEADMAN_S",
     "HEADING_MEMORY_S",
+    "KEPT_FRAMES",
     "DEFAULT_PROFILE",
     "DRIVE_REPEAT_S",
     "PROFILES",
@@ -227,6 +237,7 @@ class ControlConfig:
     drive_repeat_s: float
     tick_s: float
     heading_memory_s: float
+    kept_frames: int
     profiles: dict[str, Profile]
 
 
@@ -241,5 +252,6 @@ def control_config(profiles: dict[str, Profile] | None = None) -> ControlConfig:
         drive_repeat_s=DRIVE_REPEAT_S,
         tick_s=TICK_S,
         heading_memory_s=HEADING_MEMORY_S,
+        kept_frames=KEPT_FRAMES,
         profiles=PROFILES if profiles is None else profiles,
     )

@@ -153,7 +153,7 @@ class PageProtocol:
 
 @dataclass(frozen=True)
 class BillboardMark:
-    """A billboard of the simulated room as the client's map draws it: a picture ``width``
+    """A billboard of the simulated arena as the client's map draws it: a picture ``width``
     metres wide where it starts (``x``, ``y``, facing ``yaw``), and the closed path it walks
     (empty when it stands still)."""
 
@@ -167,8 +167,8 @@ class BillboardMark:
 
 
 @dataclass(frozen=True)
-class RoomMap:
-    """The simulated room, for the client's map, when the server simulates one: its size, the
+class ArenaMap:
+    """The simulated arena, for the client's map, when the server simulates one: its size, the
     robot's radius and camera's field of view (the wedge drawn from its pose), the billboards,
     and where to read their places now (``GET state_path?room=R``, every ``state_period_ms``)."""
 
@@ -183,7 +183,7 @@ class RoomMap:
 
 @dataclass(frozen=True)
 class PlacedMark:
-    """Where one billboard stands now (``GET /room/state``)."""
+    """Where one billboard stands now (``GET /arena/state``)."""
 
     name: str
     x: float
@@ -192,8 +192,8 @@ class PlacedMark:
 
 
 @dataclass(frozen=True)
-class RoomState:
-    """What ``GET /room/state`` answers: the room's time (s) and its billboards' places."""
+class ArenaState:
+    """What ``GET /arena/state`` answers: the arena's time (s) and its billboards' places."""
 
     t: float
     billboards: tuple[PlacedMark, ...]
@@ -227,6 +227,9 @@ class PageConfig:
     auto: bool
     # The vehicle profile, or on the relay page the relay profile it pairs with.
     profile: str
+    # The operation the relay starts with for the vehicle profile asked (None: the spec's
+    # default).
+    operation: str | None
     # The control law's numbers, the world's geometry among them.
     control: ControlConfig
     # The vehicle page's spawn step (turn to face up at start; a turtlesim's only).
@@ -241,8 +244,8 @@ class PageConfig:
     # The fallback when the robot's rosapi cannot name its types.
     ros: RosSetting
     ros_types: RosConfig
-    # The simulated room the client draws instead of turtlesim's terrain; None: no room.
-    room_map: RoomMap | None
+    # The simulated arena the client draws instead of turtlesim's terrain; None: no arena.
+    arena_map: ArenaMap | None
     robot: RobotConfig
     # Why the robot asked for (``?robot=``) cannot be driven, or None.
     robot_error: str | None

@@ -6,7 +6,8 @@ the robot that a :class:`Robot` describes: they publish on its velocity topic in
 its pose source (``turtlesim/Pose``, or ``nav_msgs/Odometry`` with the heading from the
 quaternion), and every command they publish is clamped to its :class:`Limits` and ramped within
 its accelerations (the pilot's limiter). Three presets (:data:`PRESETS`); any other robot is a
-TOML file (:func:`load`), refused in one line naming the key and the problem.
+description file, which :mod:`app.robot_file` reads and :func:`parse` checks here, refusing it in
+one line naming the key and the problem.
 
 What only a turtlesim has stays with the turtlesim: the spawn step (``teleport_absolute``
 beside its pose topic) and the 11 m terrain whose walls the follow law keeps clear of
@@ -20,10 +21,9 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Final, Literal, cast, get_args
 
 from app.protocol.camera import CAMERA_TYPES, CameraType
@@ -156,6 +156,14 @@ class RobotError(ValueError):
     """A robot that cannot be described: one line naming the key and what is wrong."""
 
 
+# A description's text goes into logs and ROS messages: a name or a frame id is at most this
+# long, and a topic (a ROS graph name) at most that, so that no file can flood a log line.
+MAX_NAME_CHARS: Final = 64
+MAX_TOPIC_CHARS: Final = 256
+# How much of a bad value an error shows, escaped (a control character is never shown raw).
+_SHOWN_CHARS: Final = 40
+
+
 # A ROS graph resource name (ROS 2's rules, which ROS 1's accept): segments of letters, digits
 # and underscores, not starting with a digit, separated by single slashes.
 _TOPIC_RE = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*\Z")
@@ -185,7 +193,8 @@ class _Reader:
         for key in data:
             if key not in _KEYS[table]:
                 known = ", ".join(_KEYS[table])
-                raise RobotError(f"{self.path(key)}: unknown key (this table has {known})")
+                unknown = key if _BARE_KEY_RE.match(key) else _shown(key)
+                raise RobotError(f"{self.path(unknown)}: unknown key (this table has {known})")
 
     def path(self, key: str) -> str:
         return f"{self.table}.{key}" if self.table else key
@@ -201,19 +210,19 @@ class _Reader:
             raise RobotError(f"{self.path(key)}: must be a table ([{key}]), not {_kind(value)}")
         return _Reader(value, key)
 
-    def text(self, key: str, default: str | None = None) -> str:
+    def text(self, key: str, default: str | None = None, limit: int = MAX_TOPIC_CHARS) -> str:
         value = self.data.get(key, default)
         if value is None:
             raise RobotError(f"{self.path(key)}: missing")
         if not isinstance(value, str):
             raise RobotError(f"{self.path(key)}: must be a string, not {_kind(value)}")
-        return value
+        return _checked_text(self.path(key), value, limit)
 
     def topic(self) -> str:
         topic = self.text("topic")
         if not _TOPIC_RE.match(topic):
             raise RobotError(
-                f"{self.path('topic')}: not a ROS topic name: {topic!r} (letters, digits, "
+                f"{self.path('topic')}: not a ROS topic name: {_shown(topic)} (letters, digits, "
                 "underscores and single slashes, e.g. /cmd_vel)"
             )
         return topic if topic.startswith("/") else f"/{topic}"
@@ -223,7 +232,7 @@ class _Reader:
         found = canonical_type(spelled)
         if found not in choices:
             raise RobotError(
-                f"{self.path('type')}: unknown message type {spelled!r} (one of "
+                f"{self.path('type')}: unknown message type {_shown(spelled)} (one of "
                 f"{', '.join(choices)})"
             )
         return found
@@ -235,21 +244,49 @@ class _Reader:
         # TOML's booleans are not numbers, though Python's bool is an int.
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise RobotError(f"{self.path(key)}: must be a number, not {_kind(value)}")
+        # TOML's integers have no bound; a float has (float() of a longer one overflows).
+        if isinstance(value, int) and abs(value) > sys.float_info.max:
+            raise RobotError(
+                f"{self.path(key)}: must be a number within the float range (±"
+                f"{sys.float_info.max:.4g}), not {_kind(value)}"
+            )
         if math.isnan(value) or not valid(float(value)):
             raise RobotError(f"{self.path(key)}: must be {what}, not {value}")
         return float(value)
+
+
+# A key shown as it is written: TOML's bare keys (anything else is quoted, escaped).
+_BARE_KEY_RE = re.compile(r"[A-Za-z0-9_-]{1,64}\Z")
+
+
+def _shown(text: str) -> str:
+    """``text`` quoted and escaped for an error line, cut to its first characters."""
+    if len(text) <= _SHOWN_CHARS:
+        return repr(text)
+    return f"{text[:_SHOWN_CHARS]!r}... ({len(text)} characters)"
+
+
+def _checked_text(path: str, text: str, limit: int) -> str:
+    """``text`` if it is at most ``limit`` characters, all printable; else :class:`RobotError`."""
+    if len(text) > limit:
+        raise RobotError(f"{path}: at most {limit} characters, not {len(text)}")
+    if not text.isprintable():
+        raise RobotError(f"{path}: must not hold control characters or line breaks: {_shown(text)}")
+    return text
 
 
 def _kind(value: object) -> str:
     if isinstance(value, bool):
         return "a boolean"
     if isinstance(value, str):
-        return f"the string {value!r}"
+        return f"the string {_shown(value)}"
     if isinstance(value, dict):
         return "a table"
     if isinstance(value, list):
         return "an array"
-    return repr(value)
+    if isinstance(value, int) and abs(value) > 10**_SHOWN_CHARS:
+        return f"an integer of about {int(math.log10(abs(value))) + 1} digits"
+    return _shown(str(value))
 
 
 def parse(data: Mapping[str, Any], default_name: str) -> Robot:
@@ -257,14 +294,14 @@ def parse(data: Mapping[str, Any], default_name: str) -> Robot:
     naming the first key that is wrong. ``default_name`` names a robot whose file has no
     ``name``."""
     top = _Reader(data, "")
-    name = top.text("name", default_name).strip()
+    name = top.text("name", default_name, MAX_NAME_CHARS).strip()
     if not name:
         raise RobotError("name: must not be empty")
     velocity_table = top.table_of("velocity")
     velocity_type = cast(VelocityType, velocity_table.message_type(VELOCITY_TYPES))
     velocity_topic = velocity_table.topic()
     if velocity_type == TWIST_STAMPED:
-        frame_id = velocity_table.text("frame_id", DEFAULT_FRAME_ID)
+        frame_id = velocity_table.text("frame_id", DEFAULT_FRAME_ID, MAX_NAME_CHARS)
     elif velocity_table.has("frame_id"):
         raise RobotError(f"velocity.frame_id: only a {TWIST_STAMPED} has a header to put it in")
     else:
@@ -300,35 +337,6 @@ def parse(data: Mapping[str, Any], default_name: str) -> Robot:
         angular_accel=limit("angular_accel", speed=False),
     )
     return Robot(name, Velocity(velocity_topic, velocity_type, frame_id), pose, camera, limits)
-
-
-def load(path: Path) -> Robot:
-    """The robot a TOML description file describes; :class:`RobotError` (one line, naming the
-    file and the key) if it cannot be read or describes no robot."""
-    try:
-        with path.open("rb") as file:
-            data = tomllib.load(file)
-    except OSError as exc:
-        raise RobotError(f"cannot read robot file {path}: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotError(f"robot file {path}: not TOML: {exc}") from None
-    try:
-        return parse(data, path.stem)
-    except RobotError as exc:
-        raise RobotError(f"robot file {path}: {exc}") from None
-
-
-def robot_named(text: str) -> Robot:
-    """A preset by name, else the description file at ``text``; :class:`RobotError` if it is
-    neither."""
-    if text in PRESETS:
-        return PRESETS[text]
-    path = Path(text)
-    if not path.exists():
-        raise RobotError(
-            f"no robot preset named {text!r} (one of {', '.join(PRESETS)}) and no such file"
-        )
-    return load(path)
 
 
 # --- the robot's messages ----------------------------------------------------------------

@@ -10,10 +10,10 @@ import logging
 import os
 from pathlib import Path
 
-from app.arguments import add_relay_profile, add_token_option, positive_integer
+from app.arguments import add_token_option, positive_integer
 from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments
-from app.protocol import tokens
+from app.protocol import control, tokens
 from app.relay.metrics import run_with_metrics
 from app.relay.page import RelayError, check_server
 from app.relay.service import RelayService
@@ -26,7 +26,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--server", required=True, help="server base URL, e.g. http://host:8000")
     parser.add_argument("--room", default="default", help="room to join (default: default)")
     parser.add_argument("--name", default="relay", help="peer name (default: relay)")
-    add_relay_profile(parser, "relay profile")
+    parser.add_argument(
+        "--profile",
+        choices=sorted(control.PROFILES),
+        default=control.DEFAULT_PROFILE,
+        help="the vehicle profile relayed for: the relay paces its snapshots as the relay profile"
+        " it pairs with, and starts with its operation (onboard:"
+        f" {control.PROFILES['onboard'].operation}) (default: {control.DEFAULT_PROFILE})",
+    )
     add_token_option(parser, "relay")
     parser.add_argument(
         "--ca-file", type=Path, metavar="PEM", help="trust this CA for an https:// server"

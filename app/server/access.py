@@ -1,5 +1,5 @@
-"""Who may do what on ``/rosbridge``, ``/turtlesim/state`` and ``/room/state``, decided by
-room/role tokens.
+"""Who may do what on ``/rosbridge`` and the simulated robot's state route, decided by room/role
+tokens.
 
 Sans-I/O: the adapter hands over the handshake's token (an ``Authorization: Bearer`` header) and
 each frame, parsed once (:func:`app.rosbridge.protocol.parse_frame`), and gets back whether to
@@ -194,14 +194,6 @@ class RosbridgeGate:
         else:
             what = repr(operation.op)
         return f"{what} needs a vehicle token: a {role} token may only read"
-
-
-def state_refusal(secret: str | None, token: str | None, now: float) -> str | None:
-    """Why ``GET /turtlesim/state`` is refused to a request with ``token``, or None."""
-    if secret is None:
-        return None
-    claims = bearer_claims(secret, token, now)
-    return claims if isinstance(claims, str) else None
 
 
 def bearer_claims(secret: str, token: str | None, now: float) -> Claims | str:

@@ -19,7 +19,7 @@ from app.server.hosts import HostGuard, allowed_hosts
 from app.server.metrics import ServerMetrics
 from app.server.origins import OriginGuard
 from app.server.pages import router as pages_router
-from app.server.rosbridge import Simulator
+from app.server.rosbridge import Simulator, robot_state
 from app.server.rosbridge import router as rosbridge_router
 from app.server.signaling import Switchboard
 from app.server.signaling import router as signaling_router
@@ -107,10 +107,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(pages_router)
     app.include_router(fleet_router)
     app.state.simulator = Simulator.from_settings(settings)
-    if app.state.simulator.turtle is not None:
-        app.state.turtlesim = app.state.simulator.sim
     app.state.simulator.outboxes.refused = metrics.refused
     app.include_router(rosbridge_router)
+    # The robot's state for the client's map, where its simulation says.
+    app.add_api_route(app.state.simulator.simulation.state_path, robot_state, methods=["GET"])
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal, get_args
+from typing import Literal
 
 from pydantic import Field, ValidationError, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -14,13 +14,9 @@ from app.protocol.tokens import check_secret
 from app.resources import OPERATIONS_SPEC
 from app.server.origins import normalise
 from app.server.turn import TurnSettings
+from app.simulators import SimulatorName
 
-__all__ = ["IceServer", "Settings", "SimulatedRobot", "describe_settings_error"]
-
-# The robots the server can simulate: turtlesim's turtle (one for the whole server), or a
-# differential-drive robot with an onboard camera in a walled room (one per room).
-SimulatedRobot = Literal["turtlesim", "diffdrive"]
-SIMULATED_ROBOTS: tuple[SimulatedRobot, ...] = get_args(SimulatedRobot)
+__all__ = ["IceServer", "Settings", "describe_settings_error"]
 
 # What a person sets is an environment variable: say it in those words, not pydantic's.
 _TYPE_WORDS = {
@@ -80,7 +76,7 @@ class Settings(TurnSettings, BaseSettings):
     allowed_hosts: list[str] = Field(default_factory=list)
     operations_spec: Path = OPERATIONS_SPEC
     ros: RosFlavour = DEFAULT_FLAVOUR
-    robot: SimulatedRobot = "turtlesim"
+    robot: SimulatorName = "turtlesim"
     # When set (redis://host:port/db), instances sharing it form one signaling service
     # (app.server.fleet); unset, the hub runs embedded in this one process.
     redis_url: str | None = None

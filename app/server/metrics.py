@@ -14,16 +14,14 @@ from __future__ import annotations
 
 import asyncio
 import time
-from typing import TYPE_CHECKING, Final, Protocol
+from collections.abc import Sized
+from typing import Final, Protocol
 
 from prometheus_client import CollectorRegistry, Counter, Gauge
 
 from app.protocol.rooms import ROLES
 from app.protocol.signaling import INCOMING_TYPES
 from app.signaling.hub import REFUSALS, Census, Refusal
-
-if TYPE_CHECKING:
-    from app.server.rosbridge import Simulator
 
 # The ``type`` label's values: what a peer may send, and one bucket for everything else.
 MESSAGE_TYPES: Final = (*sorted(INCOMING_TYPES), "other")
@@ -34,6 +32,17 @@ class CensusSource(Protocol):
     """A hub that can say who is in it (:class:`~app.signaling.hub.Hub` or the fleet's)."""
 
     def census(self) -> Census: ...
+
+
+class TickSource(Protocol):
+    """The server's simulator, as its gauges read it (:class:`app.server.rosbridge.Simulator`):
+    the steps taken so far and the open rosbridge sessions."""
+
+    @property
+    def ticks(self) -> int: ...
+
+    @property
+    def outboxes(self) -> Sized: ...
 
 
 class ServerMetrics:
@@ -92,7 +101,7 @@ class ServerMetrics:
         self.rosbridge_sessions.set(rosbridge_sessions)
 
     async def run(
-        self, hub: CensusSource, simulator: Simulator, period_s: float = SAMPLE_PERIOD_S
+        self, hub: CensusSource, simulator: TickSource, period_s: float = SAMPLE_PERIOD_S
     ) -> None:
         """Sample the gauges every ``period_s`` until cancelled."""
         ticks, at = simulator.ticks, time.monotonic()

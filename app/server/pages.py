@@ -18,21 +18,16 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from fastapi.templating import Jinja2Templates
 
-from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.room import ROOM
-from app.diffdrive.roommap import room_map
 from app.protocol.control import (
     DEFAULT_PROFILE,
     PROFILES,
     ControlConfig,
     control_config,
-    for_robot,
     with_standoff,
 )
 from app.protocol.page import (
     BaseConfig,
     PageConfig,
-    RoomMap,
     page_protocol,
     robot_config,
     to_json,
@@ -41,7 +36,6 @@ from app.protocol.robot import DEFAULT_ROBOT, PRESETS, Robot
 from app.protocol.rooms import DEFAULT_ROOM, ROLES, Role
 from app.protocol.ros import AUTO, ROS_CONFIG, ROS_SETTINGS
 from app.resources import TEMPLATES_DIR
-from app.server.config import Settings
 from app.server.tls import insecure_rosbridge
 
 router = APIRouter()
@@ -72,7 +66,8 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         auto=query.get("auto") in ("1", "true", "yes"),
         # The relay paces its snapshots by the relay profile the vehicle profile pairs with.
         profile=profile.relay_profile if role == "relay" else profile.name,
-        control=_control(query.get("standoff"), robot),
+        operation=profile.operation,
+        control=_control(query.get("standoff")),
         # ?spawn=0 switches the spawn step off, ?preview=0 the relay's preview (unattended);
         # no robot but a turtlesim has the step.
         spawn_step=robot.turtlesim and query.get("spawn") not in ("0", "false", "no"),
@@ -83,20 +78,14 @@ def page_config(request: Request, role: Role) -> dict[str, Any]:
         rosbridge_error=insecure_rosbridge(rosbridge, request.url.scheme),
         ros=ros if ros in ROS_SETTINGS else AUTO,
         ros_types=ROS_CONFIG,
-        room_map=_room_map(request.app.state.settings),
+        # The simulated arena for the client's map, when the server simulates one.
+        arena_map=request.app.state.simulator.simulation.arena_map(),
         robot=robot_config(robot),
         robot_error=robot_error,
         protocol=page_protocol(),
     )
     converted: dict[str, Any] = to_json(config)
     return converted
-
-
-def _room_map(settings: Settings) -> RoomMap | None:
-    """The simulated room for the client's map, when the server simulates one."""
-    if settings.robot != "diffdrive":
-        return None
-    return room_map(ROOM, CAMERA_HFOV)
 
 
 def base_config() -> dict[str, Any]:
@@ -126,11 +115,12 @@ def _robot(name: str | None) -> tuple[Robot, str | None]:
     return PRESETS[DEFAULT_ROBOT], f"no robot preset named {name!r} (robot= is one of {known})"
 
 
-def _control(standoff: str | None, robot: Robot) -> ControlConfig:
-    """The control law's numbers for ``control.js``, each profile fitted to ``robot``;
-    ``?standoff=M`` sets the follow distance."""
-    profiles = {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
-    return control_config({name: for_robot(p, robot) for name, p in profiles.items()})
+def _control(standoff: str | None) -> ControlConfig:
+    """The control law's numbers for ``control.js``; ``?standoff=M`` sets the follow distance.
+    The page's pilot fits its profile to the robot (``core/pilot.js``)."""
+    return control_config(
+        {**PROFILES, "follow": with_standoff(PROFILES["follow"], _standoff(standoff))}
+    )
 
 
 def _render(request: Request, role: Role) -> HTMLResponse:

@@ -1,23 +1,23 @@
-"""WebSocket ``/rosbridge``, ``GET /turtlesim/state`` and ``GET /room/state``, plus the tasks that
-step the simulated robots and film their cameras.
+"""WebSocket ``/rosbridge`` and the simulated robot's state for the map (``GET`` its
+simulation's ``state_path``), plus the tasks that step the robots and film their cameras.
 
 The rules live in :mod:`app.rosbridge.protocol` and each robot's hub; :mod:`app.server.websocket`
 moves the frames with the policy it shares with ``/ws`` (size limit, bounded outbox, JSON edge).
-The server simulates one kind of robot (``autopilot serve --robot``): turtlesim's turtles, one
-simulator for the whole server, or the differential-drive robot of :mod:`app.diffdrive`, one per
-signaling room, made when a connection first names the room (at most :data:`MAX_ROOMS` at once;
-the robots of rooms nobody is connected to make way for new ones). A connection is bound to the room
-its token names (``auth``, or the handshake's bearer token); with no access control, to the room
-its URL asks for (``/rosbridge?room=R``, else the default room). A room's tokens reach only its
-robot.
+The server simulates one kind of robot (``autopilot serve --robot``, named by
+:mod:`app.simulators`), which it knows only as a :class:`~app.rosbridge.simulated.Simulation`:
+one robot for the whole server, or one per signaling room, made when a connection first names
+the room (at most :data:`MAX_ROOMS` at once; the robots of rooms nobody is connected to make way
+for new ones). A connection is bound to the room its token names (``auth``, or the handshake's
+bearer token); with no access control, to the room its URL asks for (``/rosbridge?room=R``, else
+the default room). A room's tokens reach only its robot.
 
 Every tick each robot steps and each connection's writer is woken; a writer that is free then
 takes its session's publications (the latest of each subscription), so the tick costs the same
 whatever the clients subscribe to, and a client that does not read is sent nothing and slows no
-one. The tick is fixed at 16 ms (turtlesim's own): the simulators advance that much per step, so
-pacing the loop any other way would only change the robots' speed. A robot's camera is filmed
-at its own pace by a task of its own, rendered in a worker thread (one for every room, so the
-renders of many rooms queue rather than take every core), and only while someone subscribes:
+one. The tick is the simulation's own (turtlesim's 16 ms): the simulators advance that much per
+step, so pacing the loop any other way would only change the robots' speed. A robot's camera is
+filmed at its own pace by a task of its own, rendered in a worker thread (one for every room, so
+the renders of many rooms queue rather than take every core), and only while someone subscribes:
 the tick never waits for a render.
 """
 
@@ -27,26 +27,22 @@ import asyncio
 import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict
-from typing import TYPE_CHECKING, Any, Final
+from dataclasses import dataclass
+from typing import Any, Final
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, status
 from pydantic import TypeAdapter, ValidationError
 
-from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.roommap import STATE_PATH, room_state
-from app.diffdrive.rosbridge import DiffDriveHub
-from app.diffdrive.sim import RoomSim, Scene
 from app.protocol.close_codes import CloseCode
 from app.protocol.jsonedge import oversize
-from app.protocol.page import to_json
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.protocol.signaling import Name
 from app.rosbridge.protocol import Frame, Hub, Publish, Refused, RosbridgeSession, parse_frame
 from app.rosbridge.protocol import status as rosbridge_status
-from app.server.access import RosbridgeGate, bearer_claims, bearer_token, state_refusal
-from app.server.config import Settings, SimulatedRobot
+from app.rosbridge.simulated import Camera, SimulatedRobot
+from app.server.access import RosbridgeGate, bearer_claims, bearer_token
+from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import (
     Outbox,
@@ -57,11 +53,7 @@ from app.server.websocket import (
     refuse_if_full,
     serve,
 )
-from app.turtlesim.rosbridge import RosbridgeHub
-from app.turtlesim.sim import TurtleSim
-
-if TYPE_CHECKING:
-    from app.diffdrive.camera import Renderer
+from app.simulators import SimulatorName, simulation
 
 log = logging.getLogger(__name__)
 
@@ -79,31 +71,12 @@ class RoomsFull(Exception):
     """No robot can be made for another room."""
 
 
-class TurtleRobot:
-    """turtlesim: one simulator for every room."""
+@dataclass
+class Running:
+    """A robot the server steps, and the task that films its camera (when it has one)."""
 
-    def __init__(self, ros: RosFlavour) -> None:
-        self.sim = TurtleSim()
-        self.hub = RosbridgeHub(self.sim, ros)
-
-    def step(self, now: float) -> None:
-        """One tick of the simulator, then of its hub."""
-        self.sim.step()
-        self.hub.tick(now)
-
-
-class RoomRobot:
-    """One room's differential-drive robot, its hub, and the task that films its camera."""
-
-    def __init__(self, ros: RosFlavour) -> None:
-        self.sim = RoomSim()
-        self.hub = DiffDriveHub(self.sim, ros)
-        self.filming: asyncio.Task[None] | None = None
-
-    def step(self, now: float) -> None:
-        """One tick of the room, then of its hub."""
-        self.sim.step()
-        self.hub.tick(now)
+    robot: SimulatedRobot
+    filming: asyncio.Task[None] | None = None
 
 
 class Connection:
@@ -122,8 +95,7 @@ class Connection:
 class Simulator:
     """The simulated robots, their rosbridge hubs, and the tasks that step and film them.
 
-    Lives on ``app.state.simulator``; with turtlesim, ``app.state.turtlesim`` is its
-    :class:`TurtleSim`.
+    Lives on ``app.state.simulator``.
     """
 
     def __init__(
@@ -131,21 +103,21 @@ class Simulator:
         policy: SocketPolicy,
         max_sessions: int = 64,
         ros: RosFlavour = DEFAULT_FLAVOUR,
-        robot: SimulatedRobot = "turtlesim",
+        robot: SimulatorName = "turtlesim",
         max_rooms: int = MAX_ROOMS,
     ) -> None:
-        self.robot: SimulatedRobot = robot
+        self.simulation = simulation(robot)
         self.ros: RosFlavour = ros
         self.max_rooms = max_rooms
-        self.turtle = TurtleRobot(ros) if robot == "turtlesim" else None
-        self.rooms: dict[str, RoomRobot] = {}
-        self.tick_s = TurtleSim.TICK_S
+        # The robot every room reaches, or None when each room has its own (in rooms).
+        self.shared = None if self.simulation.per_room else Running(self.simulation.robot(ros))
+        self.rooms: dict[str, Running] = {}
+        self.tick_s = self.simulation.tick_s
         self.ticks = 0
         self.policy = policy
         self.outboxes: Outboxes[Connection] = Outboxes(policy, max_sessions)
         self._task: asyncio.Task[None] | None = None
         self._camera_thread: ThreadPoolExecutor | None = None
-        self._renderer: asyncio.Future[Renderer] | None = None
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Simulator:
@@ -158,28 +130,21 @@ class Simulator:
         )
 
     @property
-    def sim(self) -> TurtleSim:
-        """turtlesim's simulator; ``AttributeError`` when the server simulates another robot."""
-        return self._turtle().sim
-
-    @property
-    def hub(self) -> RosbridgeHub:
-        """turtlesim's hub; ``AttributeError`` when the server simulates another robot."""
-        return self._turtle().hub
-
-    def _turtle(self) -> TurtleRobot:
-        if self.turtle is None:
-            raise AttributeError(f"the server simulates {self.robot}, not turtlesim")
-        return self.turtle
+    def per_room(self) -> bool:
+        """True when each room has a robot of its own."""
+        return self.shared is None
 
     def start(self) -> None:
-        """Start stepping the robots every ``tick_s`` of wall time."""
+        """Start stepping the robots every ``tick_s`` of wall time (and filming the shared
+        robot's camera, if it has one)."""
         self._task = asyncio.create_task(self._run(), name="simulator-tick")
         self._task.add_done_callback(_report_crash)
+        if self.shared is not None:
+            self._start_filming(self.shared, "camera")
 
     async def stop(self) -> None:
         """Stop the tick and camera tasks and wait for them."""
-        tasks = [self._task, *(robot.filming for robot in self.rooms.values())]
+        tasks = [self._task, *(each.filming for each in self._running())]
         running = [task for task in tasks if task is not None]
         for task in running:
             task.cancel()
@@ -190,29 +155,28 @@ class Simulator:
             self._camera_thread = None
 
     def hub_for(self, room: str) -> Hub[Any]:
-        """The hub of ``room``'s robot (turtlesim's for every room), made when first asked
-        for; ``RoomsFull`` when :attr:`max_rooms` rooms have one already and someone is
-        connected to each."""
-        if self.turtle is not None:
-            return self.turtle.hub
-        robot = self.rooms.get(room)
-        if robot is None:
+        """The hub of the robot ``room`` reaches (the shared robot's for every room), made when
+        first asked for; ``RoomsFull`` when :attr:`max_rooms` rooms have one already and
+        someone is connected to each."""
+        if self.shared is not None:
+            return self.shared.robot.hub
+        running = self.rooms.get(room)
+        if running is None:
             if len(self.rooms) >= self.max_rooms:
                 self._free_unattended()
             if len(self.rooms) >= self.max_rooms:
                 raise RoomsFull(f"at most {self.max_rooms} rooms have a simulated robot")
-            robot = self.rooms[room] = RoomRobot(self.ros)
-            robot.filming = asyncio.create_task(self._film(robot), name=f"camera-{room}")
-            robot.filming.add_done_callback(_report_crash)
-        return robot.hub
+            running = self.rooms[room] = Running(self.simulation.robot(self.ros))
+            self._start_filming(running, f"camera-{room}")
+        return running.robot.hub
 
     def _free_unattended(self) -> None:
         """Forget the robots of the rooms nobody is connected to: a room that comes back later
         gets a new robot at its start, rather than rooms once used keeping out new ones."""
-        for name, robot in list(self.rooms.items()):
-            if not robot.hub.sessions:
-                if robot.filming is not None:
-                    robot.filming.cancel()
+        for name, running in list(self.rooms.items()):
+            if not running.robot.hub.sessions:
+                if running.filming is not None:
+                    running.filming.cancel()
                 del self.rooms[name]
                 log.info("room %r's robot freed: nobody is connected to it", name)
 
@@ -237,35 +201,18 @@ class Simulator:
             connection.session.close()
         self.outboxes.forget(connection)
 
-    def state(self) -> dict[str, Any]:
-        """The turtles' poses and pens and the pen strokes, as JSON-ready data."""
-        sim = self.sim
-        turtles = [
-            {"name": name, **asdict(sim.pose(name)), "pen": asdict(sim.pen(name))}
-            for name in sim.names()
-        ]
-        strokes = [
-            {"turtle": s.turtle, "pen": asdict(s.pen), "points": s.points} for s in sim.strokes()
-        ]
-        return {
-            "world_size": TurtleSim.WORLD_SIZE,
-            "tick": sim.ticks,
-            "turtles": turtles,
-            "strokes": strokes,
-        }
-
-    def room_scene(self, room: str) -> Scene | None:
-        """What ``room``'s robot and billboards are now; None for a room with no robot yet."""
-        robot = self.rooms.get(room)
-        return None if robot is None else robot.sim.scene()
+    def state(self, room: str) -> dict[str, Any]:
+        """What the map shows of the robot ``room`` reaches, JSON-ready; for a room whose robot
+        is not made yet, a robot at its start (made for the answer, and kept by no one)."""
+        running = self.shared or self.rooms.get(room)
+        robot = self.simulation.robot(self.ros) if running is None else running.robot
+        return robot.state()
 
     def tick(self) -> None:
         """One step of every robot, then a word to every writer that new messages are there."""
         now = time.monotonic()
-        if self.turtle is not None:
-            self.turtle.step(now)
-        for robot in self.rooms.values():
-            robot.step(now)
+        for running in self._running():
+            running.robot.step(now)
         self.ticks += 1
         self.wake()
 
@@ -273,6 +220,16 @@ class Simulator:
         """Tell every writer there may be something new to send (a tick, a publication)."""
         for _, outbox in self.outboxes.items():
             outbox.wake()
+
+    def _running(self) -> list[Running]:
+        """Every robot the server steps."""
+        return [self.shared] if self.shared is not None else list(self.rooms.values())
+
+    def _start_filming(self, running: Running, name: str) -> None:
+        camera = running.robot.camera
+        if camera is not None:
+            running.filming = asyncio.create_task(self._film(camera), name=name)
+            running.filming.add_done_callback(_report_crash)
 
     async def _run(self) -> None:
         next_at = time.monotonic()
@@ -286,17 +243,19 @@ class Simulator:
                 delay = 0.0
             await asyncio.sleep(max(delay, 0.0))
 
-    async def _film(self, robot: RoomRobot) -> None:
-        """Render and publish ``robot``'s camera at its frame rate while anyone subscribes."""
+    async def _film(self, camera: Camera) -> None:
+        """Render and publish ``camera``'s frames at its frame rate while anyone subscribes."""
         loop = asyncio.get_running_loop()
-        thread, renderer = await self._camera()
-        period = 1.0 / renderer.camera.fps
+        thread = self._camera()
+        # Loaded in the camera thread, so that loading never holds up a tick.
+        await loop.run_in_executor(thread, camera.prepare)
+        period = 1.0 / camera.fps
         next_at = loop.time()
         while True:
-            if robot.hub.camera_wanted():
-                scene, stamp = robot.sim.scene(), time.time()
-                jpeg = await loop.run_in_executor(thread, _shoot, renderer, scene)
-                robot.hub.publish_frame(jpeg, stamp)
+            if camera.wanted():
+                render, stamp = camera.shot(), time.time()
+                jpeg = await loop.run_in_executor(thread, render)
+                camera.publish(jpeg, stamp)
                 self.wake()
             next_at += period
             delay = next_at - loop.time()
@@ -304,31 +263,12 @@ class Simulator:
                 next_at = loop.time()
             await asyncio.sleep(max(delay, 0.0))
 
-    async def _camera(self) -> tuple[ThreadPoolExecutor, Renderer]:
-        """The thread every room's camera renders in and the renderer they share, made for the
-        first room (a turtlesim server never loads the photos) -- in that thread, so that
-        loading them never holds up a tick."""
+    def _camera(self) -> ThreadPoolExecutor:
+        """The one thread every camera renders in, made for the first (a server whose robots
+        carry none never has it)."""
         if self._camera_thread is None:
             self._camera_thread = ThreadPoolExecutor(1, thread_name_prefix="camera")
-            self._renderer = asyncio.get_running_loop().run_in_executor(
-                self._camera_thread, _renderer
-            )
-        assert self._renderer is not None
-        return self._camera_thread, await self._renderer
-
-
-def _renderer() -> Renderer:
-    """The camera of the diffdrive robot over its room (in the camera thread)."""
-    from app.diffdrive.camera import Pinhole, Renderer
-
-    return Renderer(RoomSim().room, Pinhole(hfov=CAMERA_HFOV))
-
-
-def _shoot(renderer: Renderer, scene: Scene) -> bytes:
-    """One camera frame of ``scene`` as JPEG (in the camera thread)."""
-    from app.diffdrive.camera import encode_jpeg
-
-    return encode_jpeg(renderer.render(scene))
+        return self._camera_thread
 
 
 def _requested_room(websocket: WebSocket) -> str | None:
@@ -340,24 +280,10 @@ def _requested_room(websocket: WebSocket) -> str | None:
         return None
 
 
-@router.get("/turtlesim/state")
-async def turtlesim_state(request: Request) -> dict[str, Any]:
-    """Read-only view of the simulator: poses, pens and pen strokes (a token of any role)."""
-    refusal = state_refusal(
-        request.app.state.settings.secret, bearer_token(request.headers), time.time()
-    )
-    if refusal is not None:
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, refusal, {"WWW-Authenticate": "Bearer"})
-    simulator: Simulator = request.app.state.simulator
-    if simulator.turtle is None:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"the server simulates {simulator.robot}")
-    return simulator.state()
-
-
-@router.get(STATE_PATH)
-async def room_state_view(request: Request) -> dict[str, Any]:
-    """Where the billboards of a room stand now, for the client's map: the room its token names
-    (a token of any role), or without access control the one ``?room=R`` names."""
+async def robot_state(request: Request) -> dict[str, Any]:
+    """``GET`` the simulation's ``state_path``: what the client's map shows of the robot the
+    room reaches -- the room its token names (a token of any role), or without access control
+    the one ``?room=R`` names (else the default room)."""
     settings: Settings = request.app.state.settings
     asked = request.query_params.get("room")
     room = asked or DEFAULT_ROOM
@@ -373,13 +299,7 @@ async def room_state_view(request: Request) -> dict[str, Any]:
             )
         room = claims.room
     simulator: Simulator = request.app.state.simulator
-    if simulator.robot != "diffdrive":
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"the server simulates {simulator.robot}")
-    scene = simulator.room_scene(room)
-    if scene is None:  # no connection has made the room's robot yet: it stands at its start
-        scene = RoomSim().scene()
-    converted: dict[str, Any] = to_json(room_state(scene))
-    return converted
+    return simulator.state(room)
 
 
 @router.websocket("/rosbridge")
@@ -420,7 +340,7 @@ async def rosbridge(websocket: WebSocket) -> None:
             outbox.send(rosbridge_status("error", str(exc)))
             outbox.close(CloseCode.TRY_AGAIN_LATER, "no room for another robot")
             return None
-        gate.bind(room if simulator.turtle is None else None)
+        gate.bind(room if simulator.per_room else None)
         return bound
 
     session()  # bound at once when the room is known already

@@ -24,9 +24,10 @@ from app.protocol.rooms import ROLES
 from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
-from app.server.config import SIMULATED_ROBOTS, Settings, describe_settings_error
+from app.server.config import Settings, describe_settings_error
 from app.server.hosts import ANY_ADDRESS
 from app.server.metrics import ServerMetrics
+from app.simulators import SIMULATOR_NAMES
 from app.vision.spec import SpecError
 
 log = logging.getLogger(__name__)
@@ -51,9 +52,9 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
     """``--robot``: which robot the server simulates (``autopilot serve`` and ``demo``)."""
     parser.add_argument(
         "--robot",
-        choices=SIMULATED_ROBOTS,
+        choices=SIMULATOR_NAMES,
         help="the simulated robot: turtlesim's turtle, one for the whole server, or diffdrive, a"
-        " differential-drive robot with a camera in a walled room, one per room"
+        " differential-drive robot with a camera in a walled arena, one per room"
         " (default: AUTOPILOT_ROBOT or turtlesim)",
     )
 

@@ -28,10 +28,9 @@ from app.arguments import add_vehicle_profile, port
 from app.chromium import BrowserNotFound, chromium_path
 from app.metrics import add_metrics_arguments, serve_metrics
 from app.protocol import tokens
-from app.protocol.control import PROFILES
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
-from app.server.config import Settings, SimulatedRobot, describe_settings_error
+from app.server.config import Settings, describe_settings_error
 from app.server.hosts import ANY_ADDRESS
 from app.server.serve import (
     RunningServer,
@@ -40,6 +39,7 @@ from app.server.serve import (
     settings_from,
     start_in_thread,
 )
+from app.simulators import SimulatorName
 from app.supervise import Backoff, on_stop_signals, sleep_unless
 from vehicle_agent import recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
@@ -106,7 +106,7 @@ def children_for(
     ca_file: Path | None = None,
     video: str = DEMO_VIDEOS[0],
     vehicle_args: Sequence[str] = (),
-    robot: SimulatedRobot = "turtlesim",
+    robot: SimulatorName = "turtlesim",
 ) -> list[Child]:
     """The relay service and the vehicle agent pointed at the server at ``base_url``, each
     with a token for its role in ``room`` when there is a ``secret``; ``vehicle_args`` go to the
@@ -132,18 +132,11 @@ def children_for(
         }
 
     return [
-        # The relay paces its snapshots by the relay profile this vehicle profile pairs with.
+        # The relay paces its snapshots by the relay profile this vehicle profile pairs with, and
+        # starts with its operation.
         Child(
             "relay",
-            [
-                python,
-                "-m",
-                "app.cli",
-                "relay",
-                *common,
-                "--profile",
-                PROFILES[profile].relay_profile,
-            ],
+            [python, "-m", "app.cli", "relay", *common, "--profile", profile],
             token_env("relay"),
         ),
         Child(

@@ -7,12 +7,13 @@ back, unless Python's own decoding of the file has the same SHA-256), so decodin
 between browser and Python cannot hide or fake a mismatch.
 
 The windowed path (detect, then track: ``app/vision/window.py``) is checked too: for every
-cascade operation that found a target, both sides search the window around the same box on the
-same pixels, and must agree by the same rule.
+cascade or DNN operation that found a target, both sides search the window around the same box
+on the same pixels, and must agree by the same rule.
 
 Agreement rule: both sides find the same number of boxes, and the JS boxes can be paired with
 distinct Python boxes so that every pair overlaps with IoU >= 0.9. For Haar cascades the boxes are
 expected to be identical; the tolerance only absorbs last-bit differences in colour conversion.
+An operation that scores its boxes (DNN) must also give each pair scores within 0.02.
 """
 
 from __future__ import annotations
@@ -40,11 +41,12 @@ from app.protocol.relay_profiles import Profile
 from app.server.config import Settings
 from app.server.serve import start_in_thread
 from app.vision.reference import Detection, detect
-from app.vision.spec import CascadeOperation, ColourOperation, Spec, load_spec
+from app.vision.spec import AnyOperation, CascadeOperation, DnnOperation, Spec, load_spec
 
 log = logging.getLogger(__name__)
 
 IOU_THRESHOLD = 0.9
+SCORE_TOLERANCE = 0.02
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".webp", ".gif"}
 # Loading the 11 MB OpenCV.js and every cascade on a busy 2-core machine can take a while.
 READY_TIMEOUT_MS = 180_000
@@ -66,11 +68,28 @@ def iou(a: Sequence[int], b: Sequence[int]) -> float:
     return inter / union if union > 0 else 0.0
 
 
-def boxes_agree(js: Sequence[Sequence[int]], py: Sequence[Sequence[int]]) -> bool:
-    """Same count, and a one-to-one pairing in which every pair has IoU >= 0.9."""
-    if len(js) != len(py):
+def boxes_agree(
+    js: Sequence[Sequence[int]],
+    py: Sequence[Sequence[int]],
+    js_scores: Sequence[float] = (),
+    py_scores: Sequence[float] = (),
+) -> bool:
+    """Same count, and a one-to-one pairing in which every pair has IoU >= 0.9 and, where both
+    sides scored their boxes, scores within 0.02."""
+    if len(js) != len(py) or len(js_scores) != len(py_scores):
         return False
-    edges = [[j for j, p in enumerate(py) if iou(b, p) >= IOU_THRESHOLD] for b in js]
+    scored = bool(js_scores)
+    if scored and len(js_scores) != len(js):
+        return False
+    edges = [
+        [
+            j
+            for j, p in enumerate(py)
+            if iou(b, p) >= IOU_THRESHOLD
+            and (not scored or abs(js_scores[i] - py_scores[j]) <= SCORE_TOLERANCE)
+        ]
+        for i, b in enumerate(js)
+    ]
     partner: dict[int, int] = {}  # python index -> js index
 
     def augment(i: int, seen: set[int]) -> bool:
@@ -97,6 +116,9 @@ class Pair:
     js_target: list[float] | None
     py_target: list[float] | None
     agree: bool
+    # Each box's score where the operation scores them (DNN), else empty.
+    js_scores: list[float] = field(default_factory=list)
+    py_scores: list[float] = field(default_factory=list)
     # The full-frame box whose window both sides searched; None for a full-frame scan.
     around: list[int] | None = None
 
@@ -262,7 +284,9 @@ class Harness:
     ) -> None:
         """Check one image with every op in ``op_ids``; results are added to ``report``."""
         name = str(path)
-        cascades = [i for i in op_ids if isinstance(self.spec.op(i), CascadeOperation)]
+        cascades = [
+            i for i in op_ids if isinstance(self.spec.op(i), CascadeOperation | DnnOperation)
+        ]
         try:
             rgba, digest, results = self._analyse(path.read_bytes(), op_ids, profile, cascades)
         except (OSError, ValueError) as exc:
@@ -298,7 +322,7 @@ def _decoded_here(data: bytes) -> np.ndarray[Any, np.dtype[np.uint8]] | None:
 
 
 def _reference(
-    op: CascadeOperation | ColourOperation,
+    op: AnyOperation,
     rgba: np.ndarray[Any, np.dtype[np.uint8]],
     pixels: str,
     profile: Profile,
@@ -324,6 +348,8 @@ def _pair(
 ) -> Pair:
     js_target = js["target"]
     py_boxes = [list(b) for b in py.boxes]
+    js_scores = js.get("scores") or []
+    py_scores = list(py.scores)
     return Pair(
         image=image,
         op=op_id,
@@ -331,8 +357,10 @@ def _pair(
         py_boxes=py_boxes,
         js_target=[js_target["x"], js_target["y"]] if js_target else None,
         py_target=list(py.target) if py.target else None,
-        agree=boxes_agree(js["boxes"], py_boxes),
+        agree=boxes_agree(js["boxes"], py_boxes, js_scores, py_scores),
         around=around,
+        js_scores=js_scores,
+        py_scores=py_scores,
     )
 
 

@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from app.protocol.channels import LockState
+from app.protocol.channels import LockState, SearchStatus
 from app.protocol.lock import LockRule
 from app.vision.window import Box, Choose, largest
 
@@ -119,24 +119,80 @@ def associate(locked: Box, boxes: Sequence[Box], anywhere: bool, rule: LockRule)
     return best
 
 
+Look = Sequence[float]
+
+
+def look_rect(box: Box, width: int, height: int) -> Box:
+    """The pixels a look is taken from: ``box`` grown to whole pixels and clipped to the
+    ``width`` × ``height`` frame, as (x, y, w, h) (empty when the box is outside it)."""
+    x, y, w, h = box
+    x0 = min(max(0, math.floor(x)), width)
+    y0 = min(max(0, math.floor(y)), height)
+    x1 = min(max(x0, math.ceil(x + w)), width)
+    y1 = min(max(y0, math.ceil(y + h)), height)
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def likeness(a: Look, b: Look) -> float:
+    """How alike two looks (normalised histograms) are: their Bhattacharyya coefficient, 1 for
+    the same, 0 for nothing in common."""
+    return sum(math.sqrt(x * y) for x, y in zip(a, b, strict=True))
+
+
+def recognise(boxes: Sequence[Box], alike: Callable[[Box], float], rule: LockRule) -> Box | None:
+    """The box of any size most like the target (``alike(box)``, its likeness), when at least
+    ``rule.min_likeness`` alike; the first of equal likeness."""
+    best: Box | None = None
+    best_likeness = rule.min_likeness
+    for box in boxes:
+        value = alike(box)
+        if value >= best_likeness and (best is None or value > best_likeness):
+            best, best_likeness = box, value
+    return best
+
+
 @dataclass(frozen=True)
 class Query:
     """What one snapshot is asked to follow: the locked box, whether to accept it anywhere in
-    the frame, the lock's ``epoch`` then (an answer to an older lock is not news), and whether
-    the target was found at full resolution (``fine``: it is followed at full resolution)."""
+    the frame, the lock's ``epoch`` then (an answer to an older lock is not news), whether
+    the target was found at full resolution (``fine``: it is followed at full resolution), the
+    target's look (``look``: None until known), and whether a box of any size may be it
+    (``any_size``: while the vehicle searches)."""
 
     box: Box
     anywhere: bool
     epoch: int
     fine: bool = False
+    look: Look | None = None
+    any_size: bool = False
 
 
-def chooser(query: Query | None, rule: LockRule) -> Choose:
+def chooser(
+    query: Query | None, rule: LockRule, look_of: Callable[[Box], Look] | None = None
+) -> Choose:
     """The rule that picks the target among a snapshot's boxes (``window.step``): the locked
-    target's track, or the largest box when nothing is locked."""
+    target's track, or the largest box when nothing is locked. When the query gives the
+    target's look and ``look_of(box)`` each box's, a box of a similar size that overlaps the
+    locked one continues its track (the one overlapping most); else the box that looks most
+    like the target (:func:`recognise`) among those of a similar size, of any size while the
+    vehicle searches, wherever it is in the frame."""
     if query is None:
         return largest
-    return lambda boxes: associate(query.box, boxes, query.anywhere, rule)
+    look = query.look
+    if look is None or look_of is None:
+        return lambda boxes: associate(query.box, boxes, query.anywhere, rule)
+
+    def alike(box: Box) -> float:
+        return likeness(look_of(box), look)
+
+    def choose(boxes: Sequence[Box]) -> Box | None:
+        similar_boxes = [b for b in boxes if similar(b, query.box, rule.max_scale)]
+        overlapping = [b for b in similar_boxes if overlap(b, query.box) > 0]
+        if overlapping:
+            return associate(query.box, overlapping, False, rule)
+        return recognise(boxes if query.any_size else similar_boxes, alike, rule)
+
+    return choose
 
 
 @dataclass
@@ -149,6 +205,7 @@ class TargetLock:
     state: LockState = "none"
     epoch: int = 0  # bumped by every lock and release
     fine: bool = False  # found by a full-resolution search: followed at full resolution
+    look: Look | None = None  # the target's look, from the first snapshot that followed it
 
     def lock(self, x: float, y: float, boxes: Sequence[Box], now: float) -> bool:
         """A click at (x, y) on a snapshot that found ``boxes``: lock the box clicked (or near
@@ -165,35 +222,61 @@ class TargetLock:
     def hold(self, box: Box, now: float, fine: bool = False) -> None:
         """Lock on ``box``, seen at ``now``; ``fine``: found at full resolution."""
         self.box, self.seen_at, self.state, self.fine = box, now, "locked", fine
+        self.look = None
         self.epoch += 1
 
     def release(self) -> None:
         """Back to the default choice (the largest box)."""
-        self.box, self.state, self.fine = None, "none", False
+        self.box, self.state, self.fine, self.look = None, "none", False, None
         self.epoch += 1
 
-    def query(self, now: float) -> Query | None:
-        """What the next snapshot follows, or None for the default choice."""
+    def query(self, now: float, robot_searching: bool = False) -> Query | None:
+        """What the next snapshot follows, or None for the default choice: once the target's
+        look is known, by its look (:func:`chooser`), of any size while the vehicle searches
+        (``robot_searching``)."""
         if self.box is None:
             return None
         anywhere = now - self.seen_at > self.rule.search_after_s
-        return Query(self.box, anywhere, self.epoch, self.fine)
+        return Query(self.box, anywhere, self.epoch, self.fine, self.look, robot_searching)
 
-    def update(self, query: Query | None, chosen: Box | None, now: float) -> LockState | None:
+    def needs_look(self, query: Query | None) -> bool:
+        """Whether the box the snapshot asked with ``query`` chose is to give the target's
+        look: the first one after a lock."""
+        return query is not None and query.epoch == self.epoch and self.look is None
+
+    def remember(self, look: Look) -> None:
+        """The target's look (:meth:`needs_look`)."""
+        self.look = look
+
+    def update(
+        self,
+        query: Query | None,
+        chosen: Box | None,
+        now: float,
+        robot_searching: bool = False,
+    ) -> LockState | None:
         """The outcome of the snapshot asked with ``query``: the box chosen, or None when the
-        target was not found. Returns the new state when it changed."""
+        target was not found; ``robot_searching``: the vehicle says it is turning to search for
+        the target (its pose's ``search``), and the lock holds until that search ends. Returns
+        the new state when it changed."""
         if query is None or query.epoch != self.epoch:
             return None
         before = self.state
         if chosen is not None:
             self.box, self.seen_at, self.state = chosen, now, "locked"
-        elif now - self.seen_at > self.rule.release_after_s:
+        elif now - self.seen_at > self.rule.release_after_s and not robot_searching:
             self.release()
         elif now - self.seen_at > self.rule.search_after_s:
             self.state = "searching"
         else:
             self.state = "lost"
         return self.state if self.state != before else None
+
+
+def robot_searching(search: SearchStatus | None) -> bool:
+    """Whether a vehicle whose pose says ``search`` is turning to search for its lost target
+    (a search that ran out, or none, is not). lock.js ``robotSearching`` is its twin."""
+    return search is not None and search != "timed_out"
 
 
 Search = Callable[[Box], Sequence[Box]]

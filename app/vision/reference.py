@@ -14,13 +14,17 @@ import numpy.typing as npt
 from cv2.typing import MatLike
 
 from app.protocol.relay_profiles import PROFILES, Profile
-from app.vision import window
+from app.vision import blazeface, window
+from app.vision.lock import look_rect
 from app.vision.spec import (
     CASCADE_DIR,
+    MODEL_DIR,
+    AnyOperation,
     CascadeOperation,
     CascadeParams,
-    ColourOperation,
     ColourParams,
+    DnnOperation,
+    DnnParams,
     SpecError,
 )
 
@@ -36,6 +40,8 @@ class Detection:
     target: tuple[float, float] | None
     # The window searched, in detection-image pixels; None for a full-frame scan.
     region: Box | None = None
+    # Each box's score (0..1), in the boxes' order, for operations that score them (DNN).
+    scores: tuple[float, ...] = ()
 
 
 def _reduction(width: int, height: int, detect_width: int | None) -> tuple[int, int] | None:
@@ -197,6 +203,89 @@ def _detect_colour(params: ColourParams, rgba: Rgba) -> Detection:
     return Detection(boxes=[_scale_box((x, y, w, h), factor)], target=(cx * factor, cy * factor))
 
 
+_nets: dict[str, cv2.dnn.Net] = {}
+
+
+def _net(model: str) -> cv2.dnn.Net:
+    """The model's network, read once per process."""
+    if model not in _nets:
+        _nets[model] = cv2.dnn.readNetFromTFLite(str(MODEL_DIR / model))
+    return _nets[model]
+
+
+def dnn_input(params: DnnParams, rgb: MatLike, fit: blazeface.Letterbox) -> MatLike:
+    """The input blob of one pass: the part ``fit.region`` of the RGB frame resized into the
+    input's top-left corner (INTER_AREA down, INTER_LINEAR up), the rest black, scaled to
+    [-1, 1], NCHW."""
+    size = params.input_size
+    x, y, w, h = fit.region
+    interpolation = cv2.INTER_AREA if fit.scale < 1 else cv2.INTER_LINEAR
+    part = cv2.resize(
+        rgb[y : y + h, x : x + w], (fit.width, fit.height), interpolation=interpolation
+    )
+    padded = cv2.copyMakeBorder(
+        part, 0, size - fit.height, 0, size - fit.width, cv2.BORDER_CONSTANT, value=(0, 0, 0)
+    )
+    return cv2.dnn.blobFromImage(
+        padded, 1.0 / 127.5, (size, size), (127.5, 127.5, 127.5), swapRB=False, crop=False
+    )
+
+
+def _dnn_faces(params: DnnParams, rgb: MatLike, parts: list[Box]) -> list[blazeface.Face]:
+    """Every pass's faces over ``parts`` of the RGB frame, suppressed together."""
+    net = _net(params.model)
+    layers = [blazeface.AnchorLayer(a.stride, a.per_cell) for a in params.anchors]
+    centres = blazeface.anchors(params.input_size, layers)
+    faces: list[blazeface.Face] = []
+    for part in parts:
+        fit = blazeface.letterbox(part, params.input_size)
+        net.setInput(dnn_input(params, rgb, fit))
+        scores, raw = net.forward(net.getUnconnectedOutLayersNames())
+        faces += blazeface.decode(
+            np.asarray(scores, np.float64),
+            np.asarray(raw, np.float64),
+            centres,
+            fit,
+            params.score_threshold,
+        )
+    return blazeface.suppress(faces, params.nms_threshold, params.min_box_size)
+
+
+def _dnn_detection(faces: list[blazeface.Face], region: Box | None) -> Detection:
+    ordered = sorted(faces, key=lambda face: face.box)
+    boxes = [face.box for face in ordered]
+    return Detection(
+        boxes=boxes,
+        target=_centre_of_largest(boxes),
+        region=region,
+        scores=tuple(face.score for face in ordered),
+    )
+
+
+def _detect_dnn(params: DnnParams, rgba: Rgba, around: Box | None) -> Detection:
+    height, width = rgba.shape[:2]
+    if around is None:
+        parts = blazeface.passes(width, height, params.tile_fraction, params.tile_overlap)
+        return _dnn_detection(_dnn_faces(params, _rgb(rgba), parts), None)
+    region = blazeface.around(around, params.window_margin, width, height)
+    if region is None:
+        return Detection(boxes=[], target=None, region=None)
+    return _dnn_detection(_dnn_faces(params, _rgb(rgba), [region]), region)
+
+
+def _search_dnn(params: DnnParams, rgba: Rgba, region: Box) -> Detection:
+    x, y, w, h = region
+    parts = [
+        (px + x, py + y, pw, ph)
+        for px, py, pw, ph in blazeface.passes(w, h, params.tile_fraction, params.tile_overlap)
+    ]
+    return _dnn_detection(_dnn_faces(params, _rgb(rgba), parts), region)
+
+
+def _rgb(rgba: Rgba) -> MatLike:
+    return cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
+
+
 def _check(rgba: Rgba, profile: Profile) -> None:
     if rgba.dtype != np.uint8 or rgba.ndim != 3 or rgba.shape[2] != 4:
         raise ValueError(f"expected an H×W×4 uint8 RGBA frame, got {rgba.dtype} {rgba.shape}")
@@ -205,7 +294,7 @@ def _check(rgba: Rgba, profile: Profile) -> None:
 
 
 def detect(
-    op: CascadeOperation | ColourOperation,
+    op: AnyOperation,
     rgba: Rgba,
     profile: Profile = "default",
     around: Box | None = None,
@@ -220,16 +309,35 @@ def detect(
     _check(rgba, profile)
     if isinstance(op, CascadeOperation):
         return _detect_cascade(op.params_for(profile), rgba, around, full_resolution)
+    if isinstance(op, DnnOperation):
+        return _detect_dnn(op.params_for(profile), rgba, around)
     if around is not None:
         raise ValueError(f"operation {op.id!r} is not a cascade; it has no windowed search")
     return _detect_colour(op.params_for(profile), rgba)
 
 
 def search(
-    op: CascadeOperation, rgba: Rgba, region: Box, profile: Profile = "default"
+    op: CascadeOperation | DnnOperation, rgba: Rgba, region: Box, profile: Profile = "default"
 ) -> Detection:
     """Search ``region`` (full-frame pixels) of an RGBA frame at full resolution, for objects
     of every size the operation looks for: where a click near no box looks
     (app/protocol/lock.py), as ``searchIn`` of the operation's OpenCV.js module does."""
     _check(rgba, profile)
+    if isinstance(op, DnnOperation):
+        return _search_dnn(op.params_for(profile), rgba, region)
     return _search_cascade(op.params_for(profile), rgba, region)
+
+
+def look(rgba: Rgba, box: window.Box, bins: tuple[int, int]) -> list[float]:
+    """The look of ``box`` in an RGBA frame, as the relay's worker takes it (``lookIn``): the
+    hue × saturation histogram of the pixels under it (:func:`app.vision.lock.look_rect`) with
+    ``bins`` bins each way, of OpenCV's 8-bit HSV, normalised to sum 1 (all 0 for no pixels)."""
+    height, width = rgba.shape[:2]
+    x, y, w, h = look_rect(box, width, height)
+    if w == 0 or h == 0:
+        return [0.0] * (bins[0] * bins[1])
+    rgb = cv2.cvtColor(np.ascontiguousarray(rgba[y : y + h, x : x + w]), cv2.COLOR_RGBA2RGB)
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    hist = cv2.calcHist([hsv], [0, 1], None, list(bins), [0, 180, 0, 256]).flatten()
+    total = float(hist.sum())
+    return [float(v) / total for v in hist]

@@ -27,7 +27,7 @@ from pydantic.alias_generators import to_camel
 
 from app.protocol.errors import describe
 from app.protocol.relay_profiles import PROFILES, Profile
-from app.resources import OPERATION_MODULES_DIR
+from app.resources import OPERATION_MODULES_DIR, STATIC_DIR
 
 
 def _cascade_dir() -> Path:
@@ -40,6 +40,8 @@ def _cascade_dir() -> Path:
 
 
 CASCADE_DIR = _cascade_dir()
+# Where the vendored DNN models are (served at /static/vendor/).
+MODEL_DIR = STATIC_DIR / "vendor"
 
 # Taller than any target an operation finds (a person, a vehicle): a larger declared height is a
 # unit mistake (millimetres, centimetres), refused at start-up.
@@ -97,7 +99,40 @@ class ColourParams(_Model):
     detect_width: int | None = Field(None, gt=0)
 
 
-P = TypeVar("P", CascadeParams, ColourParams)
+class AnchorLayer(_Model):
+    """``perCell`` anchors of a fixed size at the centre of each cell of a ``stride``-pixel grid
+    over the model's square input (app/vision/blazeface.py anchors)."""
+
+    stride: int = Field(gt=0)
+    per_cell: int = Field(gt=0)
+
+
+class DnnParams(_Model):
+    """A BlazeFace model through OpenCV's DNN module, decoded by app/vision/blazeface.py and
+    its JS twin. Sizes are in frame pixels unless said otherwise."""
+
+    # A file of app/static/vendor (scripts/vendor fetched it; VENDORED.json records it).
+    model: str = Field(pattern=r"^[a-z0-9_]+\.tflite$")
+    # The model's square input, in pixels, and its anchors, in output order.
+    input_size: int = Field(gt=0)
+    anchors: list[AnchorLayer] = Field(min_length=1)
+    score_threshold: float = Field(0.5, gt=0.0, lt=1.0)
+    # Greedy NMS: a box overlapping a better one by more than this IoU is dropped.
+    nms_threshold: float = Field(0.3, gt=0.0, le=1.0)
+    # Boxes less tall than this are dropped (before NMS).
+    min_box_size: int = Field(0, ge=0)
+    # A full scan is the whole frame letterboxed into the input, then square tiles this share of
+    # the frame's width wide (0: none) overlapping by tile_overlap of a tile, where faces too
+    # small for the whole-frame pass are at the model's scale (docs/performance.md says why).
+    tile_fraction: float = Field(0.0, ge=0.0, le=1.0)
+    tile_overlap: float = Field(0.25, ge=0.0, lt=1.0)
+    # Detect, then track (app/vision/window.py): between full scans one forward pass over a
+    # square around the last target, window_margin of its size on each side.
+    full_scan_every: int = Field(1, ge=1)
+    window_margin: float = Field(0.5, gt=0.0)
+
+
+P = TypeVar("P", CascadeParams, ColourParams, DnnParams)
 
 
 class _OperationBase(_Model, Generic[P]):
@@ -141,7 +176,14 @@ class ColourOperation(_OperationBase[ColourParams]):
     kind: Literal["colour"]
 
 
-Operation = Annotated[CascadeOperation | ColourOperation, Field(discriminator="kind")]
+class DnnOperation(_OperationBase[DnnParams]):
+    """An operation built on a DNN face model (BlazeFace)."""
+
+    kind: Literal["dnn"]
+
+
+AnyOperation = CascadeOperation | ColourOperation | DnnOperation
+Operation = Annotated[AnyOperation, Field(discriminator="kind")]
 
 
 class Spec(_Model):
@@ -160,7 +202,7 @@ class Spec(_Model):
             raise ValueError(f"default operation {self.default!r} is not one of {ids}")
         return self
 
-    def op(self, op_id: str) -> CascadeOperation | ColourOperation:
+    def op(self, op_id: str) -> AnyOperation:
         """The operation with this id; ``KeyError`` naming it otherwise."""
         for op in self.operations:
             if op.id == op_id:
@@ -203,6 +245,14 @@ def load_spec(path: Path, module_dir: Path = OPERATION_MODULES_DIR) -> Spec:
                 f"operations spec {path}: operation {op.id!r} names module {op.module!r}, "
                 f"which is not in {module_dir}"
             )
+        if isinstance(op, DnnOperation):
+            for profile in PROFILES:
+                model = op.params_for(profile).model
+                if not (MODEL_DIR / model).is_file():
+                    raise SpecError(
+                        f"operations spec {path}: operation {op.id!r} needs model {model!r}, "
+                        f"which is not in {MODEL_DIR} (scripts/vendor fetches it)"
+                    )
         if isinstance(op, CascadeOperation):
             for profile in PROFILES:
                 for name in op.params_for(profile).cascades:

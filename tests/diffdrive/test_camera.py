@@ -11,6 +11,16 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from app.diffdrive.arena import (
+    ARENA,
+    FACE_BOX_M,
+    FACE_CENTRE_HEIGHT_M,
+    Billboard,
+    Face,
+    FacePhoto,
+    Picture,
+    Pose2D,
+)
 from app.diffdrive.camera import (
     NEAR_M,
     Image,
@@ -21,16 +31,6 @@ from app.diffdrive.camera import (
     visible_part,
 )
 from app.diffdrive.robot import RobotState
-from app.diffdrive.room import (
-    FACE_BOX_M,
-    FACE_CENTRE_HEIGHT_M,
-    ROOM,
-    Billboard,
-    Face,
-    FacePhoto,
-    Picture,
-    Pose2D,
-)
 from app.diffdrive.sim import Placed, Scene
 from app.protocol.control import PROFILES, for_robot
 from app.protocol.robot import PRESETS
@@ -40,15 +40,15 @@ from app.vision.spec import load_spec
 from vehicle_agent.control import pixel_bearing
 
 CAMERA = Pinhole()  # 640x480, 60° across
-ROBOT = RobotState(2.0, 3.0, 0.0, 0.0, 0.0)  # facing east, the room's long way
-WALKER = ROOM.billboard("walker")
-BYSTANDER = ROOM.billboard("bystander")
-FLAME = ROOM.billboard("flame")
+ROBOT = RobotState(2.0, 3.0, 0.0, 0.0, 0.0)  # facing east, the arena's long way
+WALKER = ARENA.billboard("walker")
+BYSTANDER = ARENA.billboard("bystander")
+FLAME = ARENA.billboard("flame")
 
 
 @pytest.fixture(scope="module")
 def renderer() -> Renderer:
-    return Renderer(ROOM, CAMERA)
+    return Renderer(ARENA, CAMERA)
 
 
 def scene(*placed: tuple[Billboard, float, float, float], robot: RobotState = ROBOT) -> Scene:
@@ -57,7 +57,7 @@ def scene(*placed: tuple[Billboard, float, float, float], robot: RobotState = RO
 
 
 def ahead(distance: float, bearing: float = 0.0, robot: RobotState = ROBOT) -> tuple[float, float]:
-    """The room point ``distance`` from the robot at ``bearing`` (positive: left)."""
+    """The arena point ``distance`` from the robot at ``bearing`` (positive: left)."""
     heading = robot.yaw + bearing
     return robot.x + distance * math.cos(heading), robot.y + distance * math.sin(heading)
 
@@ -70,7 +70,7 @@ def facing_robot(
 
 
 def changed(frame: Image, empty: Image) -> npt.NDArray[np.bool_]:
-    """Where ``frame`` differs from the empty room's frame."""
+    """Where ``frame`` differs from the empty arena's frame."""
     return np.asarray(np.any(frame != empty, axis=2))
 
 
@@ -104,7 +104,7 @@ def test_the_focal_length_follows_the_field_of_view() -> None:
         Pinhole(hfov=math.pi)
 
 
-def test_the_empty_room_is_not_uniform_and_turning_changes_it(renderer: Renderer) -> None:
+def test_the_empty_arena_is_not_uniform_and_turning_changes_it(renderer: Renderer) -> None:
     frame = renderer.render(scene())
     assert frame.shape == (480, 640, 3) and frame.dtype == np.uint8
     # Ceiling, walls and floor differ, and the walls darken with distance.
@@ -254,7 +254,7 @@ def test_the_onboard_law_reads_a_rendered_face_at_its_true_bearing(
     assert math.degrees(bearing) == pytest.approx(degrees, abs=0.5)
 
 
-def test_both_faces_of_the_room_are_found_side_by_side(renderer: Renderer) -> None:
+def test_both_faces_of_the_arena_are_found_side_by_side(renderer: Renderer) -> None:
     frame = renderer.render(
         scene(facing_robot(WALKER, 1.8, math.radians(12)), facing_robot(BYSTANDER, 1.8, -0.2))
     )

@@ -12,7 +12,7 @@ import pytest
 
 from app.diffdrive.robot import DiffDrive
 from app.diffdrive.rosbridge import DiffDriveHub
-from app.diffdrive.sim import RoomSim
+from app.diffdrive.sim import ArenaSim
 from app.protocol.ros import RosFlavour
 from app.rosbridge.protocol import RosbridgeSession
 
@@ -34,12 +34,12 @@ TWIST = {
 }
 
 
-class Room:
-    """A room's hub whose clock the test moves, one 16 ms tick at a time."""
+class Arena:
+    """An arena's hub whose clock the test moves, one 16 ms tick at a time."""
 
     def __init__(self, flavour: RosFlavour = "2") -> None:
         self.now = 10.0
-        self.sim = RoomSim(clock=lambda: self.now)
+        self.sim = ArenaSim(clock=lambda: self.now)
         self.hub = DiffDriveHub(self.sim, flavour, wall_clock=lambda: 1_700_000_000.0 + self.now)
 
     def tick(self, count: int = 1) -> None:
@@ -68,12 +68,12 @@ def call(session: RosbridgeSession, service: str, **args: Any) -> Json:
 
 
 def test_a_twist_on_cmd_vel_drives_the_robot_and_odom_follows_it() -> None:
-    room = Room()
-    session = room.session()
+    arena = Arena()
+    session = arena.session()
     assert send(session, op="subscribe", topic="/odom") == []
-    start = room.sim.robot.state()
+    start = arena.sim.robot.state()
     assert send(session, op="publish", topic="/cmd_vel", msg={"linear": {"x": 0.5}}) == []
-    room.tick(50)
+    arena.tick(50)
     [odom] = published(session, "/odom")  # only the latest: a newer pose supersedes
     position = odom["pose"]["pose"]["position"]
     assert position["x"] == pytest.approx(start.x + 0.5 * 50 * DiffDrive.TICK_S)
@@ -83,11 +83,11 @@ def test_a_twist_on_cmd_vel_drives_the_robot_and_odom_follows_it() -> None:
 
 
 def test_odom_carries_the_heading_as_a_quaternion() -> None:
-    room = Room()
-    session = room.session()
+    arena = Arena()
+    session = arena.session()
     send(session, op="subscribe", topic="odom")  # the leading slash is optional
     send(session, op="publish", topic="cmd_vel", msg={"angular": {"z": 1.0}})
-    room.tick(50)
+    arena.tick(50)
     [odom] = published(session, "odom")
     q = odom["pose"]["pose"]["orientation"]
     yaw = math.atan2(2 * q["w"] * q["z"], 1 - 2 * q["z"] ** 2)
@@ -96,12 +96,12 @@ def test_odom_carries_the_heading_as_a_quaternion() -> None:
 
 
 def test_every_tick_is_a_new_odometry_message() -> None:
-    room = Room()
-    session = room.session()
+    arena = Arena()
+    session = arena.session()
     send(session, op="subscribe", topic="/odom")
     seqs = []
     for _ in range(3):
-        room.tick()
+        arena.tick()
         [odom] = published(session, "/odom")
         seqs.append(odom["header"]["stamp"]["nanosec"])
     assert len(set(seqs)) == 3
@@ -110,8 +110,8 @@ def test_every_tick_is_a_new_odometry_message() -> None:
 
 @pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
 def test_each_flavour_names_the_types_its_way(flavour: RosFlavour) -> None:
-    room = Room(flavour)
-    session = room.session()
+    arena = Arena(flavour)
+    session = arena.session()
     for topic, kind in (
         ("/odom", ODOMETRY[flavour]),
         ("/camera/image/compressed", IMAGE[flavour]),
@@ -128,7 +128,7 @@ def test_each_flavour_names_the_types_its_way(flavour: RosFlavour) -> None:
 
 
 def test_the_graph_shows_the_robot_node_and_no_turtles() -> None:
-    session = Room("2").session()
+    session = Arena("2").session()
     topics = call(session, "/rosapi/topics")["values"]["topics"]
     assert {"/cmd_vel", "/odom", "/camera/image/compressed"} <= set(topics)
     assert not any("turtle" in t for t in topics)
@@ -142,14 +142,14 @@ def test_the_graph_shows_the_robot_node_and_no_turtles() -> None:
 
 @pytest.mark.parametrize("topic", ["/odom", "/camera/image/compressed"])
 def test_what_the_robot_publishes_cannot_be_published_by_a_client(topic: str) -> None:
-    room = Room()
-    session = room.session()
-    before = room.sim.robot.state()
+    arena = Arena()
+    session = arena.session()
+    before = arena.sim.robot.state()
     for op in ({"op": "advertise", "topic": topic}, {"op": "publish", "topic": topic, "msg": {}}):
         [status] = session.receive(json.dumps({**op, "id": "x"}))
         assert "published by the simulator only" in status["msg"]
-    room.tick(5)
-    assert room.sim.robot.state() == before
+    arena.tick(5)
+    assert arena.sim.robot.state() == before
 
 
 @pytest.mark.parametrize(
@@ -157,17 +157,17 @@ def test_what_the_robot_publishes_cannot_be_published_by_a_client(topic: str) ->
     [{"linear": {"x": "fast"}}, {"linear": {"x": 1e400}}, {"spin": 1}, {"angular": {"z": None}}],
 )
 def test_a_bad_twist_is_refused_and_moves_nothing(msg: Json) -> None:
-    room = Room()
-    session = room.session()
+    arena = Arena()
+    session = arena.session()
     text = json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": msg, "id": "p"})
     [status] = session.receive(text.replace("Infinity", "1e400"))
     assert status["level"] == "error"
-    room.tick(5)
-    assert room.sim.robot.state().x == room.hub.sim.room.start.x
+    arena.tick(5)
+    assert arena.sim.robot.state().x == arena.hub.sim.arena.start.x
 
 
 def test_turtlesim_topics_and_services_are_not_here() -> None:
-    session = Room().session()
+    session = Arena().session()
     [status] = send(session, op="subscribe", topic="/turtle1/pose", id="s")
     assert "unknown topic" in status["msg"] and "/odom" in status["msg"]
     reply = call(session, "/spawn", x=1.0, y=1.0)
@@ -175,8 +175,8 @@ def test_turtlesim_topics_and_services_are_not_here() -> None:
 
 
 def test_cmd_vel_subscribers_get_what_is_published() -> None:
-    room = Room()
-    watcher, driver = room.session(), room.session()
+    arena = Arena()
+    watcher, driver = arena.session(), arena.session()
     send(watcher, op="subscribe", topic="/cmd_vel")
     send(driver, op="publish", topic="/cmd_vel", msg={"linear": {"x": 0.2}, "angular": {"z": 0.1}})
     [twist] = published(watcher, "/cmd_vel")
@@ -184,25 +184,25 @@ def test_cmd_vel_subscribers_get_what_is_published() -> None:
 
 
 def test_the_camera_is_wanted_only_while_someone_subscribes() -> None:
-    room = Room()
-    first, second = room.session(), room.session()
-    assert not room.hub.camera_wanted()
+    arena = Arena()
+    first, second = arena.session(), arena.session()
+    assert not arena.hub.camera_wanted()
     send(first, op="subscribe", topic="/camera/image/compressed", id="a")
     send(second, op="subscribe", topic="camera/image/compressed", id="b")
-    assert room.hub.camera_wanted()
+    assert arena.hub.camera_wanted()
     send(first, op="unsubscribe", topic="/camera/image/compressed", id="a")
-    assert room.hub.camera_wanted()
+    assert arena.hub.camera_wanted()
     second.close()
-    assert not room.hub.camera_wanted()
+    assert not arena.hub.camera_wanted()
 
 
 def test_a_frame_reaches_the_camera_subscribers_latest_first() -> None:
-    room = Room("1")
-    session = room.session()
+    arena = Arena("1")
+    session = arena.session()
     send(session, op="subscribe", topic="/camera/image/compressed")
     assert published(session, "/camera/image/compressed") == []
-    room.hub.publish_frame(b"\xff\xd8first", 5.5)
-    room.hub.publish_frame(b"\xff\xd8second", 5.6)
+    arena.hub.publish_frame(b"\xff\xd8first", 5.5)
+    arena.hub.publish_frame(b"\xff\xd8second", 5.6)
     [frame] = published(session, "/camera/image/compressed")
     assert frame["format"] == "jpeg"
     assert base64.b64decode(frame["data"]) == b"\xff\xd8second"

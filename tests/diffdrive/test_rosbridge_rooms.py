@@ -2,7 +2,7 @@
 room, each room's tokens reaching only its own, and the camera's JPEG frames flowing.
 
 roslibpy runs Twisted's reactor in a daemon thread that is started once per process and left
-running (see tests/turtlesim/test_rosbridge_roslibpy.py); every client here shares it.
+running (see tests/rosbridge/test_roslibpy.py); every client here shares it.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import pytest
 import roslibpy
 import websockets
 
-from app.diffdrive.room import ROOM
+from app.diffdrive.arena import ARENA
 from app.protocol import tokens
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
@@ -110,7 +110,7 @@ def test_a_rooms_vehicle_token_drives_its_own_robot_and_no_other(guarded: Runnin
         odom_a = Latest(vehicle_a, "/odom", "nav_msgs/Odometry")
         odom_b = Latest(watcher_b, "/odom", "nav_msgs/Odometry")
         start_a, start_b = x_of(odom_a.next()), x_of(odom_b.next())
-        assert start_a == start_b == ROOM.start.x  # two robots, each at its room's start
+        assert start_a == start_b == ARENA.start.x  # two robots, each at its room's start
         for _ in range(10):  # within the 1 s timeout, for about a second
             drive(vehicle_a, 0.5)
             time.sleep(0.1)
@@ -254,15 +254,15 @@ def test_a_room_beyond_the_limit_is_told_to_come_back_and_gets_a_robot_once_one_
     assert refusal["op"] == "status" and "at most 1 rooms" in refusal["msg"]
     assert code == 1013
     assert odom["op"] == "publish", f"the second room is still refused: {odom}"
-    assert odom["topic"] == "/odom" and x_of(odom["msg"]) == ROOM.start.x
+    assert odom["topic"] == "/odom" and x_of(odom["msg"]) == ARENA.start.x
 
 
 def test_the_room_state_gives_the_billboards_of_the_tokens_room(guarded: RunningServer) -> None:
     headers = {"Authorization": f"Bearer {token('diff-h', 'client')}"}
-    reply = httpx.get(guarded.url + "/room/state", headers=headers, timeout=WAIT_S)
+    reply = httpx.get(guarded.url + "/arena/state", headers=headers, timeout=WAIT_S)
     assert reply.status_code == 200
     names = {b["name"] for b in reply.json()["billboards"]}
-    assert names == {b.name for b in ROOM.billboards}
-    other = httpx.get(guarded.url + "/room/state?room=diff-i", headers=headers, timeout=WAIT_S)
+    assert names == {b.name for b in ARENA.billboards}
+    other = httpx.get(guarded.url + "/arena/state?room=diff-i", headers=headers, timeout=WAIT_S)
     assert other.status_code == 403
-    assert httpx.get(guarded.url + "/room/state", timeout=WAIT_S).status_code == 401
+    assert httpx.get(guarded.url + "/arena/state", timeout=WAIT_S).status_code == 401

@@ -29,7 +29,7 @@ from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_agent_pages import H, W, page_until
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
-from vehicle_agent.turtle import SimTurtle
+from vehicle_agent.robotlink import SimLink
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
@@ -44,7 +44,7 @@ async def test_fleet_pilots_across_instances_and_a_pool_takes_over_a_killed_pool
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # the face on the left
-    turtle = SimTurtle()
+    turtle = SimLink()
     agent = Agent(
         AgentConfig(server=first.url), SyntheticVideo(W, H, fps=15, path=path), turtle, log
     )

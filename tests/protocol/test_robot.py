@@ -1,10 +1,9 @@
-"""The robot description (app/protocol/robot.py): presets, description files good and bad,
-the types a robot is driven in, its messages, and the heading of an Odometry's quaternion."""
+"""The robot description (app/protocol/robot.py): presets, the types a robot is driven in, its
+messages, and the heading of an Odometry's quaternion (description files: test_robot_file.py)."""
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
@@ -12,78 +11,11 @@ from app.protocol.robot import (
     PRESETS,
     TURTLESIM,
     Robot,
-    RobotError,
     detect,
-    load,
     pose_of,
-    robot_named,
     velocity_message,
     yaw_of,
 )
-
-ROVER = """
-name = "rover"
-
-[velocity]
-topic = "/base/cmd_vel"
-type = "geometry_msgs/TwistStamped"
-frame_id = "base_footprint"
-
-[pose]
-topic = "odom"
-type = "nav_msgs/msg/Odometry"
-
-[camera]
-topic = "/front/image_raw"
-type = "sensor_msgs/Image"
-hfov_deg = 87
-
-[limits]
-max_linear = 0.5
-max_angular = 1
-linear_accel = 0.8
-angular_accel = inf
-"""
-
-
-VELOCITY_TABLE = ROVER[ROVER.index("[velocity]") : ROVER.index("[pose]")]
-
-
-def write(tmp_path: Path, text: str, name: str = "rover.toml") -> Path:
-    path = tmp_path / name
-    path.write_text(text, encoding="utf-8")
-    return path
-
-
-def test_a_file_describes_a_robot(tmp_path: Path) -> None:
-    robot = load(write(tmp_path, ROVER))
-    assert robot.name == "rover"
-    assert (robot.velocity.topic, robot.velocity.type, robot.velocity.frame_id) == (
-        "/base/cmd_vel",
-        "geometry_msgs/TwistStamped",
-        "base_footprint",
-    )
-    # A relative topic is the root namespace's; a ROS 2 spelling of a type is read back.
-    assert (robot.pose.topic, robot.pose.type) == ("/odom", "nav_msgs/Odometry")
-    assert robot.camera is not None
-    assert (robot.camera.topic, robot.camera.type, robot.camera.hfov_deg) == (
-        "/front/image_raw",
-        "sensor_msgs/Image",
-        87.0,
-    )
-    assert robot.limits.max_angular == 1.0 and robot.limits.angular_accel == math.inf
-    assert not robot.turtlesim and robot.teleport_service is None
-
-
-def test_a_minimal_file_takes_its_name_from_the_file_and_has_no_camera(tmp_path: Path) -> None:
-    text = (
-        ROVER.split("[camera]")[0].replace('name = "rover"', "") + ROVER.split("hfov_deg = 87")[1]
-    )
-    text = text.replace('frame_id = "base_footprint"\n', "")
-    robot = load(write(tmp_path, text, "my-base.toml"))
-    assert robot.name == "my-base"
-    assert robot.camera is None
-    assert robot.velocity.frame_id == "base_link"  # a TwistStamped's default frame
 
 
 def test_the_presets() -> None:
@@ -101,58 +33,6 @@ def test_the_presets() -> None:
     # TurtleBot3 Burger: 0.22 m/s and 2.84 rad/s (ROBOTIS e-Manual).
     assert (burger.limits.max_linear, burger.limits.max_angular) == (0.22, 2.84)
     assert burger.pose.type == "nav_msgs/Odometry" and not burger.turtlesim
-    assert robot_named("turtlebot3") is burger
-
-
-@pytest.mark.parametrize(
-    ("change", "needles"),
-    [
-        # unknown keys, at the top and in a table
-        (('name = "rover"', 'name = "rover"\ncolour = "red"'), ["colour: unknown key"]),
-        (("max_linear = 0.5", "max_linear = 0.5\nmax_lateral = 1"), ["limits.max_lateral"]),
-        # wrong types
-        (("max_linear = 0.5", "max_linear = 'fast'"), ["limits.max_linear", "number", "'fast'"]),
-        (("max_linear = 0.5", "max_linear = true"), ["limits.max_linear", "boolean"]),
-        (('topic = "odom"', "topic = 7"), ["pose.topic", "string"]),
-        ((VELOCITY_TABLE, 'velocity = "/base/cmd_vel"\n'), ["velocity: must be a table"]),
-        # bad values
-        (("max_linear = 0.5", "max_linear = -0.5"), ["limits.max_linear", ">= 0", "-0.5"]),
-        (("angular_accel = inf", "angular_accel = 0"), ["limits.angular_accel", "> 0"]),
-        (("max_angular = 1", "max_angular = nan"), ["limits.max_angular", "nan"]),
-        (("hfov_deg = 87", "hfov_deg = 190"), ["camera.hfov_deg", "180"]),
-        (('topic = "odom"', 'topic = "my odom"'), ["pose.topic", "not a ROS topic name"]),
-        # unknown message types
-        (('"geometry_msgs/TwistStamped"', '"geometry_msgs/Twst"'), ["velocity.type", "Twst"]),
-        (('"nav_msgs/msg/Odometry"', '"geometry_msgs/PoseStamped"'), ["pose.type", "unknown"]),
-        (('"sensor_msgs/Image"', '"sensor_msgs/LaserScan"'), ["camera.type", "LaserScan"]),
-        # missing keys and tables
-        (('topic = "/base/cmd_vel"', ""), ["velocity.topic", "missing"]),
-        (('topic = "odom"', ""), ["pose.topic", "missing"]),
-        (("linear_accel = 0.8", ""), ["limits.linear_accel", "missing"]),
-        (("[limits]", "[limited]"), ["limited", "unknown key"]),
-        # a header only a TwistStamped has
-        (('"geometry_msgs/TwistStamped"', '"geometry_msgs/Twist"'), ["velocity.frame_id"]),
-    ],
-)
-def test_a_bad_file_is_one_line_naming_the_key(
-    tmp_path: Path, change: tuple[str, str], needles: list[str]
-) -> None:
-    assert change[0] in ROVER
-    path = write(tmp_path, ROVER.replace(change[0], change[1], 1))
-    with pytest.raises(RobotError) as raised:
-        load(path)
-    message = str(raised.value)
-    assert "\n" not in message
-    assert str(path) in message
-    for needle in needles:
-        assert needle in message, message
-
-
-def test_a_file_that_is_not_toml_or_not_there(tmp_path: Path) -> None:
-    with pytest.raises(RobotError, match=r"not TOML.*line 2"):
-        load(write(tmp_path, "name = 'x'\n[velocity\n"))
-    with pytest.raises(RobotError, match="no robot preset named 'rover3'.*no such file"):
-        robot_named("rover3")
 
 
 def test_detect_learns_the_flavour_from_the_pose_type_the_robot_reports() -> None:
@@ -279,4 +159,4 @@ def test_the_pose_of_a_pose_message() -> None:
 def test_a_robot_is_frozen() -> None:
     with pytest.raises(AttributeError):
         TURTLESIM.name = "other"  # type: ignore[misc]
-    assert isinstance(robot_named("turtlesim"), Robot)
+    assert isinstance(PRESETS["turtlesim"], Robot)

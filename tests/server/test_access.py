@@ -13,8 +13,8 @@ from app.server.access import (
     ROSBRIDGE_RIGHTS,
     Decision,
     RosbridgeGate,
+    bearer_claims,
     bearer_token,
-    state_refusal,
 )
 
 SECRET = "rosbridge-gate-test-secret"
@@ -186,11 +186,11 @@ def test_bearer_header_and_state_reads() -> None:
     assert bearer_token({"authorization": "Bearer abc.def"}) == "abc.def"
     assert bearer_token({"authorization": "Basic abc"}) is None
     assert bearer_token({}) is None
-    assert state_refusal(None, None, NOW) is None
-    assert state_refusal(SECRET, _token("client", room="any"), NOW) is None
-    assert "Bearer" in (state_refusal(SECRET, None, NOW) or "")
-    assert "bad signature" in (state_refusal(SECRET, "e30." + "A" * 43, NOW) or "")
-    assert "malformed" in (state_refusal(SECRET, "e30.AAAA", NOW) or "")
+    claims = bearer_claims(SECRET, _token("client", room="any"), NOW)
+    assert not isinstance(claims, str) and claims.room == "any"
+    assert "Bearer" in str(bearer_claims(SECRET, None, NOW))
+    assert "bad signature" in str(bearer_claims(SECRET, "e30." + "A" * 43, NOW))
+    assert "malformed" in str(bearer_claims(SECRET, "e30.AAAA", NOW))
 
 
 @pytest.mark.parametrize("op", [["publish"], {"op": "publish"}, 7, None, True])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-# What the agent, tools, bench and fleet extras install; none of it may load to serve pages.
+# What the agent, tools, bench, fleet and dev extras install; none of it may load to serve pages.
 EXTRAS_ONLY = ("aiortc", "av", "roslibpy", "playwright", "matplotlib", "cv2", "redis")
 
 PROBE = """

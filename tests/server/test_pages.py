@@ -15,8 +15,10 @@ from pydantic import SecretStr
 from app.protocol.control import PROFILES, TERRAIN_CENTRE, WORLD_SIZE
 from app.protocol.page import to_json
 from app.protocol.ros import ROS_CONFIG
+from app.resources import OPERATIONS_SPEC
 from app.server.config import IceServer, Settings
 from app.server.serve import RunningServer
+from app.vision import spec
 
 ROLES = ("vehicle", "relay", "client")
 TURN_SECRET = "shared-with-coturn"
@@ -131,6 +133,16 @@ def test_follow_on_the_vehicle_page_and_its_relay_pacing(server: RunningServer) 
     assert vehicle["profile"] == "follow"
     # The relay has no follow pacing of its own: it snapshots as for the default profile.
     assert relay["profile"] == PROFILES["follow"].relay_profile == "default"
+    assert relay["operation"] is None  # the spec's default
+
+
+def test_the_onboard_relay_starts_with_the_onboard_operation(server: RunningServer) -> None:
+    relay = embedded_config(httpx.get(f"{server.url}/relay?profile=onboard").text)
+    assert relay["profile"] == "default"
+    assert relay["operation"] == PROFILES["onboard"].operation == "face_small"
+    ops = {op.id for op in spec.load_spec(OPERATIONS_SPEC).operations}
+    # Every profile's operation is one the relay offers.
+    assert {p.operation for p in PROFILES.values()} - {None} <= ops
 
 
 @pytest.mark.parametrize(("query", "standoff"), [("2.5", 2.5), ("0", 0.0), ("-1", 1.0), ("x", 1.0)])
@@ -169,15 +181,12 @@ def test_the_vehicle_page_drives_the_robot_it_is_given(server: RunningServer) ->
         "angularAccel": 3.2,
     }
     assert burger["robot"]["types"]["pose"]["1"] == "nav_msgs/Odometry"
-    # No spawn step (it is turtlesim's), however asked; the operator's full stick is its top
-    # speed; the follow law knows no walls.
+    # No spawn step (it is turtlesim's), however asked; not a turtlesim, so the page's pilot
+    # fits its profile to a robot without the terrain's walls (core/pilot.js, with the limits
+    # above). The profiles come as the protocol has them, whatever the robot.
     assert burger["spawnStep"] is False
-    profiles = burger["control"]["profiles"]
-    assert profiles["default"]["manualLinear"] == 0.22
-    assert (profiles["follow"]["walls"], default["control"]["profiles"]["follow"]["walls"]) == (
-        False,
-        True,
-    )
+    assert (burger["robot"]["turtlesim"], default["robot"]["turtlesim"]) == (False, True)
+    assert burger["control"]["profiles"] == default["control"]["profiles"]
 
 
 def test_an_unknown_robot_is_an_error_on_the_page(server: RunningServer) -> None:

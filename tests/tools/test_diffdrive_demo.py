@@ -1,7 +1,7 @@
 """``autopilot demo --robot diffdrive --profile onboard`` end to end in the browser: the
-server's room with its diffdrive robot, the agent filming through the robot's own camera topic and
+server's arena with its diffdrive robot, the agent filming through the robot's own camera topic and
 driving it through ``/rosbridge`` by its description, the relay finding a face in that video, and
-the client page showing the camera's video, the room's map, the robot where its odometry puts it,
+the client page showing the camera's video, the arena's map, the robot where its odometry puts it,
 and the robot moving once piloting starts.
 
 Run inside the private network namespace, as the other demo tests.
@@ -24,10 +24,10 @@ import pytest
 from playwright.sync_api import Page, sync_playwright
 
 from app.chromium import launch_options
+from app.diffdrive.arena import ARENA
 from app.diffdrive.camera import Pinhole, Renderer, encode_jpeg
 from app.diffdrive.robot import CAMERA_HFOV
-from app.diffdrive.room import ROOM
-from app.diffdrive.sim import RoomSim
+from app.diffdrive.sim import ArenaSim
 from tests.helpers.demo import running_demo, wait_for_line
 from tests.helpers.processes import descendants, wait_all_gone
 from tests.helpers.waiting import wait_until
@@ -38,7 +38,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.e2e, pytest.mark.slow]
 # as soon as its condition holds.
 START_S = 120.0
 WAIT_S = 60.0
-# The robot's colour on the map (roomview.js).
+# The robot's colour on the map (arenaview.js).
 ROBOT = (0x2F, 0x6F, 0xD0)
 CAMERA = Pinhole(hfov=CAMERA_HFOV)
 # The strips of the camera's frame compared (rows, from and to): the ceiling below the frame
@@ -92,10 +92,10 @@ def strips(page: Page) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]
 
 
 def expected_strips() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """The same medians of the robot camera's frame at the room's start, as the server sends it
+    """The same medians of the robot camera's frame at the arena's start, as the server sends it
     (JPEG): the ceiling and the floor look the same from any pose away from the walls."""
-    renderer = Renderer(ROOM, CAMERA)
-    jpeg = encode_jpeg(renderer.render(RoomSim().scene()))
+    renderer = Renderer(ARENA, CAMERA)
+    jpeg = encode_jpeg(renderer.render(ArenaSim().scene()))
     bgr = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
     rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB).astype(np.float64)
 
@@ -106,7 +106,7 @@ def expected_strips() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]
 
 
 def pixel(page: Page, x: float, y: float) -> tuple[int, int, int]:
-    """The map canvas's colour at room point (x, y) metres."""
+    """The map canvas's colour at arena point (x, y) metres."""
     rgb: list[int] = page.evaluate(
         """([x, y, width]) => {
             const canvas = document.querySelector('[data-testid="turtle-view"]');
@@ -114,18 +114,18 @@ def pixel(page: Page, x: float, y: float) -> tuple[int, int, int]:
             const at = [Math.round(x * scale), Math.round(canvas.height - y * scale)];
             return Array.from(canvas.getContext('2d').getImageData(...at, 1, 1).data.slice(0, 3));
         }""",
-        [x, y, ROOM.width],
+        [x, y, ARENA.width],
     )
     return rgb[0], rgb[1], rgb[2]
 
 
 def ahead(pose: dict[str, float], distance: float, bearing: float) -> tuple[float, float]:
-    """The room point ``distance`` metres from the robot at ``bearing`` from its heading."""
+    """The arena point ``distance`` metres from the robot at ``bearing`` from its heading."""
     heading = pose["theta"] + bearing
     return pose["x"] + distance * math.cos(heading), pose["y"] + distance * math.sin(heading)
 
 
-def test_the_diffdrive_demo_drives_the_rooms_robot_from_its_own_camera(
+def test_the_diffdrive_demo_drives_the_arenas_robot_from_its_own_camera(
     demo: tuple[subprocess.Popen[str], Queue[str]],
 ) -> None:
     process, lines = demo
@@ -151,14 +151,16 @@ def test_the_diffdrive_demo_drives_the_rooms_robot_from_its_own_camera(
             assert shown is not None
             assert list(shown[0]) == pytest.approx(list(ceiling), abs=COLOUR_TOLERANCE), shown
             assert list(shown[1]) == pytest.approx(list(floor), abs=COLOUR_TOLERANCE), shown
-            # The map is the room's, its billboards where the server's room has them.
-            wait_until(lambda: status(page)["billboards"] is not None, WAIT_S, "the room's map")
-            assert set(status(page)["billboards"]) == {b.name for b in ROOM.billboards}
-            # The robot's odometry reaches the map: it stands at the room's start.
+            # The map is the arena's, its billboards where the server's arena has them.
+            wait_until(lambda: status(page)["billboards"] is not None, WAIT_S, "the arena's map")
+            assert set(status(page)["billboards"]) == {b.name for b in ARENA.billboards}
+            # The robot's odometry reaches the map: it stands at the arena's start.
             wait_until(lambda: status(page)["poses"] > 0, WAIT_S, "the robot's pose")
             start = status(page)["pose"]
-            assert (start["x"], start["y"]) == pytest.approx((ROOM.start.x, ROOM.start.y), abs=0.05)
-            # The map draws it there (roomview.js's robot blue beside its heading line), and
+            assert (start["x"], start["y"]) == pytest.approx(
+                (ARENA.start.x, ARENA.start.y), abs=0.05
+            )
+            # The map draws it there (arenaview.js's robot blue beside its heading line), and
             # its camera's wedge ahead of it (the floor tinted yellow), not behind it.
             assert pixel(page, *ahead(start, 0.1, math.pi / 2)) == ROBOT
             wedge, behind = (

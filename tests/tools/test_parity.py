@@ -20,8 +20,9 @@ from app.protocol.opencv import OPENCV_BUILDS, RELAY_OPENCV_BUILD
 from app.relay.page import relay_url
 from app.resources import OPERATIONS_SPEC
 from app.tools import parity
+from app.tools.bench import faces
 from app.vision import reference, window
-from app.vision.spec import CascadeOperation, load_spec
+from app.vision.spec import CascadeOperation, DnnOperation, load_spec
 from tests.helpers.harness import open_harness
 from tests.vision.frames import FACES, clip_stills, write_generated_frames
 from vehicle_agent.video import FixedPath, SyntheticVideo
@@ -29,7 +30,10 @@ from vehicle_agent.video import FixedPath, SyntheticVideo
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SPEC = load_spec(OPERATIONS_SPEC)
-ALL_OPS = [o.id for o in SPEC.operations]
+# The operations every photo and frame goes through; face_dnn's full scan (13 forward passes) is
+# too slow in OpenCV.js for the whole batch, so it has its own test on a sample of each source.
+ALL_OPS = [o.id for o in SPEC.operations if not isinstance(o, DnnOperation)]
+DNN_STILLS = ("two_people.jpg", "obama_partial_face.jpg", "kit_with_rose.jpg")
 
 
 @pytest.fixture(scope="module")
@@ -168,6 +172,31 @@ def test_tracked_sequence_agrees_scan_for_scan(harness: parity.Harness) -> None:
     assert js_scans[jump - 1 : jump + 2] == ["window", "full", "window"]
 
 
+@pytest.mark.parametrize("fixture", ["harness", "other_build"])
+def test_face_dnn_agrees_on_stills_the_clip_and_bench_frames(
+    fixture: str, request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
+    """face_dnn on both OpenCV.js builds against Python OpenCV: every box at IoU >= 0.9 and
+    every score within 0.02, on shared photos (a partial face among them), a still of the clip
+    and a faces-bench frame with a small tilted face; the window around each face too."""
+    harness: parity.Harness = request.getfixturevalue(fixture)
+    (still,) = clip_stills([245])
+    cv2.imwrite(str(tmp_path / "clip-245.png"), still)
+    photo = faces.photos(FACES, ["obama.jpg"])[0]
+    rgba, _ = faces.place(photo, 32, 30, (400.0, 300.0))
+    cv2.imwrite(str(tmp_path / "bench-32px-30deg.png"), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR))
+    paths = [FACES / name for name in DNN_STILLS]
+    paths += [tmp_path / "clip-245.png", tmp_path / "bench-32px-30deg.png"]
+    report = parity.Report()
+    for path in paths:
+        harness.check(path, ["face_dnn"], report)
+    assert report.ok, describe(report)
+    full = [p for p in report.details if p.around is None]
+    # Every source holds faces, each scored on both sides.
+    assert all(p.js_boxes and len(p.js_scores) == len(p.js_boxes) for p in full), describe(report)
+    assert len(report.details) == 2 * len(full)  # each checked through its window too
+
+
 def test_unreadable_image_is_reported_by_name(harness: parity.Harness, tmp_path: Path) -> None:
     bad = tmp_path / "not-a-picture.png"
     bad.write_bytes(b"this is text")
@@ -209,6 +238,11 @@ def test_matching_rule() -> None:
     assert not parity.boxes_agree([a], [[30, 30, 100, 100]])  # IoU about 0.47
     # Two JS boxes may not both claim the same Python box.
     assert not parity.boxes_agree([a, [11, 11, 100, 100]], [a, [500, 500, 10, 10]])
+    # Scored boxes (DNN) pair only with scores within 0.02.
+    b = [300, 300, 50, 50]
+    assert parity.boxes_agree([a, b], [b, a], [0.9, 0.6], [0.61, 0.89])
+    assert not parity.boxes_agree([a, b], [b, a], [0.9, 0.6], [0.63, 0.89])
+    assert not parity.boxes_agree([a], [a], [0.9], [])
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:

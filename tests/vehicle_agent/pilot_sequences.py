@@ -2,10 +2,10 @@
 (tests/vehicle_agent/test_pilot.py) and by ``pilot.js`` in Chromium (e2e/test_pilot_js.py): both
 must answer every input with the same event records, and the same wake-up for the next tick.
 
-A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``goal`` (the goal message
-as the relay sends it, and when its frame was taken if the vehicle knows), ``stop`` (), ``mode``
-(mode, operator), ``drive`` (seq, linear, angular), ``pose`` (x, y, theta), ``tick`` (),
-``new_link`` (), ``halt`` ().
+A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``frame`` (the number of a
+frame the vehicle's own camera took at ``t``), ``goal`` (the goal message as the relay sends it),
+``stop`` (), ``mode`` (mode, operator), ``drive`` (seq, linear, angular), ``pose`` (x, y, theta),
+``tick`` (), ``new_link`` (), ``halt`` ().
 
 Every sequence runs with every profile on every robot preset (:data:`ROBOTS`): turtlesim's limits
 change nothing, a Burger's clamp and ramp the commands (the last sequences are about that); the
@@ -18,7 +18,7 @@ from typing import Any
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS
 from vehicle_agent.control import Pose
 from vehicle_agent.pilot import Pilot
@@ -44,13 +44,12 @@ def goal(
     y: float = 120.0,
     late_s: float = 0.0,
     box_h: float | None = None,
-    captured: float | None = None,
     stamp_ms: float | None = None,
 ) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
-    ``late_s`` earlier (it waited that much longer on the way); with a face's box ``box_h``
-    pixels high when given, and ``captured``: when the vehicle's camera took its frame, when
-    the vehicle knows; ``stamp_ms`` replaces the relay's stamp."""
+    ``late_s`` earlier (it waited that much longer on the way), found in frame ``100 + seq``;
+    with a face's box ``box_h`` pixels high when given; ``stamp_ms`` replaces the relay's
+    stamp."""
     message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
@@ -64,7 +63,12 @@ def goal(
     }
     if box_h is not None:
         message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
-    return ("goal", t, [message] if captured is None else [message, captured])
+    return ("goal", t, [message])
+
+
+def taken(seq: int, t: float) -> Step:
+    """The vehicle's camera took the frame goal ``seq`` will be found in at ``t``."""
+    return ("frame", t, [100 + seq])
 
 
 CENTRE_POSE: Step = ("pose", 0.0, [TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0])
@@ -193,13 +197,16 @@ SEQUENCES: dict[str, list[Step]] = {
         odom(0.05, 0.0),
         odom(0.1, -0.05),
         odom(0.15, -0.1),
-        goal(1, 0.2, x=480.0, y=240.0, box_h=60.0, captured=0.05),
+        taken(1, 0.05),
+        goal(1, 0.2, x=480.0, y=240.0, box_h=60.0),
         odom(0.21, -0.15),
         odom(0.25, -0.2),
-        goal(2, 0.3, x=400.0, y=240.0, box_h=60.0, captured=0.16),
+        taken(2, 0.16),
+        goal(2, 0.3, x=400.0, y=240.0, box_h=60.0),
         odom(0.31, -0.25),
         # Taken before the oldest heading remembered: the oldest one stands in for it.
-        goal(3, 0.4, x=330.0, y=240.0, box_h=60.0, captured=-5.0),
+        taken(3, -5.0),
+        goal(3, 0.4, x=330.0, y=240.0, box_h=60.0),
         goal(4, 0.5, x=330.0, y=240.0, box_h=60.0),
     ],
     # A face that walks left round the robot, 0.05 rad a frame every 0.1 s (frames taken 0.1 s
@@ -212,17 +219,13 @@ SEQUENCES: dict[str, list[Step]] = {
             for k in range(1, 6)
             for step in (
                 odom(round(0.1 * k, 2), 0.02 * k),
-                goal(
-                    k,
-                    round(0.1 * k + 0.01, 2),
-                    x=320.0 - 40.0 * k,
-                    box_h=80.0,
-                    captured=round(0.1 * k - 0.09, 2),
-                ),
+                taken(k, round(0.1 * k - 0.09, 2)),
+                goal(k, round(0.1 * k + 0.01, 2), x=320.0 - 40.0 * k, box_h=80.0),
             )
         ],
         odom(0.58, 0.12),
-        goal(6, 0.61, x=600.0, box_h=80.0, captured=0.52),
+        taken(6, 0.52),
+        goal(6, 0.61, x=600.0, box_h=80.0),
         odom(0.66, 0.1),
     ],
     # The face leaves by the left: a search turns left, and finds it again.
@@ -283,19 +286,20 @@ ROBOTS = tuple(PRESETS)
 
 
 def pilot(profile: str, robot: str = "turtlesim") -> Pilot:
-    """The pilot each sequence runs against, built as the agent builds it: the profile fitted to
-    the robot, its limits, the protocol's dead-man, tick and freshness rule (the page gets them
-    through its config)."""
-    described = PRESETS[robot]
-    return Pilot(for_robot(PROFILES[profile], described), limits=described.limits)
+    """The pilot each sequence runs against, built as the agent builds it: the profile and the
+    robot (the pilot fits the one to the other), the protocol's dead-man, tick and freshness
+    rule (the page gets them through its config)."""
+    return Pilot(PROFILES[profile], robot=PRESETS[robot])
 
 
 def feed(driven: Pilot, kind: str, t: float, args: list[Any]) -> list[ev.AnyEvent]:
     """One step's input to ``driven``; its answer."""
     match kind:
+        case "frame":
+            driven.frame(args[0], t)
+            return []
         case "goal":
-            captured = args[1] if len(args) > 1 else None
-            return list(driven.goal(channels.Goal.model_validate(args[0]), t, captured))
+            return list(driven.goal(channels.Goal.model_validate(args[0]), t))
         case "stop":
             return list(driven.stop(t))
         case "mode":

@@ -24,7 +24,8 @@ from tests.helpers.sockets import rosbridge_url
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
-from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle
+from vehicle_agent.robotlink import RosbridgeLink, SimLink
+from vehicle_agent.rosbridge_client import RosbridgeClient
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 from .pyrelay import PyRelay
@@ -37,7 +38,7 @@ RIGHT = (0.8 * W, 0.42 * H)
 @dataclass
 class Running:
     agent: Agent
-    turtle: SimTurtle
+    turtle: SimLink
     events: list[AnyEvent]
 
     def heading_deg(self) -> float:
@@ -53,7 +54,7 @@ async def running_agent(server_url: str, **config: Any) -> AsyncIterator[Running
     log = EventLog()
     log.listeners.append(events.append)
     video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5), on_frame=log.emit)
-    turtle = SimTurtle()
+    turtle = SimLink()
     agent = Agent(AgentConfig(server=server_url, **config), video, turtle, log)
     task = asyncio.create_task(agent.run())
     try:
@@ -293,14 +294,14 @@ async def test_agent_survives_a_signaling_server_restart(free_port: int) -> None
 async def test_a_renewing_agent_keeps_its_session_and_media_past_several_token_lifetimes(
     start_server: Callable[[Settings], RunningServer],
 ) -> None:
-    """Issue 37.4: the agent renews before its vehicle token expires, on ``/ws`` and on the
+    """The agent renews before its vehicle token expires, on ``/ws`` and on the
     server's ``/rosbridge``, without dropping its link: the same peer connection carries video
     and goals through several lifetimes of its tokens, and goals still drive the turtle."""
     secret = "agent-renewal-test-secret"
     server = start_server(Settings(environment="development", secret=secret))
     lifetime = 6.0  # long enough for the turtle to connect on a loaded machine
     first = tokens.sign(secret, "default", "vehicle", now=time.time(), ttl_s=lifetime)
-    turtle = RosbridgeTurtle(rosbridge_url(server), token=first)
+    turtle = RosbridgeLink(RosbridgeClient(rosbridge_url(server), token=first))
     video = SyntheticVideo(W, H, fps=15, path=FixedPath(0.5, 0.5))
     agent = Agent(AgentConfig(server=server.url, token=first), video, turtle, EventLog())
     task = asyncio.create_task(agent.run())

@@ -36,8 +36,8 @@ from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import pixel_to_terrain
 from vehicle_agent.events import EventLog
+from vehicle_agent.robotlink import SimLink
 from vehicle_agent.signaling import LoginRefused
-from vehicle_agent.turtle import SimTurtle
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 # One Chromium for the module's client pages (tests/conftest.py), on the module's event loop
@@ -70,7 +70,7 @@ class Scene:
     def __init__(
         self,
         agent: Agent,
-        turtle: SimTurtle,
+        turtle: SimLink,
         path: FixedPath,
         relay: RelayService,
         client: Page,
@@ -117,7 +117,7 @@ async def scene(
     log = EventLog()
     log.listeners.append(events.append)
     path = FixedPath(0.2, 0.42)  # face on the left, a little above the middle
-    turtle = SimTurtle()
+    turtle = SimLink()
     agent = Agent(
         AgentConfig(server=server.url, profile=profile, robot=robot),
         SyntheticVideo(W, H, fps=15, path=path),
@@ -296,7 +296,7 @@ async def held_at_standoff(s: Scene, pixel: tuple[float, float], what: str) -> f
 async def test_follow_drives_to_the_standoff_from_the_face(
     server: RunningServer, module_browser: Browser
 ) -> None:
-    """Issue 12: the turtle drives toward the face's terrain point and keeps its distance."""
+    """The turtle drives toward the face's terrain point and keeps its distance."""
     async with scene(server, module_browser, profile="follow") as s:
         start = s.turtle.sim.pose("turtle1")
         face = (s.path.x * W, s.path.y * H)
@@ -319,7 +319,7 @@ async def test_follow_drives_to_the_standoff_from_the_face(
 async def test_switching_to_fire_in_the_demo_scene_moves_the_target_to_the_flame(
     server: RunningServer, module_browser: Browser
 ) -> None:
-    """Issue 12: the demo scene's flame is elsewhere; face -> fire takes the turtle to it."""
+    """The demo scene's flame is elsewhere; face -> fire takes the turtle to it."""
     async with scene(server, module_browser, profile="follow") as s:
         face = (s.path.x * W, s.path.y * H)
         video = s.agent.video
@@ -360,7 +360,7 @@ async def search_reads(s: Scene, words: str, timeout: float) -> None:
 async def test_onboard_searches_where_the_face_left_then_stops_and_the_client_is_told(
     server: RunningServer, module_browser: Browser
 ) -> None:
-    """Issue 36: the face leaves the view by the right; the vehicle (a camera 60° across, as if
+    """The face leaves the view by the right; the vehicle (a camera 60° across, as if
     the turtle carried it) turns right to find it, gives up after a turn and a half at 1.6 rad/s
     and stops; the client's page says each; the face back, it steers again."""
     robot = replace(TURTLESIM, camera=Camera("/camera", "sensor_msgs/CompressedImage", 60.0))
@@ -403,7 +403,7 @@ async def test_onboard_searches_where_the_face_left_then_stops_and_the_client_is
 async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted(
     server: RunningServer, module_browser: Browser
 ) -> None:
-    """Issue 37: another vehicle joins the room, tries the relay and leaves; the relay keeps
+    """Another vehicle joins the room, tries the relay and leaves; the relay keeps
     piloting the vehicle it had, on that vehicle's own video, and goals keep arriving."""
     async with scene(server, module_browser) as s:
         await s.start_piloting()
@@ -422,7 +422,7 @@ async def test_a_second_vehicle_that_comes_and_goes_leaves_the_first_one_piloted
         second = Agent(
             AgentConfig(server=server.url, name="vehicle-2"),
             SyntheticVideo(W, H, fps=15, path=FixedPath(0.8, 0.42)),
-            SimTurtle(),
+            SimLink(),
             second_log,
         )
         second_task = asyncio.create_task(second.run())

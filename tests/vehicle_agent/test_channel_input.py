@@ -1,4 +1,4 @@
-"""Hostile data-channel input to the agent's real handler (issue 9): refused with a reason,
+"""Hostile data-channel input to the agent's real handler: refused with a reason,
 never a command. No WebRTC needed: the handler is called the way the data channel calls it."""
 
 from __future__ import annotations

@@ -204,7 +204,7 @@ def test_thesis_profile_times_out_after_2_5_s() -> None:
 
 
 def test_default_profile_answers_a_goal_at_once() -> None:
-    """Issue 13: a Twist as soon as a goal lands, not at the next pose update."""
+    """A Twist as soon as a goal lands, not at the next pose update."""
     clock = FakeClock()
     control = Controller(PROFILES["default"])
     assert control.goal(Goal(320, 40, 640, 480, seq=1, frame=3), clock.now) is None  # no pose yet

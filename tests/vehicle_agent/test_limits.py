@@ -11,7 +11,7 @@ import pytest
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
+from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS, Limits
 from tests.vehicle_agent.pilot_sequences import goal
 from vehicle_agent.control import Pose, Twist
@@ -25,7 +25,7 @@ CENTRE = Pose(TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0)
 
 def burger_pilot(profile: str = "default") -> Pilot:
     """A pilot for a Burger, as the agent builds it."""
-    return Pilot(for_robot(PROFILES[profile], BURGER), limits=BURGER.limits)
+    return Pilot(PROFILES[profile], robot=BURGER)
 
 
 def twists(events: list[Any]) -> list[ev.TwistSent]:

@@ -5,14 +5,15 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from typing import Any
 
 import pytest
 
 from app.protocol import channels
 from app.protocol import events as ev
-from app.protocol.control import PROFILES, TERRAIN_CENTRE, for_robot
-from app.protocol.robot import PRESETS
+from app.protocol.control import PROFILES, TERRAIN_CENTRE
+from app.protocol.robot import PRESETS, TURTLESIM
 from tests.vehicle_agent import pilot_sequences
 from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal
 from vehicle_agent.control import Goal, Pose, Profile, pixel_bearing, target_range
@@ -213,8 +214,8 @@ def test_the_shared_sequences_give_records_the_event_log_reads_back(
 # --- the onboard law: a camera the vehicle carries --------------------------------------------
 
 # The diffdrive robot's camera: 60° across a 640-pixel frame, so f = 320 / tan 30° = 554.26 px.
-# The law alone: the profile as the diffdrive robot gets it, without the robot's limiter.
-ONBOARD = for_robot(PROFILES["onboard"], PRESETS["diffdrive"])
+# The law alone: the diffdrive robot's camera on a robot with turtlesim's wide limits (no ramp).
+CAMERA_ONLY = replace(PRESETS["diffdrive"], limits=TURTLESIM.limits)
 ODOM = Pose(1.0, 3.0, 0.0)
 FOCAL_PX = 320 / math.tan(math.radians(30))
 
@@ -230,7 +231,7 @@ def face(seq: int, t: float, x: float, range_m: float | None = None) -> channels
 
 
 def onboard(pose: Pose = ODOM) -> Pilot:
-    pilot = Pilot(ONBOARD)
+    pilot = Pilot(PROFILES["onboard"], robot=CAMERA_ONLY)
     pilot.pose(pose, 0.0)
     return pilot
 
@@ -294,14 +295,17 @@ def test_the_bearing_is_taken_from_the_heading_the_frame_was_taken_at() -> None:
         return pilot
 
     pilot = turned_pilot()
-    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.0))[-1]
+    pilot.frame(101, 0.0)  # the goal's frame (goal 1 names frame 101)
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15))[-1]
     assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 11.46), abs=1e-3)
     # Taken at 0.07: the heading then was the pose of 0.05's, −0.1 rad (5.73°).
     pilot = turned_pilot()
-    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15, captured_at=0.07))[-1]
+    pilot.frame(101, 0.07)
+    twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15))[-1]
     assert twist.angular == pytest.approx(4.0 * math.radians(-16.10 + 5.73), abs=1e-3)
-    # Not known: the heading on arrival, the whole 16.10° still to turn.
+    # Not known (another frame's time is): the heading on arrival, the whole 16.10° to turn.
     pilot = turned_pilot()
+    pilot.frame(100, 0.0)
     twist = _twists(pilot.goal(face(1, 0.15, x=480.0), 0.15))[-1]
     assert twist.angular == pytest.approx(4.0 * math.radians(-16.10), abs=1e-3)
 
@@ -348,7 +352,7 @@ def _trail(target_rate: float, seconds: float = 6.0) -> list[tuple[float, float]
     ``target_rate`` rad/s (counter-clockwise: to the left), over ``seconds``: goals about 8 a
     second, each from a frame taken 0.15 s before it arrives, and odometry every 20 ms. The
     robot turns exactly as commanded. The face's true bearing (rad) at each odometry, by time."""
-    pilot = Pilot(ONBOARD, limits=PRESETS["diffdrive"].limits)
+    pilot = Pilot(PROFILES["onboard"], robot=PRESETS["diffdrive"])
     theta, angular = 0.0, 0.0
     headings: list[tuple[float, float]] = []
     trail: list[tuple[float, float]] = []
@@ -364,7 +368,8 @@ def _trail(target_rate: float, seconds: float = 6.0) -> list[tuple[float, float]
             then = next(h for t, h in reversed(headings) if t <= taken + 1e-9)
             bearing = target_rate * taken - then
             x = 320.0 - FOCAL_PX * math.tan(bearing)
-            answers += pilot.goal(face(seq, now, x=x, range_m=1.2), now, captured_at=taken)
+            pilot.frame(100 + seq, taken)
+            answers += pilot.goal(face(seq, now, x=x, range_m=1.2), now)
         answers += pilot.tick(now + 0.001)
         for twist in _twists(answers):
             angular = twist.angular

@@ -125,8 +125,9 @@ async def drive_and_collect(
     log: Path,
     top: tuple[float, float],
     video: str = "synthetic",
-) -> tuple[StandIn, PyRelay]:
-    """Drive ``robot`` by hand to its ``top`` speed and let go; the stand-in and the relay."""
+) -> tuple[StandIn, PyRelay, float]:
+    """Drive ``robot`` by hand to its ``top`` speed and let go; the stand-in, the relay, and
+    the server's count of open /rosbridge sessions while the agent drove."""
     url = server.url.replace("http", "ws", 1) + "/rosbridge"
     async with stand_in(url, velocity, odom) as standin:
         relay = PyRelay(server.ws_url)
@@ -138,6 +139,9 @@ async def drive_and_collect(
                 )
                 # The agent reads the robot's pose from its Odometry and reports it.
                 await relay.until(lambda: any(m["type"] == "pose" for m in relay.messages), 30)
+                # The server samples its sessions once a second: a sample taken from now on.
+                await asyncio.sleep(1.5)
+                sessions = server.metrics.registry.get_sample_value("autopilot_rosbridge_sessions")
                 stamped = velocity[1].endswith("TwistStamped")
                 await operator_drives(relay, standin, stamped, top)
 
@@ -147,7 +151,8 @@ async def drive_and_collect(
                 await relay.until(stopped, 10)
         finally:
             await relay.leave()
-        return standin, relay
+        assert sessions is not None
+        return standin, relay, sessions
 
 
 def reported_pose(relay: PyRelay) -> dict[str, Any]:
@@ -160,7 +165,7 @@ async def test_a_burger_gets_twists_on_cmd_vel_within_its_limits(
     log = tmp_path / "agent.log"
     # Full stick on a Burger: its top speed ahead, the operator's 2 rad/s turn.
     velocity = ("/cmd_vel", "geometry_msgs/msg/Twist")
-    standin, relay = await drive_and_collect(
+    standin, relay, _ = await drive_and_collect(
         server, "turtlebot3", velocity, "/odom", log, (0.22, -2.0)
     )
     output = log.read_text()
@@ -191,10 +196,12 @@ async def test_a_robot_file_with_twist_stamped(server: RunningServer, tmp_path: 
     before = time.time()
     # Its camera is the one the file names (`--video ros`), of the type it names while the
     # robot's rosapi cannot say (nobody publishes it yet).
-    standin, relay = await drive_and_collect(
+    standin, relay, sessions = await drive_and_collect(
         server, str(description), velocity, "/rover/odom", log, (0.3, -0.5), video="ros"
     )
     output = log.read_text()
+    # The stand-in's session and the agent's one: its camera rides on the robot's connection.
+    assert sessions == 2, output
     assert "camera /rover/camera/image_raw: sensor_msgs/Image (from the robot's description)" in (
         output
     ), output
@@ -220,7 +227,9 @@ async def test_the_type_the_robot_reports_beats_the_description(
     # names the type, and the agent publishes what the robot takes.
     log = tmp_path / "agent.log"
     velocity = ("/cmd_vel", "geometry_msgs/msg/TwistStamped")
-    standin, _ = await drive_and_collect(server, "turtlebot3", velocity, "/odom", log, (0.22, -2.0))
+    standin, _, _ = await drive_and_collect(
+        server, "turtlebot3", velocity, "/odom", log, (0.22, -2.0)
+    )
     output = log.read_text()
     messages = [m for _, m in standin.commands()]
     assert messages and all({"header", "twist"} == set(m) for m in messages), output

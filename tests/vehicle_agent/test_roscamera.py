@@ -8,6 +8,7 @@ types, is tests/vehicle_agent/test_roscamera_rosbridge.py.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import json
 import logging
@@ -15,11 +16,9 @@ import time
 from collections.abc import AsyncIterator
 from typing import Any
 
-import cbor2
 import cv2
 import numpy as np
 import pytest
-from websockets.asyncio.server import Server, ServerConnection, serve
 
 from app.protocol import frametag
 from app.protocol.events import FrameSent
@@ -28,7 +27,9 @@ from app.resources import OPERATIONS_SPEC
 from app.vision.reference import detect
 from app.vision.spec import load_spec
 from tests.helpers.camera_frames import as_json, compressed, pattern, pattern_error
+from tests.helpers.stub_rosbridge import StubRosbridge, running
 from tests.helpers.waiting import eventually
+from vehicle_agent.rosbridge_client import RosbridgeClient
 from vehicle_agent.roscamera import (
     CameraError,
     LatestSlot,
@@ -107,75 +108,24 @@ def test_the_no_camera_frame_gives_no_operation_a_target() -> None:
 # -- a rosbridge of the test's own -------------------------------------------------------------
 
 
-class StubRosbridge:
-    """Answers rosapi ``topic_type`` with ``topic_type``, records subscriptions, and sends the
-    test's frames to the last connection; ``refuse_cbor``: a warning for a CBOR subscription."""
-
-    def __init__(self, topic_type: str = "", refuse_cbor: bool = False) -> None:
-        self.topic_type = topic_type
-        self.refuse_cbor = refuse_cbor
-        self.subscribes: list[dict[str, Any]] = []
-        self.connection: ServerConnection | None = None
-        self.server: Server | None = None
-
-    @property
-    def url(self) -> str:
-        assert self.server is not None
-        port = next(iter(self.server.sockets)).getsockname()[1]
-        return f"ws://127.0.0.1:{port}"
-
-    async def _serve(self, connection: ServerConnection) -> None:
-        self.connection = connection
-        async for text in connection:
-            message = json.loads(text)
-            if message["op"] == "call_service":
-                answer = {"type": self.topic_type}
-                await connection.send(
-                    json.dumps(
-                        {
-                            "op": "service_response",
-                            "id": message["id"],
-                            "values": answer,
-                            "result": True,
-                        }
-                    )
-                )
-            elif message["op"] == "subscribe":
-                self.subscribes.append(message)
-                if self.refuse_cbor and message.get("compression") == "cbor":
-                    warning = {
-                        "op": "status",
-                        "level": "warning",
-                        "id": message["id"],
-                        "msg": "unknown compression cbor",
-                    }
-                    await connection.send(json.dumps(warning))
-
-    async def send(self, frame: str | bytes) -> None:
-        assert self.connection is not None
-        await self.connection.send(frame)
-
-    async def publish(self, msg: dict[str, Any], binary: bool = True) -> None:
-        op = {"op": "publish", "topic": TOPIC}
-        if binary:
-            await self.send(cbor2.dumps({**op, "msg": msg}))
-        else:
-            await self.send(json.dumps({**op, "msg": as_json(msg)}))
-
-
 @pytest.fixture
 async def stub() -> AsyncIterator[StubRosbridge]:
-    rosbridge = StubRosbridge()
-    async with serve(rosbridge._serve, "127.0.0.1", 0, max_size=None) as server:
-        rosbridge.server = server
+    async with running(StubRosbridge()) as rosbridge:
         yield rosbridge
 
 
-async def started(stub: StubRosbridge, **options: Any) -> RosCamera:
-    camera = RosCamera(stub.url, TOPIC, fps=100, **options)
-    await camera.start()
-    await eventually(lambda: bool(stub.subscribes), 5, "the subscription")
-    return camera
+@contextlib.asynccontextmanager
+async def started(stub: StubRosbridge, **options: Any) -> AsyncIterator[RosCamera]:
+    """A camera subscribed through a connection of its own (the robot link's, in the agent)."""
+    client = RosbridgeClient(stub.url)
+    camera = RosCamera(client, TOPIC, **{"fps": 100, **options})
+    try:
+        await camera.start()
+        await eventually(lambda: bool(stub.subscribes), 5, "the subscription")
+        yield camera
+    finally:
+        camera.stop()
+        await client.close()
 
 
 def rgb(frame: Any) -> np.ndarray:
@@ -192,13 +142,12 @@ async def test_no_camera_frames_before_the_first_picture_and_after_the_camera_fa
 ) -> None:
     caplog.set_level(logging.INFO, logger="vehicle_agent.roscamera")
     sent: list[FrameSent] = []
-    camera = await started(stub, on_frame=sent.append)
-    try:
+    async with started(stub, on_frame=sent.append) as camera:
         blank = blank_frame((640, 480), TOPIC)
         first = rgb(await camera.recv())
         assert np.array_equal(first[50:], blank[50:])  # all but the tag rows
         assert sent == []  # nothing was captured
-        await stub.publish(jpeg_msg(7))
+        await stub.publish(TOPIC, jpeg_msg(7))
         await eventually(lambda: camera.slot.received == 1, 5, "the picture")
         picture = rgb(await camera.recv())
         assert pattern_error(picture) <= 12
@@ -211,22 +160,19 @@ async def test_no_camera_frames_before_the_first_picture_and_after_the_camera_fa
         silent = [r for r in caplog.records if "sending 'no camera' frames" in r.message]
         assert len(silent) == 1
         # It comes back: the new picture, said once.
-        await stub.publish(jpeg_msg(8))
+        await stub.publish(TOPIC, jpeg_msg(8))
         await eventually(lambda: camera.slot.received == 2, 5, "the second picture")
         assert pattern_error(rgb(await camera.recv())) <= 12
         assert any("frames again after" in r.message for r in caplog.records)
-    finally:
-        await camera.close()
 
 
 async def test_a_camera_slower_than_the_track_has_its_newest_picture_sent_again(
     stub: StubRosbridge,
 ) -> None:
     sent: list[FrameSent] = []
-    camera = await started(stub, on_frame=sent.append)
-    try:
+    async with started(stub, on_frame=sent.append) as camera:
         stamp = time.time()
-        await stub.publish(jpeg_msg(3, stamp))
+        await stub.publish(TOPIC, jpeg_msg(3, stamp))
         await eventually(lambda: camera.slot.received == 1, 5, "the picture")
         frames = [rgb(await camera.recv()) for _ in range(3)]
         assert [frametag.read(f) for f in frames] == [0, 1, 2]
@@ -234,8 +180,6 @@ async def test_a_camera_slower_than_the_track_has_its_newest_picture_sent_again(
         assert [e.frame for e in sent] == [0, 1, 2]
         assert len({e.t for e in sent}) == 1
         assert camera.pictures == 1
-    finally:
-        await camera.close()
 
 
 async def test_a_camera_faster_than_the_track_is_paced_to_its_frame_rate_newest_first(
@@ -243,42 +187,38 @@ async def test_a_camera_faster_than_the_track_is_paced_to_its_frame_rate_newest_
 ) -> None:
     """A camera flooding the topic does not speed the video up: frames go out at ``fps``, their
     timestamps 1/fps apart, each with the newest picture there was."""
-    camera = RosCamera(stub.url, TOPIC, fps=10)
-    await camera.start()
-    await eventually(lambda: bool(stub.subscribes), 5, "the subscription")
     flooding = True
 
     async def flood() -> None:
         number = 0
         while flooding:
             number += 1
-            await stub.publish(jpeg_msg(number % 256))
+            await stub.publish(TOPIC, jpeg_msg(number % 256))
             await asyncio.sleep(0.005)
 
-    task = asyncio.create_task(flood())
-    try:
-        await eventually(lambda: camera.slot.received > 0, 5, "the first picture")
-        begun = time.monotonic()
-        frames = [await camera.recv() for _ in range(6)]
-        elapsed = time.monotonic() - begun
-        # Six frames at 10 fps: five periods of 0.1 s at least, however fast pictures came.
-        assert elapsed >= 0.5 - 0.01
-        periods = {b.pts - a.pts for a, b in itertools.pairwise(frames)}
-        assert periods == {9000}  # 1/10 s at the video's 90 kHz clock
-        assert camera.slot.received > camera.pictures  # pictures came faster than frames ...
-        assert camera.slot.dropped >= 1  # ... and the older ones waiting were dropped
-    finally:
-        flooding = False
-        await task
-        await camera.close()
+    async with started(stub, fps=10) as camera:
+        task = asyncio.create_task(flood())
+        try:
+            await eventually(lambda: camera.slot.received > 0, 5, "the first picture")
+            begun = time.monotonic()
+            frames = [await camera.recv() for _ in range(6)]
+            elapsed = time.monotonic() - begun
+            # Six frames at 10 fps: five periods of 0.1 s at least, however fast pictures came.
+            assert elapsed >= 0.5 - 0.01
+            periods = {b.pts - a.pts for a, b in itertools.pairwise(frames)}
+            assert periods == {9000}  # 1/10 s at the video's 90 kHz clock
+            assert camera.slot.received > camera.pictures  # pictures came faster than frames ...
+            assert camera.slot.dropped >= 1  # ... and the older ones waiting were dropped
+        finally:
+            flooding = False
+            await task
 
 
 async def test_bad_frames_are_skipped_each_sort_said_once_and_the_next_good_one_shows(
     stub: StubRosbridge, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="vehicle_agent.roscamera")
-    camera = await started(stub)
-    try:
+    caplog.set_level(logging.WARNING, logger="vehicle_agent")
+    async with started(stub) as camera:
         good = jpeg_msg(1)
         bad_text = json.dumps(
             {"op": "publish", "topic": TOPIC, "msg": {**as_json(good), "data": "@@not base64@@"}}
@@ -289,65 +229,63 @@ async def test_bad_frames_are_skipped_each_sort_said_once_and_the_next_good_one_
             await stub.send(bad_text)
             await eventually(lambda: camera.slot.received >= 1, 5, "the bad publication")
             await camera.recv()
-            await stub.publish({**good, "format": "tiff"})
+            await stub.publish(TOPIC, {**good, "format": "tiff"})
             await eventually(lambda: camera.slot.received >= 2, 5, "the tiff")
             await camera.recv()
-            await stub.publish({**good, "data": good["data"][:2000]})
+            await stub.publish(TOPIC, {**good, "data": good["data"][:2000]})
             await eventually(lambda: camera.slot.received >= 3, 5, "the truncated JPEG")
             await camera.recv()
             camera.slot.received = 0
-        assert camera.problems == {"unreadable": 4, "message": 2, "format": 2, "corrupt": 2}
-        skipped = [r.message for r in caplog.records if "skipped a message" in r.message]
+        # Frames that are no rosbridge message are the connection's to count, not a topic's.
+        assert camera.client.unreadable == 4
+        assert camera.problems == {"message": 2, "format": 2, "corrupt": 2}
+        skipped = [r.message for r in caplog.records if "skipped a" in r.message]
         assert len(skipped) == 4, skipped  # one line per sort
         assert any("not base64" in line for line in skipped)
         assert any("truncated or corrupt" in line for line in skipped)
+        assert any("unreadable frame" in line for line in skipped)
         assert camera.pictures == 0
-        await stub.publish(good)
+        await stub.publish(TOPIC, good)
         await eventually(lambda: camera.slot.received == 1, 5, "the good picture")
         assert pattern_error(rgb(await camera.recv())) <= 12
-    finally:
-        await camera.close()
 
 
 async def test_a_rosbridge_that_refuses_cbor_is_asked_again_for_json() -> None:
-    rosbridge = StubRosbridge(refuse_cbor=True)
-    async with serve(rosbridge._serve, "127.0.0.1", 0, max_size=None) as server:
-        rosbridge.server = server
-        camera = await started(rosbridge)
-        try:
-            await eventually(lambda: len(rosbridge.subscribes) == 2, 5, "the second subscribe")
-            assert [s.get("compression") for s in rosbridge.subscribes] == ["cbor", "none"]
-            assert rosbridge.subscribes[1]["id"] == rosbridge.subscribes[0]["id"]
-            await rosbridge.publish(jpeg_msg(2), binary=False)
-            await eventually(lambda: camera.slot.received == 1, 5, "the JSON picture")
-            assert pattern_error(rgb(await camera.recv())) <= 12
-            assert camera.binary == 0
-        finally:
-            await camera.close()
+    async with (
+        running(StubRosbridge(refuse_cbor=True)) as rosbridge,
+        started(rosbridge) as camera,
+    ):
+        await eventually(lambda: len(rosbridge.subscribes) == 2, 5, "the second subscribe")
+        assert [s.get("compression") for s in rosbridge.subscribes] == ["cbor", "none"]
+        assert rosbridge.subscribes[1]["id"] == rosbridge.subscribes[0]["id"]
+        await rosbridge.publish(TOPIC, jpeg_msg(2), binary=False)
+        await eventually(lambda: camera.slot.received == 1, 5, "the JSON picture")
+        assert pattern_error(rgb(await camera.recv())) <= 12
+        assert camera.binary == 0
 
 
 async def test_the_type_comes_from_rosapi_and_one_that_is_no_image_stops_the_start() -> None:
-    rosbridge = StubRosbridge(topic_type="sensor_msgs/msg/Image")
-    async with serve(rosbridge._serve, "127.0.0.1", 0, max_size=None) as server:
-        rosbridge.server = server
-        camera = await started(rosbridge)
-        await camera.close()
-        assert camera.message_type == "sensor_msgs/Image"
-        assert rosbridge.subscribes[0]["type"] == "sensor_msgs/Image"
+    async with running(StubRosbridge(topic_type="sensor_msgs/msg/Image")) as rosbridge:
+        async with started(rosbridge) as camera:
+            assert camera.message_type == "sensor_msgs/Image"
+            assert rosbridge.subscribes[0]["type"] == "sensor_msgs/Image"
         rosbridge.topic_type = "std_msgs/msg/String"
-        with pytest.raises(CameraError, match="carries std_msgs/msg/String, not a camera image"):
-            await RosCamera(rosbridge.url, TOPIC).start()
+        client = RosbridgeClient(rosbridge.url)
+        try:
+            with pytest.raises(CameraError, match="carries std_msgs/msg/String, not a camera"):
+                await RosCamera(client, TOPIC).start()
+        finally:
+            await client.close()
 
 
 async def test_without_rosapi_the_topics_name_decides() -> None:
-    rosbridge = StubRosbridge(topic_type="")
-    async with serve(rosbridge._serve, "127.0.0.1", 0, max_size=None) as server:
-        rosbridge.server = server
-        camera = await started(rosbridge)
-        await camera.close()
+    async with (
+        running(StubRosbridge(topic_type="")) as rosbridge,
+        started(rosbridge) as camera,
+    ):
         assert camera.message_type == "sensor_msgs/CompressedImage"
 
 
 async def test_an_unreachable_rosbridge_is_one_line_at_start() -> None:
     with pytest.raises(CameraError, match=f"camera {TOPIC}: cannot connect to rosbridge at"):
-        await RosCamera("ws://127.0.0.1:9", TOPIC).start()
+        await RosCamera(RosbridgeClient("ws://127.0.0.1:9"), TOPIC).start()

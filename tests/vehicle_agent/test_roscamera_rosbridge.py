@@ -1,9 +1,9 @@
 """``--video ros:TOPIC`` against the server's own ``/rosbridge``: roslibpy (a real rosbridge
 client, JSON with base64 data) publishes test pictures of both camera types and every encoding,
-the agent's camera track subscribes in CBOR and in JSON.
+the agent's camera track subscribes in CBOR and in JSON, over the agent's own rosbridge client.
 
 roslibpy's Twisted reactor starts once per process and stays running (see
-tests/turtlesim/test_rosbridge_roslibpy.py), so the publishers here are module-scoped.
+tests/rosbridge/test_roslibpy.py), so the publishers here are module-scoped.
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from tests.helpers.sockets import rosbridge_url
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
-from vehicle_agent.rosbridge_client import Compression
+from vehicle_agent.robotlink import RosbridgeLink
+from vehicle_agent.rosbridge_client import Compression, RosbridgeClient
 from vehicle_agent.roscamera import RosCamera, camera_of
-from vehicle_agent.turtle import SimTurtle
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -75,13 +75,16 @@ def publish(publisher: roslibpy.Topic, msg: dict[str, Any]) -> None:
 
 
 @contextlib.asynccontextmanager
-async def camera(url: str, topic: str, **options: Any) -> Any:
-    track = RosCamera(url, topic, fps=100, **options)
-    await track.start()
+async def camera(url: str, topic: str, token: str | None = None, **options: Any) -> Any:
+    """A camera track on a rosbridge connection of its own (``token`` on its handshake)."""
+    client = RosbridgeClient(url, token)
+    track = RosCamera(client, topic, fps=100, **options)
     try:
+        await track.start()
         yield track
     finally:
-        await track.close()
+        track.stop()
+        await client.close()
 
 
 async def primed(publisher: roslibpy.Topic, msg: dict[str, Any], *tracks: RosCamera) -> None:
@@ -277,16 +280,17 @@ async def test_the_cameras_connection_outlives_its_token_by_renewing_with_the_ag
     guarded: RunningServer,
 ) -> None:
     """The server's /rosbridge ends a session whose token expires unless it proves a fresh one:
-    the camera is given each token the agent renews."""
+    the camera shares the robot link's connection, which proves each token the agent renews."""
     lifetime = 6.0
     first = token("vehicle", room="default", ttl_s=lifetime)
     topic = "/camera/renewed"
     vehicle = authenticated_ros(guarded, token("vehicle", room="default"))
     publisher = advertise(vehicle, topic, "sensor_msgs/CompressedImage")
-    track = RosCamera(rosbridge_url(guarded), topic, fps=15, token=first)
+    client = RosbridgeClient(rosbridge_url(guarded), first)
+    track = RosCamera(client, topic, fps=15)
     await track.start()
-    agent = Agent(AgentConfig(server=guarded.url, token=first), track, SimTurtle(), EventLog())
-    agent.token_renewed.append(track.renew)
+    link = RosbridgeLink(client)
+    agent = Agent(AgentConfig(server=guarded.url, token=first), track, link, EventLog())
     task = asyncio.create_task(agent.run())
     try:
         await asyncio.sleep(2.5 * lifetime)
@@ -294,6 +298,8 @@ async def test_the_cameras_connection_outlives_its_token_by_renewing_with_the_ag
         publish(publisher, compressed(pattern(320, 240, 3), "jpg", time.time()))
         await eventually(lambda: track.slot.received > before, WAIT_S, "a picture after expiry")
         assert agent.token != first
+        # One connection carried both, and never had to open again.
+        assert client.connected and client.opened == 1
     finally:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):

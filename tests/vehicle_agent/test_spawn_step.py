@@ -1,4 +1,4 @@
-"""The agent's spawn step against the simulator's rosbridge, through roslibpy (issue 12)."""
+"""The agent's spawn step against the simulator's rosbridge, through the agent's rosbridge link."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from app.server.config import Settings
 from app.server.serve import RunningServer
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.events import EventLog
-from vehicle_agent.turtle import RosbridgeTurtle
+from vehicle_agent.robotlink import RosbridgeLink
+from vehicle_agent.rosbridge_client import RosbridgeClient
 from vehicle_agent.video import FixedPath, SyntheticVideo
 
 
@@ -37,7 +38,7 @@ async def agent_on_rosbridge(
     agent = Agent(
         AgentConfig(server=server.url, spawn_step=spawn_step),
         SyntheticVideo(160, 120, fps=5, path=FixedPath(0.5, 0.5)),
-        RosbridgeTurtle(rosbridge),  # learns the robot's flavour from rosapi
+        RosbridgeLink(RosbridgeClient(rosbridge)),  # learns the robot's flavour from rosapi
         log,
     )
     task = asyncio.create_task(agent.run())

@@ -112,7 +112,7 @@ def test_synthetic_frames_flag_exactly_the_jumps() -> None:
 
 
 def test_the_scene_has_a_flame_apart_from_the_face() -> None:
-    """Face and fire operations pick different targets in the same frames (issue 12)."""
+    """Face and fire operations pick different targets in the same frames."""
     spec = load_spec(OPERATIONS_SPEC)
     video = SyntheticVideo(640, 480, fps=30)
     try:

@@ -2,13 +2,17 @@
 
 A script is a list of events ``[kind, t, arg]`` (JSON-ready, so the page gets the very same):
 ``snapshot`` with the boxes found (each drawn from one of three tracks that wander, change size a
-little and are now and then missed), ``click`` at a point, ``unlock``. The small track vanishes
-twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock is released).
+little and are now and then missed) and, as a fourth element, each box's look when given;
+``click`` at a point; ``unlock``; ``search``: what the vehicle's pose says of its search for the
+lost target (``left``, ``right``, ``timed_out``, or None when it does not search). The small
+track vanishes twice: for 1.6 s (the lock searches, then finds it again) and for 4 s (the lock
+is released).
 """
 
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
 from typing import Any
 
 from app.vision import lock
@@ -70,6 +74,54 @@ TWO_FACES: list[tuple[Event, list[Any]]] = [
 ]
 
 
+# The lock holds through the vehicle's search, written out: the rule's numbers are a search of
+# the whole frame after 1.0 s unseen (search_after_s) and a release after 3.0 s (release_after_s)
+# -- unless the vehicle is searching for the target, and the onboard vehicle's search lasts up
+# to 0.3 + 3π/1.6 = 6.19 s. Once its look is known, a box that does not overlap the target's is
+# the target when it looks like it: at least 0.9 alike (min_likeness, the Bhattacharyya
+# coefficient of the looks). A snapshot may give each box's look (a fourth element; two-bin
+# looks here). The walker (60 px) is clicked, its
+# look taken on the next snapshot; it leaves the view, the vehicle turns to search for it, and it
+# comes back 5 s after it was last seen, farther (30 px: too small to be taken for it by size),
+# beside the bystander (150 px, another look): it is locked again with no click, and followed
+# by its look as the turning vehicle sweeps it across the frame. It leaves again; the bystander
+# alone stays in view, never taken for it, and this time the vehicle's search runs out
+# (timed_out): the lock lets go at the next snapshot, and the largest face is the target again.
+WALKER, BYSTANDER = [300, 200, 60, 60], [500, 100, 150, 150]
+WALKER_FAR = [100, 210, 30, 30]
+WALKER_LOOK, WALKER_FAR_LOOK, BYSTANDER_LOOK = [0.98, 0.02], [0.95, 0.05], [0.1, 0.9]
+THROUGH_SEARCH: list[tuple[Event, list[Any]]] = [
+    (["snapshot", 0.0, [WALKER], [WALKER_LOOK]], [WALKER, "none"]),
+    (["click", 0.01, [330.0, 230.0]], [True, "locked"]),
+    (["snapshot", 0.05, [[304, 202, 60, 60]], [WALKER_LOOK]], [[304, 202, 60, 60], "locked"]),
+    (["snapshot", 0.5, [], []], [None, "lost"]),
+    (["search", 0.6, "left"], ["lost"]),
+    (["snapshot", 1.2, [], []], [None, "searching"]),
+    (["snapshot", 3.5, [], []], [None, "searching"]),  # past release_after_s: held
+    (
+        ["snapshot", 5.0, [WALKER_FAR, BYSTANDER], [WALKER_FAR_LOOK, BYSTANDER_LOOK]],
+        [WALKER_FAR, "locked"],
+    ),
+    (["search", 5.05, None], ["locked"]),  # a goal came: the vehicle's search is over
+    # The vehicle turns to it: the walker moves 300 px across the frame, ten times its size
+    # (reach: 1), and is followed by its look.
+    (
+        ["snapshot", 5.1, [[400, 212, 30, 30], BYSTANDER], [WALKER_FAR_LOOK, BYSTANDER_LOOK]],
+        [[400, 212, 30, 30], "locked"],
+    ),
+    (["snapshot", 5.5, [BYSTANDER], [BYSTANDER_LOOK]], [None, "lost"]),
+    (["search", 5.6, "right"], ["lost"]),
+    (["snapshot", 6.0, [BYSTANDER], [BYSTANDER_LOOK]], [None, "lost"]),
+    (["snapshot", 9.0, [BYSTANDER], [BYSTANDER_LOOK]], [None, "searching"]),
+    (["search", 11.2, "timed_out"], ["searching"]),
+    (["snapshot", 11.25, [BYSTANDER], [BYSTANDER_LOOK]], [None, "none"]),
+    (["snapshot", 11.3, [BYSTANDER], [BYSTANDER_LOOK]], [BYSTANDER, "none"]),
+]
+# The same without the vehicle's word: the lock lets go at 3.5 s, 3.45 s after the walker was
+# last seen, and the walker coming back is not the target.
+WITHOUT_SEARCH = [event for event, _ in THROUGH_SEARCH if event[0] != "search"]
+
+
 # The click rule itself (near = 0.5 of a box's own size; a click window 0.6 of the shorter
 # side), written out: [x, y, boxes, the box picked or None]. LARGE is 130 wide and tall, from 100
 # to 230: half of it is 65 pixels; SMALL is 76 wide, from 440.
@@ -104,7 +156,7 @@ def decisions(events: list[Event], outcomes: list[list[Any]]) -> list[list[Any]]
     """What TWO_FACES states of each outcome of :func:`run` (or of lock.js's run)."""
     return [
         [o[2], o[3]] if kind == "snapshot" else o
-        for (kind, _, _), o in zip(events, outcomes, strict=True)
+        for (kind, *_), o in zip(events, outcomes, strict=True)
     ]
 
 
@@ -145,18 +197,31 @@ def script(seed: int) -> tuple[list[Event], list[dict[str, str]]]:
     return events, owners
 
 
+def _looks(boxes: list[Box], looks: list[list[float]]) -> Callable[[Box], list[float]]:
+    """The look of each of a snapshot's boxes, as given with it."""
+    table = dict(zip(boxes, looks, strict=True))
+    return table.__getitem__
+
+
 def run(events: list[Event], rule: lock.LockRule) -> list[list[Any]]:
     """What lock.py does with each event: for a snapshot [box asked, anywhere, box chosen,
-    state, state changed]; for a click [locked, state]; for unlock [state]."""
+    state, state changed]; for a click [locked, state]; for unlock and search [state]."""
     target = lock.TargetLock(rule)
     last: list[Box] = []
     out: list[list[Any]] = []
-    for kind, t, arg in events:
-        if kind == "snapshot":
+    robot_searching = False
+    for kind, t, arg, *looks in events:
+        if kind == "search":
+            robot_searching = lock.robot_searching(arg)
+            out.append([target.state])
+        elif kind == "snapshot":
             last = [(b[0], b[1], b[2], b[3]) for b in arg]
-            query = target.query(t)
-            chosen = lock.chooser(query, rule)(last)
-            changed = target.update(query, chosen, t)
+            look_of = _looks(last, looks[0]) if looks else None
+            query = target.query(t, robot_searching)
+            chosen = lock.chooser(query, rule, look_of)(last)
+            if chosen is not None and look_of is not None and target.needs_look(query):
+                target.remember(look_of(chosen))
+            changed = target.update(query, chosen, t, robot_searching)
             out.append(
                 [
                     None if query is None else list(query.box),

@@ -44,10 +44,15 @@ class RelaySteps:
         self.last_full: list[Box] = []
         self.shown: Rgba | None = None
 
-    def snapshot(self, rgba: Rgba, t: float) -> Snapshot:
-        """Analyse ``rgba`` at ``t`` seconds, as the worker's analyze with ``at`` and ``track``."""
-        query = self.lock.query(t)
-        choose = lock.chooser(query, self.rule)
+    def snapshot(self, rgba: Rgba, t: float, robot_searching: bool = False) -> Snapshot:
+        """Analyse ``rgba`` at ``t`` seconds, as the worker's analyze with ``at``, ``track`` and
+        ``robotSearching``."""
+        query = self.lock.query(t, robot_searching)
+
+        def look_of(box: Box) -> list[float]:
+            return reference.look(rgba, box, self.rule.look_bins)
+
+        choose = lock.chooser(query, self.rule, look_of)
         fine = query is not None and query.fine
         full: list[list[Box]] = []
 
@@ -65,7 +70,9 @@ class RelaySteps:
         target = found.target
         if query is not None:  # locked: the goal is the locked target's centre, or none
             target = None if chosen is None else lock.centre(chosen)
-        self.lock.update(query, chosen, t)
+        if chosen is not None and self.lock.needs_look(query):
+            self.lock.remember(look_of(chosen))
+        self.lock.update(query, chosen, t, robot_searching)
         self.last, self.shown = found.boxes, rgba
         if full:
             self.last_full = full[0]

@@ -8,11 +8,18 @@ full-resolution search around it) and followed at full resolution.
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import cv2
 import pytest
 
+from app.diffdrive.arena import ARENA, Pose2D, facing
+from app.diffdrive.camera import Pinhole, Renderer
+from app.diffdrive.robot import CAMERA_HFOV, RobotState
+from app.diffdrive.sim import Placed, Scene
 from app.resources import OPERATIONS_SPEC
-from app.vision import lock, spec, window
+from app.vision import lock, reference, spec, window
 from tests.vision import lock_sequences
 from tests.vision.relay_steps import RelaySteps
 from vehicle_agent.video import TwoFaceVideo
@@ -136,6 +143,33 @@ def test_a_clicked_small_face_stays_the_target_beside_a_larger_one() -> None:
         assert have == want, (i, event)
 
 
+def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_its_search_ends() -> None:
+    # The rule's numbers this sequence is written for (lock_sequences.THROUGH_SEARCH).
+    assert (RULE.search_after_s, RULE.release_after_s, RULE.min_likeness) == (1.0, 3.0, 0.9)
+    events = [event for event, _ in lock_sequences.THROUGH_SEARCH]
+    got = lock_sequences.decisions(events, lock_sequences.run(events, RULE))
+    for i, ((event, want), have) in enumerate(zip(lock_sequences.THROUGH_SEARCH, got, strict=True)):
+        assert have == want, (i, event)
+    # Without the vehicle's word the same snapshots release the walker at 3.5 s, and the walker
+    # coming back at 5 s is not the target: only a click would lock it again.
+    alone = lock_sequences.run(lock_sequences.WITHOUT_SEARCH, RULE)
+    at = {
+        event[1]: outcome
+        for event, outcome in zip(lock_sequences.WITHOUT_SEARCH, alone, strict=True)
+    }
+    assert at[3.5][3] == "none"
+    assert at[5.0][2:4] == [lock_sequences.BYSTANDER, "none"]
+
+
+def test_only_a_turning_search_holds_the_lock() -> None:
+    assert [lock.robot_searching(s) for s in ("left", "right", "timed_out", None)] == [
+        True,
+        True,
+        False,
+        False,
+    ]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_scripted_lock_follows_the_small_track_only(seed: int) -> None:
     events, owners = lock_sequences.script(seed)
@@ -215,3 +249,40 @@ def test_a_face_too_small_for_the_reduced_scan_is_locked_by_a_click_and_followed
     # were full scans, which did not find it; the window around where it was found it then, as
     # the tracker's window did on every snapshot between.
     assert full_scans == [1, 1 + op.params.full_scan_every]
+
+
+def test_the_walker_looks_like_itself_near_and_far_and_unlike_the_bystander() -> None:
+    # The arena's walker seen by the robot's camera from 0.8 to 4 m, and the bystander from two
+    # places: each face as face_small finds it, its look as the relay's worker takes it. The
+    # walker's looks are all at least min_likeness (0.9) alike; the bystander's, less.
+    op = spec.load_spec(OPERATIONS_SPEC).op("face_small")
+    renderer = Renderer(ARENA, Pinhole(hfov=CAMERA_HFOV))
+    bystander_at = ARENA.billboard("bystander").pose
+    assert bystander_at is not None
+
+    def face_seen(robot: tuple[float, float], walker: tuple[float, float], at: Any) -> list[float]:
+        yaw = math.atan2(at[1] - robot[1], at[0] - robot[0])
+        state = RobotState(robot[0], robot[1], yaw, 0.0, 0.0)
+        placed = tuple(
+            Placed(b, Pose2D(*walker, facing(walker, robot)))
+            if b.name == "walker"
+            else Placed(b, b.placed(0.0, robot))
+            for b in ARENA.billboards
+        )
+        rgba = cv2.cvtColor(renderer.render(Scene(0.0, state, placed, 0)), cv2.COLOR_RGB2RGBA)
+        found = reference.detect(op, rgba).boxes
+        # The face looked at is straight ahead: the box nearest the frame's middle column.
+        ahead = min(found, key=lambda box: abs(box[0] + box[2] / 2 - rgba.shape[1] / 2))
+        assert abs(ahead[0] + ahead[2] / 2 - rgba.shape[1] / 2) < ahead[2], (robot, at, found)
+        return reference.look(rgba, ahead, RULE.look_bins)
+
+    walker = [face_seen((1.0, 3.0), (1.0 + d, 3.0), (1.0 + d, 3.0)) for d in (0.8, 1.2, 2.0, 3.3)]
+    bystander = [
+        face_seen(robot, (7.5, 5.5), (bystander_at.x, bystander_at.y))
+        for robot in ((1.0, 3.0), (2.0, 2.5))
+    ]
+    for a in walker:
+        for b in walker:
+            assert lock.likeness(a, b) >= RULE.min_likeness
+        for b in bystander:
+            assert lock.likeness(a, b) < RULE.min_likeness

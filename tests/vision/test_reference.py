@@ -109,3 +109,38 @@ def test_bad_frames_and_profiles_are_refused() -> None:
         detect(SPEC.op("face"), grey_frame())
     with pytest.raises(ValueError, match="profile"):
         detect(SPEC.op("face"), to_rgba(grey_frame()), "turbo")
+
+
+class _Cascade:
+    """A stand-in classifier that 'finds' fixed boxes (in the image it is given)."""
+
+    def __init__(self, boxes: list[tuple[int, int, int, int]]) -> None:
+        self.boxes = boxes
+
+    def detectMultiScale(self, gray: np.ndarray, **_: object) -> np.ndarray:  # noqa: N802
+        return np.array(self.boxes, np.int32).reshape(-1, 4)
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_the_body_target_is_the_centre_of_the_largest_box_tall_or_wide(
+    monkeypatch: pytest.MonkeyPatch, profile: str
+) -> None:
+    # Body boxes are not square (a face's are): the target is the centre of the box, x from its
+    # width and y from its height. The cascades stand in for what they found, so the test pins
+    # the arithmetic, not Haar's recall on a drawing.
+    found_by = {
+        "haarcascade_fullbody.xml": [(40, 20, 30, 90)],  # tall: the largest
+        "haarcascade_upperbody.xml": [(100, 100, 50, 40), (10, 150, 60, 20)],  # wide
+    }
+    monkeypatch.setattr("app.vision.reference._classifier", lambda name: _Cascade(found_by[name]))
+    found = detect(SPEC.op("body"), to_rgba(grey_frame(640, 480)), profile)
+    # The default profile detects on a frame reduced to 320 wide: boxes come back doubled.
+    factor = 640 / (SPEC.op("body").params_for(profile).detect_width or 640)
+    x, y, w, h = (round(v * factor) for v in (40, 20, 30, 90))
+    assert (x, y, w, h) in found.boxes and len(found.boxes) == 3
+    assert found.target == (x + w / 2, y + h / 2)
+    # The largest box wide instead of tall: its centre again.
+    found_by["haarcascade_fullbody.xml"] = [(40, 20, 90, 30)]
+    found = detect(SPEC.op("body"), to_rgba(grey_frame(640, 480)), profile)
+    x, y, w, h = (round(v * factor) for v in (40, 20, 90, 30))
+    assert found.target == (x + w / 2, y + h / 2)

@@ -1,10 +1,10 @@
 """``autopilot bench --camera``: what the simulated robot's camera costs per frame.
 
-Renders the room as the robot sees it while the walker walks its round and the robot follows it
+Renders the arena as the robot sees it while the walker walks its round and the robot follows it
 as a perfect follower would -- a metre and a half behind, facing it, so the walker's face is in
 every frame and the other billboards come and go behind it -- frame by frame at the camera's
-rate of room time: the render and the JPEG encode timed apart, each frame's JPEG size kept. The
-same frames of the empty room (walls, floor and ceiling alone) are the baseline: what the
+rate of arena time: the render and the JPEG encode timed apart, each frame's JPEG size kept. The
+same frames of the empty arena (walls, floor and ceiling alone) are the baseline: what the
 billboards add.
 """
 
@@ -18,9 +18,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from app.diffdrive.arena import ARENA, WALK, Arena
 from app.diffdrive.camera import Pinhole, Renderer, encode_jpeg
 from app.diffdrive.robot import DiffDrive, RobotState
-from app.diffdrive.room import ROOM, WALK, Room
 from app.diffdrive.sim import Placed, Scene
 from app.tools.bench.stats import summarize
 
@@ -29,13 +29,13 @@ QUICK_FRAMES, FULL_FRAMES = 300, 1800
 STANDOFF_M = 1.5
 
 
-def _frames(room: Room, camera: Pinhole, frames: int) -> dict[str, Any]:
-    """Render and encode ``frames`` frames of ``room``; the timings' summaries (ms) and sizes."""
-    renderer = Renderer(room, camera)
+def _frames(arena: Arena, camera: Pinhole, frames: int) -> dict[str, Any]:
+    """Render and encode ``frames`` frames of ``arena``; the timings' summaries (ms) and sizes."""
+    renderer = Renderer(arena, camera)
     render_ms: list[float] = []
     encode_ms: list[float] = []
     sizes: list[float] = []
-    for scene in _following(room, camera.fps, frames):
+    for scene in _following(arena, camera.fps, frames):
         started = time.perf_counter()
         image = renderer.render(scene)
         rendered = time.perf_counter()
@@ -52,33 +52,33 @@ def _frames(room: Room, camera: Pinhole, frames: int) -> dict[str, Any]:
     return figures
 
 
-def _following(room: Room, fps: float, frames: int) -> Iterator[Scene]:
-    """The room frame by frame, seen by a robot on a leash: each frame it stands
+def _following(arena: Arena, fps: float, frames: int) -> Iterator[Scene]:
+    """The arena frame by frame, seen by a robot on a leash: each frame it stands
     :data:`STANDOFF_M` from the walker on the line from where it stood, facing the walker
     (kept inside the walls)."""
     margin = DiffDrive.RADIUS_M
-    rx, ry = room.start.x, room.start.y
+    rx, ry = arena.start.x, arena.start.y
     for frame in range(frames):
         t = frame / fps
         x, y = WALK.at(t)
         away = math.atan2(ry - y, rx - x)
-        rx = min(max(x + STANDOFF_M * math.cos(away), margin), room.width - margin)
-        ry = min(max(y + STANDOFF_M * math.sin(away), margin), room.depth - margin)
+        rx = min(max(x + STANDOFF_M * math.cos(away), margin), arena.width - margin)
+        ry = min(max(y + STANDOFF_M * math.sin(away), margin), arena.depth - margin)
         robot = RobotState(rx, ry, math.atan2(y - ry, x - rx), 0.0, 0.0)
-        placed = tuple(Placed(b, b.placed(t, (rx, ry))) for b in room.billboards)
+        placed = tuple(Placed(b, b.placed(t, (rx, ry))) for b in arena.billboards)
         yield Scene(t, robot, placed, round(t / DiffDrive.TICK_S))
 
 
 def run(out: Path, frames: int, fps: float) -> dict[str, Any]:
-    """Measure ``frames`` frames of the full room and of the empty one; write camera.md and
+    """Measure ``frames`` frames of the full arena and of the empty one; write camera.md and
     camera.json into ``out``."""
     camera = Pinhole(fps=fps)
     obj = {
         "frames": frames,
         "size": [camera.width, camera.height],
         "fps": fps,
-        "room": _frames(ROOM, camera, frames),
-        "empty_room": _frames(replace(ROOM, billboards=()), camera, frames),
+        "arena": _frames(ARENA, camera, frames),
+        "empty_arena": _frames(replace(ARENA, billboards=()), camera, frames),
     }
     out.mkdir(parents=True, exist_ok=True)
     (out / "camera.json").write_text(json.dumps(obj, indent=2) + "\n")
@@ -92,14 +92,14 @@ def report(obj: dict[str, Any]) -> str:
     lines = [
         "# The simulated camera's cost per frame",
         "",
-        f"{obj['frames']} frames of {width}×{height} at {obj['fps']:g} fps of room time, the"
+        f"{obj['frames']} frames of {width}×{height} at {obj['fps']:g} fps of arena time, the"
         f" robot following the walker {STANDOFF_M:g} m behind it, rendered and JPEG-encoded"
         " (quality 80) one after the other on one core (`autopilot bench --camera`).",
         "",
         "| scene | render p50 / p95 (ms) | encode p50 / p95 (ms) | JPEG p50 (KB) |",
         "|---|---|---|---|",
     ]
-    for key, label in (("room", "the room"), ("empty_room", "empty room (baseline)")):
+    for key, label in (("arena", "the arena"), ("empty_arena", "empty arena (baseline)")):
         found = obj[key]
         render, encode = found["render_ms"], found["encode_ms"]
         lines.append(

@@ -47,6 +47,10 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
 # bench --relay-cost: seconds measured.
 RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
+# bench --faces --quick: photos of the set.
+QUICK_PHOTOS = 4
+# The shared face set, in a source checkout.
+FACES_DIR = APP_DIR.parent / "tests" / "data" / "faces"
 FULL = {"default_s": 60.0, "thesis_s": 60.0, "follow_s": 60.0, "lock_s": 60.0, "frames": 43}
 
 
@@ -126,16 +130,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f" {QUICK['frames']:g})",
     )
     parser.add_argument(
+        "--faces",
+        action="store_true",
+        help="measure face recall instead: the shared face set's photos at 24-192 px, upright and"
+        " tilted, and face-free frames, through face, face_small and face_dnn (faces.md)",
+    )
+    parser.add_argument(
+        "--photos",
+        type=positive_integer,
+        metavar="N",
+        help=f"with --faces: the first N photos of the set (default all, --quick {QUICK_PHOTOS})",
+    )
+    parser.add_argument(
         "--camera",
         action="store_true",
         help="measure the simulated robot's camera instead: render and JPEG encode per frame,"
-        " the room against the empty room (camera.md)",
+        " the arena against the empty arena (camera.md)",
     )
     parser.add_argument(
         "--onboard",
         action="store_true",
         help="measure the onboard law instead: the simulated diffdrive robot follows the walker"
         " with its own camera over the real stack (onboard.md)",
+    )
+    parser.add_argument(
+        "--ops",
+        metavar="OP[,OP...]",
+        help="with --onboard: the operations to follow the walker with, one walk each, side by"
+        " side in one report (default: face_small, and face_dnn when the relay offers it)",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
@@ -159,6 +181,18 @@ def run(args: argparse.Namespace) -> int:
     if args.frames is not None and not args.opencv_builds:
         log.error("--frames goes with --opencv-builds")
         return 2
+    if args.photos is not None and not args.faces:
+        log.error("--photos goes with --faces")
+        return 2
+    if args.ops is not None and not args.onboard:
+        log.error("--ops goes with --onboard")
+        return 2
+    if args.onboard:
+        try:
+            args.ops = ",".join(_onboard_ops(args.ops))
+        except ValueError as exc:
+            log.error("%s", exc)
+            return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
@@ -167,6 +201,8 @@ def run(args: argparse.Namespace) -> int:
         return _field(args)
     if args.camera:
         return _camera(args)
+    if args.faces:
+        return asyncio.run(_faces(args))
     if _can_enter_netns():
         _reexec_in_netns(args)
     if os.environ.get("AUTOPILOT_IN_NETNS") != "1":
@@ -223,6 +259,48 @@ def _camera(args: argparse.Namespace) -> int:
     return 0
 
 
+async def _faces(args: argparse.Namespace) -> int:
+    """Face recall in the relay's analyzer: no WebRTC, so no namespace. 1 when a target of
+    face_dnn is not met."""
+    from playwright.async_api import async_playwright
+
+    from app.chromium import launch_options
+    from app.server.serve import start_in_thread
+    from app.tools.bench import faces
+
+    photos = faces.photos(FACES_DIR)[: args.photos or (QUICK_PHOTOS if args.quick else None)]
+    cases = faces.face_cases(photos) + faces.face_free_frames()
+    load_before = os.getloadavg()[0]
+    provenance = _provenance(args)
+    server = start_in_thread()
+    try:
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(**launch_options())
+            try:
+                outcomes, build = await faces.measure(browser, server.url, cases)
+                browser_version = browser.version
+            finally:
+                await browser.close()
+    finally:
+        server.stop()
+    figures = faces.figures(outcomes)
+    found: dict[str, Any] = provenance | {
+        "chromium": browser_version,
+        "opencv": build,
+        "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+        "photos": len(photos),
+        "sizes": list(faces.SIZES),
+        "tilts": list(faces.TILTS),
+        "free_frames": sum(case.truth is None for case in cases),
+        "ops": figures,
+        "targets": faces.targets(figures),
+    }
+    log.info("faces report: %s", faces.write_report(args.out, found))
+    if args.json:
+        sys.stdout.write(json.dumps(found, allow_nan=False) + "\n")
+    return 0 if all(check["met"] for check in found["targets"]) else 1
+
+
 def _can_enter_netns() -> bool:
     if os.environ.get("AUTOPILOT_IN_NETNS") == "1" or os.environ.get(REEXEC_ENV) == "1":
         return False
@@ -254,7 +332,7 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     if args.opencv_builds:
         argv.append("--opencv-builds")
     if args.onboard:
-        argv.append("--onboard")
+        argv += ["--onboard", "--ops", args.ops]
     if args.frames is not None:
         argv += ["--frames", str(args.frames)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -264,9 +342,29 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     os.execve(argv[0], argv, {**os.environ, REEXEC_ENV: "1"})
 
 
+def _onboard_ops(asked: str | None) -> list[str]:
+    """The operations ``--ops`` names (comma-separated), each one the relay offers; by default
+    those of :data:`onboard.COMPARED` it offers. ValueError names an unknown one."""
+    from app.resources import OPERATIONS_SPEC
+    from app.tools.bench.onboard import COMPARED
+    from app.vision.spec import load_spec
+
+    offered = [op.id for op in load_spec(OPERATIONS_SPEC).operations]
+    if asked is None:
+        return [op for op in COMPARED if op in offered]
+    ops = [op.strip() for op in asked.split(",") if op.strip()]
+    unknown = [op for op in ops if op not in offered]
+    if unknown or not ops:
+        raise ValueError(
+            f"--ops {asked!r}: {', '.join(unknown) or 'no operation'} is not one the relay offers"
+            f" ({', '.join(offered)})"
+        )
+    return list(dict.fromkeys(ops))
+
+
 async def _onboard(args: argparse.Namespace) -> int:
-    """The onboard law over the simulated room: print the figures, write onboard.md; 1 when a
-    figure could not be measured."""
+    """The onboard law over the simulated arena, one walk per operation of ``--ops``: print
+    the figures, write onboard.md; 1 when a figure could not be measured."""
     from playwright.async_api import async_playwright
 
     from app.chromium import launch_options
@@ -283,7 +381,10 @@ async def _onboard(args: argparse.Namespace) -> int:
             browser = await playwright.chromium.launch(**launch_options())
             try:
                 with tempfile.TemporaryDirectory(prefix="autopilot-bench-onboard-") as tmp:
-                    found = await onboard.run(browser, server.url, seconds, args.fps, Path(tmp))
+                    runs = {
+                        op: await onboard.run(browser, server.url, seconds, args.fps, Path(tmp), op)
+                        for op in args.ops.split(",")
+                    }
             finally:
                 await browser.close()
     finally:
@@ -293,11 +394,15 @@ async def _onboard(args: argparse.Namespace) -> int:
         "netns": os.environ.get("AUTOPILOT_IN_NETNS") == "1",
         "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
-    log.info("onboard report: %s", onboard.write_report(args.out, found, run_info))
+    log.info("onboard report: %s", onboard.write_report(args.out, runs, run_info))
     if args.json:
-        shown = {key: found.get(key) for key in onboard.FIGURE_KEYS}
-        sys.stdout.write(json.dumps(shown | {"problems": found["problems"]}) + "\n")
-    return 1 if found["problems"] else 0
+        shown = {
+            op: {key: found.get(key) for key in onboard.FIGURE_KEYS}
+            | {"problems": found["problems"]}
+            for op, found in runs.items()
+        }
+        sys.stdout.write(json.dumps(shown) + "\n")
+    return 1 if any(found["problems"] for found in runs.values()) else 0
 
 
 async def _recorder(args: argparse.Namespace) -> int:
@@ -571,9 +676,13 @@ def _command(args: argparse.Namespace) -> str:
     if args.baseline:
         parts.append(f"--baseline --rounds {args.rounds}")
     if args.onboard:
-        parts.append("--onboard")
+        parts.append(f"--onboard --ops {args.ops}")
     if args.opencv_builds:
         parts.append("--opencv-builds")
+    if args.faces:
+        parts.append("--faces")
+    if args.photos is not None:
+        parts.append(f"--photos {args.photos}")
     if args.frames is not None:
         parts.append(f"--frames {args.frames}")
     if args.soak:

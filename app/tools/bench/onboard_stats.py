@@ -1,5 +1,5 @@
 """Pure figures of ``autopilot bench --onboard``: a robot that carries its camera, following the
-walker of the simulated room. No I/O, no clocks: the run collects the samples, these read them.
+walker of the simulated arena. No I/O, no clocks: the run collects the samples, these read them.
 
 The truth is the robot's pose (its odometry, as the agent received it) against where the walker
 stood at the same instant (:class:`Sighting`): the walker's true bearing from the camera's axis
@@ -87,6 +87,12 @@ def standoff_errors_m(track: Sequence[Sighting], hfov: float, standoff_m: float)
     """The walker's distance less the standoff (m, signed: positive too far) at every sighting
     in view after the first acquisition."""
     return [s.distance - standoff_m for s in after_acquisition(track) if in_view(s, hfov)]
+
+
+def min_distance_m(track: Sequence[Sighting]) -> float | None:
+    """The walker's least distance from the camera over the whole track, in view or not (None
+    for no sighting)."""
+    return min((s.distance for s in track), default=None)
 
 
 def reacquisitions(track: Sequence[Sighting], hfov: float) -> list[Reacquisition]:

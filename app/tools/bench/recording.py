@@ -1,4 +1,4 @@
-"""``autopilot bench --recorder``: what the flight recorder costs the vehicle (issue 21).
+"""``autopilot bench --recorder``: what the flight recorder costs the vehicle.
 
 The default-profile stack runs on the same browser and server as it is ("plain") and with the
 agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80),

@@ -1,4 +1,4 @@
-"""``autopilot bench --relay-cost``: where one relayed room's cores go (issue 22).
+"""``autopilot bench --relay-cost``: where one relayed room's cores go.
 
 One room, default profile, the Python agent sending its synthetic 640x480 video at ``--fps``
 (30): the relay page runs in a Chromium of its own (the client page in another), so that every
@@ -47,7 +47,7 @@ MARKER = "--autopilot-bench-relay-cost"
 # Run before the relay page's scripts: a browser without encoded transforms, whose relay
 # decodes the vehicle's video and encodes it again for each client (net/relay-links.js).
 NO_ENCODED_TRANSFORMS = "delete window.RTCRtpScriptTransform;"
-# The relay's cores per room that forwarding without re-encoding is to reach (issue 38), at
+# The relay's cores per room that forwarding without re-encoding is to reach, at
 # the vehicle's usual frame rate.
 TARGET_CORES_PER_ROOM = 0.18
 TARGET_FPS = 30

@@ -80,7 +80,7 @@ TARGETS = (
 
 SOAK_TARGET_MINUTES = 10.0
 
-# The follow profile's own figures (issue 12): turtle to target point, minus the standoff.
+# The follow profile's own figures: turtle to target point, minus the standoff.
 POSITION_KEYS = ("position_error_m_p50", "position_error_m_p95")
 FOLLOW_TARGET = Target(
     "position_error_m_p50", 0.3, True, "follow: position error p50 <= 0.3 m (face moving)"

@@ -6,41 +6,72 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from app.tools.bench.cpu import chromium_type, cores_used, parse_stat, thread_cpu, tree_cpu_s
 
-BUSY = "import time\nend = time.monotonic() + 1.5\nwhile time.monotonic() < end: pass\n"
-IDLE = "import time\ntime.sleep(1.5)\n"
+# Waits on events, never on wall time: a loaded machine may give a spinning process a small
+# share of a core, so the busy process says when it has spun SPIN_S of its own CPU time, and the
+# figures are checked against that, not against the seconds that took.
+SPIN_S = 0.3
+# Once told to, spins SPIN_S CPU-seconds, says so, then spins on until the file argv[1] exists
+# (a process that is gone counts as nothing, so it must still run when the test reads its tree).
+BUSY = f"""import os, sys, time
+print('ready', flush=True)
+sys.stdin.readline()
+start = time.process_time()
+while time.process_time() - start < {SPIN_S}:
+    pass
+print('spun', flush=True)
+while not os.path.exists(sys.argv[1]):
+    pass
+"""
+IDLE = "import sys\nprint('ready', flush=True)\nsys.stdin.read()\n"
 
 
-def test_a_busy_tree_uses_a_core_and_an_idle_one_none() -> None:
+def test_a_busy_tree_uses_a_core_and_an_idle_one_none(tmp_path: Path) -> None:
     # The busy process is a grandchild: trees count descendants, not only the root.
+    stop = tmp_path / "stop"
+    middle = "import subprocess, sys; subprocess.run([sys.executable, '-c', *sys.argv[1:]])"
     busy = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            f"import subprocess, sys; subprocess.run([sys.executable, '-c', {BUSY!r}])",
-        ]
+        [sys.executable, "-c", middle, BUSY, str(stop)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
     )
-    idle = subprocess.Popen([sys.executable, "-c", IDLE])
+    idle = subprocess.Popen(
+        [sys.executable, "-c", IDLE], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    assert busy.stdin is not None and busy.stdout is not None
+    assert idle.stdin is not None and idle.stdout is not None
     try:
-        time.sleep(0.4)  # both interpreters have started
+        # Both interpreters have started (what they spent starting is before the window).
+        assert busy.stdout.readline() == idle.stdout.readline() == "ready\n"
         groups = {"busy": [busy.pid], "idle": [idle.pid], "rest": [os.getpid()]}
         before, start = tree_cpu_s(groups), time.monotonic()
-        time.sleep(0.8)
-        cores = cores_used(before, tree_cpu_s(groups), time.monotonic() - start)
+        busy.stdin.write("go\n")
+        busy.stdin.close()
+        # This process waits on a pipe meanwhile: it spends next to nothing itself.
+        assert busy.stdout.readline() == "spun\n"
+        after, seconds = tree_cpu_s(groups), time.monotonic() - start
     finally:
-        busy.wait(10)
-        idle.wait(10)
-    # A spinning process gets a core to itself on a quiet machine, but only its share of one
-    # when the suite's other workers run beside it: well above nothing, and far above the idle
-    # tree (which sleeps through the window whatever the load).
-    assert cores["busy"] > 0.1, cores
-    assert cores["idle"] < 0.1 and cores["busy"] > 5 * cores["idle"], cores
+        stop.touch()
+        idle.stdin.close()
+        for process in (busy, idle):
+            process.wait(60)
+            assert process.stdout is not None
+            process.stdout.close()
+    spent = {name: after[name] - before[name] for name in groups}
+    # The grandchild's CPU time counted in the busy tree (less a clock tick); nothing of a
+    # process asleep on a pipe.
+    assert spent["busy"] >= SPIN_S - 0.02 and spent["idle"] < 0.05, spent
     # The children were counted in their own groups, not again in the parent's.
-    assert cores["rest"] < 0.5, cores
+    assert spent["rest"] < SPIN_S / 2, spent
+    # Cores: CPU seconds over the window's seconds, per group.
+    cores = cores_used(before, after, seconds)
+    assert cores == {name: round(spent[name] / seconds, 2) for name in groups}, (cores, spent)
 
 
 def test_a_process_that_is_gone_counts_as_nothing() -> None:
@@ -50,19 +81,22 @@ def test_a_process_that_is_gone_counts_as_nothing() -> None:
 
 
 def test_threads_are_named_and_timed_with_their_process_kind() -> None:
-    # A spinning thread named by the kernel (comm): it shows up under this process, busy.
+    # A spinning thread named by the kernel (comm): it shows up under this process, busy. It
+    # says when it has spun SPIN_S of its own CPU time, and spins on until read.
     import threading
 
-    stop = threading.Event()
+    spun, stop = threading.Event(), threading.Event()
 
     def spin() -> None:
+        start = time.thread_time()
         while not stop.is_set():
-            pass
+            if time.thread_time() - start >= SPIN_S:
+                spun.set()
 
     worker = threading.Thread(target=spin, name="spinner")
     worker.start()
     try:
-        time.sleep(0.3)
+        assert spun.wait(60)
         found = thread_cpu(os.getpid())
     finally:
         stop.set()
@@ -71,7 +105,7 @@ def test_threads_are_named_and_timed_with_their_process_kind() -> None:
     assert {t.process for t in mine} == {"browser"}  # no --type: a main process
     assert any(t.tid == os.getpid() for t in mine)
     spinner = [t for t in mine if t.tid == worker.native_id]
-    assert spinner and spinner[0].cpu_s > 0.05, spinner
+    assert spinner and spinner[0].cpu_s >= SPIN_S - 0.02, spinner
 
 
 def test_chromium_process_kinds_from_their_command_lines() -> None:

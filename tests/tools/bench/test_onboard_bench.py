@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -10,7 +11,9 @@ import pytest
 
 from app.protocol import events as ev
 from app.recording import event_line
+from app.resources import OPERATIONS_SPEC
 from app.tools.bench import onboard
+from app.vision.spec import load_spec
 
 
 def test_the_figures_of_a_hand_made_run(tmp_path: Path) -> None:
@@ -43,6 +46,8 @@ def test_the_figures_of_a_hand_made_run(tmp_path: Path) -> None:
     assert found["bearing_err_deg_p50"] == pytest.approx(0.0, abs=0.01)
     assert found["bearing_err_deg_p95"] == pytest.approx(2.0, abs=0.01)
     assert found["standoff_err_m_p50"] == pytest.approx(0.3, abs=0.01)  # 1.5 m, standoff 1.2
+    # Nearest while behind the robot, out of view: from (1, 3) to (0, 4).
+    assert found["min_distance_m"] == pytest.approx(math.sqrt(2), abs=1e-3)
     # Out of view at 2.0, back within 5° at 4.5.
     assert found["reacquire_s"] == pytest.approx(2.5, abs=1e-6)
     assert found["reacquisitions"] == [{"left_at_s": 2.0, "side": "left", "after_s": 2.5}]
@@ -79,3 +84,60 @@ def test_a_walker_never_back_leaves_reacquire_missing_with_the_reason(tmp_path: 
         " before the run ended"
     )
     assert "no Twist" in found["problems"]["frame_to_twist_ms_p50"]
+
+
+def test_the_report_sets_the_operations_side_by_side_against_the_targets(tmp_path: Path) -> None:
+    # Two hand-made walks: the targets are goals/s >= 28, bearing p50 <= 2° and p95 <= 10°,
+    # standoff p50 within ±0.10 m, never nearer than 0.6 m, reacquire <= 4 s, and no click
+    # after the first lock.
+    met = {
+        "bearing_err_deg_p50": 1.5,
+        "bearing_err_deg_p95": 9.0,
+        "standoff_err_m_p50": -0.08,
+        "min_distance_m": 0.65,
+        "reacquire_s": 3.5,
+        "clicks_after_first": 0,
+        "goals_per_s": 29.0,
+    }
+    missed = {
+        "bearing_err_deg_p50": 2.5,
+        "bearing_err_deg_p95": 26.0,
+        "standoff_err_m_p50": -0.12,
+        "min_distance_m": 0.4,
+        "reacquire_s": 14.0,
+        "clicks_after_first": 3,
+        "goals_per_s": 12.0,
+    }
+    common = {"seconds": 90.0, "fps": 30.0, "video": "ros:/camera", "problems": {}}
+    run_info = {
+        "command": "autopilot bench --onboard",
+        "machine": "a test",
+        "started": "now",
+        "load_average": [1.0, 1.0],
+    }
+    runs = {"face_dnn": common | met, "face_small": common | missed}
+    path = onboard.write_report(tmp_path, runs, run_info)
+    rows = {
+        line.split("|")[1].strip(" `"): [cell.strip() for cell in line.split("|")[2:4]]
+        for line in path.read_text().splitlines()
+        if line.startswith("| `")
+    }
+    assert path.read_text().count("| `face_dnn` | `face_small` | target |") == 1
+    for key in met:
+        assert rows[key][0].endswith("✓") and rows[key][1].endswith("✗"), (key, rows[key])
+    assert rows["clicks_after_first"] == ["0 ✓", "3 ✗"]
+    saved = json.loads((tmp_path / "onboard.json").read_text())
+    assert list(saved["operations"]) == ["face_dnn", "face_small"]
+    assert saved["operations"]["face_small"]["goals_per_s"] == 12.0
+
+
+def test_ops_name_operations_the_relay_offers() -> None:
+    from app.tools.bench.cli import _onboard_ops
+
+    offered = {op.id for op in load_spec(OPERATIONS_SPEC).operations}
+    assert _onboard_ops(None) == [op for op in ("face_small", "face_dnn") if op in offered]
+    assert _onboard_ops("face, face_small,face") == ["face", "face_small"]
+    with pytest.raises(ValueError, match="nope is not one the relay offers"):
+        _onboard_ops("face_small,nope")
+    with pytest.raises(ValueError, match="no operation"):
+        _onboard_ops(",")

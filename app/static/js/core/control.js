@@ -49,6 +49,7 @@ export class ControlLaw {
     this.minTargetDistanceM = constants.minTargetDistanceM;
     this.spawnTheta = constants.spawnTheta;
     this.headingMemoryS = constants.headingMemoryS;
+    this.keptFrames = constants.keptFrames;
     this.profiles = Object.freeze(
       Object.fromEntries(
         Object.entries(constants.profiles).map(([name, p]) => [name, profileFrom(p)]),

@@ -131,6 +131,7 @@ export class TargetLock {
     this.state = 'none';
     this.epoch = 0; // bumped by every lock and release
     this.fine = false; // found by a full-resolution search: followed at full resolution
+    this.look = null; // the target's look, from the first snapshot that followed it
   }
 
   /**
@@ -155,6 +156,7 @@ export class TargetLock {
     this.seenAt = now;
     this.state = 'locked';
     this.fine = fine;
+    this.look = null;
     this.epoch += 1;
   }
 
@@ -163,33 +165,51 @@ export class TargetLock {
     this.box = null;
     this.state = 'none';
     this.fine = false;
+    this.look = null;
     this.epoch += 1;
   }
 
   /**
-   * What the next snapshot follows, {box, anywhere, epoch, fine}, or null for the default
-   * choice.
+   * What the next snapshot follows, {box, anywhere, epoch, fine, look, anySize}, or null for the
+   * default choice: once the target's look is known (`look`, else null), by its look (chooser),
+   * of any size while the vehicle searches (`searching`).
    */
-  query(now) {
+  query(now, searching = false) {
     if (this.box === null) return null;
     return {
       box: this.box,
       anywhere: now - this.seenAt > this.rule.searchAfterS,
       epoch: this.epoch,
       fine: this.fine,
+      look: this.look,
+      anySize: searching,
     };
   }
 
-  /** The outcome of the snapshot asked with `query`: the box chosen or null; the new state, if
-   * it changed. */
-  update(query, chosen, now) {
+  /** Whether the box the snapshot asked with `query` chose is to give the target's look: the
+   * first one after a lock. */
+  needsLook(query) {
+    return query !== null && query.epoch === this.epoch && this.look === null;
+  }
+
+  /** The target's look (needsLook). */
+  remember(look) {
+    this.look = look;
+  }
+
+  /**
+   * The outcome of the snapshot asked with `query`: the box chosen or null; the new state, if
+   * it changed. `searching`: the vehicle says it is turning to search for the target (its
+   * pose's `search`), and the lock holds until that search ends.
+   */
+  update(query, chosen, now, searching = false) {
     if (query === null || query.epoch !== this.epoch) return null;
     const before = this.state;
     if (chosen !== null) {
       this.box = chosen;
       this.seenAt = now;
       this.state = 'locked';
-    } else if (now - this.seenAt > this.rule.releaseAfterS) {
+    } else if (now - this.seenAt > this.rule.releaseAfterS && !searching) {
       this.release();
     } else if (now - this.seenAt > this.rule.searchAfterS) {
       this.state = 'searching';
@@ -200,11 +220,69 @@ export class TargetLock {
   }
 }
 
-/** The rule that picks the target among a snapshot's boxes: the locked one's track, or the
- * largest. */
-export function chooser(lock, rule) {
-  if (lock === null) return largest;
-  return (boxes) => associate(lock.box, boxes, lock.anywhere, rule);
+/**
+ * Whether a vehicle whose pose says `search` ('left', 'right', 'timed_out'; null or undefined:
+ * none) is turning to search for its lost target. lock.py's robot_searching is its twin.
+ */
+export function robotSearching(search) {
+  return search !== null && search !== undefined && search !== 'timed_out';
+}
+
+/**
+ * The pixels a look is taken from: box [x, y, w, h] grown to whole pixels and clipped to the
+ * `width` × `height` frame, as {x, y, width, height} (empty when the box is outside it).
+ */
+export function lookRect([x, y, w, h], width, height) {
+  const x0 = Math.min(Math.max(0, Math.floor(x)), width);
+  const y0 = Math.min(Math.max(0, Math.floor(y)), height);
+  const x1 = Math.min(Math.max(x0, Math.ceil(x + w)), width);
+  const y1 = Math.min(Math.max(y0, Math.ceil(y + h)), height);
+  return { x: x0, y: y0, width: x1 - x0, height: y1 - y0 };
+}
+
+/** How alike two looks (normalised histograms) are: their Bhattacharyya coefficient. */
+export function likeness(a, b) {
+  if (a.length !== b.length) throw new Error('looks of different sizes');
+  let sum = 0;
+  for (let i = 0; i < a.length; i += 1) sum += Math.sqrt(a[i] * b[i]);
+  return sum;
+}
+
+/** The box of any size most like the target (`alike(box)`), when at least `rule.minLikeness`
+ * alike; the first of equal likeness. */
+export function recognise(boxes, alike, rule) {
+  let best = null;
+  let bestLikeness = rule.minLikeness;
+  for (const b of boxes) {
+    const value = alike(b);
+    if (value >= bestLikeness && (best === null || value > bestLikeness)) {
+      best = b;
+      bestLikeness = value;
+    }
+  }
+  return best;
+}
+
+/**
+ * The rule that picks the target among a snapshot's boxes: the locked one's track, or the
+ * largest. When the query gives the target's look and `lookOf(box)` each box's, a box of a
+ * similar size that overlaps the locked one continues its track (the one overlapping most); else
+ * the box that looks most like the target (recognise) among those of a similar size, of any size
+ * while the vehicle searches, wherever it is in the frame. The twin of lock.py's chooser.
+ */
+export function chooser(query, rule, lookOf = null) {
+  if (query === null) return largest;
+  const { look } = query;
+  if (look === null || look === undefined || lookOf === null) {
+    return (boxes) => associate(query.box, boxes, query.anywhere, rule);
+  }
+  const alike = (b) => likeness(lookOf(b), look);
+  return (boxes) => {
+    const similarBoxes = boxes.filter((b) => similar(b, query.box, rule.maxScale));
+    const overlapping = similarBoxes.filter((b) => overlap(b, query.box) > 0);
+    if (overlapping.length > 0) return associate(query.box, overlapping, false, rule);
+    return recognise(query.anySize ? boxes : similarBoxes, alike, rule);
+  };
 }
 
 /**

@@ -17,6 +17,7 @@
 // it turns to) and how it ends (`search_ended`: found, timed_out when its time ran out and the
 // vehicle stopped, or stopped when piloting did).
 import { Controller } from './control.js';
+import { FrameTimes } from './frame-times.js';
 import { GoalGate } from './freshness.js';
 import { Limiter } from './limits.js';
 import { ManualDrive } from './manual.js';
@@ -35,25 +36,46 @@ function record(twist, now) {
   ];
 }
 
+/**
+ * `profile` fitted to `robot` (config.robot: its description and whether it is a turtlesim): an
+ * operator's full deflection is at most the robot's top speed, the follow law knows of walls on a
+ * turtlesim only, and the onboard law sees through the robot's camera (no camera, no bearing).
+ * The twin of app/protocol/control.py's for_robot.
+ */
+function forRobot(profile, robot) {
+  const { limits, camera } = robot.description;
+  return Object.freeze({
+    ...profile,
+    manualLinear: Math.min(profile.manualLinear, limits.maxLinear),
+    manualAngular: Math.min(profile.manualAngular, limits.maxAngular),
+    walls: robot.turtlesim,
+    hfov: camera === null ? 0 : (camera.hfovDeg * Math.PI) / 180,
+  });
+}
+
 export class Pilot {
   #lastGoalAt = null; // when the last goal was applied on this link (link health)
   #searchTimedOut = false; // a search ran out and stopped the vehicle; nothing steered it since
 
   /**
    * @param controlLaw the law's numbers (core/control.js ControlLaw, from `config.control`)
-   * @param profile one of `controlLaw.profiles` (fitted to the robot by the server)
-   * @param {{deadmanS: number, tickS: number, freshness: object,
-   *   limits: Object, law?: Function}} rules the protocol's numbers (`config.control`,
-   *   `config.protocol.goalFreshness`) and the robot's limits (`config.robot.description.limits`);
-   *   `law` replaces the profile's control law
+   * @param profile one of `controlLaw.profiles`; the pilot fits it to `robot`
+   * @param robot the robot driven (`config.robot`: its description and whether it is a
+   *   turtlesim); every command is held to its limits
+   * @param {{deadmanS: number, tickS: number, freshness: object, law?: Function}} rules the
+   *   protocol's numbers (`config.control`, `config.protocol.goalFreshness`); `law` replaces the
+   *   profile's control law
    */
-  constructor(controlLaw, profile, { deadmanS, tickS, freshness, limits, law = null }) {
+  constructor(controlLaw, profile, robot, { deadmanS, tickS, freshness, law = null }) {
+    profile = forRobot(profile, robot);
     this.profile = profile;
     this.tickS = tickS;
     this.controller = new Controller(controlLaw, profile, law);
     this.manual = new ManualDrive(profile, deadmanS);
     // Between every command and the robot: its top speeds and accelerations.
-    this.limiter = new Limiter(limits, tickS);
+    this.limiter = new Limiter(robot.description.limits, tickS);
+    // When the vehicle's own camera took its recent frames: a goal names its frame.
+    this.frames = new FrameTimes(controlLaw.keptFrames);
     // Latest-wins on the lossy goal channel; reset for every new link.
     this.gate = new GoalGate(freshness);
   }
@@ -90,10 +112,18 @@ export class Pilot {
   }
 
   /**
-   * A goal (validated against the protocol's Goal model): dropped, or it steers. `capturedAt`:
-   * when the frame it was found in was taken, on `now`'s clock, when the vehicle knows.
+   * The vehicle's own camera took its frame number `frame` (the number its frame tag carries) at
+   * `now`: a goal found in it later takes its bearing from the heading then.
    */
-  goal(goal, now, capturedAt = null) {
+  frame(frame, now) {
+    this.frames.add(frame, now);
+  }
+
+  /**
+   * A goal (validated against the protocol's Goal model): dropped, or it steers, from the heading
+   * the vehicle had when its frame was taken (when the vehicle took that frame).
+   */
+  goal(goal, now) {
     const frame = goal.frame ?? null;
     if (this.manual.manual)
       return [{ ev: 'goal_dropped', seq: goal.seq, frame, why: 'manual', t: now }];
@@ -116,7 +146,7 @@ export class Pilot {
       boxH: goal.boxH ?? null,
       targetHeightM: goal.targetHeightM ?? null,
     };
-    const twist = this.controller.goal(target, now, capturedAt);
+    const twist = this.controller.goal(target, now, this.frames.capturedAt(frame));
     return [applied, ...this.#searched(searching, 'found', now), ...this.#sent(twist, now)];
   }
 

@@ -5,8 +5,16 @@
 // clients. The relay page schedules the frames; a test can feed synthetic ones. The target lock
 // (lock.js) is the analyzer's: each snapshot follows it at the loop's time, and while a target is
 // locked the goal is that target's, not the largest box's. The loop passes clicks and releases
-// on and tells the clients what the lock became.
+// on and tells the clients what the lock became, and holds the lock while the vehicle says it is
+// searching for the target.
+//
+// Every frame the vehicle sends is offered; one is analysed at a time, and the freshest frame
+// that came meanwhile waits for it and is analysed next (an older one waiting is skipped). The
+// snapshots follow the target in a window around it between full scans (tracking-window.js), so
+// most take a fraction of a frame's time and a goal goes out for nearly every frame
+// (docs/performance.md, "Goals at the camera's frame rate").
 
+import { robotSearching } from './lock.js';
 import { RelayStats } from './relay-stats.js';
 
 /**
@@ -23,6 +31,8 @@ import { RelayStats } from './relay-stats.js';
 export class SnapshotLoop extends EventTarget {
   #busy = false;
   #lastFailure = null;
+  #waiting = null; // {source, resolve}: the freshest frame offered while one is analysed
+  #robotSearching = false;
 
   /**
    * @param {object} options
@@ -88,30 +98,50 @@ export class SnapshotLoop extends EventTarget {
     this.#emit('lock', this.lockMessage(reason));
   }
 
-  /** Whether a snapshot is being analysed (the next frame is then skipped). */
-  get busy() {
-    return this.#busy;
+  /**
+   * What the vehicle's pose says of its search for a lost target ('left', 'right', 'timed_out',
+   * or null: none): while it searches, the lock holds (lock.js robotSearching).
+   */
+  vehicleSearch(search) {
+    this.#robotSearching = robotSearching(search);
   }
 
   start() {
     this.running = true;
   }
 
-  /** Stop: a snapshot still in flight is dropped when it comes back. */
+  /** Stop: a snapshot still in flight is dropped when it comes back, a waiting frame skipped. */
   stop() {
     this.running = false;
+    this.#skipWaiting();
   }
 
   /**
-   * Offer one frame. It is analysed unless the loop is stopped or busy, in which case it is
-   * closed and skipped. Resolves to {goal, detections} (goal null when nothing was found), or
-   * null when the frame was skipped, failed, or piloting stopped meanwhile.
+   * Offer one frame. It is analysed at once when no other is; else it waits for the one being
+   * analysed and is analysed next, unless a fresher frame comes meanwhile (then it is closed and
+   * skipped), or the loop is stopped. Resolves to {goal, detections} (goal null when nothing was
+   * found), or null when the frame was skipped, failed, or piloting stopped meanwhile.
    */
-  async frame(source) {
-    if (!this.running || this.#busy) {
+  frame(source) {
+    if (!this.running) {
       source.close?.();
-      return null;
+      return Promise.resolve(null);
     }
+    if (!this.#busy) return this.#run(source);
+    this.#skipWaiting();
+    return new Promise((resolve) => {
+      this.#waiting = { source, resolve };
+    });
+  }
+
+  #skipWaiting() {
+    if (this.#waiting === null) return;
+    this.#waiting.source.close?.();
+    this.#waiting.resolve(null);
+    this.#waiting = null;
+  }
+
+  async #run(source) {
     this.#busy = true;
     try {
       const outcome = await this.#analyze(source);
@@ -124,6 +154,9 @@ export class SnapshotLoop extends EventTarget {
       return null;
     } finally {
       this.#busy = false;
+      const next = this.#waiting;
+      this.#waiting = null;
+      if (next !== null) this.#run(next.source).then(next.resolve);
     }
   }
 
@@ -133,6 +166,7 @@ export class SnapshotLoop extends EventTarget {
       profile: this.profile,
       track: this.track,
       at: started / 1000,
+      robotSearching: this.#robotSearching,
     });
     // The lock followed this snapshot (its box moves with the target) whether or not piloting
     // goes on; the clients hear of it when its state changed.

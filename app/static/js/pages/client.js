@@ -7,8 +7,8 @@ import { LockPanel } from '../view/lock-view.js';
 import { preferLowLatency, RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
 import { RoomSession } from '../net/room.js';
-import { pollRoomState } from '../net/room-state.js';
-import { RoomView } from '../view/roomview.js';
+import { pollArenaState } from '../net/arena-state.js';
+import { ArenaView } from '../view/arenaview.js';
 import { TurtleView } from '../view/turtleview.js';
 import {
   button,
@@ -34,13 +34,13 @@ const video = byTestId('video');
 const overlay = byTestId('overlay');
 const select = byTestId('operation');
 const law = new ControlLaw(config.control);
-// The simulated room when the server has one (`autopilot serve --robot diffdrive`), else
+// The simulated arena when the server has one (`autopilot serve --robot diffdrive`), else
 // turtlesim's terrain.
-const map = config.roomMap;
+const map = config.arenaMap;
 const mapView =
   map === null
     ? new TurtleView(byTestId('turtle-view'), law.worldSize)
-    : new RoomView(byTestId('turtle-view'), map);
+    : new ArenaView(byTestId('turtle-view'), map);
 // Vehicle capture → presentation here, frame by frame (view/glass-view.js).
 const glassView = new GlassView({
   video,
@@ -78,7 +78,7 @@ const status = {
   get drivesSent() {
     return driveInput.sent;
   },
-  // The simulated room's billboards where the map draws them ({name: {x, y, yaw}}), or null.
+  // The simulated arena's billboards where the map draws them ({name: {x, y, yaw}}), or null.
   get billboards() {
     return map === null ? null : mapView.placed;
   },
@@ -495,15 +495,15 @@ updateControls();
 showState();
 if (map !== null) {
   const canvas = byTestId('turtle-view');
-  canvas.setAttribute('aria-label', 'Room map');
-  canvas.closest('section').setAttribute('aria-label', 'Room');
-  pollRoomState({
+  canvas.setAttribute('aria-label', 'Arena map');
+  canvas.closest('section').setAttribute('aria-label', 'Arena');
+  pollArenaState({
     path: map.statePath,
     periodMs: map.statePeriodMs,
     room: () => room.room ?? config.room,
     token: () => config.token,
     onState: (state) => mapView.setBillboards(state.billboards),
-    onError: (reason) => log.error(`the room's state: ${reason}`),
+    onError: (reason) => log.error(`the arena's state: ${reason}`),
   });
 }
 if (config.auto) room.autoJoin();

@@ -41,12 +41,12 @@ async function sha256Hex(bytes) {
 /**
  * Decode an image (base64 file bytes) in the browser and run each op on it; each op of
  * `windowOps` that found something runs again on the window around its largest box (the
- * detect-then-track path). Returns {width, height, rgba, results: {opId: {boxes, target,
- * window?: {around, boxes, target}}}}, or {unreadable: reason} when the browser cannot decode
- * the bytes. `rgba` is the base64 of the pixels analysed, except where `pixelsWanted` says
- * otherwise: 'none' returns none; a SHA-256 in hex (the caller's own decoding of the file)
- * returns none when the analysed pixels have that digest (`sameDigest: true`), so that
- * megabytes of identical pixels need not cross the DevTools protocol.
+ * detect-then-track path). Returns {width, height, rgba, results: {opId: {boxes, scores,
+ * target, window?: {around, boxes, scores, target}}}}, or {unreadable: reason} when the
+ * browser cannot decode the bytes. `rgba` is the base64 of the pixels analysed, except where
+ * `pixelsWanted` says otherwise: 'none' returns none; a SHA-256 in hex (the caller's own
+ * decoding of the file) returns none when the analysed pixels have that digest (`sameDigest:
+ * true`), so that megabytes of identical pixels need not cross the DevTools protocol.
  */
 async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = 'base64') {
   let decoded;
@@ -68,11 +68,16 @@ async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = '
         returnPixels: pixels === null && pixelsWanted !== 'none',
       });
       if (pixels === null) pixels = { width: result.w, height: result.h, rgba: result.rgba };
-      results[opId] = { boxes: result.boxes, target: result.target };
+      results[opId] = { boxes: result.boxes, scores: result.scores, target: result.target };
       const around = largest(result.boxes);
       if (windowOps.includes(opId) && around !== null) {
         const windowed = await window.analyzer.analyze(await copy(), opId, { profile, around });
-        results[opId].window = { around, boxes: windowed.boxes, target: windowed.target };
+        results[opId].window = {
+          around,
+          boxes: windowed.boxes,
+          scores: windowed.scores,
+          target: windowed.target,
+        };
       }
     }
   } finally {
@@ -92,12 +97,12 @@ async function runImage(base64, opIds, profile, windowOps = [], pixelsWanted = '
  */
 async function runPixels(base64, width, height, opId, options) {
   const data = new Uint8ClampedArray(fromBase64(base64).buffer);
-  const { boxes, target, scan, region } = await window.analyzer.analyze(
+  const { boxes, scores, target, scan, region } = await window.analyzer.analyze(
     { width, height, data },
     opId,
     options,
   );
-  return { boxes, target, scan, region };
+  return { boxes, scores, target, scan, region };
 }
 
 createAnalyzer().then(

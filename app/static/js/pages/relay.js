@@ -158,7 +158,7 @@ const analyzerReady = createAnalyzer()
       if (status.piloting) session.loop.start(); // asked to pilot while OpenCV.js was loading
       status.analyzerReady = true;
       status.opencvBuild = created.build;
-      status.op = created.defaultOp;
+      status.op = session.loop.op;
       view.operation(status.op);
       const ops = created.ops.map((op) => op.id).join(', ');
       log.info(`OpenCV.js (${created.build} build) ready: operations ${ops}`);
@@ -176,7 +176,10 @@ function createLoop(analyzer) {
   const loop = new SnapshotLoop({
     analyzer,
     profile: config.profile,
-    op: analyzer.defaultOp,
+    // The vehicle profile's operation (config.operation), else the spec's default.
+    op: analyzer.ops.some((op) => op.id === config.operation)
+      ? config.operation
+      : analyzer.defaultOp,
     // Between full scans, search only around the last target (the spec's fullScanEvery).
     track: true,
     sendGoal: (goal) => session.links.sendToVehicle(goal, { lossy: true }),
@@ -363,6 +366,8 @@ function onPose(msg) {
   const pose = { type: 'pose', x: msg.x, y: msg.y, theta: msg.theta, t: msg.t ?? Date.now() };
   if (msg.goalAgeMs !== undefined) pose.goalAgeMs = msg.goalAgeMs;
   if (msg.search !== undefined) pose.search = msg.search;
+  // While the vehicle searches for the locked target, the lock holds.
+  session.loop?.vehicleSearch(msg.search ?? null);
   session.links.broadcast(pose);
 }
 
@@ -397,6 +402,8 @@ session.links.addEventListener('vehicletrack', ({ detail: track }) => {
   view.vehicleTrack(track);
 });
 session.links.addEventListener('vehicle', ({ detail: name }) => {
+  // A vehicle gone searches no more; one that comes says so in its poses.
+  if (name === null) session.loop?.vehicleSearch(null);
   if (name !== null && session.operator.holder !== null) {
     session.links.sendToVehicle(session.operator.modeMessage('an operator holds the wheel'));
   }

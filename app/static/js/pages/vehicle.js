@@ -25,11 +25,10 @@ const log = new Log(byTestId('log'));
 const room = new RoomSession(config, log);
 const law = new ControlLaw(config.control);
 const described = config.robot.description;
-const pilot = new Pilot(law, law.profiles[config.profile], {
+const pilot = new Pilot(law, law.profiles[config.profile], config.robot, {
   deadmanS: config.control.deadmanS,
   tickS: config.control.tickS,
   freshness: PROTOCOL.goalFreshness,
-  limits: described.limits,
 });
 /** The page's clock, in the seconds the pilot takes. */
 const now = () => performance.now() / 1000;

@@ -6,8 +6,8 @@
 //   for the video element to present it;
 // - 'presented': where the browser has no MediaStreamTrackProcessor, each frame the video
 //   element presents (requestVideoFrameCallback).
-// A frame that comes while the loop is busy with the last one is skipped, so the next snapshot
-// is always the freshest frame.
+// Every frame goes to the loop: one that comes while the loop analyses another waits for it,
+// replacing an older one waiting, so the next snapshot is always the freshest frame.
 
 export class FrameSource {
   #running = false;
@@ -73,7 +73,7 @@ export class FrameSource {
       for (;;) {
         const { value: frame, done } = await reader.read();
         if (done) return;
-        if (this.loop === null || this.loop.busy || this.#reader !== reader) frame.close();
+        if (this.loop === null || this.#reader !== reader) frame.close();
         // A VideoFrame wraps the decoded picture without copying it; the worker converts it to
         // RGBA straight into OpenCV's memory.
         else this.loop.frame(frame);
@@ -92,9 +92,9 @@ export class FrameSource {
     this.#callback = this.video.requestVideoFrameCallback(onFrame);
   }
 
-  /** The frame the video element shows, unless the loop is busy or there is none yet. */
+  /** The frame the video element shows, unless there is none yet. */
   #takeShown() {
-    if (this.loop === null || this.loop.busy || this.video.videoWidth === 0) return;
+    if (this.loop === null || this.video.videoWidth === 0) return;
     this.loop.frame(new VideoFrame(this.video));
   }
 }

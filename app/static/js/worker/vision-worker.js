@@ -4,7 +4,8 @@
 // Protocol (vision.js is the only other side):
 //   worker -> page  {type: 'ready', ops, defaultOp, build: 'simd'|'official'}
 //                   | {type: 'failed', error}
-//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, at}
+//   page -> worker  {type: 'analyze', id, source, opId, profile, returnPixels, track, around, at,
+//                    robotSearching}
 //                   | {type: 'lock', id, x, y, at} | {type: 'unlock', id}
 //                   | {type: 'memory', id} | {type: 'reset', id}
 //   worker -> page  {type: 'result', id, result} | {type: 'error', id, error}
@@ -61,7 +62,7 @@ const session = {
   lastFullScanBoxes: [],
   lastInstance: null, // the operation instance of the last such snapshot (a click's search)
   frameTag: null, // the imported frame-tag.js (the frame number stamped into its pixels)
-  files: [], // cascade files written to the Emscripten FS
+  files: [], // cascade and model files written to the Emscripten FS
   canvas: null,
   ctx: null,
   frame: null, // cv.Mat CV_8UC4 reused while the frame size stays the same
@@ -104,8 +105,19 @@ async function init() {
       for (const name of params.cascades ?? []) cascades.add(name);
     }
   }
-  for (const name of cascades) {
-    const bytes = new Uint8Array(await (await fetchOk(`/cascades/${name}`)).arrayBuffer());
+  // DNN models (vendored, app/static/vendor): written once per worker, read by cv.readNet.
+  const models = new Set();
+  for (const op of session.spec.operations) {
+    for (const params of Object.values(op.paramsByProfile)) {
+      if (params.model) models.add(params.model);
+    }
+  }
+  const urls = [
+    ...[...cascades].map((name) => [name, `/cascades/${name}`]),
+    ...[...models].map((name) => [name, `/static/vendor/${name}`]),
+  ];
+  for (const [name, url] of urls) {
+    const bytes = new Uint8Array(await (await fetchOk(url)).arrayBuffer());
     session.cv.FS_createDataFile('/', name, bytes, true, false, false);
     session.files.push(name);
   }
@@ -137,8 +149,8 @@ function instanceFor(opId, profile) {
   const params = op.paramsByProfile[profile];
   if (!params) throw new Error(`unknown profile "${profile}"`);
   const spec = { ...op, params };
-  // Cascade operations search a window around the last target between full scans.
-  const windowed = op.kind === 'cascade';
+  // Cascade and DNN operations search a window around the last target between full scans.
+  const windowed = op.kind === 'cascade' || op.kind === 'dnn';
   instance = {
     op: session.modules.get(op.module).create(session.cv, spec, session.files),
     // What the operation's box spans, in metres: goals carry it for the onboard law's range.
@@ -346,6 +358,7 @@ async function analyze({
   track = false,
   around = null,
   at = null,
+  robotSearching = false,
 }) {
   const started = performance.now();
   let instance;
@@ -358,9 +371,11 @@ async function analyze({
   const frame = await readPixels(source);
   const detectStarted = performance.now();
   // From here to the lock's update nothing waits, so no click or release comes in between.
-  const query = at === null ? null : session.target.query(at);
-  // Locked (lock.js): the target is the centre of the box that continues the locked track.
-  const choose = session.lock.chooser(query, PROTOCOL.lock);
+  const query = at === null ? null : session.target.query(at, robotSearching);
+  // Locked (lock.js): the target is the centre of the box that continues the locked track, or
+  // while the vehicle searches, the box that looks like it.
+  const lookOf = (box) => lookIn(frame, box);
+  const choose = session.lock.chooser(query, PROTOCOL.lock, lookOf);
   const { found, scan, fullScan } = detectIn(instance, frame, track, around, choose, query);
   const { boxes, region = null } = found;
   const locked = query === null ? null : choose(boxes);
@@ -371,7 +386,9 @@ async function analyze({
       locked === null ? null : { x: locked[0] + locked[2] / 2, y: locked[1] + locked[3] / 2 };
     targetBox = locked;
   }
-  const lock = at === null ? null : followed(instance, query, locked, boxes, fullScan, at);
+  if (locked !== null && session.target.needsLook(query)) session.target.remember(lookOf(locked));
+  const lock =
+    at === null ? null : followed(instance, query, locked, boxes, fullScan, at, robotSearching);
   const { cols: width, rows: height } = frame;
   // The tag's blocks are the top row's (frame-tag.js).
   const { decodeFrameTag, tagBlockSize } = session.frameTag;
@@ -380,6 +397,8 @@ async function analyze({
   const result = {
     op: opId,
     boxes,
+    // Each box's score (0..1) for operations that score them (DNN), else null.
+    scores: found.scores ?? null,
     target,
     targetBox,
     targetHeightM: instance.targetHeightM,
@@ -401,19 +420,57 @@ async function analyze({
 }
 
 /**
+ * The look of `box` (full-frame pixels) in the frame Mat: its hue × saturation histogram
+ * (`PROTOCOL.lock.lookBins`, OpenCV's 8-bit HSV), normalised to sum 1 (all 0 for no pixels), as
+ * app/vision/reference.py's look.
+ */
+function lookIn(frame, box) {
+  const { cv } = session;
+  const rect = session.lock.lookRect(box, frame.cols, frame.rows);
+  const [hueBins, saturationBins] = PROTOCOL.lock.lookBins;
+  if (rect.width === 0 || rect.height === 0) return new Array(hueBins * saturationBins).fill(0);
+  ensurePixels(frame, rect);
+  const roi = frame.roi(new cv.Rect(rect.x, rect.y, rect.width, rect.height));
+  const rgb = new cv.Mat();
+  const hsv = new cv.Mat();
+  const planes = new cv.MatVector();
+  const mask = new cv.Mat();
+  const hist = new cv.Mat();
+  try {
+    cv.cvtColor(roi, rgb, cv.COLOR_RGBA2RGB);
+    cv.cvtColor(rgb, hsv, cv.COLOR_RGB2HSV);
+    planes.push_back(hsv);
+    cv.calcHist(planes, [0, 1], mask, hist, [hueBins, saturationBins], [0, 180, 0, 256]);
+    const counts = Array.from(hist.data32F);
+    const total = counts.reduce((sum, c) => sum + c, 0);
+    return counts.map((c) => c / total);
+  } finally {
+    roi.delete();
+    rgb.delete();
+    hsv.delete();
+    planes.delete();
+    mask.delete();
+    hist.delete();
+  }
+}
+
+/**
  * The relay's snapshot at `at` (s) with `instance` chose `locked` (null: not found) for the
  * lock's `query`: update the lock and keep the boxes a click is looked up in (`fullScan`: the
- * boxes of the full scan it ran, or null). Returns {state, box, changed: the new state or null,
- * reason: why it changed, or null}.
+ * boxes of the full scan it ran, or null); `robotSearching`: the vehicle searches for the target,
+ * and the lock holds. Returns {state, box, changed: the new state or null, reason: why it
+ * changed, or null}.
  */
-function followed(instance, query, locked, boxes, fullScan, at) {
+function followed(instance, query, locked, boxes, fullScan, at, robotSearching) {
   session.lastInstance = instance;
   session.lastBoxes = boxes;
   if (fullScan !== null) session.lastFullScanBoxes = fullScan;
   const { target } = session;
-  const changed = target.update(query, locked, at);
+  const changed = target.update(query, locked, at, robotSearching);
   const reason =
-    changed === 'none' ? `not seen for more than ${PROTOCOL.lock.releaseAfterS} s` : null;
+    changed === 'none'
+      ? `not seen for more than ${PROTOCOL.lock.releaseAfterS} s, and the robot is not searching`
+      : null;
   return { state: target.state, box: target.box, changed, reason };
 }
 

@@ -78,7 +78,9 @@ export async function createAnalyzer() {
      * frame, the rest an earlier one); track: detect, then track (window.js) across the calls
      * that set it, per operation and profile; around: a full-frame box [x, y, w, h] whose
      * window alone is searched (parity); at: the snapshot's time in seconds, for the relay's
-     * snapshots, which follow the worker's target lock (lock.js) instead of the largest box.
+     * snapshots, which follow the worker's target lock (lock.js) instead of the largest box;
+     * robotSearching: the vehicle says it is searching for the lost target (lock.js
+     * robotSearching), and the lock holds until its search ends.
      * Resolves to {op, boxes, target, targetBox: the target's box [x, y, w, h] or null,
      * targetHeightM: the real height the operation declares for it, w, h, ms, workMs, frame,
      * scan: 'full' | 'window', region:
@@ -97,11 +99,12 @@ export async function createAnalyzer() {
         track = false,
         around = null,
         at = null,
+        robotSearching = false,
       } = {},
     ) {
       const transfer = source.data ? [] : [source];
       return call(
-        { type: 'analyze', source, opId, profile, returnPixels, track, around, at },
+        { type: 'analyze', source, opId, profile, returnPixels, track, around, at, robotSearching },
         transfer,
       );
     },

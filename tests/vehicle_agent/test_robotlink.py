@@ -1,4 +1,5 @@
-"""Turtle backends: the in-process simulator and roslibpy against this server's /rosbridge."""
+"""Robot links: the in-process simulator, and the rosbridge link against this server's
+/rosbridge."""
 
 from __future__ import annotations
 
@@ -11,8 +12,10 @@ import pytest
 from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
-from vehicle_agent.control import Pose, Twist
-from vehicle_agent.turtle import RosbridgeTurtle, SimTurtle, Turtle, TurtleError
+from tests.helpers.sockets import rosbridge_url
+from vehicle_agent.control import Pose
+from vehicle_agent.robotlink import RobotLink, RobotLinkError, RosbridgeLink, SimLink
+from vehicle_agent.rosbridge_client import RosbridgeClient
 
 
 class PoseWatch:
@@ -36,7 +39,7 @@ class PoseWatch:
                 await self._changed.wait()
 
 
-async def turn_and_stop(turtle: Turtle) -> None:
+async def turn_and_stop(turtle: RobotLink) -> None:
     watch = PoseWatch()
     await turtle.start(watch)
     try:
@@ -45,9 +48,9 @@ async def turn_and_stop(turtle: Turtle) -> None:
         # Keep commanding (turtlesim drops a command after 1 s) until the turtle faces up.
         async with asyncio.timeout(20):
             while watch.poses[-1].theta < math.pi / 4:
-                turtle.publish(Twist(0.0, 1.5))
+                turtle.publish(0.0, 1.5)
                 await asyncio.sleep(0.1)
-        turtle.publish(Twist(0.0, 0.0))
+        turtle.publish(0.0, 0.0)
         await asyncio.sleep(0.3)  # let the zero Twist reach the turtle
         stopped = watch.poses[-1].theta
         await asyncio.sleep(0.5)
@@ -57,8 +60,8 @@ async def turn_and_stop(turtle: Turtle) -> None:
         await turtle.close()
 
 
-async def test_sim_turtle_turns_and_stops() -> None:
-    turtle = SimTurtle()
+async def test_the_sim_link_turns_and_stops() -> None:
+    turtle = SimLink()
     await turn_and_stop(turtle)
     # Pose updates come on turtlesim's 16 ms tick.
     assert turtle.sim.pose("turtle1").theta > math.pi / 4
@@ -69,11 +72,11 @@ POSE_TYPE = {"1": "turtlesim/Pose", "2": "turtlesim/msg/Pose", "jazzy": "turtles
 
 
 @pytest.mark.parametrize("flavour", ["1", "2", "jazzy"])
-async def test_rosbridge_turtle_learns_the_robots_flavour(
+async def test_the_rosbridge_link_learns_the_robots_flavour(
     start_server: Callable[[Settings], RunningServer], flavour: RosFlavour
 ) -> None:
     robot = start_server(Settings(environment="development", token=None, ros=flavour))
-    turtle = RosbridgeTurtle(robot.url.replace("http", "ws", 1) + "/rosbridge")  # --ros auto
+    turtle = RosbridgeLink(RosbridgeClient(rosbridge_url(robot)))  # --ros auto
     await turn_and_stop(turtle)
     assert turtle.types is not None
     assert (turtle.types.flavour, turtle.types.from_robot) == (flavour, True)
@@ -85,21 +88,21 @@ async def test_the_robots_answer_beats_a_wrong_setting(
 ) -> None:
     # A Jazzy robot refuses turtlesim/Pose; told "--ros 1", the agent still drives it.
     robot = start_server(Settings(environment="development", token=None, ros="jazzy"))
-    turtle = RosbridgeTurtle(robot.url.replace("http", "ws", 1) + "/rosbridge", ros="1")
+    turtle = RosbridgeLink(RosbridgeClient(rosbridge_url(robot)), ros="1")
     await turn_and_stop(turtle)
     assert turtle.types is not None
     assert turtle.types.flavour == "jazzy"
 
 
 async def test_dead_rosbridge_is_named() -> None:
-    turtle = RosbridgeTurtle("ws://127.0.0.1:9/rosbridge")
+    turtle = RosbridgeLink(RosbridgeClient("ws://127.0.0.1:9/rosbridge"))
     # Nothing listens on port 9: refused at once, and said so (not a wait for the timeout).
     with pytest.raises(
-        TurtleError, match=r"rosbridge at ws://127\.0\.0\.1:9/rosbridge: connection refused"
+        RobotLinkError, match=r"rosbridge at ws://127\.0\.0\.1:9/rosbridge: connection refused"
     ):
         await turtle.start(lambda pose: None)
 
 
-def test_rosbridge_url_must_be_a_websocket() -> None:
-    with pytest.raises(TurtleError, match="ws://"):
-        RosbridgeTurtle("http://robot:9090")
+def test_the_ros_setting_must_be_one_the_agent_knows() -> None:
+    with pytest.raises(RobotLinkError, match="--ros must be one of"):
+        RosbridgeLink(RosbridgeClient("ws://robot:9090"), ros="3")  # type: ignore[arg-type]

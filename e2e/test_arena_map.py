@@ -1,5 +1,5 @@
-"""The client page of a diffdrive server draws the simulated room: its proportions, the
-billboards where the room's state puts them, the walker moving as its robot's room runs."""
+"""The client page of a diffdrive server draws the simulated arena: its proportions, the
+billboards where the arena's state puts them, the walker moving as its robot's arena runs."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 import websockets
 from playwright.sync_api import Browser, Page
 
-from app.diffdrive.room import FLAME_AT, ROOM
+from app.diffdrive.arena import ARENA, FLAME_AT
 from app.server.config import Settings
 from app.server.serve import RunningServer, start_in_thread
 from tests.helpers.sockets import rosbridge_url
@@ -23,7 +23,7 @@ pytestmark = [pytest.mark.e2e, pytest.mark.browser]
 
 ROOM_NAME = "map-room"
 WAIT_S = 15.0
-# The colour roomview.js draws the flame's centre in.
+# The colour arenaview.js draws the flame's centre in.
 FLAME = (0xFF, 0x7A, 0x1A)
 
 
@@ -36,7 +36,7 @@ def diffdrive() -> Iterator[RunningServer]:
 
 @pytest.fixture(scope="module")
 def robot_running(diffdrive: RunningServer) -> Iterator[None]:
-    """A rosbridge client in the room, so that the room has its robot and its time runs."""
+    """A rosbridge client in the room, so that the room has its robot and its arena's clock runs."""
     stop = threading.Event()
 
     async def hold() -> None:
@@ -70,7 +70,7 @@ def billboards(page: Page) -> dict[str, Any]:
 
 
 def pixel(page: Page, x: float, y: float) -> tuple[int, int, int]:
-    """The map canvas's colour at room point (x, y)."""
+    """The map canvas's colour at arena point (x, y)."""
     rgb: list[int] = page.evaluate(
         """([x, y, width]) => {
             const canvas = document.querySelector('[data-testid="turtle-view"]');
@@ -80,26 +80,26 @@ def pixel(page: Page, x: float, y: float) -> tuple[int, int, int]:
                 .data;
             return [data[0], data[1], data[2]];
         }""",
-        [x, y, ROOM.width],
+        [x, y, ARENA.width],
     )
     return rgb[0], rgb[1], rgb[2]
 
 
-def test_the_map_has_the_rooms_proportions_and_its_billboards(client: Page) -> None:
-    wait_until(lambda: billboards(client) is not None, WAIT_S, "the room's billboards on the map")
+def test_the_map_has_the_arenas_proportions_and_its_billboards(client: Page) -> None:
+    wait_until(lambda: billboards(client) is not None, WAIT_S, "the arena's billboards on the map")
     width, height = client.evaluate(
         """() => {
             const canvas = document.querySelector('[data-testid="turtle-view"]');
             return [canvas.width, canvas.height];
         }"""
     )
-    assert height / width == pytest.approx(ROOM.depth / ROOM.width, abs=0.01)
-    assert set(billboards(client)) == {b.name for b in ROOM.billboards}
+    assert height / width == pytest.approx(ARENA.depth / ARENA.width, abs=0.01)
+    assert set(billboards(client)) == {b.name for b in ARENA.billboards}
     assert pixel(client, *FLAME_AT) == FLAME
 
 
-def test_the_walker_moves_on_the_map_as_the_room_runs(client: Page) -> None:
-    wait_until(lambda: billboards(client) is not None, WAIT_S, "the room's billboards on the map")
+def test_the_walker_moves_on_the_map_as_the_arena_runs(client: Page) -> None:
+    wait_until(lambda: billboards(client) is not None, WAIT_S, "the arena's billboards on the map")
     first = billboards(client)["walker"]
     wait_until(
         lambda: (

@@ -1,13 +1,13 @@
-// Reads the simulated room's state (GET config.roomMap.statePath: where its billboards stand
+// Reads the simulated arena's state (GET config.arenaMap.statePath: where its billboards stand
 // now) every statePeriodMs for the client's map, with the page's token when it has one.
 
 /**
- * Poll the room's state until `stop()` is called. `room()` and `token()` are read at each poll
+ * Poll the arena's state until `stop()` is called. `room()` and `token()` are read at each poll
  * (the page may join another room, renew its token); `onState` gets the parsed answer
  * ({t, billboards: [{name, x, y, yaw}]}), `onError` the reason a poll failed. `fetchFn` is the
  * browser's fetch unless a test gives another.
  */
-export function pollRoomState({ path, periodMs, room, token, onState, onError, fetchFn = fetch }) {
+export function pollArenaState({ path, periodMs, room, token, onState, onError, fetchFn = fetch }) {
   let timer = null;
   let stopped = false;
   let lastError = null;

@@ -22,6 +22,7 @@ import pytest
 import roslibpy
 import websockets
 
+from app.protocol.rooms import DEFAULT_ROOM
 from app.server.config import Settings
 from app.server.rosbridge import Simulator
 from app.server.serve import RunningServer, start_in_thread
@@ -288,14 +289,14 @@ async def test_many_clients_at_once_each_get_their_poses(rosbridge_url: str) -> 
 async def test_closed_sockets_leave_no_sessions_behind(
     rosbridge_url: str, simulator: Simulator
 ) -> None:
-    before = len(simulator.hub.sessions)
+    before = len(simulator.hub_for(DEFAULT_ROOM).sessions)
     subscribe = json.dumps({"op": "subscribe", "topic": "/turtle1/pose"})
     async with websockets.connect(rosbridge_url) as ws:
         await ws.send(subscribe)
         await asyncio.wait_for(ws.recv(), WAIT_S)
-        assert len(simulator.hub.sessions) == before + 1
+        assert len(simulator.hub_for(DEFAULT_ROOM).sessions) == before + 1
     deadline = time.monotonic() + WAIT_S
-    while len(simulator.hub.sessions) != before:
+    while len(simulator.hub_for(DEFAULT_ROOM).sessions) != before:
         assert time.monotonic() < deadline, "session still registered after its socket closed"
         await asyncio.sleep(0.01)
 

@@ -1,7 +1,7 @@
-// The simulated room from above, for the client: its walls, the billboards (faces and the
+// The simulated arena from above, for the client: its walls, the billboards (faces and the
 // flame, the walker's path dotted), the robot from its forwarded odometry with the wedge its
-// camera sees, and the route it drove. The layout comes from the page config (`config.roomMap`,
-// app/diffdrive/roommap.py); the billboards' places now from GET /room/state.
+// camera sees, and the route it drove. The layout comes from the page config (`config.arenaMap`,
+// app/diffdrive/arenamap.py); the billboards' places now from GET /arena/state.
 import { Route } from './route.js';
 import { throttle } from './ui.js';
 
@@ -18,17 +18,17 @@ const WEDGE_M = 4;
 // Poses arrive 30 to 60 times a second: redrawn at most 20 times a second, as the turtle view.
 const REDRAW_PERIOD_MS = 50;
 
-/** Draws the room `map` ({width, depth, robotRadius, hfov, billboards}) on `canvas`. */
-export class RoomView {
+/** Draws the arena `map` ({width, depth, robotRadius, hfov, billboards}) on `canvas`. */
+export class ArenaView {
   #route = new Route();
   #pose = null;
-  #placed = new Map(); // billboard name -> {x, y, yaw}, from the room's state
+  #placed = new Map(); // billboard name -> {x, y, yaw}, from the arena's state
   #redraw = throttle(REDRAW_PERIOD_MS, () => this.draw());
 
   constructor(canvas, map) {
     this.canvas = canvas;
     this.map = map;
-    // The canvas keeps its width and takes the room's proportions (the page's stylesheet
+    // The canvas keeps its width and takes the arena's proportions (the page's stylesheet
     // makes the turtle's terrain square).
     canvas.height = Math.round((canvas.width * map.depth) / map.width);
     canvas.style.aspectRatio = `${map.width} / ${map.depth}`;
@@ -51,7 +51,7 @@ export class RoomView {
     return Object.fromEntries(this.#placed);
   }
 
-  /** Add the robot's pose {x, y, theta} (room metres, radians). */
+  /** Add the robot's pose {x, y, theta} (arena metres, radians). */
   addPose(pose) {
     this.#route.add(pose);
     this.#pose = pose;
@@ -64,7 +64,7 @@ export class RoomView {
     this.#redraw();
   }
 
-  /** The turtle view's goal marker: a goal pixel is no place in this room (the camera moves). */
+  /** The turtle view's goal marker: a goal pixel is no place in this arena (the camera moves). */
   setTarget() {}
 
   draw() {

@@ -491,7 +491,7 @@ def test_failed_calls_answer_result_false_and_a_status_error(
 
 def test_rosapi_lists_topics_and_services_of_living_turtles(session: RosbridgeSession) -> None:
     # Before the graph was modelled this listed only cmd_vel and pose; a real robot's list also
-    # has color_sensor, /rosout and /parameter_events (tests/turtlesim/test_rosapi.py).
+    # has color_sensor, /rosout and /parameter_events (tests/rosbridge/test_rosapi.py).
     service_call(session, "/spawn", name="leo")
     topics = service_call(session, "/rosapi/topics")["values"]
     listed = dict(zip(topics["topics"], topics["types"], strict=True))

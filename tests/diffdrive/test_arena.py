@@ -1,4 +1,4 @@
-"""The room's layout: billboards' real sizes, the walk, and the walker facing the robot."""
+"""The arena's layout: billboards' real sizes, the walk, and the walker facing the robot."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import math
 
 import pytest
 
-from app.diffdrive.room import (
+from app.diffdrive.arena import (
+    ARENA,
     FACE_BOX_M,
     FACE_CENTRE_HEIGHT_M,
-    ROOM,
     WALK,
     Billboard,
     Face,
@@ -17,18 +17,18 @@ from app.diffdrive.room import (
     Pose2D,
     Walk,
 )
-from app.diffdrive.sim import RoomSim
+from app.diffdrive.sim import ArenaSim
 
 
-def test_every_billboard_stands_inside_the_room() -> None:
-    for billboard in ROOM.billboards:
+def test_every_billboard_stands_inside_the_arena() -> None:
+    for billboard in ARENA.billboards:
         for t in [i * 0.25 for i in range(400)] if billboard.walk else [0.0]:
-            pose = billboard.placed(t, (ROOM.start.x, ROOM.start.y))
-            assert 0 < pose.x < ROOM.width and 0 < pose.y < ROOM.depth, billboard.name
+            pose = billboard.placed(t, (ARENA.start.x, ARENA.start.y))
+            assert 0 < pose.x < ARENA.width and 0 < pose.y < ARENA.depth, billboard.name
 
 
 def test_a_face_photo_is_scaled_so_its_face_box_has_the_real_height() -> None:
-    for billboard in ROOM.billboards:
+    for billboard in ARENA.billboards:
         if not isinstance(billboard.look, Face):
             continue
         photo = billboard.look.photo
@@ -62,7 +62,7 @@ def test_a_walk_must_come_back_to_its_start() -> None:
 
 
 def test_a_billboard_has_a_pose_or_a_walk() -> None:
-    look = ROOM.billboard("walker").look
+    look = ARENA.billboard("walker").look
     with pytest.raises(ValueError, match="a pose or a walk"):
         Billboard("both", look, pose=Pose2D(1, 1, 0), walk=WALK)
     with pytest.raises(ValueError, match="a pose or a walk"):
@@ -70,7 +70,7 @@ def test_a_billboard_has_a_pose_or_a_walk() -> None:
 
 
 def test_the_walker_always_faces_the_robot() -> None:
-    walker = ROOM.billboard("walker")
+    walker = ARENA.billboard("walker")
     for t, robot in [(0.0, (1.0, 3.0)), (7.0, (5.0, 1.0)), (13.0, (2.0, 5.0))]:
         pose = walker.placed(t, robot)
         assert (pose.x, pose.y) == WALK.at(t)
@@ -98,8 +98,8 @@ def test_the_walker_dashes_past_the_side_of_a_robot_that_followed_it_to_behind_i
     assert left_view > 0  # it left the view by the left side, not the right
 
 
-def test_room_time_runs_on_ticks_and_moves_the_walker() -> None:
-    sim = RoomSim(clock=lambda: 0.0)
+def test_arena_time_runs_on_ticks_and_moves_the_walker() -> None:
+    sim = ArenaSim(clock=lambda: 0.0)
     first = sim.scene()
     for _ in range(125):
         sim.step()

@@ -1,6 +1,6 @@
-"""The room the simulated robot drives in: its walls and the billboards placed in it.
+"""The arena the simulated robot drives in: its walls and the billboards placed in it.
 
-Coordinates are the room's: metres, origin at the south-west corner on the floor, x east, y
+Coordinates are the arena's: metres, origin at the south-west corner on the floor, x east, y
 north, heights above the floor; a yaw is counter-clockwise from +x, as turtlesim's theta. A
 billboard is a picture on a vertical rectangle: a face photo at head height (with a flat body
 below it for a person), or a flame on a stand. Its ``yaw`` is the way its picture faces; seen
@@ -9,7 +9,7 @@ follows a closed path and always turns its face to the robot, as a person who ke
 it would (a picture seen edge-on would vanish).
 
 The face photos are scaled so that the box the face cascade finds on them (measured once, in
-``face_box``) is :data:`FACE_BOX_M` high in the room: the onboard law's range estimate from
+``face_box``) is :data:`FACE_BOX_M` high in the arena: the onboard law's range estimate from
 the box's height then reads the true distance.
 """
 
@@ -66,7 +66,7 @@ class FacePhoto:
 
     @property
     def metres_per_pixel(self) -> float:
-        """The photo's scale in the room: its face box is :data:`FACE_BOX_M` high."""
+        """The photo's scale in the arena: its face box is :data:`FACE_BOX_M` high."""
         return FACE_BOX_M / self.face_box[3]
 
 
@@ -180,7 +180,7 @@ class Walk:
 
 @dataclass(frozen=True)
 class Billboard:
-    """A picture in the room: at ``pose``, or walking ``walk`` (then it faces the robot)."""
+    """A picture in the arena: at ``pose``, or walking ``walk`` (then it faces the robot)."""
 
     name: str
     look: Look
@@ -192,7 +192,7 @@ class Billboard:
             raise ValueError(f"billboard {self.name!r} needs a pose or a walk, not both")
 
     def placed(self, t: float, robot: tuple[float, float]) -> Pose2D:
-        """Where it stands at room time ``t`` and which way it faces, the robot at ``robot``."""
+        """Where it stands at arena time ``t`` and which way it faces, the robot at ``robot``."""
         if self.pose is not None:
             return self.pose
         assert self.walk is not None
@@ -201,8 +201,8 @@ class Billboard:
 
 
 @dataclass(frozen=True)
-class Room:
-    """A rectangular room ``width`` (x) by ``depth`` (y) with walls ``wall_height`` high, the
+class Arena:
+    """A rectangular arena ``width`` (x) by ``depth`` (y) with walls ``wall_height`` high, the
     billboards in it, and where the robot starts."""
 
     width: float
@@ -226,7 +226,7 @@ def facing(at: tuple[float, float], towards: tuple[float, float]) -> float:
 
 START: Final = Pose2D(1.0, 3.0, 0.0)
 
-# The walking person: off ahead of the robot, east along the middle of the room, a pause,
+# The walking person: off ahead of the robot, east along the middle of the arena, a pause,
 # then back west at a jog along a line 0.6 m to the north -- past the side of a robot that has
 # followed it, to behind it -- another pause, and round the south half back to the start.
 # Passing 0.6 m from the robot at 1.6 m/s, its bearing turns at up to 2.7 rad/s: faster than a
@@ -246,7 +246,7 @@ WALK: Final = Walk(
 BYSTANDER_AT: Final = (3.4, 1.9)
 FLAME_AT: Final = (7.7, 1.2)
 
-ROOM: Final = Room(
+ARENA: Final = Arena(
     width=8.0,
     depth=6.0,
     wall_height=2.5,
