@@ -36,6 +36,12 @@ export default [
     rules: { 'no-implicit-globals': 'off' },
   },
   {
+    // The tests' Node scripts (the official Foxglove and MCAP clients).
+    files: ['tests/**/*.mjs'],
+    languageOptions: { ecmaVersion: 2024, sourceType: 'module', globals: globals.node },
+    rules: { 'max-len': ['error', { code: 100 }] },
+  },
+  {
     files: ['eslint.config.js'],
     languageOptions: { sourceType: 'module', globals: globals.node },
   },

@@ -154,6 +154,7 @@ class _Recorded:
     offset: int
     topic: str
     schema: str
+    encoding: str
     log_time: int
     data: bytes
 
@@ -173,11 +174,13 @@ class _Recorded:
 def messages(
     paths: Sequence[Path], on_cut_off: Callable[[CutOff], None] | None = None
 ) -> Iterator[tuple[str, int, dict[str, Any]]]:
-    """Every message of the files, in the order written: (topic, log time ns, fields).
-    :class:`RecordingError` on a damaged file; a file cut off (:class:`CutOff`) goes to
-    ``on_cut_off`` after its whole records, or is raised without it."""
+    """Every JSON message of the files, in the order written: (topic, log time ns, fields); the
+    Foxglove view's protobuf ones (``vehicle_agent/foxglove.py``) are only counted by
+    :func:`summary`. :class:`RecordingError` on a damaged file; a file cut off (:class:`CutOff`)
+    goes to ``on_cut_off`` after its whole records, or is raised without it."""
     for found in _scan(paths, on_cut_off):
-        yield found.topic, found.log_time, found.fields()
+        if found.encoding == "json":
+            yield found.topic, found.log_time, found.fields()
 
 
 def events(
@@ -261,7 +264,7 @@ def _scan_file(path: Path) -> Iterator[_Recorded]:
     summary section or indexes, which a cut-off file lacks), every length checked against what
     remains and every chunk's expansion bounded."""
     schemas: dict[int, str] = {0: ""}
-    channels: dict[int, tuple[str, int]] = {}
+    channels: dict[int, tuple[str, int, str]] = {}
     for offset, opcode, body in _records(path):
         where = f"{path}: the {_opcode_name(opcode)} record at byte {offset}"
         try:
@@ -287,7 +290,7 @@ class _Unknown(Exception):
 
 
 def _read(
-    opcode: int, body: bytes, schemas: dict[int, str], channels: dict[int, tuple[str, int]]
+    opcode: int, body: bytes, schemas: dict[int, str], channels: dict[int, tuple[str, int, str]]
 ) -> Message | None:
     """A message record read; a schema or channel record noted; any other record skipped."""
     if opcode == Opcode.SCHEMA:
@@ -295,7 +298,7 @@ def _read(
         schemas[schema.id] = schema.name
     elif opcode == Opcode.CHANNEL:
         channel = Channel.read(_Exact(body))
-        channels[channel.id] = (channel.topic, channel.schema_id)
+        channels[channel.id] = (channel.topic, channel.schema_id, channel.message_encoding)
     elif opcode == Opcode.MESSAGE:
         found: Message = Message.read(_Exact(body), len(body))
         return found
@@ -307,14 +310,15 @@ def _recorded(
     offset: int,
     found: Message,
     schemas: dict[int, str],
-    channels: dict[int, tuple[str, int]],
+    channels: dict[int, tuple[str, int, str]],
 ) -> _Recorded:
     if found.channel_id not in channels:
         raise _Unknown(f"has a message on channel {found.channel_id}, which is not defined")
-    topic, schema_id = channels[found.channel_id]
+    topic, schema_id, encoding = channels[found.channel_id]
     if schema_id not in schemas:
         raise _Unknown(f"has a message on {topic}, whose schema {schema_id} is not defined")
-    return _Recorded(path, offset, topic, schemas[schema_id], found.log_time, found.data)
+    schema = schemas[schema_id]
+    return _Recorded(path, offset, topic, schema, encoding, found.log_time, found.data)
 
 
 def _records(path: Path) -> Iterator[tuple[int, int, bytes]]:

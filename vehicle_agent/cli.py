@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
 import ssl
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -22,9 +23,10 @@ from app.arguments import (
 from app.metrics import add_metrics_arguments
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import AUTO, ROS_SETTINGS
+from app.protocol.tokens import SECRET_ENV
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import on_stop_signals
-from vehicle_agent import recorder
+from vehicle_agent import foxglove, recorder
 from vehicle_agent.agent import Agent, AgentConfig
 from vehicle_agent.control import PROFILES
 from vehicle_agent.events import EventLog
@@ -143,6 +145,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="trust this CA for an https:// server and a wss:// rosbridge (--self-signed: ca.pem)",
     )
     recorder.add_arguments(parser)
+    foxglove.add_arguments(parser)
     add_metrics_arguments(parser)
 
 
@@ -189,7 +192,11 @@ async def _main(args: argparse.Namespace) -> int:
     events = EventLog(args.events)
     record = recorder.settings_from(args, args.room)
     # A folder that cannot be written is said now, not at the first write.
-    flight = None if record is None else recorder.FlightRecorder(record)
+    flight = (
+        None
+        if record is None
+        else recorder.FlightRecorder(record, extra=foxglove.recorded_channels())
+    )
     # The token goes only to the server's own /rosbridge.
     rosbridge_token = (
         args.token if args.rosbridge and same_server(args.server, args.rosbridge) else None
@@ -202,7 +209,10 @@ async def _main(args: argparse.Namespace) -> int:
         if args.rosbridge
         else None
     )
+    live = None
+    viewer = None
     try:
+        live = foxglove.start(args, robot, secret_set=bool(os.environ.get(SECRET_ENV)))
         video = await _open_video(args, events, client)
         link: RobotLink = SimLink() if client is None else RosbridgeLink(client, args.ros, robot)
         config = AgentConfig(
@@ -221,7 +231,11 @@ async def _main(args: argparse.Namespace) -> int:
         agent = Agent(config, video, link, events)
         if flight is not None:
             events.listeners.append(flight.on_event)
+            events.listeners.append(foxglove.recording_scene(flight, robot).on_event)
             camera = asyncio.create_task(flight.record_video(agent.camera_tap()), name="record")
+        if live is not None:
+            events.listeners.append(live.on_event)
+            viewer = asyncio.create_task(live.stream_video(agent.camera_tap()), name="foxglove")
         metrics = serve_agent_metrics(args, events)
         task = asyncio.create_task(agent.run())
         on_stop_signals(task.cancel)
@@ -232,6 +246,10 @@ async def _main(args: argparse.Namespace) -> int:
             await client.close()
         if camera is not None:
             camera.cancel()
+        if viewer is not None:
+            viewer.cancel()
+        if live is not None:
+            await foxglove.close(live)
         if flight is not None:
             # Also when setting up failed: the recorder's writer thread would keep the process.
             await _close_recorder(flight, events)

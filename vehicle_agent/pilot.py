@@ -140,6 +140,8 @@ class Pilot:
             y=goal.y,
             w=goal.w,
             h=goal.h,
+            box_w=goal.boxW,
+            box_h=goal.boxH,
             t=now,
         )
         target = Goal(

@@ -49,7 +49,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -104,6 +104,17 @@ class RecordSettings:
     max_files: int = 20
     # What the writer holds before it writes a chunk: at most what a crash or a full disk loses.
     chunk_bytes: int = 1024 * 1024
+
+
+@dataclass(frozen=True)
+class ExtraChannel:
+    """A channel beside the recording's own: its topic, schema and encodings."""
+
+    topic: str
+    schema: str
+    schema_encoding: str
+    schema_data: bytes
+    encoding: str
 
 
 class RecorderError(Exception):
@@ -232,14 +243,36 @@ def frame_tag(frame: av.VideoFrame) -> int | None:
     return frametag.read(pixels.reshape(rows, frame.width, channels))
 
 
+def encode_jpeg(frame: av.VideoFrame, quality: int) -> bytes:
+    """``frame`` as a JPEG of ``quality`` (1-100); also the live Foxglove view's."""
+    # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
+    # packed RGB's channels is faster in OpenCV (the synthetic camera's frames).
+    if frame.format.name == "rgb24":
+        rgb = frame.to_ndarray(format="rgb24")
+        bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
+    else:
+        bgr = np.asarray(frame.to_ndarray(format="bgr24"), np.uint8)
+    ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return bytes(jpeg.tobytes())
+
+
 class FlightRecorder:
     """Records the agent's events (:meth:`on_event`) and camera (:meth:`record_video`)."""
 
-    def __init__(self, settings: RecordSettings, clock: Callable[[], int] = time.time_ns) -> None:
+    def __init__(
+        self,
+        settings: RecordSettings,
+        clock: Callable[[], int] = time.time_ns,
+        extra: Sequence[ExtraChannel] = (),
+    ) -> None:
         """``clock``: wall-clock nanoseconds, the recording's one clock (log times, image
-        timestamps, file names and ages). :class:`RecorderError` when the folder cannot be
-        written, found by opening the first file."""
+        timestamps, file names and ages). ``extra``: more channels, written by :meth:`record`
+        (the Foxglove view's, ``vehicle_agent/foxglove.py``). :class:`RecorderError` when the
+        folder cannot be written, found by opening the first file."""
         self.settings = settings
+        self._extra = tuple(extra)
         self._clock = clock
         self.files: list[Path] = []
         self.images = 0
@@ -291,6 +324,14 @@ class FlightRecorder:
             self._put("event", event)
         if isinstance(event, GoalApplied):
             self._image_for_goal(event)
+        self._loop_cpu_s += time.thread_time() - started
+
+    def record(self, topic: str, log_ns: int, message: Any) -> None:
+        """Queue ``message`` for one of the ``extra`` channels: a JSON object, or anything with
+        ``encode()`` (an SDK message); ``log_ns`` is the message's own time (its log time is when
+        it was queued, so that log times never go back)."""
+        started = time.thread_time()
+        self._put("extra", (topic, message))
         self._loop_cpu_s += time.thread_time() - started
 
     async def record_video(self, track: MediaStreamTrack) -> None:
@@ -347,7 +388,7 @@ class FlightRecorder:
         self._put("image", held, held.arrived_ns)
 
     def _put(
-        self, kind: Literal["image", "event"], payload: Any, log_ns: int | None = None
+        self, kind: Literal["image", "event", "extra"], payload: Any, log_ns: int | None = None
     ) -> None:
         if not self._thread.is_alive():  # closed, or stopped by a fault it logged
             self.dropped += 1
@@ -425,6 +466,9 @@ class FlightRecorder:
                 if kind == "image":
                     self._write(recording.IMAGE_TOPIC, log_ns, self._image(payload, log_ns))
                     self.images += 1
+                elif kind == "extra":
+                    topic, message = payload
+                    self._write(topic, log_ns, message)
                 else:
                     topic = recording.EVENT_CHANNELS[type(payload)].topic
                     self._write(topic, log_ns, recording.message(payload))
@@ -470,28 +514,21 @@ class FlightRecorder:
             self._dropped_failing += 1
 
     def _image(self, held: _Held, log_ns: int) -> dict[str, Any]:
-        # To BGR, OpenCV's order: libswscale converts a camera's YUV in one step, but swapping
-        # packed RGB's channels is faster in OpenCV (the synthetic camera's frames).
-        if held.frame.format.name == "rgb24":
-            rgb = held.frame.to_ndarray(format="rgb24")
-            bgr = np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), np.uint8)
-        else:
-            bgr = np.asarray(held.frame.to_ndarray(format="bgr24"), np.uint8)
-        quality = [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality]
-        ok, jpeg = cv2.imencode(".jpg", bgr, quality)
-        if not ok:
-            raise RuntimeError("JPEG encoding failed")
+        jpeg = encode_jpeg(held.frame, self.settings.jpeg_quality)
         return {
             "timestamp": {"sec": log_ns // 1_000_000_000, "nsec": log_ns % 1_000_000_000},
             "frame_id": "camera",
             "format": "jpeg",
-            "data": base64.b64encode(jpeg.tobytes()).decode("ascii"),
+            "data": base64.b64encode(jpeg).decode("ascii"),
             "frame": held.tag,
         }
 
-    def _write(self, topic: str, log_ns: int, message: dict[str, Any]) -> None:
+    def _write(self, topic: str, log_ns: int, message: Any) -> None:
         writer = self._writer_for(log_ns)
-        data = json.dumps(message, separators=(",", ":")).encode()
+        if isinstance(message, dict):
+            data = json.dumps(message, separators=(",", ":")).encode()
+        else:
+            data = message.encode()
         writer.add_message(self._channels[topic], log_time=log_ns, data=data, publish_time=log_ns)
         self.messages += 1
         self._bytes += len(data)
@@ -528,6 +565,13 @@ class FlightRecorder:
                 )
                 channels[topic] = writer.register_channel(
                     topic=topic, message_encoding="json", schema_id=schema_id
+                )
+            for extra in self._extra:
+                schema_id = writer.register_schema(
+                    name=extra.schema, encoding=extra.schema_encoding, data=extra.schema_data
+                )
+                channels[extra.topic] = writer.register_channel(
+                    topic=extra.topic, message_encoding=extra.encoding, schema_id=schema_id
                 )
             file.flush()
         except OSError:

@@ -78,6 +78,9 @@ class GoalApplied(Event):
     y: float
     w: float
     h: float
+    # The target's box in pixels of the w×h frame, when the relay sent one.
+    box_w: float | None = None
+    box_h: float | None = None
 
 
 @dataclass(frozen=True, kw_only=True)

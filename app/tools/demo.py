@@ -41,7 +41,7 @@ from app.server.serve import (
 )
 from app.simulators import SimulatorName
 from app.supervise import Backoff, on_stop_signals, sleep_unless
-from vehicle_agent import recorder
+from vehicle_agent import foxglove, recorder
 from vehicle_agent.video import SYNTHETIC, TWO_FACES
 
 log = logging.getLogger(__name__)
@@ -83,6 +83,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_robot_argument(parser)
     tls.add_arguments(parser)
     recorder.add_arguments(parser)
+    parser.add_argument(
+        "--foxglove-port",
+        type=port,
+        default=foxglove.DEFAULT_PORT,
+        help=f"the agent serves Foxglove on 127.0.0.1 at this port (default"
+        f" {foxglove.DEFAULT_PORT}; docs/foxglove.md)",
+    )
     # The server's metrics (the relay's and the agent's are each their own process's).
     add_metrics_arguments(parser)
 
@@ -275,7 +282,7 @@ async def _main(
         settings.secret,
         ca_file,
         args.video,
-        recorder.arguments_of(args),
+        [*recorder.arguments_of(args), "--foxglove", f"127.0.0.1:{args.foxglove_port}"],
         settings.robot,
     )
     tasks = [asyncio.create_task(supervise(child, stop)) for child in children]
@@ -289,6 +296,7 @@ async def _main(
     sys.stdout.write(
         f"\nwebrtc-autopilot demo is running. Open the client page:\n\n{urls}\n\n"
         f"then press Connect, Join Room and Start Piloting. Ctrl-C stops everything.\n\n"
+        f"Foxglove (Open connection, Foxglove WebSocket): ws://127.0.0.1:{args.foxglove_port}\n\n"
     )
     sys.stdout.flush()
     await asyncio.gather(*tasks)

@@ -4,10 +4,11 @@ goals a relay would send for its frames."""
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Sequence
 from pathlib import Path
 
 from app.protocol import events as ev
-from vehicle_agent.events import EventLog
+from vehicle_agent.events import EventLog, Listener
 from vehicle_agent.recorder import FlightRecorder, RecordSettings
 from vehicle_agent.video import SyntheticVideo
 
@@ -16,13 +17,17 @@ SMALL_CHUNK_BYTES = 16 * 1024
 
 
 async def record(
-    settings: RecordSettings, seconds: float, recorder: FlightRecorder | None = None
+    settings: RecordSettings,
+    seconds: float,
+    recorder: FlightRecorder | None = None,
+    listeners: Sequence[Listener] = (),
 ) -> FlightRecorder:
     """Record a synthetic camera for ``seconds`` while goals arrive, 60 ms late, for every
-    other frame, with a pose and a Twist beside each; ``recorder``: an open one to record to."""
+    other frame, with a pose and a Twist beside each; ``recorder``: an open one to record to;
+    ``listeners``: more listeners of the events."""
     recorder = recorder or FlightRecorder(settings)
     events = EventLog()
-    events.listeners.append(recorder.on_event)
+    events.listeners += [recorder.on_event, *listeners]
     loop = asyncio.get_running_loop()
 
     def answer(sent: ev.FrameSent) -> None:

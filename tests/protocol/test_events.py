@@ -71,6 +71,8 @@ def test_the_lines_the_bench_reads_keep_their_field_names() -> None:
         "y": 200.5,
         "w": 640,
         "h": 480,
+        "box_w": None,
+        "box_h": None,
         "t": 1.1,
     }
     twist = ev.record(SAMPLES[5])

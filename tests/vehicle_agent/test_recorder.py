@@ -155,6 +155,8 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
         "y": 200.0,
         "w": 640,
         "h": 480,
+        "box_w": None,
+        "box_h": None,
         "t": 0.1,
     }
     # Read back typed, every recorded event is the one emitted.

@@ -45,6 +45,8 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 # The follow run spans three cycles of the synthetic face's path (20 s each).
 # bench --recorder: seconds per run (with and without recording).
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
+# bench --foxglove: seconds in all (both phases, every round).
+FOXGLOVE_QUICK_S, FOXGLOVE_FULL_S = 18.0, 60.0
 # bench --relay-cost: seconds measured.
 RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
 # bench --faces --quick: photos of the set.
@@ -96,6 +98,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="measure the flight recorder's cost instead: the agent's CPU and latency without"
         " and with --record",
+    )
+    parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="measure instead whether a Foxglove viewer that never reads slows the agent: goal"
+        " → Twist without and with one, alternating in one run (foxglove.md)",
     )
     parser.add_argument(
         "--relay-cost",
@@ -201,6 +209,8 @@ def run(args: argparse.Namespace) -> int:
         return _field(args)
     if args.camera:
         return _camera(args)
+    if args.foxglove:  # no WebRTC: loopback sockets only
+        return asyncio.run(_foxglove(args))
     if args.faces:
         return asyncio.run(_faces(args))
     if _can_enter_netns():
@@ -429,6 +439,25 @@ async def _recorder(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
     return 1 if figures["problems"] or "agent_cpu_increase_pct" not in figures else 0
+
+
+async def _foxglove(args: argparse.Namespace) -> int:
+    """A Foxglove viewer that never reads, and goal → Twist: print the figures, write
+    foxglove.md; 1 if not measured."""
+    from app.server.serve import start_in_thread
+    from app.tools.bench import foxglove
+
+    seconds = args.seconds or (FOXGLOVE_QUICK_S if args.quick else FOXGLOVE_FULL_S)
+    server = start_in_thread()
+    try:
+        figures = await foxglove.run(server.url, seconds, args.fps)
+    finally:
+        server.stop()
+    path = foxglove.write_report(args.out, figures)
+    log.info("Foxglove report: %s", path)
+    if args.json:
+        sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
+    return 0 if "p50_increase_pct" in figures else 1
 
 
 async def _relay_cost(args: argparse.Namespace) -> int:

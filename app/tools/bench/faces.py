@@ -172,9 +172,8 @@ def face_free_frames(
     """The simulated arena from its start, one frame per heading in ``views``, with every
     billboard but the flame taken away; then ``flame_frames`` frames of the agent's synthetic
     scene, its face out of view (the flame alone)."""
-    arena = replace(
-        ARENA, billboards=tuple(b for b in ARENA.billboards if isinstance(b.look, Flame))
-    )
+    flames = tuple(b for b in ARENA.billboards if isinstance(b.look, Flame))
+    arena = replace(ARENA, billboards=flames)
     camera = Pinhole(width=FRAME_SIZE[0], height=FRAME_SIZE[1])
     renderer = Renderer(arena, camera)
     cases = []

@@ -48,11 +48,11 @@ def test_cases_cover_every_size_and_tilt_inside_the_frame() -> None:
         assert 0 <= x and x + w <= 640 and 0 <= y and y + h <= 480, case.truth
 
 
-def test_face_free_frames_are_the_room_and_the_flame_scene() -> None:
+def test_face_free_frames_are_the_arena_and_the_flame_scene() -> None:
     free = faces.face_free_frames(views=(0, 90), flame_frames=2)
     assert [c.photo for c in free] == [
-        "room heading 0°",
-        "room heading 90°",
+        "arena heading 0°",
+        "arena heading 90°",
         "flame scene frame 0",
         "flame scene frame 1",
     ]
