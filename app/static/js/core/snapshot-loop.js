@@ -106,6 +106,11 @@ export class SnapshotLoop extends EventTarget {
     this.#robotSearching = robotSearching(search);
   }
 
+  /** Whether a snapshot is being analysed (a frame offered meanwhile waits for it). */
+  get busy() {
+    return this.#busy;
+  }
+
   start() {
     this.running = true;
   }
