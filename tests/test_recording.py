@@ -88,7 +88,7 @@ def test_a_field_s_type_becomes_its_json_schema() -> None:
     assert properties["on"] == {"type": "boolean"}
     assert properties["why"] == {
         "type": ["string", "null"],
-        "enum": ["old", "stale", "manual", None],
+        "enum": ["old", "stale", "future", "manual", None],
     }
     assert properties["names"] == {"type": "array", "items": {"type": "string"}}
     assert properties["t"]["type"] == "number"

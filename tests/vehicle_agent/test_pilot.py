@@ -109,6 +109,24 @@ def test_old_and_stale_goals_are_dropped_with_their_reason() -> None:
     assert isinstance(pilot.goal(goal_message(3, 0.3, late_s=0.4), 0.3)[0], ev.GoalApplied)
 
 
+def test_goals_from_the_future_are_dropped_and_never_hold_back_the_real_ones() -> None:
+    pilot = steering()
+    far = channels.Goal.model_validate(goal(2**40, 0.1)[2][0])
+    assert pilot.goal(far, 0.1) == [
+        ev.GoalDropped(seq=2**40, frame=100 + 2**40, why="future", t=0.1)
+    ]
+    ahead = goal(2, 0.15, stamp_ms=pilot_sequences.FAR_FUTURE_MS)[2][0]
+    dropped = pilot.goal(channels.Goal.model_validate(ahead), 0.15)
+    assert dropped == [ev.GoalDropped(seq=2, frame=102, why="future", t=0.15)]
+    for seq in (2, 3, 4):
+        assert isinstance(pilot.goal(goal_message(seq, seq * 0.1), seq * 0.1)[0], ev.GoalApplied)
+
+
+def test_a_seq_past_what_a_page_can_count_is_no_goal() -> None:
+    with pytest.raises(ValueError, match="seq"):
+        channels.Goal.model_validate(goal(channels.GOAL_SEQ_MAX + 1, 0.1)[2][0])
+
+
 def test_the_dead_man_stops_within_0_3_s_of_the_last_drive_command() -> None:
     pilot = Pilot(DEFAULT)
     pilot.mode_change("manual", "ann", 0.0)
