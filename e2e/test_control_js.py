@@ -99,7 +99,15 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
 
 def test_wrap_angle_matches_including_the_boundaries(page: Page) -> None:
     angles = [k * math.pi / 4 for k in range(-12, 13)] + [-math.pi, math.pi, 7.0, -7.0, 1e-9]
-    js = page.evaluate("angles => angles.map((a) => control.wrapAngle(a))", angles)
+    # Through the steering error, the public way in: a target straight along +x from a turtle
+    # heading −a is a turn of a, wrapped.
+    js = page.evaluate(
+        """angles => angles.map((a) => law.steeringError(
+             { x: 320, y: 240, w: 640, h: 480 },
+             { x: law.terrainCentre - 1, y: law.terrainCentre, theta: -a },
+           ))""",
+        angles,
+    )
     for angle, got in zip(angles, js, strict=True):
         assert -math.pi < got <= math.pi
         assert got == pytest.approx(control.wrap_angle(angle), abs=1e-12), angle

@@ -19,7 +19,7 @@ pytestmark = [pytest.mark.e2e, pytest.mark.browser]
 T0 = 1_700_000_000_000
 
 SEQUENCES = """(t0) => {
-  const { GlassToGlass, quantile } = window['glass-to-glass'];
+  const { GlassToGlass } = window['glass-to-glass'];
   const out = {};
 
   // Frame 1: timed, then shown 40 ms later. Frame 2: shown first, timed after (the batch of
@@ -64,7 +64,16 @@ SEQUENCES = """(t0) => {
   g.presented(1, t0 + 50);
   g.presented(3, t0 + 50);
   out.bounded = g.samples.toArray();
-  out.quantiles = [quantile([4, 1, 3, 2], 0.5), quantile([1, 2, 3, 4, 5], 0.95), quantile([], 0.5)];
+  // The quantiles interpolate between the nearest ranks, whatever order the samples came in.
+  const measured = (samples) => {
+    const m = new GlassToGlass();
+    samples.forEach((ms, frame) => {
+      m.captured(frame, t0);
+      m.presented(frame, t0 + ms);
+    });
+    return m.summary();
+  };
+  out.quantiles = [measured([4, 1, 3, 2]).p50Ms, measured([1, 2, 3, 4, 5]).p95Ms];
   return out;
 }"""
 
@@ -84,4 +93,36 @@ def test_glass_to_glass_pairs_frames_either_way(server: RunningServer, browser: 
     }
     assert found["emptySummary"] is None
     assert found["bounded"] == [50]
-    assert found["quantiles"] == [2.5, pytest.approx(4.8), None]
+    assert found["quantiles"] == [2.5, pytest.approx(4.8)]
+
+
+STALE = """(t0) => {
+  const { GlassToGlass } = window['glass-to-glass'];
+  const g = new GlassToGlass();
+  const out = { before: g.stale(t0) };
+  g.captured(1, t0);
+  g.presented(1, t0 + 40);
+  // Shown at t0 + 40: live for 2 s after, stale once no frame has been measured for longer.
+  out.live = [g.stale(t0 + 40), g.stale(t0 + 2040)];
+  out.stale = g.stale(t0 + 2041);
+  // A frame timed but never shown measures nothing: the figure stays stale.
+  g.captured(2, t0 + 2100);
+  out.timedOnly = g.stale(t0 + 2200);
+  g.presented(2, t0 + 2150);
+  out.again = g.stale(t0 + 2200);
+  return out;
+}"""
+
+
+def test_the_figure_is_stale_two_seconds_after_the_last_frame_measured(
+    server: RunningServer, browser: Browser
+) -> None:
+    with module_page(server, browser, "core/glass-to-glass") as page:
+        found: dict[str, Any] = page.evaluate(STALE, T0)
+    assert found == {
+        "before": True,
+        "live": [False, False],
+        "stale": True,
+        "timedOnly": True,
+        "again": False,
+    }

@@ -26,6 +26,16 @@ def joystick(server: RunningServer, browser: Browser) -> Iterator[Page]:
         page.evaluate(
             "async () => { window.drive = await import('/static/js/view/drive-input.js'); }"
         )
+        # A gesture, the public way in: one finger pressed at (dx, dy) from the pad's centre.
+        page.evaluate(
+            """() => {
+              window.pressed = (dx, dy, radius) => {
+                const gesture = new joystick.StickGesture();
+                gesture.press(1, dx, dy, { x: 0, y: 0 }, radius);
+                return gesture;
+              };
+            }"""
+        )
         yield page
 
 
@@ -33,7 +43,7 @@ def commands(page: Page, offsets: list[tuple[float, float]]) -> list[tuple[float
     """(linear, angular) of a finger at each (dx, dy) from the centre (screen axes, y down)."""
     got: list[list[float]] = page.evaluate(
         """([offsets, radius]) => offsets.map(([dx, dy]) => {
-             const c = joystick.dragCommand(dx, dy, radius);
+             const c = pressed(dx, dy, radius).command;
              return [c.linear, c.angular];
            })""",
         [offsets, RADIUS],
@@ -73,7 +83,7 @@ def test_the_offset_is_the_command_and_a_resting_finger_commands_nothing(joystic
 def test_the_knob_follows_the_finger_within_the_rim(joystick: Page) -> None:
     got = joystick.evaluate(
         """(r) => [[10, -20], [0, -3 * r], [3 * r, 4 * r]].map(([dx, dy]) => {
-             const k = joystick.knobOffset(dx, dy, r);
+             const k = pressed(dx, dy, r).knob;
              return [k.x, k.y];
            })""",
         RADIUS,

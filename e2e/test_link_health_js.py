@@ -17,9 +17,16 @@ from e2e.helpers import module_page
 
 pytestmark = [pytest.mark.browser]
 
-FIGURES_JS = """([previous, now]) => {
-  const report = (entries) => (entries === null ? null : new Map(entries.map((s) => [s.id, s])));
-  return window['link-health'].linkFigures(report(previous), report(now));
+# Through the meter, the public way in: a stand-in connection whose getStats() gives the
+# reports in turn, read once a report.
+FIGURES_JS = """async ([previous, now]) => {
+  const reports = [previous, now]
+    .filter((entries) => entries !== null)
+    .map((entries) => new Map(entries.map((s) => [s.id, s])));
+  const meter = new window['link-health'].LinkMeter({ getStats: async () => reports.shift() });
+  let figures = null;
+  while (reports.length > 0) figures = await meter.read();
+  return figures;
 }"""
 WARNINGS_JS = """([figures, limits]) => window['link-health'].warnings('link', figures, limits)"""
 

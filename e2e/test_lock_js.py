@@ -87,7 +87,7 @@ def test_the_rule_reaches_the_page_from_app_protocol(
     # its embedded config, the worker's from the query string the page started it with.
     relay = browser.new_page()
     try:
-        # The vision worker, not the video forward's (net/forward-worker.js).
+        # The vision worker, not the video forward's (worker/forward-worker.js).
         with relay.expect_worker(lambda worker: "vision-worker" in worker.url) as started:
             relay.goto(server.url + "/relay")
         in_page = relay.evaluate("async () => (await import('/static/js/config.js')).PROTOCOL.lock")

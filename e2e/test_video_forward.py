@@ -15,9 +15,12 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page, expect
 
+from app.protocol import frametag
 from app.protocol.video import CLIENT_FORWARD_SCALE_DOWN, VIDEO_SIZE
 from app.server.serve import RunningServer
 from app.tools.bench.relaycost import NO_ENCODED_TRANSFORMS
@@ -88,6 +91,34 @@ def wait_for_glass_to_glass(client: Page) -> dict[str, float]:
     return figure
 
 
+# Where the picture stands in the <video> element (object-fit: contain) and at what scale.
+PICTURE_JS = f"""() => {{
+  const v = {VIDEO};
+  const scale = Math.min(v.clientWidth / v.videoWidth, v.clientHeight / v.videoHeight);
+  return {{
+    scale,
+    top: (v.clientHeight - v.videoHeight * scale) / 2,
+    left: (v.clientWidth - v.videoWidth * scale) / 2,
+    width: v.videoWidth,
+    clientWidth: v.clientWidth,
+  }};
+}}"""
+
+
+def tag_as_shown(client: Page) -> np.ndarray:
+    """The grey levels the operator sees where the frame tag's blocks are (their middle rows)."""
+    shot = client.get_by_test_id("video").screenshot()
+    image = cv2.imdecode(np.frombuffer(shot, np.uint8), cv2.IMREAD_GRAYSCALE)
+    picture: dict[str, float] = client.evaluate(PICTURE_JS)
+    ratio = image.shape[1] / picture["clientWidth"]  # screenshot pixels per CSS pixel
+    block = frametag.block_size(int(picture["width"])) * picture["scale"]
+    blocks = frametag.LAYOUT.marker_blocks + frametag.LAYOUT.bits
+    y0, y1 = (round((picture["top"] + f * block) * ratio) for f in (0.25, 0.75))
+    x0, x1 = (round((picture["left"] + n * block) * ratio) for n in (0, blocks))
+    strip: np.ndarray = image[y0:y1, x0:x1]
+    return strip
+
+
 def test_passed_through_to_clients_that_join_before_and_after_the_vehicle(
     open_role: OpenRole, browser: Browser, vehicle_browser: Browser
 ) -> None:
@@ -118,6 +149,14 @@ def test_the_client_measures_glass_to_glass_on_the_vehicle_s_frames(
         assert status(relay)["forwards"] == {"client": "pass-through"}
         assert video_width(client) == VIDEO_SIZE[0]
         wait_for_glass_to_glass(client)
+        # The tag stays in the stream (the figure reads it) but not in the picture: where its
+        # white marker and black blocks are, the operator sees one even colour.
+        strip = tag_as_shown(client)
+        assert strip.size > 0 and float(strip.std()) < 4.0, float(strip.std())
+    # The camera stopped with the vehicle: the figure no longer passes for a live one.
+    figure = client.get_by_test_id("glass-to-glass")
+    expect(figure).to_have_text("–", timeout=15_000)
+    expect(figure).to_have_attribute("title", re.compile("^stale"))
 
 
 def test_without_encoded_transforms_the_relay_encodes_for_each_client(

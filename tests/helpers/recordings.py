@@ -43,7 +43,13 @@ async def record(
         for event in (goal, twist, pose):
             loop.call_later(0.06, events.emit, event)
 
-    video = SyntheticVideo(320, 240, fps=20, on_frame=answer)
+    return await record_for(recorder, SyntheticVideo(320, 240, fps=20, on_frame=answer), seconds)
+
+
+async def record_for(
+    recorder: FlightRecorder, video: SyntheticVideo, seconds: float
+) -> FlightRecorder:
+    """``recorder`` recording ``video`` for ``seconds``, then closed."""
     camera = asyncio.create_task(recorder.record_video(video))
     await asyncio.sleep(seconds)
     camera.cancel()

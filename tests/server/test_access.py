@@ -9,6 +9,7 @@ import pytest
 from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
 from app.rosbridge.protocol import Operation, Refused, parse_frame
+from app.rosbridge.rosapi import ROSAPI_READS
 from app.server.access import (
     ROSBRIDGE_RIGHTS,
     Decision,
@@ -93,22 +94,7 @@ READS = [
     _op("subscribe", topic="/turtle1/cmd_vel"),
     _op("unsubscribe", topic="/turtle1/pose"),
     _op("set_level", level="error"),
-    *[
-        _service(f"{slash}rosapi/{name}")
-        for slash in ("/", "")
-        for name in (
-            "topics",
-            "topics_and_raw_types",
-            "topic_type",
-            "services",
-            "service_type",
-            "nodes",
-            "node_details",
-            "get_param",
-            "get_param_names",
-            "get_time",
-        )
-    ],
+    *[_service(f"{slash}rosapi/{name}") for slash in ("/", "") for name in ROSAPI_READS],
 ]
 # ... and nothing that publishes, changes the simulator or sets a parameter (issue 37.3).
 WRITES = [

@@ -66,6 +66,19 @@ def test_trust_instructions_name_the_file_and_its_fingerprint(tmp_path: Path) ->
     assert cert.fingerprint(cert.signature_hash_algorithm).hex(":").upper() in text  # type: ignore[arg-type]
 
 
+def certutil(*args: str) -> str:
+    """What NSS's ``certutil`` prints with ``args``."""
+    done = subprocess.run(
+        ["certutil", *args],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=True,
+    )
+    return done.stdout
+
+
 def test_the_printed_chromium_line_trusts_the_ca_where_chromium_never_ran(tmp_path: Path) -> None:
     files = tls.self_signed(tmp_path / "state dir", ["localhost"], LOOPBACK)
     assert files.ca_file is not None
@@ -86,23 +99,9 @@ def test_the_printed_chromium_line_trusts_the_ca_where_chromium_never_ran(tmp_pa
             timeout=30,
         )
         assert run.returncode == 0, run.stdout + run.stderr
-        listed = subprocess.run(
-            ["certutil", "-d", nssdb, "-L"],
-            stdin=subprocess.DEVNULL,
-            capture_output=True,
-            text=True,
-            timeout=30,
-            check=True,
-        ).stdout
+        listed = certutil("-d", nssdb, "-L")
         assert ["webrtc-autopilot", "C,,"] in [row.split() for row in listed.splitlines()], listed
-    exported = subprocess.run(
-        ["certutil", "-d", nssdb, "-L", "-n", "webrtc-autopilot", "-a"],
-        stdin=subprocess.DEVNULL,
-        capture_output=True,
-        text=True,
-        timeout=30,
-        check=True,
-    ).stdout
+    exported = certutil("-d", nssdb, "-L", "-n", "webrtc-autopilot", "-a")
     imported = x509.load_pem_x509_certificate(exported.encode())
     assert imported == x509.load_pem_x509_certificate(files.ca_file.read_bytes())
 

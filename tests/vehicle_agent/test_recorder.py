@@ -158,6 +158,7 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
         "h": 480,
         "box_w": None,
         "box_h": None,
+        "locked": False,
         "t": 0.1,
     }
     # Read back typed, every recorded event is the one emitted.
@@ -259,7 +260,8 @@ async def test_the_agents_drive_commands_are_recorded(tmp_path: Path) -> None:
     ]
     assert by_topic[EVENT_CHANNELS[ev.ModeChanged].topic] == [{"mode": "manual", "operator": "ann"}]
     manual = PROFILES["default"].manual_linear
-    assert [(t["linear"], t["angular"]) for t in by_topic[EVENT_CHANNELS[ev.TwistSent].topic]] == [
+    twists = by_topic[EVENT_CHANNELS[ev.TwistSent].topic]
+    assert [(t["linear"]["x"], t["angular"]["z"]) for t in twists] == [
         (0.0, 0.0),  # taking over stops first
         (manual, 0.0),
         (0.0, 0.0),

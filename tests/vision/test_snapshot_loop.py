@@ -235,6 +235,19 @@ STOP_IN_FLIGHT = """async () => {
 }"""
 
 
+def lock_then_lose(face: tuple[int, int, int]) -> list[list[Any]]:
+    """Steps that lock ``face`` (x, y, size) of frame 0 by a click on its centre, then show
+    frame 2, which lacks it."""
+    centre = [face[0] + face[2] / 2, face[1] + face[2] / 2]
+    return [["frame", 0.05, 0], ["click", 0.07, centre], ["frame", 0.1, 0], ["frame", 0.15, 2]]
+
+
+def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
+    """Whether the goal point ``goal`` is inside ``face`` (x, y, size)."""
+    x, y, size = face
+    return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
+
+
 def test_a_snapshot_in_flight_when_the_loop_stops_sends_no_goal(page: Page) -> None:
     got = page.evaluate(STOP_IN_FLIGHT)
     # The control: the same answer while running is goal 1, sent and told.
@@ -287,12 +300,8 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
     # the larger face is the target again. The lock is decided in the analyzer's worker.
     large, small, small_elsewhere = (40, 100, 200), (420, 200, 130), (420, 10, 130)
     frames = [faces([large, small], 1), faces([large, small_elsewhere], 2), faces([large], 3)]
-    small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
     steps = [
-        ["frame", 0.05, 0],
-        ["click", 0.07, small_centre],
-        ["frame", 0.1, 0],
-        ["frame", 0.15, 2],  # gone: lost
+        *lock_then_lose(small),  # gone at 0.15: lost
         ["frame", 1.2, 2],  # unseen for over 1 s: searching the whole frame
         ["frame", 1.25, 1],  # back, out of the lock's reach: found by the whole-frame search
         ["frame", 4.3, 2],  # unseen for over 3 s: released (this snapshot still looked)
@@ -302,10 +311,6 @@ def test_a_click_locks_the_smaller_face_until_it_is_gone_past_the_release_time(p
         LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
     )
     outcomes = got["outcomes"]
-
-    def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
-        x, y, size = face
-        return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
 
     assert on(outcomes[0][0], large) and outcomes[0][1] == "none"
     assert outcomes[1] is True
@@ -431,12 +436,8 @@ def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_the_search_e
         faces([large, small_back], 2, biden),
         faces([large], 3, biden),
     ]
-    small_centre = [small[0] + small[2] / 2, small[1] + small[2] / 2]
     steps = [
-        ["frame", 0.05, 0],
-        ["click", 0.07, small_centre],
-        ["frame", 0.1, 0],
-        ["frame", 0.15, 2],  # gone: lost
+        *lock_then_lose(small),  # gone at 0.15: lost
         ["search", 0.5, "left"],
         ["frame", 4.3, 2],  # unseen for over 3 s: held, the vehicle searches
         ["frame", 4.35, 1],  # back: the target again, no click
@@ -451,10 +452,6 @@ def test_the_lock_holds_while_the_vehicle_searches_and_lets_go_when_the_search_e
         LOCK_STEPS, {"frames": frames, "steps": steps, "profile": DEFAULT_PROFILE}
     )
     outcomes = got["outcomes"]
-
-    def on(goal: list[float] | None, face: tuple[int, int, int]) -> bool:
-        x, y, size = face
-        return goal is not None and x < goal[0] < x + size and y < goal[1] < y + size
 
     assert on(outcomes[2][0], small) and outcomes[2][1] == "locked"
     assert outcomes[3] == [None, "lost"]

@@ -4,14 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.protocol.events import (
-    AnyEvent,
-    FrameSent,
-    GoalApplied,
-    LinkChanged,
-    PoseReport,
-    TwistSent,
-)
+from app.protocol import events as ev
 from app.tools.bench.field import (
     figures,
     link_drop_times,
@@ -21,24 +14,24 @@ from app.tools.bench.field import (
 )
 
 
-def _log() -> list[AnyEvent]:
+def _log() -> list[ev.AnyEvent]:
     """A link that comes up, then 40 frames at 20/s, each turned into a goal and a Twist 60 ms
     later, with the turtle facing the face (160, 240 px: straight left of the centre)."""
-    events: list[AnyEvent] = [
-        LinkChanged(state="offer", relay="relay", t=0.0),
-        LinkChanged(state="up", relay="relay", selected="relay", t=0.25),
+    events: list[ev.AnyEvent] = [
+        ev.LinkChanged(state="offer", relay="relay", t=0.0),
+        ev.LinkChanged(state="up", relay="relay", selected="relay", t=0.25),
     ]
     for i in range(40):
         t = 1.0 + i * 0.05
-        events.append(FrameSent(frame=i, face_x=160, face_y=240, t=t))
+        events.append(ev.FrameSent(frame=i, face_x=160, face_y=240, t=t))
         events.append(_goal(i + 1, i, t + 0.04))
-        events.append(TwistSent(seq=i + 1, frame=i, linear=0.0, angular=1.0, t=t + 0.06))
-        events.append(PoseReport(x=5.544445, y=5.544445, theta=3.14159, sent=True, t=t + 0.07))
+        events.append(ev.TwistSent(seq=i + 1, frame=i, linear=0.0, angular=1.0, t=t + 0.06))
+        events.append(ev.PoseReport(x=5.544445, y=5.544445, theta=3.14159, sent=True, t=t + 0.07))
     return events
 
 
-def _goal(seq: int, frame: int | None, t: float) -> GoalApplied:
-    return GoalApplied(seq=seq, op="face", frame=frame, x=160, y=240, w=640, h=480, t=t)
+def _goal(seq: int, frame: int | None, t: float) -> ev.GoalApplied:
+    return ev.GoalApplied(seq=seq, op="face", frame=frame, x=160, y=240, w=640, h=480, t=t)
 
 
 def test_figures_have_every_key_and_plausible_values() -> None:
@@ -67,15 +60,15 @@ def test_the_client_glass_to_glass_over_the_window() -> None:
 def test_a_goal_applied_after_a_newer_one_counts_as_stale_until_the_next_link() -> None:
     events = _log()
     events.append(_goal(12, 11, 4.0))  # older than seq 40
-    events.append(LinkChanged(state="up", relay="relay", t=5.0))
+    events.append(ev.LinkChanged(state="up", relay="relay", t=5.0))
     events.append(_goal(1, 50, 5.1))  # a new link counts again
     assert stale_goals_applied(events) == 1
 
 
 def test_link_drop_times_from_the_last_goal_and_from_the_link_coming_back() -> None:
-    events: list[AnyEvent] = [
+    events: list[ev.AnyEvent] = [
         _goal(1, None, 10.0),
-        TwistSent(seq=None, frame=None, linear=0.0, angular=0.0, t=10.8),
+        ev.TwistSent(seq=None, frame=None, linear=0.0, angular=0.0, t=10.8),
         _goal(2, None, 13.6),
     ]
     assert link_drop_times(events, dark_at=10.2, back_at=13.2) == {

@@ -14,7 +14,7 @@
 // Times are seconds, as in Python, so both sides compute the same doubles.
 
 /** `angle` wrapped into (−π, π]. */
-export function wrapAngle(angle) {
+function wrapAngle(angle) {
   let wrapped = angle % (2 * Math.PI);
   if (wrapped <= -Math.PI) wrapped += 2 * Math.PI;
   else if (wrapped > Math.PI) wrapped -= 2 * Math.PI;

@@ -9,19 +9,24 @@
 import { SampleRing } from './relay-stats.js';
 
 /** Samples kept for a reader that polls (the bench): a minute at 30 frames/s. */
-export const KEPT_SAMPLES = 2000;
+const KEPT_SAMPLES = 2000;
 /** The live figure is the median and 95th percentile of this many latest samples. */
-export const RECENT_SAMPLES = 90;
+const RECENT_SAMPLES = 90;
 /** Frames waiting for their other half: ten seconds at 30 frames/s. */
-export const WAITING = 300;
+const WAITING = 300;
 /**
  * A capture and a presentation this far apart are not the same frame (a vehicle that restarted
  * numbers its frames from 0 again), and make no sample.
  */
-export const SAME_FRAME_WITHIN_MS = 10_000;
+const SAME_FRAME_WITHIN_MS = 10_000;
+/**
+ * The figure is stale once no frame has been measured for this long (the camera stopped, or
+ * the link): it speaks of frames that are no longer coming, so it is not shown as live.
+ */
+const STALE_AFTER_MS = 2000;
 
 /** The `q`-quantile (0..1) of `values`, interpolated between the nearest ranks; null if none. */
-export function quantile(values, q) {
+function quantile(values, q) {
   if (values.length === 0) return null;
   const sorted = [...values].sort((a, b) => a - b);
   const at = (sorted.length - 1) * q;
@@ -42,6 +47,7 @@ export class GlassToGlass {
     /** Frames measured so far. */
     this.count = 0;
     this.last = null;
+    this.lastShownAt = null; // when the last frame measured was shown, Unix ms (client clock)
   }
 
   /** The vehicle captured frame number `frame` at `tMs`. */
@@ -82,9 +88,15 @@ export class GlassToGlass {
     };
   }
 
+  /** True when no frame has been measured for STALE_AFTER_MS before `nowMs` (or none ever). */
+  stale(nowMs) {
+    return this.lastShownAt === null || nowMs - this.lastShownAt > STALE_AFTER_MS;
+  }
+
   #measure(capturedAt, shownAt) {
     const ms = shownAt - capturedAt;
     if (Math.abs(ms) > SAME_FRAME_WITHIN_MS) return;
+    this.lastShownAt = Math.max(this.lastShownAt ?? shownAt, shownAt);
     this.count += 1;
     this.last = ms;
     this.samples.push(ms);

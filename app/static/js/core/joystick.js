@@ -5,12 +5,12 @@
 // e2e/test_joystick_js.py.
 
 /** An axis nearer the centre than this reads 0: a resting finger or stick wobbles. */
-export const STICK_DEADZONE = 0.1;
+const STICK_DEADZONE = 0.1;
 /**
  * The pad's commands move in steps of 1/STICK_STEPS: a finger resting on glass jitters by a
  * pixel or two, and every change of command is sent at once.
  */
-export const STICK_STEPS = 20;
+const STICK_STEPS = 20;
 
 /** One stick axis as a command axis: 0 within the dead zone, held to [−1, 1] beyond. */
 export function stickAxis(value) {
@@ -23,13 +23,13 @@ export function stickAxis(value) {
  * counter-clockwise (θ increases), as ↑ and ←. At the rim an axis is at full speed, and beyond
  * it each axis stays at its limit, as a key's ±1 does.
  */
-export function dragCommand(dx, dy, radius) {
+function dragCommand(dx, dy, radius) {
   const axis = (offset) => stickAxis(Math.round((offset / radius) * STICK_STEPS) / STICK_STEPS);
   return { linear: axis(-dy), angular: axis(-dx) };
 }
 
 /** Where the knob is drawn for a finger at (`dx`, `dy`): under it, held within the rim. */
-export function knobOffset(dx, dy, radius) {
+function knobOffset(dx, dy, radius) {
   const distance = Math.hypot(dx, dy);
   if (distance <= radius) return { x: dx, y: dy };
   return { x: (dx * radius) / distance, y: (dy * radius) / distance };

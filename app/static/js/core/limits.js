@@ -10,7 +10,7 @@
 // brakes within what its motors can do, and the dead-man's contract is a stop within 0.3 s.
 
 /** True for a stop: a zero Twist that answers no goal. */
-export function isStop(twist) {
+function isStop(twist) {
   return twist.linear === 0 && twist.angular === 0 && twist.seq === null;
 }
 

@@ -76,7 +76,7 @@ export function overlap(a, b) {
 }
 
 /** Neither side of `box` is more than maxScale times the locked box's, nor less than 1/maxScale. */
-export function similar(box, locked, maxScale) {
+function similar(box, locked, maxScale) {
   return [2, 3].every((i) => box[i] <= maxScale * locked[i] && locked[i] <= maxScale * box[i]);
 }
 

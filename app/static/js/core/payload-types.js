@@ -39,7 +39,7 @@ export function videoCodecs(sdp) {
 }
 
 /** Whether two codecs (of `videoCodecs`) are the same encoding: name, clock rate, parameters. */
-export function sameCodec(a, b) {
+function sameCodec(a, b) {
   return (
     a.mimeType.toLowerCase() === b.mimeType.toLowerCase() &&
     a.clockRate === b.clockRate &&
@@ -48,7 +48,7 @@ export function sameCodec(a, b) {
 }
 
 /** The codec a sender of this SDP's video encodes with: its first one that is not a carrier. */
-export function sentCodec(codecs) {
+function sentCodec(codecs) {
   return codecs.find((codec) => !CARRIERS.has(codec.mimeType.slice(6).toLowerCase())) ?? null;
 }
 
@@ -76,7 +76,7 @@ export function passesThrough(pt, vehicle, client) {
 }
 
 /** `sdp` with payload types `a` and `b` exchanged everywhere in its first video section. */
-export function swapPayloadTypes(sdp, a, b) {
+function swapPayloadTypes(sdp, a, b) {
   const eol = sdp.includes('\r\n') ? '\r\n' : '\n';
   const lines = sdp.split(/\r?\n/);
   const section = videoSection(lines);

@@ -1,8 +1,8 @@
 // The relay's statistics: per-snapshot timings in bounded rings and goals per second over a
 // sliding window. No DOM, no WebRTC; time comes from the caller.
 
-export const RATE_WINDOW_MS = 2000;
-export const MS_SAMPLES = 2000;
+const RATE_WINDOW_MS = 2000;
+const MS_SAMPLES = 2000;
 
 /**
  * The latest `capacity` samples, in storage allocated once: a ring that fills up must not look

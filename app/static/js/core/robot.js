@@ -27,7 +27,7 @@ export function velocityMessage(kind, flavour, linear, angular, stampS, frameId)
  * The heading (rotation about z, in (−π, π]) of the quaternion (x, y, z, w), which need not be
  * normalised: both atan2 arguments scale with its squared norm. null for one with no heading.
  */
-export function yawOf(x, y, z, w) {
+function yawOf(x, y, z, w) {
   const sine = 2 * (w * z + x * y);
   const cosine = w * w + x * x - y * y - z * z;
   if (!Number.isFinite(sine) || !Number.isFinite(cosine) || (sine === 0 && cosine === 0))

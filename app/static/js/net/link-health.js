@@ -25,7 +25,7 @@ function pick(report) {
  * packets lost among those due over the period; the candidate type is the pair's most relayed
  * end (a relay at either end makes it a relayed link).
  */
-export function linkFigures(previous, report) {
+function linkFigures(previous, report) {
   const now = pick(report);
   const before = previous === null ? null : pick(previous);
   const video = now.video;

@@ -1,4 +1,4 @@
-// The relay's pass-through forward, the page's side (its worker: net/forward-worker.js): the
+// The relay's pass-through forward, the page's side (its worker: worker/forward-worker.js): the
 // vehicle's encoded frames go to the clients as they came, with no decode and encode for them
 // (the relay still decodes the vehicle's video for its analysis). It needs Chromium's encoded
 // transforms on both sides: RTCRtpScriptTransform on the vehicle's receiver, whose transformer
@@ -30,7 +30,9 @@ export class VideoForward extends EventTarget {
   constructor({ log }) {
     super();
     this.log = log;
-    this.worker = new Worker(new URL('./forward-worker.js', import.meta.url), { type: 'module' });
+    this.worker = new Worker(new URL('../worker/forward-worker.js', import.meta.url), {
+      type: 'module',
+    });
     this.worker.addEventListener('message', ({ data }) => this.#onMode(data));
     this.worker.addEventListener('error', (event) =>
       log.error(`the video forward's worker failed: ${event.message}`),

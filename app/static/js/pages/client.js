@@ -23,6 +23,7 @@ import {
 } from '../view/ui.js';
 import { DriveInput } from '../view/drive-input.js';
 import { GlassView } from '../view/glass-view.js';
+import { showLinkHealth } from '../view/health-view.js';
 import { hasTouch, Joystick } from '../view/joystick.js';
 
 const MS_SMOOTHING = 15; // the figure shows the median of the last few snapshots
@@ -233,31 +234,7 @@ function showHealth() {
     ...warnings('vehicle → relay', health.vehicleToRelay, limits),
     ...warnings('relay → client', health.relayToClient, limits),
   ];
-  for (const [id, figures] of [
-    ['health-vehicle', health.vehicleToRelay],
-    ['health-client', health.relayToClient],
-  ]) {
-    const cells = byTestId(id).querySelectorAll('td');
-    const frames = figures?.width
-      ? `${fmt(figures.fps, 1)} fps, ${figures.width}×${figures.height}`
-      : '–';
-    const values = [
-      figures?.rttMs == null ? '–' : `${fmt(figures.rttMs, 0)} ms`,
-      figures?.lossPct == null ? '–' : `${fmt(figures.lossPct, 1)} %`,
-      frames,
-      figures?.candidate ?? '–',
-    ];
-    values.forEach((text, i) => {
-      cells[i].textContent = text;
-    });
-  }
-  show(
-    'goal-age',
-    health.goalAgeMs === null
-      ? 'no goal applied at the vehicle yet'
-      : `last goal applied at the vehicle ${fmt(health.goalAgeMs, 0)} ms ago`,
-  );
-  show('health-warnings', health.warnings.join(' · '));
+  showLinkHealth(health);
 }
 
 async function measureHealth() {

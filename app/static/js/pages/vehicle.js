@@ -10,13 +10,11 @@ import { ControlLaw } from '../core/control.js';
 import { Pilot } from '../core/pilot.js';
 import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
 import { CHANNELS, CONFIG, PROTOCOL, SCHEMAS } from '../config.js';
+import { RobotLink } from '../net/robot-link.js';
 import { RoomSession } from '../net/room.js';
-import { pickTypes } from '../core/rosflavour.js';
-import { poseOf, velocityMessage } from '../core/robot.js';
 import { byTestId, fmt, Log, searchText, show } from '../view/ui.js';
 
 const POSE_FORWARD_MS = 50; // turtlesim publishes every 16 ms; 20 Hz is plenty for a route
-const ROS_RETRY_MS = 2000;
 // The pilot's latest records kept in the status (the agent's event log keeps them all).
 const RECORDS_KEPT = 200;
 
@@ -50,7 +48,7 @@ const status = {
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
   // Goals not applied, by why: not newer (old), too late (stale), an operator held the wheel.
-  goalsDropped: { old: 0, stale: 0, manual: 0 },
+  goalsDropped: { old: 0, stale: 0, future: 0, manual: 0 },
   mode: 'auto', // 'manual' while an operator holds the wheel
   operator: null,
   drivesApplied: 0,
@@ -60,148 +58,21 @@ const status = {
 };
 window.autopilotStatus = status;
 
-/**
- * roslib.js connection to a rosbridge: velocity commands out, pose in, and on a turtlesim the
- * spawn step once.
- */
-class RobotLink {
-  /** `token`: sent as the rosbridge `auth` op, only to this server's own /rosbridge. */
-  constructor(url, setting, rosTypes, robot, token) {
-    this.url = url;
-    this.setting = setting;
-    this.rosTypes = rosTypes;
-    this.robot = robot; // config.robot: the description and its type names
-    this.token = token;
-    this.types = null; // learnt on each connection
-    this.ros = null;
-    this.cmdVel = null;
-    this.spawnDone = false;
-    this.reported = false; // an outage has been logged
-    this.badPoseLogged = false;
-    this.onPose = () => {};
-  }
-
-  /** The page's token was renewed: prove the fresh one to rosbridge, which ends a session whose
-   *  token expires (only where the old one was sent: this server's own /rosbridge). */
-  renew(token) {
-    if (!this.token) return;
-    this.token = token;
-    this.ros?.callOnConnection({ op: 'auth', token });
-  }
-
-  connect() {
-    const ros = new ROSLIB.Ros({ url: this.url });
-    this.ros = ros;
-    // Queued for the moment the socket opens, ahead of the subscriptions made on 'connection'.
-    if (this.token) ros.callOnConnection({ op: 'auth', token: this.token });
-    ros.on('connection', () => {
-      log.info(`rosbridge connected: ${this.url}`);
-      this.reported = false;
-      status.rosConnected = true;
-      show('ros-state', 'connected');
-      this.#learnTypes(ros);
-    });
-    // roslib throws on an 'error' nobody listens to; the 'close' that follows is what we report.
-    ros.on('error', () => {});
-    ros.on('close', () => {
-      if (this.ros !== ros) return;
-      // Said once per outage, not on every retry.
-      if (status.rosConnected || !this.reported) {
-        log.error(`rosbridge ${this.url} unreachable; retrying every ${ROS_RETRY_MS / 1000} s`);
-      }
-      this.reported = true;
-      status.rosConnected = false;
-      this.cmdVel = null;
-      show('ros-state', `not connected (retrying every ${ROS_RETRY_MS / 1000} s)`);
-      setTimeout(() => this.connect(), ROS_RETRY_MS);
-    });
-  }
-
-  // The robot's own type names from rosapi topic_type; the ros= setting when it cannot say.
-  async #learnTypes(ros) {
-    const { velocity, pose } = this.robot.description;
-    const [poseType, velocityType] = await Promise.all(
-      [pose.topic, velocity.topic].map((topic) => this.#topicType(ros, topic)),
-    );
-    if (this.ros !== ros) return; // reconnected meanwhile
-    const types = pickTypes(this.rosTypes, this.robot, this.setting, poseType, velocityType);
-    this.types = types;
-    status.rosFlavour = types.flavour;
-    status.rosTypesFrom = types.fromRobot ? 'robot' : 'setting';
-    status.velocityType = types.velocity;
-    const from = types.fromRobot
-      ? 'as its rosapi reports'
-      : `from ros=${this.setting}: rosapi did not say`;
-    log.info(`ROS ${types.flavour} types (${types.pose}, ${types.velocity}) ${from}`);
-    if (types.velocityKind !== velocity.type)
-      log.warn(`${velocity.topic} is a ${types.velocityKind} on the robot, not a ${velocity.type}`);
-    show('ros-state', `connected (ROS ${types.flavour}, ${this.robot.description.name})`);
-    this.cmdVel = new ROSLIB.Topic({ ros, name: velocity.topic, messageType: types.velocity });
-    const topic = new ROSLIB.Topic({ ros, name: pose.topic, messageType: types.pose });
-    topic.subscribe((msg) => this.#pose(msg));
-  }
-
-  #topicType(ros, topic) {
-    return new Promise((resolve) => {
-      const timer = setTimeout(() => resolve(null), this.rosTypes.detectTimeoutS * 1000);
-      const done = (type) => {
-        clearTimeout(timer);
-        resolve(type || null);
-      };
-      ros.getTopicType(topic, done, () => done(null));
-    });
-  }
-
-  publish(twist) {
-    if (this.cmdVel === null) return false;
-    const { velocityKind, flavour } = this.types;
-    const { frameId } = this.robot.description.velocity;
-    // ROS time is the wall clock's: a TwistStamped is stamped with it.
-    const stampS = Date.now() / 1000;
-    this.cmdVel.publish(
-      velocityMessage(velocityKind, flavour, twist.linear, twist.angular, stampS, frameId),
-    );
-    return true;
-  }
-
-  #pose(msg) {
-    const pose = poseOf(this.robot.description.pose.type, msg);
-    if (pose === null) {
-      if (!this.badPoseLogged) log.warn(`${this.robot.description.pose.topic}: no pose in it`);
-      this.badPoseLogged = true;
-      return;
-    }
-    if (!this.spawnDone) {
-      this.spawnDone = true;
-      this.#spawnStep(pose);
-    }
-    this.onPose(pose);
-  }
-
-  // The thesis's spawn step: the turtle starts facing "up" (θ = π/2), where the camera looks.
-  // A turtlesim's only (the server leaves it off for any other robot).
-  #spawnStep(pose) {
-    if (!config.spawnStep || this.robot.teleportService === null) return;
-    const service = new ROSLIB.Service({
-      ros: this.ros,
-      name: this.robot.teleportService,
-      serviceType: this.types.teleport,
-    });
-    service.callService(
-      { x: pose.x, y: pose.y, theta: law.spawnTheta },
-      () => log.info('spawn step: the turtle turned to π/2'),
-      (err) => log.error(`spawn step failed: ${err}`),
-    );
-  }
-}
-
 const robotLink = new RobotLink(
   config.rosbridge,
   config.ros,
   config.rosTypes,
   config.robot,
   config.rosbridgeAuth ? config.token : null,
+  { log, spawnTheta: config.spawnStep ? law.spawnTheta : null },
 );
+robotLink.onState = (text) => {
+  status.rosConnected = robotLink.connected;
+  status.rosFlavour = robotLink.types?.flavour ?? null;
+  status.rosTypesFrom = robotLink.types === null ? null : robotLink.typesFrom;
+  status.velocityType = robotLink.types?.velocity ?? null;
+  show('ros-state', text);
+};
 /** Everything else this page holds, in one place. */
 const session = {
   channel: null, // the open `autopilot` data channel (reliable)

@@ -13,9 +13,9 @@ const KEYS = Object.freeze({
 });
 // The W3C "standard" gamepad mapping, driven as teleop_twist_joy drives a joystick: hold the
 // enable button (the left shoulder button) as a dead-man, the left stick for linear/angular.
-export const ENABLE_BUTTON = 4;
-export const LINEAR_AXIS = 1; // left stick, up is −1
-export const ANGULAR_AXIS = 0; // left stick, left is −1
+const ENABLE_BUTTON = 4;
+const LINEAR_AXIS = 1; // left stick, up is −1
+const ANGULAR_AXIS = 0; // left stick, left is −1
 
 const ZERO = Object.freeze({ linear: 0, angular: 0 });
 
@@ -31,7 +31,7 @@ export function keyCommand(held) {
 }
 
 /** The command of a gamepad, or null unless its enable button is held. */
-export function padCommand(pad) {
+function padCommand(pad) {
   if (!pad || pad.mapping !== 'standard' || !pad.buttons[ENABLE_BUTTON]?.pressed) return null;
   const axis = (index) => stickAxis(-(pad.axes[index] ?? 0));
   return { linear: axis(LINEAR_AXIS), angular: axis(ANGULAR_AXIS) };

@@ -1,17 +1,23 @@
 // The client's glass-to-glass figure: reads the frame tag of every frame its <video> presents
 // (requestVideoFrameCallback; the tag's top rows drawn into a small canvas), matches it with
-// the vehicle's capture time (core/glass-to-glass.js) and shows the figure. The tag's blocks
-// scale with the picture, so a forward at half size (the relay's re-encoding fallback) reads as
-// well as the vehicle's own size (the pass-through).
+// the vehicle's capture time (core/glass-to-glass.js) and shows the figure, or a dash once it
+// is stale (no frame measured lately: the camera or the link stopped). The tag's blocks scale
+// with the picture, so a forward at half size (the relay's re-encoding fallback) reads as well
+// as the vehicle's own size (the pass-through). The tag stays in the stream, for the
+// measurement, but the operator does not see it: while the video carries one, its rows are
+// masked off the picture (a clip of the <video>; the canvas still reads the whole frame).
 import { GlassToGlass } from '../core/glass-to-glass.js';
 import { decodeFrameTag, tagBlockSize } from '../core/frame-tag.js';
 import { fmt, FIGURES_PERIOD_MS, throttle } from './ui.js';
 
 // Presented frames after which a video with no tag is said to have none.
 const UNTAGGED_AFTER = 30;
+// How often the figure is looked at when no frame comes: a stopped camera presents none.
+const STALE_CHECK_MS = 500;
 
 export class GlassView {
   #callback = null;
+  #clip = ''; // the clip on the video (the browser may write it back in its own words)
 
   /**
    * @param {object} options
@@ -30,6 +36,7 @@ export class GlassView {
     this.canvas = document.createElement('canvas');
     this.context = this.canvas.getContext('2d', { willReadFrequently: true });
     this.show = throttle(FIGURES_PERIOD_MS, () => this.#show());
+    setInterval(this.show, STALE_CHECK_MS);
   }
 
   /** A `frameTimes` message: when the vehicle captured its latest frames. */
@@ -43,6 +50,8 @@ export class GlassView {
     this.glass.reset();
     this.presented = 0;
     this.tagged = 0;
+    // Another video may carry no tag: nothing of its picture is hidden until one is read.
+    this.#setClip('');
     if (this.#callback === null)
       this.#callback = this.video.requestVideoFrameCallback(this.#onFrame);
     this.show();
@@ -57,6 +66,7 @@ export class GlassView {
     if (frame !== null) {
       this.tagged += 1;
       this.glass.presented(frame, shownAt);
+      this.#maskTag(metadata.width, metadata.height);
     }
     this.show();
   };
@@ -72,11 +82,33 @@ export class GlassView {
     return decodeFrameTag(this.layout, width, rows, pixels);
   }
 
+  /**
+   * Hide the tag's rows of a `width`×`height` picture from the operator: the clip runs from the
+   * element's top to below the tag as the picture is laid out (object-fit: contain may put a
+   * band above it).
+   */
+  #maskTag(width, height) {
+    const { clientWidth, clientHeight } = this.video;
+    const scale = Math.min(clientWidth / width, clientHeight / height);
+    const top = (clientHeight - height * scale) / 2;
+    const below = Math.ceil(top + tagBlockSize(this.layout, width) * scale);
+    this.#setClip(`inset(${below}px 0px 0px)`);
+  }
+
+  #setClip(clip) {
+    if (this.#clip === clip) return;
+    this.#clip = clip;
+    this.video.style.clipPath = clip;
+  }
+
   #show() {
     const summary = this.glass.summary();
     // Short enough to stay on one line beside its name on a phone; the title says more.
     let [text, title] = ['–', ''];
-    if (summary !== null) text = `${fmt(summary.p50Ms, 0)} ms (p95 ${fmt(summary.p95Ms, 0)})`;
+    const now = performance.timeOrigin + performance.now();
+    if (summary !== null && this.glass.stale(now))
+      [text, title] = ['–', 'stale: no frame measured lately (the camera or the link stopped)'];
+    else if (summary !== null) text = `${fmt(summary.p50Ms, 0)} ms (p95 ${fmt(summary.p95Ms, 0)})`;
     else if (this.tagged > 0)
       [text, title] = ['waiting for capture times', "the vehicle's capture times have not come"];
     else if (this.presented >= UNTAGGED_AFTER)

@@ -9,7 +9,7 @@
  * which shows a `w` × `h` frame letterboxed (object-fit: contain, as the video and its overlay),
  * or null when the point is on the letterbox bars.
  */
-export function framePoint(rect, clientX, clientY, w, h) {
+function framePoint(rect, clientX, clientY, w, h) {
   const scale = Math.min(rect.width / w, rect.height / h);
   const x = (clientX - rect.left - (rect.width - w * scale) / 2) / scale;
   const y = (clientY - rect.top - (rect.height - h * scale) / 2) / scale;
@@ -28,7 +28,7 @@ const WORDS = {
 const RELEASE = 'Unlock, or a click where there is no face, releases it';
 
 /** Words for a lockState message. */
-export function describeLock({ state, reason }) {
+function describeLock({ state, reason }) {
   const words = reason ? `${WORDS[state]} (${reason})` : WORDS[state];
   return state === 'none' ? words : `${words}; ${RELEASE}`;
 }

@@ -73,7 +73,8 @@ export async function createAnalyzer() {
     /**
      * Run operation `opId` on one frame. `source`: ImageBitmap or VideoFrame (transferred, so
      * the caller must not use it afterwards), or {width, height, data: Uint8ClampedArray RGBA}.
-     * Options: profile (one of PROTOCOL.profiles.relay); returnPixels adds `rgba` (the pixels
+     * Options (each off by default): profile (one of PROTOCOL.profiles.relay, the protocol's
+     * default profile by default); returnPixels adds `rgba` (the pixels
      * analysed: of a BT.601 VideoFrame searched in a window, only the parts read hold this
      * frame, the rest an earlier one); track: detect, then track (window.js) across the calls
      * that set it, per operation and profile; around: a full-frame box [x, y, w, h] whose
@@ -90,23 +91,10 @@ export async function createAnalyzer() {
      * were converted into RGBA (fewer than all for a windowed search of a BT.601
      * VideoFrame)[, rgba]}.
      */
-    analyze(
-      source,
-      opId,
-      {
-        profile = PROTOCOL.defaultProfile,
-        returnPixels = false,
-        track = false,
-        around = null,
-        at = null,
-        robotSearching = false,
-      } = {},
-    ) {
+    analyze(source, opId, options = {}) {
       const transfer = source.data ? [] : [source];
-      return call(
-        { type: 'analyze', source, opId, profile, returnPixels, track, around, at, robotSearching },
-        transfer,
-      );
+      // The worker applies the options' defaults (vision-worker.js `analyze`).
+      return call({ ...options, type: 'analyze', source, opId }, transfer);
     },
 
     /**

@@ -38,7 +38,7 @@ export function scaleBox([x, y, w, h], factor) {
 }
 
 /** Boxes in the order Python's list.sort() gives tuples. */
-export function sortBoxes(boxes) {
+function sortBoxes(boxes) {
   return boxes.sort((a, b) => a[0] - b[0] || a[1] - b[1] || a[2] - b[2] || a[3] - b[3]);
 }
 
