@@ -255,9 +255,12 @@ def test_a_cut_at_any_byte_near_a_record_s_end_is_a_cut_never_damage(
     whole = list(recording.messages([real]))
     ends = _messages_per_record(real)
     assert sum(1 for _, held in ends if held) >= 3, ends  # several chunks
+    # The records up to the third that holds messages: the arithmetic is the same for every
+    # record, and a cut early in the file reads less.
+    third = [i for i, (_, held) in enumerate(ends) if held][2]
     cut = tmp_path / "cut.mcap"
     tried = 0
-    for end, _ in ends:
+    for end, _ in ends[: third + 1]:
         for at in range(end - 10, min(end + 12, ends[-1][0] + 1)):
             if at <= len(MAGIC):
                 continue
