@@ -5,7 +5,9 @@ line each (:func:`event_line`, read back by :func:`read_event_log`). The flight 
 (``vehicle_agent/recorder.py``) writes the kinds of :data:`EVENT_CHANNELS` on their topics and
 the camera on :data:`IMAGE_TOPIC`, each channel with a JSON Schema that Foxglove and Lichtblick
 read natively; an event's schema is derived from its dataclass (:func:`json_schema`) and its
-message is its record without ``ev`` (the topic names the kind). ``autopilot replay``
+message is its record without ``ev`` (the topic names the kind), but for a Twist's speeds, which
+are a ``geometry_msgs/Twist``'s vectors (:data:`TWIST_SCHEMA`), so that a plot reads
+``/turtle1/cmd_vel.angular.z`` as it would a ROS robot's. ``autopilot replay``
 (``app/tools/replay.py``) reads the files back here (:func:`messages`, :func:`events`,
 :func:`images`, :func:`summary`), without the recorder's media stack.
 
@@ -39,6 +41,7 @@ from mcap.records import Channel, Chunk, Message, Schema
 
 from app.protocol import events as ev
 from app.protocol.events import AnyEvent, Event
+from app.protocol.robot import twist
 
 
 @dataclass(frozen=True)
@@ -77,6 +80,15 @@ EVENT_CHANNELS: Final[dict[type[Event], EventChannel]] = {
     ev.LinkChanged: EventChannel("/autopilot/link", "autopilot.Link"),
 }
 _KIND_OF_TOPIC: Final = {channel.topic: kind for kind, channel in EVENT_CHANNELS.items()}
+_VECTOR3: Final[dict[str, Any]] = {
+    "type": "object",
+    "properties": {axis: {"type": "number"} for axis in "xyz"},
+}
+# A Twist's speeds in a recorded message: geometry_msgs/Twist's vectors, in the robot's frame.
+TWIST_SCHEMA: Final[dict[str, Any]] = {
+    "linear": {**_VECTOR3, "description": "m/s: x ahead"},
+    "angular": {**_VECTOR3, "description": "rad/s: z counter-clockwise"},
+}
 _T_DESCRIPTION: Final = "seconds, the vehicle's monotonic clock (the MCAP log time is UTC)"
 
 
@@ -106,6 +118,8 @@ def json_schema(cls: type[Event], title: str) -> dict[str, Any]:
     hints = typing.get_type_hints(cls)
     properties = {f.name: _schema_of(hints[f.name]) for f in dataclasses.fields(cls)}
     properties["t"] = {**properties["t"], "description": _T_DESCRIPTION}
+    if cls is ev.TwistSent:
+        properties |= TWIST_SCHEMA
     return {"title": title, "type": "object", "properties": properties}
 
 
@@ -118,10 +132,25 @@ def channels() -> list[tuple[str, dict[str, Any]]]:
 
 
 def message(event: Event) -> dict[str, Any]:
-    """``event``'s recorded message: its record without ``ev``."""
+    """``event``'s recorded message: its record without ``ev``, a Twist's speeds as vectors."""
     fields = ev.record(event)
     del fields["ev"]
+    if isinstance(event, ev.TwistSent):
+        fields |= twist(event.linear, event.angular)
     return fields
+
+
+def _event_data(kind: type[Event], found: _Recorded) -> str | bytes:
+    """A recorded message's event fields as JSON: a Twist's speeds are its ``linear.x`` and
+    ``angular.z`` (a recording from before the vectors has the speeds themselves)."""
+    fields = found.fields()  # JSON that is not an object is named as such
+    if kind is not ev.TwistSent:
+        return found.data
+    for name, axis in (("linear", "x"), ("angular", "z")):
+        vector = fields.get(name)
+        if isinstance(vector, dict):
+            fields[name] = vector.get(axis)
+    return json.dumps(fields)
 
 
 class RecordingError(ValueError):
@@ -192,9 +221,9 @@ def events(
     for found in _scan(paths, on_cut_off):
         kind = _KIND_OF_TOPIC.get(found.topic)
         if kind is not None:
-            found.fields()  # JSON that is not an object is named as such
+            data = _event_data(kind, found)
             try:
-                event = ev.from_fields(kind, found.data)
+                event = ev.from_fields(kind, data)
             except ev.EventError as exc:
                 raise RecordingError(f"{found.where()}: {_one_line(exc)}") from exc
             yield found.log_time, event

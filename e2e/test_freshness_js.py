@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import random
 from collections.abc import Iterator
-from dataclasses import asdict
 
 import pytest
 from playwright.sync_api import Browser, Page
 
+from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
+from tests.vehicle_agent.freshness_sequences import SEQUENCES, WALL_MS
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 
 pytestmark = [pytest.mark.browser]
@@ -22,34 +22,21 @@ def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
         yield opened
 
 
-def _arrivals(rng: random.Random) -> list[tuple[int, float, float]]:
-    """Goals at 20/s over 20 s through a path with jitter, reordering, a 3 s outage whose
-    goals land in one burst, and a path that gets 0.8 s slower for good; (seq, sent ms, now s)."""
-    arrivals = []
-    for seq in range(400):
-        sent = seq * 0.05
-        now = sent + 0.03 + rng.uniform(0, 0.1)
-        if 5.0 <= sent < 8.0:
-            now = 8.2
-        if sent >= 12.0:
-            now += 0.8
-        arrivals.append((seq, sent * 1000 - 777_000, now))
-    arrivals.sort(key=lambda a: a[2])
-    return arrivals
-
-
-def test_the_page_and_the_agent_judge_every_goal_alike(page: Page) -> None:
+@pytest.mark.parametrize("name", SEQUENCES)
+def test_the_page_and_the_agent_judge_every_goal_alike(page: Page, name: str) -> None:
     rule = FreshnessRule()
-    arrivals = _arrivals(random.Random(7))
-    gate = GoalGate(rule)
+    arrivals = SEQUENCES[name]
+    gate = GoalGate(rule, wall_clock=lambda: WALL_MS)
     python = [gate.admit(seq, sent, now) for seq, sent, now in arrivals]
     js = page.evaluate(
-        """([rule, arrivals]) => {
-             const gate = new freshness.GoalGate({maxAgeS: rule.max_age_s, windowS: rule.window_s});
+        """([rule, wallMs, arrivals]) => {
+             const gate = new freshness.GoalGate(rule, () => wallMs);
              return arrivals.map(([seq, sent, now]) => gate.admit(seq, sent, now));
            }""",
-        [asdict(rule), arrivals],
+        [to_json(page_protocol().goal_freshness), WALL_MS, arrivals],
     )
     assert js == python
-    # The scenario exercises every verdict, so agreement means something.
-    assert {"fresh", "old", "stale"} <= set(python)
+    # The page gets the agent's rule: the same numbers, from one place.
+    assert to_json(page_protocol().goal_freshness) == to_json(rule)
+    # Each sequence exercises the verdicts it is about, so agreement means something.
+    assert ({"future"} if name == "from the future" else {"fresh", "old", "stale"}) <= set(python)

@@ -51,9 +51,17 @@ def two_faces_browser(
     launched.close()
 
 
-def goal_near(vehicle: Page, centre: tuple[float, float], within: float = ON_FACE_PX) -> bool:
+def goal_near(
+    vehicle: Page,
+    centre: tuple[float, float],
+    within: float = ON_FACE_PX,
+    locked: bool | None = None,
+) -> bool:
+    """The last goal was near ``centre`` (and said ``locked``, when given)."""
     goal = status(vehicle)["lastGoal"]
-    return goal is not None and abs(goal["x"] - centre[0]) + abs(goal["y"] - centre[1]) < within
+    if goal is None or (locked is not None and goal["locked"] is not locked):
+        return False
+    return bool(abs(goal["x"] - centre[0]) + abs(goal["y"] - centre[1]) < within)
 
 
 def shown(client: Page) -> list[dict[str, Any]]:
@@ -113,14 +121,18 @@ def test_candidates_a_near_click_unlock_the_tiny_face_and_a_switch(
     locked: Box = tuple(status(client)["lock"]["box"])  # type: ignore[assignment]
     assert contains(locked, *small) and not contains(locked, *large)
     assert not contains(locked, *beside)
-    wait_until(lambda: goal_near(vehicle, small), 30, "goals on the smaller face once locked")
+    wait_until(
+        lambda: goal_near(vehicle, small, locked=True), 30, "locked goals on the smaller face"
+    )
     detections = status(client)["lastDetections"]
     assert detections["locked"] is not None and contains(tuple(detections["locked"]), *small)
     wait_until(lambda: kind_at(shown(client), small) == "locked", 10, "the locked box drawn")
 
     client.get_by_role("button", name="Unlock").click()
     expect(lock_state).to_contain_text("no lock", timeout=10_000)
-    wait_until(lambda: goal_near(vehicle, large), 30, "goals back on the larger face")
+    wait_until(
+        lambda: goal_near(vehicle, large, locked=False), 30, "unlocked goals on the larger face"
+    )
 
     # The tiny face: no scan of the reduced frame finds it, so it has no box; a click on it
     # searches around the click at full resolution, and the lock holds past the time a lock

@@ -3,6 +3,7 @@ to do next. CLI output as printed, by the real commands."""
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import subprocess
@@ -12,9 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from app.cli import main
 from app.server import tls
 from app.server.serve import RunningServer
-from tests.test_cli_errors import assert_one_line_error, autopilot
+from tests.test_cli_errors import assert_one_line_error, autopilot, in_process
 
 SECRET = "a-first-day-secret-of-enough-length"
 
@@ -57,17 +59,28 @@ def serve_output(*args: str, env: dict[str, str], until: str, timeout: float = 6
     return output
 
 
-def test_token_without_a_secret_says_how_to_make_one() -> None:
-    result = autopilot("token", "--room", "lab", "--role", "client", env={"AUTOPILOT_SECRET": ""})
-    assert_one_line_error(result, "AUTOPILOT_SECRET is not set", "secrets.token_urlsafe(32)")
+# The token command and the help texts run in this process: nothing starts, nothing listens.
+def test_token_without_a_secret_says_how_to_make_one(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    monkeypatch.setenv("AUTOPILOT_SECRET", "")
+    _, line = in_process(capsys, caplog, "token", "--room", "lab", "--role", "client")
+    assert "AUTOPILOT_SECRET is not set" in line and "secrets.token_urlsafe(32)" in line, line
 
 
-def test_token_says_which_server_it_assumed_from_the_server_s_settings() -> None:
-    env = {"AUTOPILOT_SECRET": SECRET, "AUTOPILOT_PORT": "8123"}
-    result = autopilot("token", "--room", "lab", "--role", "client", env=env)
-    assert result.returncode == 0, result.stderr
-    assert "assuming http://127.0.0.1:8123" in result.stderr
-    assert '"url": "http://127.0.0.1:8123/client?room=lab#token=' in result.stdout
+def test_token_says_which_server_it_assumed_from_the_server_s_settings(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    monkeypatch.setenv("AUTOPILOT_SECRET", SECRET)
+    monkeypatch.setenv("AUTOPILOT_PORT", "8123")
+    caplog.set_level(logging.INFO)
+    assert main(["token", "--room", "lab", "--role", "client"]) == 0, caplog.text
+    assert "assuming http://127.0.0.1:8123" in caplog.text
+    assert '"url": "http://127.0.0.1:8123/client?room=lab#token=' in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
@@ -78,9 +91,13 @@ def test_token_says_which_server_it_assumed_from_the_server_s_settings() -> None
         ("demo", "turns on HTTPS"),
     ],
 )
-def test_help_says_what_a_command_needs(command: str, words: str) -> None:
-    result = autopilot(command, "--help")
-    assert result.returncode == 0 and words in " ".join(result.stdout.split()), result.stdout
+def test_help_says_what_a_command_needs(
+    capsys: pytest.CaptureFixture[str], command: str, words: str
+) -> None:
+    with pytest.raises(SystemExit) as exited:
+        main([command, "--help"])
+    out = capsys.readouterr().out
+    assert exited.value.code == 0 and words in " ".join(out.split()), out
 
 
 def test_serve_on_a_port_in_use_is_one_line_before_any_url(server: RunningServer) -> None:

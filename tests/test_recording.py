@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from mcap.writer import Writer
 
 from app import recording
 from app.protocol import events as ev
@@ -33,6 +34,42 @@ def test_each_recorded_kind_s_schema_has_exactly_its_dataclass_fields(
     assert set(recording.message(sample)) == set(schema["properties"]), topic
 
 
+def _twists_file(path: Path, messages: list[dict[str, object]]) -> Path:
+    """An MCAP file of ``messages`` on the Twists' channel."""
+    topic = recording.EVENT_CHANNELS[ev.TwistSent].topic
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema(name="any", encoding="jsonschema", data=b"{}")
+        channel = writer.register_channel(topic, message_encoding="json", schema_id=schema)
+        for n, fields in enumerate(messages):
+            writer.add_message(
+                channel, log_time=n, data=json.dumps(fields).encode(), publish_time=n
+            )
+        writer.finish()  # type: ignore[no-untyped-call]
+    return path
+
+
+def test_a_twist_is_recorded_as_a_geometry_msgs_twist_and_read_back(tmp_path: Path) -> None:
+    sent = ev.TwistSent(seq=3, frame=103, linear=0.4, angular=-0.7, t=1.5)
+    fields = recording.message(sent)
+    # Where a plot finds them: `.linear.x` and `.angular.z`, as on a ROS robot's cmd_vel.
+    assert fields["linear"] == {"x": 0.4, "y": 0.0, "z": 0.0}
+    assert fields["angular"] == {"x": 0.0, "y": 0.0, "z": -0.7}
+    schema = dict(recording.channels())[recording.EVENT_CHANNELS[ev.TwistSent].topic]
+    for name in ("linear", "angular"):
+        assert schema["properties"][name]["type"] == "object"
+        assert set(schema["properties"][name]["properties"]) == {"x", "y", "z"}
+    # A recording from before the vectors (flat speeds) reads back alike.
+    flat = {**fields, "linear": 0.4, "angular": -0.7}
+    path = _twists_file(tmp_path / "twists.mcap", [fields, flat])
+    assert [event for _, event in recording.events([path])] == [sent, sent]
+    # A vector without its axis is not a Twist.
+    broken = _twists_file(tmp_path / "broken.mcap", [{**fields, "angular": {"x": 0.0}}])
+    with pytest.raises(recording.RecordingError, match="not a 'twist' event"):
+        list(recording.events([broken]))
+
+
 def test_a_field_s_type_becomes_its_json_schema() -> None:
     @dataclasses.dataclass(frozen=True, kw_only=True)
     class Probe(ev.Event):
@@ -51,7 +88,7 @@ def test_a_field_s_type_becomes_its_json_schema() -> None:
     assert properties["on"] == {"type": "boolean"}
     assert properties["why"] == {
         "type": ["string", "null"],
-        "enum": ["old", "stale", "manual", None],
+        "enum": ["old", "stale", "future", "manual", None],
     }
     assert properties["names"] == {"type": "array", "items": {"type": "string"}}
     assert properties["t"]["type"] == "number"

@@ -88,8 +88,10 @@ BACKLOG: Final = 64
 JPEG_QUALITY: Final = 80
 # The image encoder thread's niceness (Linux gives each thread its own).
 ENCODER_NICENESS: Final = 10
-# Colours (RGBA 0-1) of the annotations: the target's box and point, and the label's text.
+# Colours (RGBA 0-1) of the annotations: the target's box and point, and the label's text; the
+# target the operator locked on is drawn in its own colour.
 TARGET_COLOUR: Final = (0.0, 1.0, 0.0, 1.0)
+LOCKED_COLOUR: Final = (1.0, 0.5, 0.0, 1.0)
 LABEL_BACKGROUND: Final = (0.0, 0.0, 0.0, 0.6)
 NO_FILL: Final = (0.0, 0.0, 0.0, 0.0)
 POINT_DIAMETER_PX: Final = 8.0
@@ -239,12 +241,13 @@ def image_annotations(
     goal: ev.GoalApplied, size: tuple[int, int], stamp_ns: int
 ) -> fm.ImageAnnotations:
     """``goal``'s detection on an image of ``size`` (the goal's frame may be another size): the
-    target's box (clipped to the image), its point and a label."""
+    target's box (clipped to the image), its point and a label, in :data:`LOCKED_COLOUR` when
+    the operator locked on it."""
     width, height = size
     sx, sy = width / goal.w, height / goal.h
     x, y = goal.x * sx, goal.y * sy
     stamp = timestamp(stamp_ns)
-    colour = _colour(TARGET_COLOUR)
+    colour = _colour(LOCKED_COLOUR if goal.locked else TARGET_COLOUR)
     points: list[fm.PointsAnnotation] = []
     top = y
     if goal.box_w is not None and goal.box_h is not None:
@@ -280,7 +283,7 @@ def image_annotations(
             fm.TextAnnotation(
                 timestamp=stamp,
                 position=fm.Point2(x=min(max(0.0, x), width - 1.0), y=top),
-                text=f"{goal.op} #{goal.seq}",
+                text=f"{goal.op} #{goal.seq}" + (" locked" if goal.locked else ""),
                 font_size=14.0,
                 text_color=colour,
                 background_color=_colour(LABEL_BACKGROUND),

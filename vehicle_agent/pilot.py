@@ -142,6 +142,7 @@ class Pilot:
             h=goal.h,
             box_w=goal.boxW,
             box_h=goal.boxH,
+            locked=goal.locked,
             t=now,
         )
         target = Goal(

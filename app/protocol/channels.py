@@ -42,6 +42,16 @@ MAX_FRAME_TIMES: Final = 64
 # way is stale and dropped.
 GOAL_MAX_AGE_S: Final = 0.5
 GOAL_AGE_WINDOW_S: Final = 5.0
+# A goal stamped more than this ahead of the vehicle's wall clock comes from the future and is
+# refused: the relay's and the vehicle's clocks must agree within it (docs/architecture.md).
+GOAL_MAX_CLOCK_SKEW_S: Final = 60.0
+# A relay numbers its goals one by one, at most one per analysed frame: a goal's seq runs ahead
+# of the last applied on its link by at most GOAL_SEQ_BURST plus GOAL_SEQ_RATE_HZ per second since
+# then, and never past GOAL_SEQ_MAX (beyond it a page's counter no longer counts). A goal
+# numbered beyond that reach is refused: it would hold back every real goal after it.
+GOAL_SEQ_RATE_HZ: Final = 120.0
+GOAL_SEQ_BURST: Final = 120
+GOAL_SEQ_MAX: Final = 2**53 - 1
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -67,10 +77,12 @@ class Goal(_Message):
     height its operation declares for what the box spans (``app/vision/operations.json``): with
     the camera's field of view they give a camera carried by the vehicle the target's range
     (the onboard law). A relay that sends neither leaves that law turning without driving.
+    ``locked``: the target is the one the operator locked on, not the largest box (a relay that
+    does not say is taken as unlocked).
     """
 
     type: Literal["goal"] = "goal"
-    seq: Annotated[int, Field(ge=1)]
+    seq: Annotated[int, Field(ge=1, le=GOAL_SEQ_MAX)]
     op: OpId
     x: Finite
     y: Finite
@@ -82,6 +94,7 @@ class Goal(_Message):
     boxW: BoxSide | None = None  # noqa: N815 -- the wire name
     boxH: BoxSide | None = None  # noqa: N815 -- the wire name
     targetHeightM: Height | None = None  # noqa: N815 -- the wire name
+    locked: bool = False
 
 
 # What a vehicle's search for a lost target is doing (the onboard and follow profiles): turning

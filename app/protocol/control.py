@@ -176,8 +176,8 @@ PROFILES: dict[str, Profile] = {
         search_after_s=0.3,
         search_angular=1.6,
         goal_timeout_s=0.3 + 3 * math.pi / 1.6,
-        # The detector the onboard bench measures better at following the walker, whose round
-        # takes it 3 m from the robot (docs/performance.md, "A robot that carries its camera").
+        # The detector the onboard bench measures following the walker better (docs/performance.md,
+        # "Which detector the onboard profile uses").
         operation="face_small",
     ),
 }

@@ -26,8 +26,9 @@ from pydantic import ConfigDict, TypeAdapter, ValidationError
 from app.protocol.channels import Mode
 
 # Why a goal was not applied: not newer than the last (``old``), sent too long ago (``stale``),
-# or the operator holds the wheel (``manual``).
-DropReason = Literal["old", "stale", "manual"]
+# numbered or stamped beyond what its link can have reached (``future``), or the operator holds
+# the wheel (``manual``).
+DropReason = Literal["old", "stale", "future", "manual"]
 LinkState = Literal["offer", "up", "down"]
 # What a frame's time is: when the synthetic scene drew it (``render``), the camera message's
 # header stamp (``stamp``), or when the message arrived, its stamp missing or not believable
@@ -80,6 +81,8 @@ class GoalApplied(Event):
     # The target's box in pixels of the w×h frame, when the relay sent one.
     box_w: float | None = None
     box_h: float | None = None
+    # The target is the one the operator locked on (the relay's goal said so).
+    locked: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -25,6 +25,9 @@ from app.protocol.channels import (
     CONTROL_CHANNEL,
     GOAL_AGE_WINDOW_S,
     GOAL_MAX_AGE_S,
+    GOAL_MAX_CLOCK_SKEW_S,
+    GOAL_SEQ_BURST,
+    GOAL_SEQ_RATE_HZ,
     STATE_CHANNEL_MAX_RETRANSMITS,
     STATE_CHANNEL_ORDERED,
     channel_schemas,
@@ -111,6 +114,9 @@ class GoalFreshness:
 
     max_age_s: float
     window_s: float
+    max_skew_s: float
+    seq_rate_hz: float
+    seq_burst: int
 
 
 @dataclass(frozen=True)
@@ -269,7 +275,13 @@ def page_protocol() -> PageProtocol:
         state_channel_options=StateChannelOptions(
             STATE_CHANNEL_ORDERED, STATE_CHANNEL_MAX_RETRANSMITS
         ),
-        goal_freshness=GoalFreshness(GOAL_MAX_AGE_S, GOAL_AGE_WINDOW_S),
+        goal_freshness=GoalFreshness(
+            GOAL_MAX_AGE_S,
+            GOAL_AGE_WINDOW_S,
+            GOAL_MAX_CLOCK_SKEW_S,
+            GOAL_SEQ_RATE_HZ,
+            GOAL_SEQ_BURST,
+        ),
         video=VideoSize(*VIDEO_SIZE),
         client_forward_scale_down=CLIENT_FORWARD_SCALE_DOWN,
         frame_tag=LAYOUT,

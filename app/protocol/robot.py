@@ -412,6 +412,15 @@ def detect(
     return RobotTypes(flavour, table.pose[flavour], velocity, kind, reported is not None)
 
 
+def twist(linear: float, angular: float) -> dict[str, Any]:
+    """A ``geometry_msgs/Twist`` as JSON: ``linear`` (m/s) ahead, ``angular`` (rad/s)
+    counter-clockwise."""
+    return {
+        "linear": {"x": linear, "y": 0.0, "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": angular},
+    }
+
+
 def velocity_message(
     kind: VelocityType,
     flavour: RosFlavour,
@@ -423,12 +432,8 @@ def velocity_message(
     """A velocity command as rosbridge JSON: a ``Twist``, or a ``TwistStamped`` stamped
     ``stamp_s`` (seconds since the epoch) in ``frame_id``, its time as ``flavour`` spells it
     (``secs``/``nsecs`` in ROS 1, ``sec``/``nanosec`` in ROS 2). ``robot.js`` has the twin."""
-    twist = {
-        "linear": {"x": linear, "y": 0.0, "z": 0.0},
-        "angular": {"x": 0.0, "y": 0.0, "z": angular},
-    }
     if kind == TWIST:
-        return twist
+        return twist(linear, angular)
     seconds = math.floor(stamp_s)
     nanoseconds = min(999_999_999, round((stamp_s - seconds) * 1e9))
     stamp = (
@@ -436,7 +441,7 @@ def velocity_message(
         if flavour == "1"
         else {"sec": seconds, "nanosec": nanoseconds}
     )
-    return {"header": {"stamp": stamp, "frame_id": frame_id}, "twist": twist}
+    return {"header": {"stamp": stamp, "frame_id": frame_id}, "twist": twist(linear, angular)}
 
 
 def yaw_of(x: float, y: float, z: float, w: float) -> float | None:

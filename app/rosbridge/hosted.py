@@ -48,6 +48,11 @@ class HostingError(ValueError):
     """A topic that cannot be hosted, or a message that is not of its type."""
 
 
+class MalformedMessage(HostingError):
+    """A message that is not of its topic's type (a field missing, of the wrong type or out of
+    range, a camera image's data that is not base64): malformed input, always answered."""
+
+
 @dataclass(frozen=True)
 class HostedTopic:
     """A hosted topic, by its absolute name."""
@@ -108,7 +113,7 @@ class HostedTopics:
 
     def publish(self, topic: HostedTopic, msg: dict[str, Any]) -> None:
         """``msg`` published on ``topic``: checked against its type and kept (missing fields
-        filled in) for its subscribers; :class:`HostingError` naming the bad fields."""
+        filled in) for its subscribers; :class:`MalformedMessage` naming the bad fields."""
         hosting = self._topics.get(topic.name)
         if hosting is None:
             raise HostingError(f"{topic.name} is no longer advertised")
@@ -118,13 +123,13 @@ class HostedTopics:
             try:
                 image = camera.parse(kind, msg)
             except camera.CameraMessageError as exc:
-                raise HostingError(f"{topic.name}: {exc}") from None
+                raise MalformedMessage(f"{topic.name}: {exc}") from None
             message = camera.wire(image, self.flavour)
         else:
             try:
                 model = MODELS[kind].model_validate(msg, context={"flavour": self.flavour})
             except ValidationError as exc:
-                raise HostingError(f"{topic.name} ({kind}): {describe(exc)}") from None
+                raise MalformedMessage(f"{topic.name} ({kind}): {describe(exc)}") from None
             message = model.model_dump(exclude_none=True)
         self._version += 1
         hosting.kept.append((self._version, message))

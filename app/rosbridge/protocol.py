@@ -20,8 +20,9 @@ names in rosapi's answers, and only its spellings accepted in ``advertise`` and 
 rosbridge does not). A failed call gets ``service_response`` with ``result: false`` and the
 reason in ``values``. A request that is well formed but cannot be served gets a ``status`` only
 after the client's ``set_level``, since current rosbridge_suite sends none; a frame that is no
-rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type)
-always gets a ``status`` error, unless the client asked for ``none``. rosapi's services are
+rosbridge message at all (not JSON, no string ``op``, an unknown op, a field of the wrong type,
+a published message that is not of its topic's type) always gets a ``status`` error, unless the
+client asked for ``none``. rosapi's services are
 answered by :class:`app.rosbridge.rosapi.RosGraph`. Besides the robot's own topics, every hub
 carries topics of the types a robot description names between its clients
 (:mod:`app.rosbridge.hosted`).
@@ -50,7 +51,13 @@ from pydantic import (
 from app.protocol import jsonedge
 from app.protocol.errors import describe
 from app.protocol.ros import RosTypes, spellings
-from app.rosbridge.hosted import HostedTopic, HostedTopics, HostingError, Versioned
+from app.rosbridge.hosted import (
+    HostedTopic,
+    HostedTopics,
+    HostingError,
+    MalformedMessage,
+    Versioned,
+)
 from app.rosbridge.rosapi import RosapiError, RosGraph
 
 log = logging.getLogger(__name__)
@@ -446,6 +453,8 @@ class RosbridgeSession:
             # Another robot's topic: checked against its type, then kept for its subscribers.
             try:
                 self._hub.hosted.publish(hosted, msg.msg)
+            except MalformedMessage as exc:  # a field of the wrong shape: always told
+                return self.refuse(Refused(f"publish: {exc}", msg.id))
             except HostingError as exc:
                 raise ProtocolError(str(exc)) from None
             return []

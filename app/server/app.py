@@ -15,6 +15,7 @@ from app.resources import STATIC_DIR
 from app.server.config import Settings
 from app.server.fleet.page import router as fleet_router
 from app.server.headers import SecurityHeaders
+from app.server.hosts import HostGuard, allowed_hosts
 from app.server.metrics import ServerMetrics
 from app.server.origins import OriginGuard
 from app.server.pages import router as pages_router
@@ -81,10 +82,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.metrics = metrics
     # The middleware added last runs first: the security headers go on every HTTP response,
-    # the origin guard's refusals included; a foreign origin reaches no route.
+    # the host and origin guards' refusals included; a foreign host or origin reaches no route.
     app.add_middleware(
         OriginGuard, allowed=settings.allowed_origins, on_refused=lambda: metrics.refused("origin")
     )
+    if settings.secret is None:  # with one, a rebinding page has no token: any name is fine
+        app.add_middleware(
+            HostGuard,
+            allowed=allowed_hosts(settings.host, settings.allowed_hosts),
+            on_refused=lambda: metrics.refused("origin"),
+        )
     app.add_middleware(SecurityHeaders)
     # Validated here so that a bad operations spec stops the server before it serves anything.
     app.state.operations = load_spec(settings.operations_spec)

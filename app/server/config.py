@@ -60,8 +60,20 @@ class Settings(TurnSettings, BaseSettings):
     # ... and these many sockets of each kind are served at once; more are closed with 1013.
     max_connections: int = Field(default=256, ge=1)
     max_rosbridge_sessions: int = Field(default=64, ge=1)
-    # A /ws connection that has not logged in this long after opening is closed (1008).
+    # A connection that has not shown a token this long after opening is closed (1008): a /ws
+    # login, or on /rosbridge (with AUTOPILOT_SECRET) an auth op or the handshake's token.
     login_timeout_s: float = Field(default=10.0, gt=0, allow_inf_nan=False)
+    # Of each route's places, connections that have not shown a token yet hold at most these
+    # many, and these many per client address; a newcomer takes the place of the oldest of
+    # them, so they never keep out a peer that logs in (app/server/websocket.py).
+    max_waiting_connections: int = Field(default=32, ge=1)
+    max_waiting_per_address: int = Field(default=8, ge=1)
+    # An HTTP request whose headers have not all arrived this long after it began is dropped.
+    header_timeout_s: float = Field(default=10.0, gt=0, allow_inf_nan=False)
+    # Without AUTOPILOT_SECRET, requests must name one of these hosts (besides 127.0.0.1,
+    # localhost, [::1] and the address the server binds): a page on another name that a DNS
+    # rebinding points here is refused (app/server/hosts.py).
+    allowed_hosts: list[str] = Field(default_factory=list)
     operations_spec: Path = OPERATIONS_SPEC
     ros: RosFlavour = DEFAULT_FLAVOUR
     robot: SimulatorName = "turtlesim"

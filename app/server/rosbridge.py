@@ -44,7 +44,15 @@ from app.rosbridge.simulated import Camera, SimulatedRobot
 from app.server.access import RosbridgeGate, bearer_claims, bearer_token
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
-from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
+from app.server.websocket import (
+    Outbox,
+    Outboxes,
+    SocketPolicy,
+    client_address,
+    login_deadline,
+    refuse_if_full,
+    serve,
+)
 from app.simulators import SimulatorName, simulation
 
 log = logging.getLogger(__name__)
@@ -172,10 +180,13 @@ class Simulator:
                 del self.rooms[name]
                 log.info("room %r's robot freed: nobody is connected to it", name)
 
-    def open(self) -> tuple[Connection, Outbox]:
-        """A new rosbridge client: its connection (not yet bound to a room) and outbox."""
+    def open(self, address: str = "local", waiting: bool = False) -> tuple[Connection, Outbox]:
+        """A new rosbridge client from ``address``: its connection (not yet bound to a room)
+        and outbox; ``waiting`` while it has shown no token (see
+        :class:`~app.server.websocket.Outboxes`)."""
         connection = Connection()
-        return connection, self.outboxes.open(connection, pull=connection.pull)
+        outbox = self.outboxes.open(connection, address, connection.pull, waiting)
+        return connection, outbox
 
     def bind(self, connection: Connection, room: str) -> RosbridgeSession:
         """Give ``connection`` a session on ``room``'s robot; ``RoomsFull`` if it has none and
@@ -309,7 +320,11 @@ async def rosbridge(websocket: WebSocket) -> None:
     await websocket.accept()
     if await refuse_if_full(websocket, simulator.outboxes, "rosbridge clients"):
         return
-    connection, outbox = simulator.open()
+
+    def authenticated() -> bool:
+        return gate.secret is None or gate.claims is not None
+
+    connection, outbox = simulator.open(client_address(websocket), not authenticated())
 
     def session() -> RosbridgeSession | None:
         """The connection's session, bound on first need to the room its token (or URL)
@@ -350,6 +365,8 @@ async def rosbridge(websocket: WebSocket) -> None:
             closing = decision.close
             if decision.forward is False and closing is None:
                 session()  # an auth op proved a token: bind now, not at the next frame
+        if authenticated():
+            simulator.outboxes.authenticated(connection)
         for reply in replies:
             outbox.send(reply)
         if closing is not None:
@@ -376,7 +393,8 @@ async def rosbridge(websocket: WebSocket) -> None:
     if gate.secret is not None:
         watchdog = asyncio.create_task(end_at_expiry(), name="rosbridge-expiry")
     try:
-        await serve(websocket, outbox, on_text, on_binary, name="rosbridge")
+        deadline = login_deadline(simulator.policy, authenticated, "auth")
+        await serve(websocket, outbox, on_text, on_binary, name="rosbridge", deadline=deadline)
     finally:
         if watchdog is not None:
             watchdog.cancel()

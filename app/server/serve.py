@@ -7,12 +7,14 @@ import asyncio
 import errno
 import logging
 import socket
+import struct
 import threading
 from dataclasses import dataclass
 from typing import Any, Final
 
 import uvicorn
 from pydantic import ValidationError
+from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 from websockets.protocol import State
 
@@ -23,14 +25,12 @@ from app.protocol.ros import DEFAULT_FLAVOUR, ROS_FLAVOURS
 from app.protocol.urls import page_url, reachable_host, ws_endpoint
 from app.server import tls
 from app.server.config import Settings, describe_settings_error
+from app.server.hosts import ANY_ADDRESS
 from app.server.metrics import ServerMetrics
 from app.simulators import SIMULATOR_NAMES
 from app.vision.spec import SpecError
 
 log = logging.getLogger(__name__)
-
-# Bound to these, the server listens on every address of the machine.
-ANY_ADDRESS = ("0.0.0.0", "::")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -61,7 +61,7 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
 
 def settings_from(args: argparse.Namespace) -> Settings:
     """The environment's settings, with what the command line sets over them."""
-    given = {name: getattr(args, name, None) for name in ("ros", "robot")}
+    given = {name: getattr(args, name, None) for name in ("ros", "robot", "host")}
     return Settings(**{name: value for name, value in given.items() if value})
 
 
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         log.error("cannot start: %s", exc)
         return 1
-    host = args.host or settings.host
+    host = settings.host
     port = args.port or settings.port
     # Before any URL is printed: a port already taken fails here in one line, not in uvicorn.
     if port_in_use(host, port):
@@ -179,12 +179,22 @@ class _QuietInvalidUtf8(logging.Filter):
 SEND_BUFFER_BYTES: Final = 16 * 1024
 
 
+# Once either side has begun to close a WebSocket, the peer has this long to answer (or to read
+# what is left) before the TCP connection is aborted. uvicorn's own close waits for its write
+# buffer to drain, which a peer that never reads never lets happen: every socket closed for a
+# flood (1009, 1008, 1013) stayed open for as long as that peer did.
+CLOSE_ABORT_S: Final = 3.0
+
+
 class _SansIOWebSocket(WebSocketsSansIOProtocol):
-    """uvicorn's sans-I/O WebSocket protocol with a bounded send buffer and without one crash: a
-    text frame that is not UTF-8 makes it close with 1007, and a second such frame read in the
-    same chunk made it try to close again ("Fatal error: protocol.data_received() call failed",
-    InvalidState). Frames that arrive once the closing handshake has begun are dropped, as
-    RFC 6455 allows."""
+    """uvicorn's sans-I/O WebSocket protocol with a bounded send buffer, a bounded close and
+    without one crash: a text frame that is not UTF-8 makes it close with 1007, and a second
+    such frame read in the same chunk made it try to close again ("Fatal error:
+    protocol.data_received() call failed", InvalidState). Frames that arrive once the closing
+    handshake has begun are dropped, as RFC 6455 allows. A close the peer does not complete
+    within :data:`CLOSE_ABORT_S` aborts the connection."""
+
+    _abort_timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         """Bound what the connection holds unsent (:data:`SEND_BUFFER_BYTES`)."""
@@ -195,6 +205,34 @@ class _SansIOWebSocket(WebSocketsSansIOProtocol):
             transport.set_write_buffer_limits(high=SEND_BUFFER_BYTES)
         super().connection_made(transport)
 
+    def connection_lost(self, exc: Exception | None) -> None:
+        """The connection is gone: nothing is left to abort."""
+        if self._abort_timer is not None:
+            self._abort_timer.cancel()
+        super().connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        """Read as uvicorn does; a close begun by either side starts the abort timer."""
+        super().data_received(data)
+        self._abort_if_unanswered()
+
+    async def send(self, message: Any) -> None:
+        """Send as uvicorn does; a close (or a refused handshake) starts the abort timer."""
+        await super().send(message)
+        self._abort_if_unanswered()
+
+    def _abort_if_unanswered(self) -> None:
+        closing = self.close_sent or self.conn.state in (State.CLOSING, State.CLOSED)
+        if closing and self._abort_timer is None and self.transport is not None:
+            self._abort_timer = self.loop.call_later(CLOSE_ABORT_S, self._abort)
+
+    def _abort(self) -> None:
+        """Drop the connection, and what the kernel still holds for the peer: a reset."""
+        sock = self.transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        self.transport.abort()
+
     def send_receive_event_to_app(self) -> None:
         """Hand a whole message to the app, unless the connection is already closing."""
         if self.conn.state is not State.OPEN:
@@ -203,13 +241,63 @@ class _SansIOWebSocket(WebSocketsSansIOProtocol):
         super().send_receive_event_to_app()
 
 
+class _HeaderTimeoutHttp(HttpToolsProtocol):
+    """uvicorn's HTTP protocol (httptools) dropping a request whose headers do not all arrive
+    within ``header_timeout_s`` of its start: uvicorn has no such limit, and a peer sending
+    headers a byte at a time held a connection for as long as it liked."""
+
+    header_timeout_s: float = 10.0
+    _header_timer: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        """A connection: its first request's headers are due."""
+        super().connection_made(transport)
+        self._await_headers()
+
+    def on_message_begin(self) -> None:
+        """A request begins (the next on a kept-alive connection): its headers are due."""
+        super().on_message_begin()
+        self._await_headers()
+
+    def on_headers_complete(self) -> None:
+        """Every header arrived in time."""
+        self._stop_header_timer()
+        super().on_headers_complete()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        """The connection is gone: nothing is due."""
+        self._stop_header_timer()
+        super().connection_lost(exc)
+
+    def _await_headers(self) -> None:
+        if self._header_timer is None:
+            self._header_timer = self.loop.call_later(self.header_timeout_s, self._headers_late)
+
+    def _stop_header_timer(self) -> None:
+        if self._header_timer is not None:
+            self._header_timer.cancel()
+            self._header_timer = None
+
+    def _headers_late(self) -> None:
+        self._header_timer = None
+        log.info(
+            "dropping a connection whose request headers took over %g s", self.header_timeout_s
+        )
+        self.transport.abort()
+
+
 def uvicorn_options(settings: Settings, files: tls.TlsFiles | None = None) -> dict[str, Any]:
     """What every uvicorn we start needs: the WebSocket frame size limit from ``settings``
-    (uvicorn refuses a larger frame before buffering it, closing with 1009) and TLS ``files``."""
+    (uvicorn refuses a larger frame before buffering it, closing with 1009), its header
+    timeout, the bounded close (:data:`CLOSE_ABORT_S`) and TLS ``files``."""
     logger = logging.getLogger("uvicorn.error")
     if not any(isinstance(f, _QuietInvalidUtf8) for f in logger.filters):
         logger.addFilter(_QuietInvalidUtf8())
+    http = type(
+        "HeaderTimeoutHttp", (_HeaderTimeoutHttp,), {"header_timeout_s": settings.header_timeout_s}
+    )
     return {
+        "http": http,
         "ws": _SansIOWebSocket,
         "ws_max_size": settings.max_message_bytes,
         "ssl_certfile": None if files is None else str(files.certfile),
@@ -266,6 +354,8 @@ def start_in_thread(
     from app.server.app import create_app
 
     settings = settings or Settings()
+    if settings.host != host:  # the address bound is a name the server answers (hosts.py)
+        settings = settings.model_copy(update={"host": host})
     app = create_app(settings)
     config = uvicorn.Config(
         app,

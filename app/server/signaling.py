@@ -2,8 +2,9 @@
 
 All rules live in the hub; :mod:`app.server.websocket` moves the frames, with the policy it
 shares with ``/rosbridge`` (size limit, bounded outbox, JSON edge). This module adds what is
-particular to signaling: the cap on connections, the login deadline and the clock that ends
-sessions whose token has expired.
+particular to signaling: the cap on connections, when a connection has logged in (its login
+deadline and waiting budget are the shared adapter's) and the clock that ends sessions whose
+token has expired.
 """
 
 from __future__ import annotations
@@ -20,7 +21,15 @@ from fastapi import APIRouter, WebSocket
 from app.protocol.signaling import IceServer, IceTransportPolicy
 from app.server.config import Settings
 from app.server.turn import ice_servers_for
-from app.server.websocket import Outbox, Outboxes, SocketPolicy, refuse_if_full, serve
+from app.server.websocket import (
+    Outbox,
+    Outboxes,
+    SocketPolicy,
+    client_address,
+    login_deadline,
+    refuse_if_full,
+    serve,
+)
 from app.signaling.hub import Action, Census, Close, ConnId, Hub, HubMetrics, Outgoing
 
 log = logging.getLogger(__name__)
@@ -63,7 +72,6 @@ class Switchboard:
     hub: HubPort
     policy: SocketPolicy
     max_connections: int = 256
-    login_timeout_s: float = 10.0
     outboxes: Outboxes[ConnId] = field(init=False)
 
     def __post_init__(self) -> None:
@@ -82,13 +90,13 @@ class Switchboard:
             hub,
             SocketPolicy.from_settings(settings),
             max_connections=settings.max_connections,
-            login_timeout_s=settings.login_timeout_s,
         )
 
-    def open(self) -> tuple[ConnId, Outbox]:
-        """Register a connection with the hub and give it an outbox."""
+    def open(self, address: str) -> tuple[ConnId, Outbox]:
+        """Register a connection from ``address`` with the hub and give it an outbox; it is
+        waiting (see :class:`~app.server.websocket.Outboxes`) until it logs in."""
         conn = self.hub.connect()
-        return conn, self.outboxes.open(conn)
+        return conn, self.outboxes.open(conn, address)
 
     def forget(self, conn: ConnId) -> None:
         """The connection is gone: tell the hub and deliver what that causes."""
@@ -103,11 +111,13 @@ class Switchboard:
             self.dispatch(self.hub.expire())
 
     def dispatch(self, actions: list[Action]) -> None:
-        """Queue each action on its connection's outbox."""
+        """Queue each action on its connection's outbox (a login's answer ends its wait)."""
         for action in actions:
             outbox = self.outboxes.get(action.conn)
             if outbox is None:
                 continue  # closed while this batch was being produced
+            if self.hub.logged_in(action.conn):
+                self.outboxes.authenticated(action.conn)
             match action:
                 case Outgoing(message=message):
                     outbox.send(message)
@@ -122,7 +132,7 @@ async def signaling(websocket: WebSocket) -> None:
     await websocket.accept()
     if await refuse_if_full(websocket, board.outboxes, "connections"):
         return
-    conn, outbox = board.open()
+    conn, outbox = board.open(client_address(websocket))
 
     def on_text(text: str) -> None:
         # The hub applies the same size limit (it is sans-I/O and tested without uvicorn).
@@ -131,11 +141,7 @@ async def signaling(websocket: WebSocket) -> None:
     def on_binary(_data: bytes) -> None:
         board.dispatch(board.hub.receive_binary(conn))
 
-    deadline = (
-        board.login_timeout_s,
-        lambda: board.hub.logged_in(conn),
-        f"no login within {board.login_timeout_s:g} s",
-    )
+    deadline = login_deadline(board.policy, lambda: board.hub.logged_in(conn), "login")
     try:
         await serve(
             websocket, outbox, on_text, on_binary, name=f"signaling-{conn}", deadline=deadline

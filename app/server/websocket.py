@@ -16,8 +16,13 @@ moves frames between a socket and a core, the same way for both:
   accepts (1013 beyond that).
 * **JSON.** Replies are written with :func:`app.protocol.jsonedge.dumps`: never NaN or Infinity.
   Incoming text is parsed by the cores with :func:`app.protocol.jsonedge.loads`.
-* **Deadline.** A connection may be given a deadline (the login on ``/ws``); if the core does not
-  report it met in time the connection is closed with 1008.
+* **Login.** Until a connection has shown a token (a ``/ws`` login, a ``/rosbridge`` auth) it
+  is *waiting*. It has :attr:`SocketPolicy.login_timeout_s` to show one, else it is closed with
+  1008 (the same deadline on both routes). Waiting connections hold at most
+  :attr:`SocketPolicy.max_waiting` of a route's places, and
+  :attr:`SocketPolicy.max_waiting_per_address` per client address: a newcomer beyond either, or
+  at a full route, takes the place of the oldest waiting one (closed with 1013). So sockets
+  without a token can never keep out a peer that has one, nor the newcomer about to log in.
 """
 
 from __future__ import annotations
@@ -51,11 +56,21 @@ class SocketPolicy:
     max_message_bytes: int
     outbox_messages: int
     outbox_bytes: int
+    login_timeout_s: float = 10.0
+    max_waiting: int = 32
+    max_waiting_per_address: int = 8
 
     @classmethod
     def from_settings(cls, settings: Settings) -> SocketPolicy:
         """The limits of ``settings``."""
-        return cls(settings.max_message_bytes, settings.outbox_messages, settings.outbox_bytes)
+        return cls(
+            settings.max_message_bytes,
+            settings.outbox_messages,
+            settings.outbox_bytes,
+            settings.login_timeout_s,
+            settings.max_waiting_connections,
+            settings.max_waiting_per_address,
+        )
 
 
 @dataclass(frozen=True)
@@ -174,11 +189,17 @@ class Outbox:
 K = TypeVar("K", bound=Hashable)
 
 
+# Why a waiting connection loses its place to a newcomer.
+MAKE_WAY = "too many connections waiting to log in"
+
+
 class Outboxes(Generic[K]):
     """The outbox of each open connection of one route, keyed by the core's handle for it.
 
-    At most ``limit`` connections at once, each outbox bounded by ``policy``. ``refused`` is
-    told of each connection refused at the limit (``caps``) and each slow reader closed.
+    At most ``limit`` connections at once, each outbox bounded by ``policy``, and of them at
+    most the policy's budgets *waiting* (not yet shown a token; see the module's docstring).
+    ``refused`` is told of each connection refused at the limit or made to make way for a
+    newcomer (``caps``) and each slow reader closed.
     """
 
     def __init__(self, policy: SocketPolicy, limit: int) -> None:
@@ -186,22 +207,61 @@ class Outboxes(Generic[K]):
         self.limit = limit
         self.refused: Callable[[Refusal], None] | None = None
         self._by_key: dict[K, Outbox] = {}
+        # The waiting connections, oldest first, with their client's address.
+        self._waiting: dict[K, str] = {}
 
     def __len__(self) -> int:
         return len(self._by_key)
 
     @property
-    def full(self) -> bool:
-        """True when no more connections are accepted."""
-        return len(self._by_key) >= self.limit
+    def waiting(self) -> int:
+        """How many connections have not shown a token yet."""
+        return len(self._waiting)
 
-    def open(self, key: K, pull: Pull | None = None) -> Outbox:
-        """A new connection: its outbox (``pull``: see :class:`Outbox`)."""
+    @property
+    def full(self) -> bool:
+        """True when no more connections are accepted: every place is taken, none by a
+        connection that is still waiting (those make way)."""
+        return self._live() >= self.limit and not self._waiting
+
+    def open(self, key: K, address: str, pull: Pull | None = None, waiting: bool = True) -> Outbox:
+        """A new connection from ``address``: its outbox (``pull``: see :class:`Outbox`);
+        ``waiting`` until :meth:`authenticated`. Makes way for it first (see the module)."""
+        if waiting:
+            self._make_way(address)
+        elif self._live() >= self.limit and self._waiting:
+            self._evict(next(iter(self._waiting)))
         outbox = Outbox(
             self.policy.outbox_messages, self.policy.outbox_bytes, self._slow_reader, pull
         )
         self._by_key[key] = outbox
+        if waiting:
+            self._waiting[key] = address
         return outbox
+
+    def authenticated(self, key: K) -> None:
+        """The connection has shown a token: it no longer counts as waiting."""
+        self._waiting.pop(key, None)
+
+    def _make_way(self, address: str) -> None:
+        """Close the oldest waiting connections over a budget, so a newcomer fits."""
+        same = [key for key, where in self._waiting.items() if where == address]
+        if len(same) >= self.policy.max_waiting_per_address:
+            self._evict(same[0])
+        if len(self._waiting) >= self.policy.max_waiting:
+            self._evict(next(iter(self._waiting)))
+        if self._live() >= self.limit and self._waiting:
+            self._evict(next(iter(self._waiting)))
+
+    def _evict(self, key: K) -> None:
+        del self._waiting[key]
+        self._by_key[key].close(CloseCode.TRY_AGAIN_LATER, MAKE_WAY)
+        if self.refused is not None:
+            self.refused("caps")
+
+    def _live(self) -> int:
+        """Connections not yet closing: those closed are on their way out."""
+        return sum(1 for outbox in self._by_key.values() if outbox.shut is None)
 
     def _slow_reader(self) -> None:
         if self.refused is not None:
@@ -210,6 +270,7 @@ class Outboxes(Generic[K]):
     def forget(self, key: K) -> None:
         """The connection is gone: so is its outbox."""
         self._by_key.pop(key, None)
+        self._waiting.pop(key, None)
 
     def get(self, key: K) -> Outbox | None:
         """The connection's outbox; None once it is forgotten."""
@@ -218,6 +279,20 @@ class Outboxes(Generic[K]):
     def items(self) -> ItemsView[K, Outbox]:
         """Each open connection with its outbox."""
         return self._by_key.items()
+
+
+def client_address(websocket: WebSocket) -> str:
+    """The address the connection comes from (its waiting budget is counted per address)."""
+    return websocket.client.host if websocket.client is not None else "unknown"
+
+
+Deadline = tuple[float, Callable[[], bool], str]
+
+
+def login_deadline(policy: SocketPolicy, met: Callable[[], bool], what: str) -> Deadline:
+    """The deadline of :func:`serve` for showing a token (``what``: the route's word for it)."""
+    seconds = policy.login_timeout_s
+    return seconds, met, f"no {what} within {seconds:g} s"
 
 
 async def refuse_if_full(websocket: WebSocket, outboxes: Outboxes[Any], what: str) -> bool:
@@ -242,7 +317,7 @@ async def serve(
     on_binary: Callable[[bytes], None],
     *,
     name: str,
-    deadline: tuple[float, Callable[[], bool], str] | None = None,
+    deadline: Deadline | None = None,
 ) -> None:
     """Pump one accepted socket until it closes or its outbox is closed.
 

@@ -31,8 +31,8 @@ from app.protocol import tokens
 from app.protocol.urls import page_url, reachable_host
 from app.server import tls
 from app.server.config import Settings, describe_settings_error
+from app.server.hosts import ANY_ADDRESS
 from app.server.serve import (
-    ANY_ADDRESS,
     RunningServer,
     add_robot_argument,
     reachable_hosts,

@@ -69,6 +69,11 @@ SAMPLES: list[Sample] = [
     Sample(A, "vehicle", _with(GOAL, boxH=1e9), False, "boxH"),
     Sample(A, "vehicle", _with(GOAL, targetHeightM=0), False, "targetHeightM"),
     Sample(A, "vehicle", _with(GOAL, targetHeightM=1e6), False, "targetHeightM"),
+    # Whether the target is the operator's lock (a boolean; absent: unlocked).
+    Sample(A, "vehicle", _with(GOAL, locked=True), True),
+    Sample(A, "vehicle", _with(GOAL, locked="yes"), False, "locked"),
+    Sample(A, "vehicle", _with(GOAL, locked=1), False, "locked"),
+    Sample(A, "vehicle", _with(GOAL, locked=None), False, "locked"),
     Sample(A, "vehicle", _with(GOAL, w=640.5), False, "w"),
     Sample(A, "vehicle", _with(GOAL, seq=0), False, "seq"),
     Sample(A, "vehicle", _with(GOAL, seq="1"), False, "seq"),

@@ -31,6 +31,13 @@ def test_a_built_message_round_trips_through_the_wire() -> None:
     assert channels.parse(channels.dump(goal), AUTOPILOT_CHANNEL, "vehicle") == goal
 
 
+def test_a_goal_is_locked_only_when_its_relay_says_so() -> None:
+    # An older relay sends no ``locked``: its goals are accepted, unlocked.
+    for extra, locked in (({}, False), ({"locked": False}, False), ({"locked": True}, True)):
+        parsed = channels.validate({**GOAL, **extra}, AUTOPILOT_CHANNEL, "vehicle")
+        assert isinstance(parsed, channels.Goal) and parsed.locked is locked, (extra, parsed)
+
+
 def test_the_same_type_is_refused_on_a_channel_that_does_not_carry_it() -> None:
     refused = channels.parse('{"type": "setOp", "op": "face"}', AUTOPILOT_CHANNEL, "vehicle")
     assert isinstance(refused, channels.Refused)

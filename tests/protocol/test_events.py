@@ -73,8 +73,12 @@ def test_the_lines_the_bench_reads_keep_their_field_names() -> None:
         "h": 480,
         "box_w": None,
         "box_h": None,
+        "locked": False,
         "t": 1.1,
     }
+    # A log from before ``locked`` reads back: its goals were not locked.
+    earlier = {k: v for k, v in ev.record(SAMPLES[1]).items() if k != "locked"}
+    assert ev.from_json(json.dumps(earlier)) == SAMPLES[1]
     twist = ev.record(SAMPLES[5])
     assert twist == {
         "ev": "twist",

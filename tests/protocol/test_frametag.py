@@ -68,3 +68,20 @@ def test_untagged_or_too_small_frames_read_as_none() -> None:
     short = np.zeros((40, 640, 3), np.uint8)
     frametag.stamp(short, 7)
     assert frametag.read(short[:15]) is None
+
+
+def test_a_block_is_white_from_a_mean_of_128_up() -> None:
+    # The contract's threshold, at its edge: every black block's inner half at 127 and every
+    # white one's at 128 (a codec's greys either side of the middle) still read as stamped.
+    rgb = np.zeros((480, 640, 3), np.uint8)
+    frametag.stamp(rgb, 0xA5A5A5)
+    top = rgb[:16]
+    inner = np.zeros(top.shape[:2], bool)
+    inner[4:12] = np.tile(np.r_[np.zeros(4, bool), np.ones(8, bool), np.zeros(4, bool)], 40)
+    white = top[..., 0] == 255
+    top[inner & white] = 128
+    top[inner & ~white] = 127
+    assert frametag.read(rgb) == 0xA5A5A5
+    # One grey level down, the white blocks read black: the marker's first one among them.
+    top[inner & white] = 127
+    assert frametag.read(rgb) is None

@@ -73,6 +73,8 @@ def test_the_protocol_carries_the_frame_tag_lock_and_health_numbers() -> None:
         "reach": 1.0,
         "near": 0.5,
         "clickSearch": 0.6,
+        "lookBins": [16, 16],
+        "minLikeness": 0.9,
     }
     assert protocol["health"] == {"periodS": 1.0, "maxLossPct": 5.0, "maxRttMs": 300.0}
     assert protocol["channels"] == {

@@ -1,7 +1,8 @@
 """Seeded fuzz runs against a server with tokens on (issue 9 item 5, issue 37): frames across
 ``/ws`` and ``/rosbridge``, the agent's data-channel handler and the relay's ``control`` channel
 parser -- valid messages mutated (logins and renewals with tokens, rosbridge ``auth``, drive,
-lock, take-over), random bytes, big numbers, deep nesting, invalid UTF-8, slow readers.
+lock, take-over), random bytes, big numbers, deep nesting, invalid UTF-8, slow readers, and
+sockets that show no token, more than an address's budget of them.
 Afterwards the server has logged no traceback, its memory stayed flat over the second half of
 the run, and a legitimate login, relay and rosbridge session still work.
 
@@ -293,6 +294,23 @@ async def stuck_clients(url: str, count: int, first: str, frame: str) -> None:
             client.close()
 
 
+async def unauthenticated_flood(url: str, count: int) -> None:
+    """Sockets that show no token: opened one after another from this one address and left
+    idle, more than the address's budget of waiting places (the oldest are made to make way)."""
+
+    def flood() -> None:
+        opened = []
+        try:
+            for _ in range(count):
+                with contextlib.suppress(OSError, InvalidStatus):
+                    opened.append(StuckClient(url))
+        finally:
+            for client in opened:
+                client.close()
+
+    await asyncio.to_thread(flood)
+
+
 @dataclass(frozen=True)
 class Run:
     """How many frames of each kind one half of a run sends."""
@@ -301,6 +319,8 @@ class Run:
     rosbridge: int
     channel: int
     control: int
+    # Sockets without a token opened on each of /ws and /rosbridge.
+    flood: int
 
 
 @pytest.fixture
@@ -329,6 +349,8 @@ async def fuzz_half(
         fuzz_endpoint(ros, fuzzer, valid_rosbridge(), run.rosbridge, ros_prelude),
         stuck_clients(ros, 3, json.dumps({"op": "auth", "token": token("client")}), big_services),
         stuck_clients(server.ws_url, 3, ws_prelude(0)[0], '{"type": "getOps", "pad": 1}'),
+        unauthenticated_flood(server.ws_url, run.flood),
+        unauthenticated_flood(ros, run.flood),
         asyncio.to_thread(fuzz_channel, Fuzzer(random.Random(rng.random())), vehicles, run.channel),
         asyncio.to_thread(fuzz_control, Fuzzer(random.Random(rng.random())), run.control),
     )
@@ -399,11 +421,11 @@ async def fuzz_then_everything_still_works(
 async def test_fuzz_with_tokens_then_everything_still_works(
     guarded: RunningServer, server_log: Records
 ) -> None:
-    await fuzz_then_everything_still_works(guarded, server_log, Run(500, 500, 500, 500))
+    await fuzz_then_everything_still_works(guarded, server_log, Run(500, 500, 500, 500, 40))
 
 
 @pytest.mark.slow
 async def test_fuzz_ten_thousand_socket_frames_with_tokens_then_everything_still_works(
     guarded: RunningServer, server_log: Records
 ) -> None:
-    await fuzz_then_everything_still_works(guarded, server_log, Run(2500, 2500, 1250, 1250))
+    await fuzz_then_everything_still_works(guarded, server_log, Run(2500, 2500, 1250, 1250, 200))

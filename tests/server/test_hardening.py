@@ -210,15 +210,12 @@ async def test_a_socket_that_never_logs_in_is_closed_at_the_deadline(
         assert (await recv(prompt))["type"] == "error"  # logged in in time: still open
 
 
-async def test_connections_are_capped_with_a_clear_close(
+async def test_rosbridge_sessions_are_capped_with_a_clear_close(
     start_server: Callable[[Settings], RunningServer],
 ) -> None:
-    server = start_server(
-        Settings(environment="development", token=None, max_connections=3, max_rosbridge_sessions=2)
-    )
-    async with connect(server.ws_url), connect(server.ws_url), connect(server.ws_url):
-        async with connect(server.ws_url) as extra:
-            assert await closed(extra) == (1013, "server full: 3 connections")
+    # Without a secret every rosbridge connection has shown what it needs at once; /ws's cap,
+    # reached once every place is logged in, is in test_waiting.py.
+    server = start_server(Settings(environment="development", max_rosbridge_sessions=2))
     url = rosbridge_url(server)
     async with connect(url), connect(url), connect(url) as extra:
         assert await closed(extra) == (1013, "server full: 2 rosbridge clients")

@@ -209,7 +209,7 @@ async def test_a_slow_reader_is_counted() -> None:
     metrics = ServerMetrics()
     outboxes: Outboxes[str] = Outboxes(SocketPolicy(1024, 2, 1024), 4)
     outboxes.refused = metrics.refused
-    outbox = outboxes.open("peer")
+    outbox = outboxes.open("peer", "127.0.0.1")
     for n in range(3):  # the third does not fit: the peer is closed as a slow reader
         outbox.send({"n": n})
     assert outbox.shut is not None

@@ -13,7 +13,8 @@ import sys
 from fastapi.testclient import TestClient
 from app.server.app import create_app
 from app.server.config import Settings
-with TestClient(create_app(Settings(environment="development"))) as client:
+app = create_app(Settings(environment="development"))
+with TestClient(app, base_url="http://127.0.0.1") as client:
     for path in ("/healthz", "/client?room=r", "/operations.json",
                  "/cascades/haarcascade_frontalface_default.xml", "/fleet", "/fleet/rooms"):
         assert client.get(path).status_code == 200, path

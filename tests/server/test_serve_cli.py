@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import websockets
 
+from tests.test_cli_errors import in_process
+
 
 def _serve(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -37,32 +39,48 @@ def _serve(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
         ({"AUTOPILOT_ROS": "3"}, "AUTOPILOT_ROS: Input should be"),
     ],
 )
-def test_bad_configuration_is_one_line_and_exit_1(env: dict[str, str], words: str) -> None:
-    result = _serve(env)
+def test_bad_configuration_is_one_line_and_exit_1(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+    env: dict[str, str],
+    words: str,
+) -> None:
+    # In this process: a bad setting is refused before anything starts.
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    status, line = in_process(capsys, caplog, "serve", "--port", "1")
+    assert status == 1
+    assert "cannot start" in line and words in line, line
+
+
+def test_a_bad_setting_is_one_line_and_exit_1_from_the_process() -> None:
+    result = _serve({"AUTOPILOT_ENVIRONMENT": "production"})
     assert result.returncode == 1
     assert "Traceback" not in result.stderr
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, result.stderr
-    assert "cannot start" in lines[0] and words in lines[0]
+    assert "cannot start" in lines[0] and "AUTOPILOT_SECRET must be set" in lines[0]
 
 
-def test_broken_operations_spec_names_the_problem(tmp_path: Path) -> None:
+def test_broken_operations_spec_names_the_problem(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     spec = tmp_path / "ops.json"
     spec.write_text("{not json")
-    result = _serve({"AUTOPILOT_OPERATIONS_SPEC": str(spec)})
-    assert result.returncode == 1
-    assert "not valid JSON" in result.stderr
+    monkeypatch.setenv("AUTOPILOT_OPERATIONS_SPEC", str(spec))
+    status, line = in_process(capsys, caplog, "serve", "--port", "1")
+    assert status == 1 and "not valid JSON" in line, line
 
 
-def test_ros_flavour_outside_the_choices_is_refused() -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "app.cli", "serve", "--ros", "4"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert result.returncode == 2
-    assert "'1', '2', 'jazzy'" in result.stderr
+def test_ros_flavour_outside_the_choices_is_refused(
+    capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    status, line = in_process(capsys, caplog, "serve", "--ros", "4")
+    assert status == 2 and "'1', '2', 'jazzy'" in line, line
 
 
 async def test_serve_ros_1_speaks_ros_1_type_names() -> None:

@@ -256,7 +256,7 @@ async def test_login_needs_the_token_when_the_server_has_one(
 
 async def test_a_peer_that_does_not_read_is_closed_instead_of_buffered_without_bound() -> None:
     board = Switchboard(Hub(), SocketPolicy(64 * 1024, outbox_messages=3, outbox_bytes=10**6))
-    conn, outbox = board.open()
+    conn, outbox = board.open("127.0.0.1")
     board.dispatch([Outgoing(conn, {"type": "peers", "n": n}) for n in range(4)])
 
     # What was queued is dropped; what remains is the order to close the slow connection.

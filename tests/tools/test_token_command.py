@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from urllib.parse import parse_qs, urlsplit
 
+import pytest
+
+from app.cli import main
 from app.protocol import tokens
 
 SECRET = "token-command-test-secret"
@@ -27,7 +32,37 @@ def _token(*args: str, secret: str | None = SECRET) -> subprocess.CompletedProce
     )
 
 
+Token = Callable[..., tuple[int, str, str]]
+
+
+@pytest.fixture
+def token(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+) -> Token:
+    """``autopilot token args`` in this process (nothing starts): its status, stdout and what
+    it logged (the parser's refusal on stderr included)."""
+    caplog.set_level(logging.INFO)
+
+    def run(*args: str, secret: str | None = SECRET) -> tuple[int, str, str]:
+        if secret is None:
+            monkeypatch.delenv("AUTOPILOT_SECRET", raising=False)
+        else:
+            monkeypatch.setenv("AUTOPILOT_SECRET", secret)
+        caplog.clear()
+        try:
+            status = main(["token", *args])
+        except SystemExit as exited:
+            status = exited.code if isinstance(exited.code, int) else 1
+        out, err = capsys.readouterr()
+        return status, out, err + caplog.text
+
+    return run
+
+
 def test_output_shape_and_a_token_the_server_accepts() -> None:
+    # The whole process: its last line on stdout is what scripts read.
     result = _token(
         "--room", "lab 1", "--role", "relay", "--ttl", "120", "--server", "https://10.203.0.1:8443/"
     )
@@ -43,24 +78,24 @@ def test_output_shape_and_a_token_the_server_accepts() -> None:
     assert claims.exp <= time.time() + 121
 
 
-def test_no_secret_is_one_line_and_exit_1() -> None:
-    result = _token("--room", "lab", "--role", "client", secret=None)
-    assert result.returncode == 1
-    assert result.stdout == ""
-    assert "AUTOPILOT_SECRET is not set" in result.stderr
-    assert "Traceback" not in result.stderr
+def test_no_secret_is_one_line_and_exit_1(token: Token) -> None:
+    status, out, said = token("--room", "lab", "--role", "client", secret=None)
+    assert status == 1
+    assert out == ""
+    assert "AUTOPILOT_SECRET is not set" in said
+    assert "Traceback" not in said
 
 
-def test_unknown_role_is_refused_by_the_parser() -> None:
-    result = _token("--room", "lab", "--role", "admin")
-    assert result.returncode == 2
-    assert "invalid choice" in result.stderr
+def test_unknown_role_is_refused_by_the_parser(token: Token) -> None:
+    status, _, said = token("--room", "lab", "--role", "admin")
+    assert status == 2
+    assert "invalid choice" in said
 
 
-def test_a_fleet_token_is_for_the_fleet_page_of_every_room_and_nothing_else() -> None:
-    result = _token("--role", "fleet", "--server", "http://10.0.0.5:8000")
-    assert result.returncode == 0, result.stderr
-    last = json.loads(result.stdout.strip().splitlines()[-1])
+def test_a_fleet_token_is_for_the_fleet_page_of_every_room_and_nothing_else(token: Token) -> None:
+    status, out, said = token("--role", "fleet", "--server", "http://10.0.0.5:8000")
+    assert status == 0, said
+    last = json.loads(out.strip().splitlines()[-1])
     assert last["url"] == f"http://10.0.0.5:8000/fleet#token={last['token']}"
     claims = tokens.verify(SECRET, last["token"], now=time.time(), roles=("fleet",))
     assert claims.room == tokens.ALL_ROOMS
@@ -71,7 +106,7 @@ def test_a_fleet_token_is_for_the_fleet_page_of_every_room_and_nothing_else() ->
     except tokens.TokenError as exc:
         refused = exc.reason
     assert refused == "wrong role"
-    both = _token("--role", "fleet", "--room", "lab")
-    assert both.returncode == 1 and "leave out --room" in both.stderr
-    neither = _token("--role", "client")
-    assert neither.returncode == 1 and "--room is required" in neither.stderr
+    status, _, said = token("--role", "fleet", "--room", "lab")
+    assert status == 1 and "leave out --room" in said
+    status, _, said = token("--role", "client")
+    assert status == 1 and "--room is required" in said

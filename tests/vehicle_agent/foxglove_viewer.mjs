@@ -27,7 +27,7 @@ const imageSizes = new Set();
 const annotationPoints = [];
 const parents = {}; // child frame -> parent frame
 const goals = new Map(); // seq -> {x, w}
-const twists = new Map(); // seq -> angular
+const twists = new Map(); // seq -> angular.z
 let serverInfo = null;
 
 const ws = new WebSocket(options.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, 'foxglove.sdk.v1']);
@@ -93,7 +93,8 @@ function inspect(schemaName, topic, message) {
   } else if (topic === options.goalTopic) {
     goals.set(message.seq, { x: message.x, w: message.w });
   } else if (topic === options.twistTopic && message.seq !== null) {
-    twists.set(message.seq, message.angular);
+    // The turn where Foxglove's Plot reads it (geometry_msgs/Twist's `angular.z`).
+    twists.set(message.seq, message.angular.z);
   }
 }
 
@@ -106,7 +107,7 @@ function side(seq) {
 
 // Each Twist that answered a goal well off centre, after goals on that side for a while (the
 // robot's accelerations ramp a turn from the other side): does it turn toward the goal's side
-// (left of centre: counter-clockwise, angular > 0)?
+// (left of centre: counter-clockwise, angular.z > 0)?
 function twistSides() {
   const compared = [];
   for (const [seq, angular] of twists) {

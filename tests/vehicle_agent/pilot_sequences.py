@@ -29,6 +29,10 @@ Step = tuple[str, float, list[Any]]
 RELAY_CLOCK_MS = 5_000_000.0
 
 
+# A stamp ahead of every vehicle's wall clock by far more than the skew the gate allows (the
+# year 2500): the twins judge it against their real clocks alike.
+FAR_FUTURE_MS = 16_725_225_600_000.0
+
 # A face's real height as the operations spec declares it (goals with a box carry it).
 FACE_HEIGHT_M = 0.24
 
@@ -40,10 +44,13 @@ def goal(
     y: float = 120.0,
     late_s: float = 0.0,
     box_h: float | None = None,
+    locked: bool | None = None,
+    stamp_ms: float | None = None,
 ) -> Step:
     """The relay's goal ``seq``, received at ``t``: sent at ``t`` on the relay's clock, or
     ``late_s`` earlier (it waited that much longer on the way), found in frame ``100 + seq``;
-    with a face's box ``box_h`` pixels high when given."""
+    with a face's box ``box_h`` pixels high when given, and ``locked`` when given (an older
+    relay says nothing); ``stamp_ms`` replaces the relay's stamp."""
     message: dict[str, Any] = {
         "type": "goal",
         "seq": seq,
@@ -52,11 +59,13 @@ def goal(
         "y": y,
         "w": 640,
         "h": 480,
-        "t": RELAY_CLOCK_MS + (t - late_s) * 1000,
+        "t": RELAY_CLOCK_MS + (t - late_s) * 1000 if stamp_ms is None else stamp_ms,
         "frame": 100 + seq,
     }
     if box_h is not None:
         message |= {"boxW": box_h * 0.9, "boxH": box_h, "targetHeightM": FACE_HEIGHT_M}
+    if locked is not None:
+        message["locked"] = locked
     return ("goal", t, [message])
 
 
@@ -91,9 +100,10 @@ SEQUENCES: dict[str, list[Step]] = {
         at(CENTRE_POSE, 0.116),
         at(CENTRE_POSE, 0.132),
         at(CENTRE_POSE, 0.2),
-        goal(2, 0.21, x=600.0, y=300.0),
+        goal(2, 0.21, x=600.0, y=300.0, box_h=60.0, locked=True),
         ("tick", 0.25, []),
         at(CENTRE_POSE, 0.3),
+        goal(3, 0.31, locked=False),
     ],
     "old and stale goals are dropped": [
         CENTRE_POSE,
@@ -143,6 +153,14 @@ SEQUENCES: dict[str, list[Step]] = {
         ("drive", 0.35, [1, 0.0, 1.0]),
         ("halt", 0.4, []),
         goal(2, 0.5),
+    ],
+    "goals from the future are refused and hold back no real goal": [
+        CENTRE_POSE,
+        goal(1, 0.1),
+        goal(2**40, 0.12),  # a seq no link can have reached
+        goal(2, 0.15, x=600.0),
+        goal(3, 0.2, stamp_ms=FAR_FUTURE_MS),  # stamped ahead of any vehicle's clock
+        goal(4, 0.25, x=40.0),
     ],
     "a new link starts the goal and drive seq again": [
         CENTRE_POSE,

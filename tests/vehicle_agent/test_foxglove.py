@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import re
 import shutil
 import subprocess
 from collections.abc import Sequence
@@ -201,6 +202,32 @@ def test_the_vehicle_refuses_the_network_with_a_secret_set(tmp_path: Path) -> No
     half = parser.parse_args(["--foxglove", "0", "--foxglove-certfile", str(tmp_path / "c")])
     with pytest.raises(OSError, match="go together"):
         foxglove.start(half, ROBOT, secret_set=False)
+
+
+def test_a_locked_target_is_drawn_in_its_own_colour() -> None:
+    emitted: list[tuple[str, Any]] = []
+    scene = foxglove.Scene(ROBOT, lambda topic, _, m: emitted.append((topic, m)), lambda t: True)
+    box = {"op": "face", "frame": None, "x": 160.0, "y": 120.0, "w": W, "h": H, "box_w": 40.0}
+    for seq, locked in ((1, False), (2, True)):
+        scene.on_event(ev.GoalApplied(seq=seq, **box, box_h=50.0, locked=locked, t=float(seq)))
+    drawn = [m for topic, m in emitted if topic == foxglove.ANNOTATIONS_TOPIC]
+    assert len(drawn) == 2
+
+    # The SDK's messages show their fields only in their text (Rust's Debug form).
+    outline = re.compile(
+        r"(?:outline_color|text_color): Some\(Color \{ r: ([-\d.]+), g: ([-\d.]+), b: ([-\d.]+),"
+        r" a: ([-\d.]+) \}\)"
+    )
+
+    def colours(annotations: Any) -> set[tuple[float, ...]]:
+        """The colours of the box's and the point's outline and of the label's text."""
+        found = outline.findall(repr(annotations))
+        assert len(found) == 3, repr(annotations)  # the point, the box, the label
+        return {tuple(float(c) for c in rgba) for rgba in found}
+
+    assert colours(drawn[0]) == {foxglove.TARGET_COLOUR}
+    assert colours(drawn[1]) == {foxglove.LOCKED_COLOUR} != {foxglove.TARGET_COLOUR}
+    assert 'text: "face #1"' in repr(drawn[0]) and 'text: "face #2 locked"' in repr(drawn[1])
 
 
 def test_a_recording_has_the_same_channels_and_an_outside_reader_validates_them(

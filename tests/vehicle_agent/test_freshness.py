@@ -4,6 +4,15 @@ from __future__ import annotations
 
 import pytest
 
+from app.protocol.channels import (
+    GOAL_AGE_WINDOW_S,
+    GOAL_MAX_AGE_S,
+    GOAL_MAX_CLOCK_SKEW_S,
+    GOAL_SEQ_BURST,
+    GOAL_SEQ_RATE_HZ,
+)
+from tests.vehicle_agent.freshness_sequences import SEQUENCES
+from tests.vehicle_agent.freshness_sequences import WALL_MS as SHARED_WALL_MS
 from vehicle_agent.freshness import FreshnessRule, GoalGate
 
 RULE = FreshnessRule(max_age_s=0.5, window_s=5.0)
@@ -65,3 +74,63 @@ def test_reset_starts_a_new_link_from_any_seq() -> None:
     assert gate.admit(500, _sent_ms(1.0), 1.01) == "fresh"
     gate.reset()
     assert gate.admit(0, _sent_ms(50.0), 50.01) == "fresh"
+
+
+# --- goals from the future ------------------------------------------------------------------
+
+WALL_MS = 1_800_000_000_000.0  # the receiver's wall clock, fixed for these tests
+
+
+def future_gate() -> GoalGate:
+    return GoalGate(RULE, wall_clock=lambda: WALL_MS)
+
+
+def test_a_seq_beyond_the_reach_of_the_link_is_refused_and_changes_nothing() -> None:
+    gate = future_gate()
+    assert gate.admit(1, _sent_ms(0.0), 0.0) == "fresh"
+    # Within 1 s of the last goal applied, a relay can have numbered at most burst + rate goals.
+    reach = RULE.seq_burst + RULE.seq_rate_hz * 1.0
+    assert gate.admit(1 + int(reach) + 1, _sent_ms(1.0), 1.0) == "future"
+    assert gate.admit(2**62, _sent_ms(1.0), 1.0) == "future"
+    assert gate.last_seq == 1
+    # The next real goals apply, and one within the reach too (a gap of lost goals).
+    assert gate.admit(2, _sent_ms(1.05), 1.05) == "fresh"
+    assert gate.admit(1 + int(reach), _sent_ms(2.05), 2.05) == "fresh"
+
+
+def test_a_goal_stamped_ahead_of_this_clock_by_more_than_the_skew_is_refused() -> None:
+    gate = future_gate()
+    skew_ms = RULE.max_skew_s * 1000
+    assert gate.admit(1, WALL_MS - 20, 0.0) == "fresh"
+    assert gate.admit(2, WALL_MS + 3_600_000, 0.05) == "future"  # an hour ahead
+    assert gate.admit(3, WALL_MS + skew_ms + 1, 0.1) == "future"
+    # Refused, neither moved the path's base delay: the next real goals are on time.
+    assert [gate.admit(seq, WALL_MS - 20 + seq * 50, seq * 0.05) for seq in (4, 5, 6)] == [
+        "fresh"
+    ] * 3
+    assert gate.admit(7, WALL_MS + skew_ms - 1, 0.35) == "fresh"  # within the skew: believed
+
+
+def test_the_default_rule_is_the_protocol_s() -> None:
+    assert FreshnessRule() == FreshnessRule(
+        max_age_s=GOAL_MAX_AGE_S,
+        window_s=GOAL_AGE_WINDOW_S,
+        max_skew_s=GOAL_MAX_CLOCK_SKEW_S,
+        seq_rate_hz=GOAL_SEQ_RATE_HZ,
+        seq_burst=GOAL_SEQ_BURST,
+    )
+
+
+@pytest.mark.parametrize("name", SEQUENCES)
+def test_the_shared_sequences_meet_the_rule(name: str) -> None:
+    gate = GoalGate(FreshnessRule(), wall_clock=lambda: SHARED_WALL_MS)
+    verdicts = [(seq, gate.admit(seq, sent, now)) for seq, sent, now in SEQUENCES[name]]
+    future = {seq for seq, verdict in verdicts if verdict == "future"}
+    if name == "from the future":
+        assert future == {2**40, 2**52, 81, 101, 161 + 120}
+        # Every real goal after them still applied.
+        applied = [seq for seq, verdict in verdicts if verdict == "fresh"]
+        assert applied == list(range(1, 201))
+    else:
+        assert future == set()
+        assert {"fresh", "old", "stale"} <= {verdict for _, verdict in verdicts}

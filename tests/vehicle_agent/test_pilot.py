@@ -74,6 +74,14 @@ def test_a_goal_is_recorded_and_steers_the_turtle_toward_it() -> None:
     assert twist.t == applied.t == 0.0  # the time given, not a clock read inside
 
 
+def test_a_goal_is_recorded_locked_only_when_its_relay_says_so() -> None:
+    pilot = Pilot(DEFAULT)
+    for seq, locked in ((1, None), (2, True), (3, False)):
+        message = channels.Goal.model_validate(goal(seq, seq / 10, locked=locked)[2][0])
+        applied = ev.of_kind(pilot.goal(message, seq / 10), ev.GoalApplied)
+        assert [a.locked for a in applied] == [locked is True], seq
+
+
 def test_goals_while_manual_are_dropped_why_manual_and_never_steer() -> None:
     pilot = steering()
     taken = pilot.mode_change("manual", "ann", 0.1)
@@ -99,6 +107,24 @@ def test_old_and_stale_goals_are_dropped_with_their_reason() -> None:
     late = pilot.goal(goal_message(2, 0.2, late_s=0.6), 0.2)
     assert late == [ev.GoalDropped(seq=2, frame=102, why="stale", t=0.2)]
     assert isinstance(pilot.goal(goal_message(3, 0.3, late_s=0.4), 0.3)[0], ev.GoalApplied)
+
+
+def test_goals_from_the_future_are_dropped_and_never_hold_back_the_real_ones() -> None:
+    pilot = steering()
+    far = channels.Goal.model_validate(goal(2**40, 0.1)[2][0])
+    assert pilot.goal(far, 0.1) == [
+        ev.GoalDropped(seq=2**40, frame=100 + 2**40, why="future", t=0.1)
+    ]
+    ahead = goal(2, 0.15, stamp_ms=pilot_sequences.FAR_FUTURE_MS)[2][0]
+    dropped = pilot.goal(channels.Goal.model_validate(ahead), 0.15)
+    assert dropped == [ev.GoalDropped(seq=2, frame=102, why="future", t=0.15)]
+    for seq in (2, 3, 4):
+        assert isinstance(pilot.goal(goal_message(seq, seq * 0.1), seq * 0.1)[0], ev.GoalApplied)
+
+
+def test_a_seq_past_what_a_page_can_count_is_no_goal() -> None:
+    with pytest.raises(ValueError, match="seq"):
+        channels.Goal.model_validate(goal(channels.GOAL_SEQ_MAX + 1, 0.1)[2][0])
 
 
 def test_the_dead_man_stops_within_0_3_s_of_the_last_drive_command() -> None:

@@ -17,6 +17,7 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
+from aiortc.mediastreams import MediaStreamError
 from mcap.reader import make_reader
 
 from app import recording
@@ -157,6 +158,7 @@ def test_a_recording_reads_back_with_its_schemas_counts_times_and_images(
         "h": 480,
         "box_w": None,
         "box_h": None,
+        "locked": False,
         "t": 0.1,
     }
     # Read back typed, every recorded event is the one emitted.
@@ -258,35 +260,59 @@ async def test_the_agents_drive_commands_are_recorded(tmp_path: Path) -> None:
     ]
     assert by_topic[EVENT_CHANNELS[ev.ModeChanged].topic] == [{"mode": "manual", "operator": "ann"}]
     manual = PROFILES["default"].manual_linear
-    assert [(t["linear"], t["angular"]) for t in by_topic[EVENT_CHANNELS[ev.TwistSent].topic]] == [
+    twists = by_topic[EVENT_CHANNELS[ev.TwistSent].topic]
+    assert [(t["linear"]["x"], t["angular"]["z"]) for t in twists] == [
         (0.0, 0.0),  # taking over stops first
         (manual, 0.0),
         (0.0, 0.0),
     ]
 
 
-async def _record_with_goals(settings: RecordSettings, seconds: float) -> FlightRecorder:
-    """Record a synthetic camera while goals arrive, 60 ms late, for every other frame only."""
-    recorder = FlightRecorder(settings)
-    events = EventLog()
-    events.listeners.append(recorder.on_event)
-    loop = asyncio.get_running_loop()
+class _Camera:
+    """A synthetic camera on the recorder's own clock, ``fps`` frames a second for ``seconds``:
+    each frame is handed over at its time, after the goals a relay sent by then, 60 ms after
+    the frames they name (every other frame). Nothing waits on wall time: a loaded machine
+    runs the same sequence of frames and goals."""
 
-    def goal_later(sent: ev.FrameSent) -> None:
-        if sent.frame % 2 == 0:
-            loop.call_later(0.06, lambda: events.emit(_goal(sent.frame, t=sent.t + 0.06)))
+    def __init__(self, fps: float, seconds: float) -> None:
+        self.video = SyntheticVideo(320, 240, fps=fps)
+        self.fps, self.frames = fps, round(seconds * fps)
+        self.now_ns = 0
+        self.index = 0
+        self.recorder: FlightRecorder | None = None
 
-    video = SyntheticVideo(fps=FPS, on_frame=goal_later)
-    camera = asyncio.create_task(recorder.record_video(video))
-    await asyncio.sleep(seconds)
-    camera.cancel()
-    video.stop()
-    await recorder.close()
-    return recorder
+    def clock(self) -> int:
+        return self.now_ns
+
+    def _at_ns(self, seconds: float) -> int:
+        return round(seconds * 1e9)
+
+    async def recv(self) -> Any:
+        if self.index == self.frames:
+            raise MediaStreamError("the camera's clip ended")
+        self.now_ns = self._at_ns(self.index / self.fps)
+        assert self.recorder is not None
+        for named in range(0, self.index, 2):
+            sent_s = named / self.fps
+            arrives_ns = self._at_ns(sent_s + 0.06)
+            if self.now_ns - self._at_ns(1 / self.fps) < arrives_ns <= self.now_ns:
+                self.recorder.on_event(_goal(named, t=sent_s + 0.06))
+        frame = await self.video.make_frame(self.index)
+        self.index += 1
+        return frame
+
+
+async def _record_on_a_clock(folder: Path, fps: float, seconds: float) -> FlightRecorder:
+    camera = _Camera(FPS, seconds)
+    flight = FlightRecorder(RecordSettings(folder, room="lab", fps=fps), clock=camera.clock)
+    camera.recorder = flight
+    await flight.record_video(camera)  # type: ignore[arg-type]
+    await flight.close()
+    return flight
 
 
 def test_the_images_kept_are_the_frames_goals_were_sent_for(tmp_path: Path) -> None:
-    recorder = asyncio.run(_record_with_goals(RecordSettings(tmp_path, room="lab", fps=10), 2.0))
+    recorder = asyncio.run(_record_on_a_clock(tmp_path, fps=10, seconds=2.0))
     _, messages = _read(recorder.files[0])
     goals = {fields["frame"] for topic, _, fields in messages if topic == GOALS}
     tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]
@@ -301,12 +327,12 @@ def test_frames_are_held_only_from_shortly_before_an_image_is_due(tmp_path: Path
     # Two images a second from a 30 fps camera, goals 60 ms late: after the first period (held
     # whole, no goal delay known yet), each period of 15 frames holds those from the goals' delay
     # and a margin before it is due until a goal names one, about 6; not every frame.
-    settings = RecordSettings(tmp_path, room="lab", fps=2)
-    recorder = asyncio.run(_record_with_goals(settings, 3.0))
+    recorder = asyncio.run(_record_on_a_clock(tmp_path, fps=2, seconds=3.0))
     totals = recorder.totals()
-    assert totals.images >= 4, totals
-    # (About 40 % on an idle machine; a loaded one delays the goals, and the lead grows with them.)
-    assert 0 < totals.frames_held <= 0.8 * totals.frames, totals
+    # Two images a second for three seconds; the first period's 15 frames held whole, then a
+    # few before each image is due: well under half of the 90.
+    assert totals.images == 6 and totals.frames == 90, totals
+    assert 15 < totals.frames_held <= 0.4 * totals.frames, totals
     _, messages = _read(recorder.files[0])
     goals = {fields["frame"] for topic, _, fields in messages if topic == GOALS}
     tags = [fields["frame"] for topic, _, fields in messages if topic == IMAGE_TOPIC]

@@ -224,13 +224,14 @@ STOP_IN_FLIGHT = """async () => {
   let pending = loop.frame(frame());
   finish(found);
   const running = await pending;
+  finish = null;
   pending = loop.frame(frame());
-  const busy = loop.busy;
+  const inFlight = finish !== null; // the analyzer has it
   loop.stop();
   finish(found);
   const stopped = await pending;
-  return { running: running && running.goal.seq, busy, stopped, goals: sent.length,
-           emitted: [emitted.goal.length, emitted.detections.length], after: loop.busy };
+  return { running: running && running.goal.seq, inFlight, stopped, goals: sent.length,
+           emitted: [emitted.goal.length, emitted.detections.length] };
 }"""
 
 
@@ -239,8 +240,8 @@ def test_a_snapshot_in_flight_when_the_loop_stops_sends_no_goal(page: Page) -> N
     # The control: the same answer while running is goal 1, sent and told.
     assert got["running"] == 1
     # Stopped mid-analysis: the answer comes back with a target and is dropped whole.
-    assert got["busy"] is True and got["stopped"] is None
-    assert got["goals"] == 1 and got["emitted"] == [1, 1] and got["after"] is False
+    assert got["inFlight"] is True and got["stopped"] is None
+    assert got["goals"] == 1 and got["emitted"] == [1, 1]
 
 
 def test_a_locked_face_that_jumped_is_followed_by_its_look(page: Page) -> None:

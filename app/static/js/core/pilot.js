@@ -62,9 +62,9 @@ export class Pilot {
    * @param profile one of `controlLaw.profiles`; the pilot fits it to `robot`
    * @param robot the robot driven (`config.robot`: its description and whether it is a
    *   turtlesim); every command is held to its limits
-   * @param {{deadmanS: number, tickS: number, freshness: {maxAgeS: number, windowS: number},
-   *   law?: Function}} rules the protocol's numbers (`config.control`,
-   *   `config.protocol.goalFreshness`); `law` replaces the profile's control law
+   * @param {{deadmanS: number, tickS: number, freshness: object, law?: Function}} rules the
+   *   protocol's numbers (`config.control`, `config.protocol.goalFreshness`); `law` replaces the
+   *   profile's control law
    */
   constructor(controlLaw, profile, robot, { deadmanS, tickS, freshness, law = null }) {
     profile = forRobot(profile, robot);
@@ -135,7 +135,20 @@ export class Pilot {
     this.#searchTimedOut = false;
     const searching = this.controller.searchSince;
     const { seq, op, x, y, w, h } = goal;
-    const applied = { ev: 'goal', seq, op, frame, x, y, w, h, t: now };
+    const applied = {
+      ev: 'goal',
+      seq,
+      op,
+      frame,
+      x,
+      y,
+      w,
+      h,
+      box_w: goal.boxW ?? null,
+      box_h: goal.boxH ?? null,
+      locked: goal.locked ?? false,
+      t: now,
+    };
     const target = {
       x,
       y,

@@ -20,7 +20,7 @@ import { RelayStats } from './relay-stats.js';
 /**
  * Events (CustomEvent detail):
  *   `goal`        the goal message ({type: 'goal', seq, op, x, y, w, h, t, frame?, boxW?,
- *                 boxH?, targetHeightM?}) once sent
+ *                 boxH?, targetHeightM?, locked}) once sent
  *   `detections`  the detections message ({type: 'detections', op, boxes, target, w, h, ms,
  *                 goalsPerS, locked: the locked target's box or null, candidates: the last
  *                 full scan's boxes})
@@ -106,6 +106,11 @@ export class SnapshotLoop extends EventTarget {
     this.#robotSearching = robotSearching(search);
   }
 
+  /** Whether a snapshot is being analysed (a frame offered meanwhile waits for it). */
+  get busy() {
+    return this.#busy;
+  }
+
   start() {
     this.running = true;
   }
@@ -185,6 +190,8 @@ export class SnapshotLoop extends EventTarget {
         w: result.w,
         h: result.h,
         t: this.wallClock(),
+        // The target is the operator's lock, not the largest box (the vehicle records it).
+        locked: state === 'locked',
       };
       if (result.frame !== null && result.frame !== undefined) goal.frame = result.frame;
       // The target's box and real height: a camera the vehicle carries reads its range from

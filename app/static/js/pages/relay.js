@@ -10,7 +10,9 @@
 //   the target lock;
 // - view/relay-view.js: what the page shows.
 import { CONFIG, PROTOCOL } from '../config.js';
+import { OneAtATime } from '../core/one-at-a-time.js';
 import { OperatorSeat, Watchers } from '../core/relay-seats.js';
+import { RobotStop } from '../core/robot-stop.js';
 import { SnapshotLoop } from '../core/snapshot-loop.js';
 import { BadMessage } from '../net/peer.js';
 import { RelayLinks } from '../net/relay-links.js';
@@ -70,7 +72,7 @@ const status = {
   },
   /** The last robotStopped message ({by, reason}) while that stop stands, or null. */
   get stopped() {
-    return session.lastStop;
+    return session.stop.standing;
   },
   drivesForwarded: 0,
   get snapshots() {
@@ -116,9 +118,11 @@ const session = {
   loop: null, // the SnapshotLoop, once the analyzer is ready
   operator: new OperatorSeat(),
   watchers: new Watchers(),
-  // The robotStopped message of the last stop, until piloting starts again: a client that
-  // connects meanwhile hears why the robot stands.
-  lastStop: null,
+  // The stop that stands until piloting starts again: a client that connects meanwhile hears
+  // why the robot stands, and more presses meanwhile are no news.
+  stop: new RobotStop(),
+  // A client's lock and unlock clicks reach the analyzer one at a time, the newest waiting.
+  lockRequests: new OneAtATime(),
   links: new RelayLinks({
     room,
     log,
@@ -243,7 +247,7 @@ function setPiloting(on, from) {
   status.piloting = on;
   log.info(`${on ? 'piloting started' : 'piloting stopped'} by ${from}`);
   if (on) {
-    session.lastStop = null;
+    session.stop.clear();
     session.loop?.start();
     frames.start();
   } else {
@@ -267,12 +271,14 @@ function haltPiloting() {
  * (`by`: a client, or null when the relay stopped because nobody watches) and why.
  */
 function stopRobot(by, reason) {
+  const moving = status.piloting || session.operator.holder !== null;
+  const stop = session.stop.press(by, reason, moving);
+  if (stop === null) return; // stands stopped already: nothing to do, nobody to tell again
   log.warn(`robot stopped: ${reason}`);
   status.piloting = false;
   haltPiloting();
   if (session.operator.takeBack() !== null) announceOperator(reason);
-  session.lastStop = { type: 'robotStopped', by, reason };
-  session.links.broadcast(session.lastStop);
+  session.links.broadcast(stop);
   broadcastState();
 }
 
@@ -321,18 +327,25 @@ function forwardDrive(msg, from) {
 
 /** A client clicked frame pixel (x, y): lock on the box there, or release (the worker's lock). */
 function lockAt(msg, from) {
-  if (session.loop === null) throw new BadMessage('operations are still loading; try again');
-  session.loop.lockAt(msg.x, msg.y).then(
-    (locked) => {
-      if (locked)
-        log.info(`locked on the target at (${fmt(msg.x, 0)}, ${fmt(msg.y, 0)}) for ${from}`);
-    },
-    (err) => log.error(`could not lock for ${from}: ${err.message}`),
-  );
+  const loop = session.loop;
+  if (loop === null) throw new BadMessage('operations are still loading; try again');
+  session.lockRequests
+    .run(() => loop.lockAt(msg.x, msg.y))
+    .then(
+      (locked) => {
+        if (locked)
+          log.info(`locked on the target at (${fmt(msg.x, 0)}, ${fmt(msg.y, 0)}) for ${from}`);
+      },
+      (err) => log.error(`could not lock for ${from}: ${err.message}`),
+    );
 }
 
 function unlock(reason) {
-  session.loop?.unlock(reason).catch((err) => log.error(`could not unlock: ${err.message}`));
+  const loop = session.loop;
+  if (loop === null) return;
+  session.lockRequests
+    .run(() => loop.unlock(reason))
+    .catch((err) => log.error(`could not unlock: ${err.message}`));
 }
 
 function onLockChanged(message) {
@@ -399,7 +412,7 @@ session.links.addEventListener('vehicle', ({ detail: name }) => {
 session.links.addEventListener('control', ({ detail: name }) => {
   session.watchers.linkUp(name);
   // Why the robot stands, before the state that shows it standing.
-  if (session.lastStop !== null) session.links.sendTo(name, session.lastStop);
+  if (session.stop.standing !== null) session.links.sendTo(name, session.stop.standing);
   session.links.sendTo(name, stateMessage());
   session.links.sendTo(name, session.operator.modeMessage());
   if (session.loop !== null) session.links.sendTo(name, session.loop.lockMessage());

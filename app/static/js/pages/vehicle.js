@@ -50,7 +50,7 @@ const status = {
   rosTypesFrom: null, // 'robot' (its rosapi named them) or 'setting' (the ros= fallback)
   relayChannelOpen: false,
   // Goals not applied, by why: not newer (old), too late (stale), an operator held the wheel.
-  goalsDropped: { old: 0, stale: 0, manual: 0 },
+  goalsDropped: { old: 0, stale: 0, future: 0, manual: 0 },
   mode: 'auto', // 'manual' while an operator holds the wheel
   operator: null,
   drivesApplied: 0,

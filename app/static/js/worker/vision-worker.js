@@ -374,7 +374,13 @@ async function analyze({
   const query = at === null ? null : session.target.query(at, robotSearching);
   // Locked (lock.js): the target is the centre of the box that continues the locked track, or
   // while the vehicle searches, the box that looks like it.
-  const lookOf = (box) => lookIn(frame, box);
+  // Each box's look once per snapshot (the target is chosen twice: in the window's step and for
+  // the goal).
+  const looks = new Map();
+  const lookOf = (box) => {
+    if (!looks.has(box)) looks.set(box, lookIn(frame, box));
+    return looks.get(box);
+  };
   const choose = session.lock.chooser(query, PROTOCOL.lock, lookOf);
   const { found, scan, fullScan } = detectIn(instance, frame, track, around, choose, query);
   const { boxes, region = null } = found;
