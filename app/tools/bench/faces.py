@@ -3,11 +3,11 @@
 Each photo of the shared face set (``tests/data/faces``) is placed in a 640×480 frame (the rest
 mid-grey) with its face ``SIZES`` pixels tall, upright and tilted by each of ``TILTS`` about the
 face's centre, at a position that moves from photo to photo so faces fall on tile edges too.
-The face's box on the photo is the truth: the largest face the Python reference of ``face_dnn``
-finds on the photo at its own resolution (a large, upright face, which it finds in every photo
-of the set); scaled and moved with the photo, it is the truth on the frame. A detection finds
-the face when its centre is inside the truth's box and its height within a factor of
-``HEIGHT_RATIO`` of the truth's. Face-free frames are the simulated arena's walls (every
+The face's box on the photo is the truth: the face the Python reference of ``face_dnn`` finds
+with the highest score on the photo at its own resolution (a large, upright face, which it finds
+in every photo of the set); scaled and moved with the photo, it is the truth on the frame. A
+detection finds the face when its centre is inside the truth's box and its height within a
+factor of ``HEIGHT_RATIO`` of the truth's. Face-free frames are the simulated arena's walls (every
 billboard but the flame taken away: empty walls, floor and ceiling, and the flame where it is
 in view) from ``FREE_VIEWS`` headings, and ``FLAME_FRAMES`` frames of the agent's synthetic
 flame scene with its face out of view.
@@ -106,10 +106,12 @@ def photos(folder: Path, names: Sequence[str] | None = None) -> list[Photo]:
         if bgr is None:
             raise ValueError(f"cannot read photo {path}")
         rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), np.uint8)
-        boxes = detect(op, np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGBA), np.uint8)).boxes
-        if not boxes:
+        detection = detect(op, np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGBA), np.uint8))
+        if not detection.boxes:
             raise ValueError(f"photo {path.name}: no face to take as the truth")
-        found.append(Photo(path.name, rgb, max(boxes, key=lambda b: b[2] * b[3])))
+        # The surest face, not the largest: a large false box of a busy photo scores low.
+        best = max(range(len(detection.boxes)), key=lambda i: detection.scores[i])
+        found.append(Photo(path.name, rgb, detection.boxes[best]))
     return found
 
 
