@@ -210,21 +210,6 @@ class RecorderTotals(Event):
     seconds: float
 
 
-AnyEvent = (
-    FrameSent
-    | GoalApplied
-    | GoalDropped
-    | ModeChanged
-    | DriveReceived
-    | TwistSent
-    | SearchStarted
-    | SearchEnded
-    | PoseReport
-    | LinkChanged
-    | SpawnStep
-    | RecorderTotals
-)
-KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
 # What a vehicle's pilot makes, in both languages (vehicle_agent/core/pilot.py, core/pilot.js).
 PilotEvent = (
     GoalApplied
@@ -235,6 +220,9 @@ PilotEvent = (
     | SearchStarted
     | SearchEnded
 )
+# Every record of the event log: the pilot's and the agent's own (unions flatten).
+AnyEvent = FrameSent | PilotEvent | PoseReport | LinkChanged | SpawnStep | RecorderTotals
+KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
 
 
 E = TypeVar("E", bound=Event)
