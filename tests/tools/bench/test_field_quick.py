@@ -1,7 +1,9 @@
-"""``autopilot bench --field --quick --seconds 4`` as a user runs it, on two of its conditions
-(about a minute): every figure of those conditions measured, the video rows present,
-the report and plots written. Timings are never asserted against the targets (the report's job);
-the figures must exist and be physically possible. Needs root for the lab's namespaces."""
+"""``autopilot bench --field --quick --condition clean --seconds 1`` as a user runs it: the bench's
+code on seconds of work, not its figures. Every figure of the condition measured, the video rows
+present, the report and plots written; timings are never asserted against the targets (the
+report's job), the figures must exist and be physically possible. The arithmetic behind them
+(figures, glass to glass, stale goals, the outage's two times) is checked in-process on
+hand-made events in test_field.py. Needs root for the lab's namespaces."""
 
 from __future__ import annotations
 
@@ -22,34 +24,32 @@ pytestmark = [
     pytest.mark.bench,
     pytest.mark.slow,
     pytest.mark.browser,
-    pytest.mark.timeout(480),  # over the suite's 300 s: the run itself may take 420
+    pytest.mark.timeout(300),
     # One lane for the shorter benches (scripts/test's workers take each group whole): four
     # benches at once starved the flows beside them; the quick bench runs in a lane of its own.
     pytest.mark.xdist_group("benches"),
     pytest.mark.skipif(os.geteuid() != 0, reason="the field lab builds network namespaces"),
 ]
 
-CONDITIONS = ("clean", "link_drop")
-# Each condition and video variant measured for 4 s instead of --quick's 15 s and 6 + 6 s, at 10
-# frames/s instead of 30: the same code paths and figures, for a third of the time and cores.
-SECONDS = 4
+CONDITION = "clean"
+# The condition and each video variant measured for 1 s instead of --quick's 15 s and 6 + 6 s, at
+# 10 frames/s instead of 30: the same code paths and figures; what is left is the lab's set-up.
+SECONDS = 1
 FPS = 10
 
 
-def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
+def test_quick_field_bench_on_one_condition(tmp_path: Path) -> None:
     out = tmp_path / "report"
     argv = [sys.executable, "-m", "app.cli", "bench", "--field", "--quick", "--json"]
-    argv += ["--seconds", str(SECONDS), "--fps", str(FPS)]
-    for name in CONDITIONS:
-        argv += ["--condition", name]
+    argv += ["--seconds", str(SECONDS), "--fps", str(FPS), "--condition", CONDITION]
     done = subprocess.run(
-        [*argv, "--out", str(out)], capture_output=True, text=True, timeout=420, check=False
+        [*argv, "--out", str(out)], capture_output=True, text=True, timeout=240, check=False
     )
     assert done.returncode == 0, done.stderr[-3000:]
     obj = json.loads(done.stdout.strip().splitlines()[-1])
 
     rows = obj["field"]
-    assert [row["condition"] for row in rows] == list(CONDITIONS)
+    assert [row["condition"] for row in rows] == [CONDITION]
     for row in rows:
         assert set(row) == {f.name for f in dataclasses.fields(FieldRow)}
         assert row["problems"] == {}, row
@@ -65,10 +65,8 @@ def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
         assert 0 < p50 <= p95 < 60_000
         # Latest wins: never a goal older than one already applied (a rule, not a timing).
         assert row["stale_goals_applied"] == 0
-    drop = obj["link_drop"]
-    # The outage lasts 3 s: a stop after it started and before the link came back.
-    assert 0 < drop["stop_after_s"] < 3
-    assert 0 <= drop["resume_after_s"] < 30
+    # No outage in this run: its two figures stay unmeasured rather than made up.
+    assert obj["link_drop"] == {"stop_after_s": None, "resume_after_s": None}
 
     assert obj["window_s"] == SECONDS and obj["fps"] == FPS
 
@@ -82,6 +80,6 @@ def test_quick_field_bench_on_two_conditions(tmp_path: Path) -> None:
         assert row["width"] > 0 and row["kbit_per_s"] > 0
 
     report = (out / "field.md").read_text()
-    assert "| clean |" in report and "| link_drop |" in report and "| cap_300kbit |" in report
+    assert "| clean |" in report and "| cap_300kbit |" in report and "| link_drop |" not in report
     for plot in ("field-latency.png", "field-goals.png"):
         assert (out / plot).stat().st_size > 0
