@@ -47,15 +47,24 @@ def non_negative_number(text: str) -> float:
     return value
 
 
-def positive_integer(text: str) -> int:
-    """A whole number >= 1."""
+def _whole(text: str, least: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, not {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, not {text!r}")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= {least}, not {text!r}")
     return value
+
+
+def positive_integer(text: str) -> int:
+    """A whole number >= 1."""
+    return _whole(text, 1)
+
+
+def non_negative_integer(text: str) -> int:
+    """A whole number >= 0."""
+    return _whole(text, 0)
 
 
 def port(text: str) -> int:

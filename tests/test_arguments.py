@@ -11,6 +11,7 @@ import pytest
 from app.arguments import (
     add_relay_profile,
     add_vehicle_profile,
+    non_negative_integer,
     non_negative_number,
     port,
     positive_integer,
@@ -27,6 +28,7 @@ from app.protocol import control, relay_profiles
         (non_negative_number, "0", 0.0),
         (non_negative_number, "2.5", 2.5),
         (positive_integer, "3", 3),
+        (non_negative_integer, "0", 0),
         (port, "1", 1),
         (port, "65535", 65535),
     ],
@@ -45,6 +47,7 @@ REFUSED: dict[Callable[[str], float], dict[str, str]] = {
     },
     non_negative_number: {"NaN": "finite", "inf": "finite", "-0.1": ">= 0"},
     positive_integer: {"1.5": "whole number", "0": ">= 1"},
+    non_negative_integer: {"two": "whole number", "-1": ">= 0"},
     port: {"0": ">= 1", "65536": "65535", "http": "whole number"},
 }
 

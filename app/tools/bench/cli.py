@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.arguments import positive_integer, positive_number
+from app.arguments import non_negative_integer, positive_integer, positive_number
 from app.protocol.control import PROFILES
 from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
@@ -122,7 +122,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_integer,
         default=2,
         metavar="N",
-        help="with --baseline: this many runs of each forward (2)",
+        help="with --baseline: this many runs of each forward; with --recorder: this many"
+        " alternating rounds of each mode (2)",
     )
     parser.add_argument(
         "--opencv-builds",
@@ -136,6 +137,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help=f"with --opencv-builds: count N frames (default {FULL['frames']:g}, --quick"
         f" {QUICK['frames']:g})",
+    )
+    parser.add_argument(
+        "--warmup",
+        type=non_negative_integer,
+        metavar="N",
+        help="with --opencv-builds: leave the first N frames uncounted while both sides' JIT and"
+        " caches settle (default: the bench's warm-up, see docs/bench/)",
     )
     parser.add_argument(
         "--faces",
@@ -188,6 +196,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.frames is not None and not args.opencv_builds:
         log.error("--frames goes with --opencv-builds")
+        return 2
+    if args.warmup is not None and not args.opencv_builds:
+        log.error("--warmup goes with --opencv-builds")
         return 2
     if args.photos is not None and not args.faces:
         log.error("--photos goes with --faces")
@@ -334,7 +345,7 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     if args.json:
         argv.append("--json")
     if args.recorder:
-        argv.append("--recorder")
+        argv += ["--recorder", "--rounds", str(args.rounds)]
     if args.relay_cost:
         argv.append("--relay-cost")
     if args.baseline:
@@ -345,6 +356,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv += ["--onboard", "--ops", args.ops]
     if args.frames is not None:
         argv += ["--frames", str(args.frames)]
+    if args.warmup is not None:
+        argv += ["--warmup", str(args.warmup)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -429,7 +442,7 @@ async def _recorder(args: argparse.Namespace) -> int:
         async with async_playwright() as playwright:
             browser = await playwright.chromium.launch(**launch_options())
             try:
-                figures = await recording.run(browser, server.url, seconds, args.fps)
+                figures = await recording.run(browser, server.url, seconds, args.fps, args.rounds)
             finally:
                 await browser.close()
     finally:
@@ -507,7 +520,8 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
     from app.tools.bench import jsnative, opencv_builds
 
     counted = args.frames or int((QUICK if args.quick else FULL)["frames"])
-    frames = jsnative.synthetic_frames(counted + jsnative.WARMUP_FRAMES)
+    warmup = jsnative.WARMUP_FRAMES if args.warmup is None else args.warmup
+    frames = jsnative.synthetic_frames(counted + warmup)
     started = datetime.datetime.now(datetime.UTC)
     load_before = os.getloadavg()[0]
     server = start_in_thread()
@@ -515,7 +529,9 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
         async with async_playwright() as playwright:
             browser = await playwright.chromium.launch(**launch_options())
             try:
-                times = await opencv_builds.compare_builds(browser, server.url, frames)
+                times = await opencv_builds.compare_builds(
+                    browser, server.url, frames, warmup=warmup
+                )
                 browser_version = browser.version
             finally:
                 await browser.close()
@@ -714,6 +730,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--photos {args.photos}")
     if args.frames is not None:
         parts.append(f"--frames {args.frames}")
+    if args.warmup is not None:
+        parts.append(f"--warmup {args.warmup}")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

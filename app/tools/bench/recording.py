@@ -1,14 +1,14 @@
 """``autopilot bench --recorder``: what the flight recorder costs the vehicle.
 
-The default-profile stack runs on the same browser and server as it is ("plain") and with the
-agent recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80),
-in ``ROUNDS`` alternating pairs (plain, recording, plain, recording), each run half of the
-seconds asked for: a machine's speed drifts within the hour, and one run after the other would
-put all of the drift into the difference. Per mode: the agent process's cores over the measured
-windows (its CPU time from /proc / the window, averaged over the rounds), and the vehicle's share
-of the latency (goal received → its Twist) and the whole glass-to-command, from the agent's own
-event log. Targets: at most 5 % more agent CPU, and no change in glass-to-command beyond the
-run-to-run noise (the report shows both modes' p50 and p95 side by side, and each round's
+The default-profile stack runs on the same browser and server as it is ("plain") and with the agent
+recording (``--record``, the recorder's defaults: 5 JPEG images a second at quality 80), in
+alternating rounds, ``ROUNDS`` unless asked otherwise (plain, recording, plain, recording), each run
+the seconds asked for over the rounds: a machine's speed drifts within the hour, and one run after
+the other would put all of the drift into the difference. Per mode: the agent process's cores over
+the measured windows (its CPU time from /proc / the window, averaged over the rounds), and the
+vehicle's share of the latency (goal received → its Twist) and the whole glass-to-command, from the
+agent's own event log. Targets: at most 5 % more agent CPU, and no change in glass-to-command beyond
+the run-to-run noise (the report shows both modes' p50 and p95 side by side, and each round's
 increase).
 
 The difference stays as noisy as the machine, so the recording runs also read the recorder's
@@ -47,21 +47,29 @@ class _Mode:
     events: list[Path] = field(default_factory=list)
 
 
-async def run(browser: Browser, server_url: str, seconds: float, fps: float) -> dict[str, Any]:
-    """Both modes' figures, each round's and the overall CPU increase, and reasons for anything
-    not measured."""
-    figures: dict[str, Any] = {"seconds": seconds, "fps": fps, "rounds": [], "problems": {}}
+async def run(
+    browser: Browser, server_url: str, seconds: float, fps: float, rounds: int = ROUNDS
+) -> dict[str, Any]:
+    """Both modes' figures over ``rounds`` alternating rounds (``seconds`` of each mode in all),
+    each round's and the overall CPU increase, and reasons for anything not measured."""
+    figures: dict[str, Any] = {
+        "seconds": seconds,
+        "fps": fps,
+        "round_count": rounds,
+        "rounds": [],
+        "problems": {},
+    }
     modes = {name: _Mode() for name in RUNS}
     with tempfile.TemporaryDirectory(prefix="autopilot-bench-recorder-") as tmp:
         folder = Path(tmp) / "recording"
-        for round_no in range(1, ROUNDS + 1):
+        for round_no in range(1, rounds + 1):
             cores: dict[str, float] = {}
             for name in RUNS:
                 recorded = name == "recording"
                 extra = ("--record", str(folder)) if recorded else ()
                 options = StackOptions(
                     "default",
-                    seconds / ROUNDS,
+                    seconds / rounds,
                     fps=fps,
                     name=f"{name}-{round_no}",
                     agent_args=extra,
@@ -152,7 +160,7 @@ def write_report(out: Path, figures: dict[str, Any]) -> Path:
         "",
         f"Default profile at {figures['fps']:g} fps, the agent without and with `--record` (its "
         f"defaults: 5 JPEG images/s, quality 80), {figures['seconds']:g} s of each in "
-        f"{ROUNDS} alternating rounds.",
+        f"{figures['round_count']} alternating rounds.",
         "",
         "| mode | agent cores | glass → command p50 / p95 (ms) | goal → Twist p50 / p95 (ms) |",
         "|---|---|---|---|",

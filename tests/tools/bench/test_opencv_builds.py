@@ -3,9 +3,13 @@ choice of build and the report (``autopilot bench --opencv-builds``)."""
 
 from __future__ import annotations
 
+import argparse
 from typing import Any
 
+import pytest
+
 from app.protocol.opencv import RELAY_OPENCV_BUILD
+from app.tools.bench import cli
 from app.tools.bench.opencv_builds import (
     FrameTimes,
     OpTimes,
@@ -131,3 +135,15 @@ def test_the_report_shows_each_scan_the_choice_and_what_the_relay_loads() -> Non
     slower = decide(run([op_figures(OpTimes("face", 30, [frame(40.0, 40.0)] * 2))]))
     assert slower["choice"] == "official"
     assert (mismatch in report_text(slower)) == (RELAY_OPENCV_BUILD != "official")
+
+
+def test_warmup_goes_with_the_builds_bench_only(caplog: pytest.LogCaptureFixture) -> None:
+    # --warmup shortens the builds bench's uncounted frames; on another bench it means nothing
+    # and must not start that bench with it ignored.
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--verbose", action="store_true")
+    cli.add_arguments(parser)
+    assert cli.run(parser.parse_args(["--recorder", "--warmup", "0"])) == 2
+    assert "--warmup goes with --opencv-builds" in caplog.text
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--opencv-builds", "--warmup", "-1"])
