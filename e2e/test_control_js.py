@@ -18,7 +18,7 @@ from app.protocol.control import control_config, for_robot
 from app.protocol.page import to_json
 from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
-from vehicle_agent import control
+from vehicle_agent.core import control
 
 pytestmark = [pytest.mark.browser]
 

@@ -12,7 +12,7 @@ from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.server.serve import RunningServer
 from e2e.conftest import OpenRole
 from e2e.helpers import HEIGHT, WIDTH, status, turtle_state, wait_until
-from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.core.control import pixel_to_terrain
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 

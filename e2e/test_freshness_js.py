@@ -11,7 +11,7 @@ from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.freshness_sequences import SEQUENCES, WALL_MS
-from vehicle_agent.freshness import FreshnessRule, GoalGate
+from vehicle_agent.core.freshness import FreshnessRule, GoalGate
 
 pytestmark = [pytest.mark.browser]
 

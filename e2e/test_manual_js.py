@@ -1,5 +1,5 @@
 """The browser vehicle's manual override (manual.js) answers as the Python one does
-(vehicle_agent/manual.py): the same scripted sequences, the same Twists, modes and dead-man
+(vehicle_agent/core/manual.py): the same scripted sequences, the same Twists, modes and dead-man
 times. manual.js gets its numbers as the vehicle page does, from ``config.control``."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
 from tests.vehicle_agent.manual_sequences import SEQUENCES, run
-from vehicle_agent.control import PROFILES
+from vehicle_agent.core.control import PROFILES
 
 pytestmark = [pytest.mark.browser]
 

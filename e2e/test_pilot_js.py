@@ -1,8 +1,8 @@
 """The browser vehicle's pilot (app/static/js/core/pilot.js) answers as the agent's does
-(vehicle_agent/pilot.py): the shared sequences of tests/vehicle_agent/pilot_sequences.py give the
-same event records (the agent's event-log lines, field for field), the same wake-ups and modes.
-pilot.js is built as the vehicle page builds it, from the numbers its config carries; the rules
-themselves are stated in tests/vehicle_agent/test_pilot.py, and one of them again here."""
+(vehicle_agent/core/pilot.py): the shared sequences of tests/vehicle_agent/pilot_sequences.py
+give the same event records (the agent's event-log lines, field for field), the same wake-ups and
+modes. pilot.js is built as the vehicle page builds it, from the numbers its config carries; the
+rules themselves are stated in tests/vehicle_agent/test_pilot.py, and one of them again here."""
 
 from __future__ import annotations
 

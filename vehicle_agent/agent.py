@@ -3,8 +3,9 @@
 One :class:`Agent` runs until cancelled. Its :class:`~vehicle_agent.session.SignalingSession`
 logs in, finds the relay and keeps the link to it (reconnecting, renewing the token); what the
 relay says on that link, the robot's poses and the clock go to the
-:class:`~vehicle_agent.pilot.Pilot`, which decides; the agent acts on its answers (publishes its
-Twists, logs its records) and sends the relay the robot's pose and the camera's capture times.
+:class:`~vehicle_agent.core.pilot.Pilot`, which decides; the agent acts on its answers
+(publishes its Twists, logs its records) and sends the relay the robot's pose and the camera's
+capture times.
 """
 
 from __future__ import annotations
@@ -28,11 +29,11 @@ from app.protocol.control import with_standoff
 from app.protocol.events import PilotEvent
 from app.protocol.robot import TURTLESIM, Robot
 from app.protocol.rooms import DEFAULT_ROOM
-from vehicle_agent.capture_times import CaptureTimes
-from vehicle_agent.control import PROFILES, SPAWN_THETA, Pose
+from vehicle_agent.core.capture_times import CaptureTimes
+from vehicle_agent.core.control import PROFILES, SPAWN_THETA, Pose
+from vehicle_agent.core.pilot import Pilot
 from vehicle_agent.events import EventLog
 from vehicle_agent.peer import RelayLink
-from vehicle_agent.pilot import Pilot
 from vehicle_agent.robotlink import RobotLink, RobotLinkError
 from vehicle_agent.session import SignalingSession
 

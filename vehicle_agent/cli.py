@@ -28,7 +28,7 @@ from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.supervise import on_stop_signals
 from vehicle_agent import foxglove, recorder
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.control import PROFILES
+from vehicle_agent.core.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.metrics import serve_agent_metrics
 from vehicle_agent.robotlink import RobotLink, RobotLinkError, RosbridgeLink, SimLink

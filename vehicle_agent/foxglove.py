@@ -61,7 +61,7 @@ from app import recording
 from app.arguments import port
 from app.protocol import events as ev
 from app.protocol.robot import Robot
-from vehicle_agent.frame_times import FrameTimes
+from vehicle_agent.core.frame_times import FrameTimes
 from vehicle_agent.recorder import ExtraChannel, FlightRecorder, encode_jpeg, frame_tag
 
 log = logging.getLogger(__name__)

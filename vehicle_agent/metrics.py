@@ -6,7 +6,7 @@ knows nothing of it. The goal age is the time since the previous goal applied on
 i.e. how old the goal the turtle was steering by had become when a newer one replaced it (the
 ``goalAgeMs`` the agent reports in its pose telemetry, observed at each goal). It is not the
 relay-to-vehicle delay: the goal message's own ``t`` is the relay's clock, which this machine's
-need not match (see :mod:`vehicle_agent.freshness`).
+need not match (see :mod:`vehicle_agent.core.freshness`).
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from typing import Any, Final, Protocol
 from app.protocol.robot import TURTLESIM, Robot, RobotTypes, detect, pose_of, velocity_message
 from app.protocol.ros import AUTO, ROS_SETTINGS, RosSetting
 from app.turtlesim.sim import TurtleSim
-from vehicle_agent.control import Pose
+from vehicle_agent.core.control import Pose
 from vehicle_agent.rosbridge_client import (
     CallFailed,
     Publication,

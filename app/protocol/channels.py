@@ -12,7 +12,7 @@ arrive. ``autopilot-state`` is unordered and never retransmits: goals (relay -> 
 frame capture times (vehicle -> relay) are state, only the newest matters, and a lost one is
 better skipped than waited for (no head-of-line blocking on a lossy link). The vehicle applies a
 goal only if its ``seq`` is newer than every goal applied on this link and it is not stale
-(``vehicle_agent/freshness.py``, ``app/static/js/core/freshness.js``). The client's ``control``
+(``vehicle_agent/core/freshness.py``, ``app/static/js/core/freshness.js``). The client's ``control``
 channel is reliable.
 """
 

@@ -1,7 +1,7 @@
 """The control law's numbers: terrain geometry and the vehicle profiles.
 
 Written once here and read by both vehicles: the Python agent's law
-(:mod:`vehicle_agent.control`) imports them, and the browser vehicle page's ``control.js``
+(:mod:`vehicle_agent.core.control`) imports them, and the browser vehicle page's ``control.js``
 receives them through its embedded config (:func:`control_config`), so neither re-types a gain,
 a distance or a profile name.
 """

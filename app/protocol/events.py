@@ -5,7 +5,7 @@ recording process's clock, given by whoever made the event (the agent's ``time.m
 comparable across processes of one machine; the vehicle page's ``performance.now() / 1000``).
 The pilot's kinds (:data:`PilotEvent`: goal, goal_dropped, mode, drive, twist, search,
 search_ended) are made by the
-pilot core of each vehicle (``vehicle_agent/pilot.py`` and its twin
+pilot core of each vehicle (``vehicle_agent/core/pilot.py`` and its twin
 ``app/static/js/core/pilot.js``), so both vehicles record the same records.
 
 Who reads them: the agent's JSON-lines log (``vehicle_agent/events.py``), its flight recorder and
@@ -225,7 +225,7 @@ AnyEvent = (
     | RecorderTotals
 )
 KINDS: dict[str, type[Event]] = {cls.kind: cls for cls in get_args(AnyEvent)}
-# What a vehicle's pilot makes, in both languages (vehicle_agent/pilot.py, core/pilot.js).
+# What a vehicle's pilot makes, in both languages (vehicle_agent/core/pilot.py, core/pilot.js).
 PilotEvent = (
     GoalApplied
     | GoalDropped

@@ -142,7 +142,7 @@ class _OperationBase(_Model, Generic[P]):
     module: str = Field(pattern=r"^[a-z][a-z0-9_]*\.js$")
     # The real height (m) of what the operation's box spans (a face's box, a flame): a vehicle
     # that carries its camera reads the target's range from its box's apparent height
-    # (vehicle_agent/control.py, the onboard law). Goals carry it with the box.
+    # (vehicle_agent/core/control.py, the onboard law). Goals carry it with the box.
     target_height_m: float = Field(gt=0.0, le=MAX_TARGET_HEIGHT_M, allow_inf_nan=False, strict=True)
     params: P
     # Parameter overrides for the relay's thesis profile (full resolution, tutorial values).

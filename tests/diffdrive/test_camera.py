@@ -37,7 +37,7 @@ from app.protocol.robot import PRESETS
 from app.resources import OPERATIONS_SPEC
 from app.vision import reference
 from app.vision.spec import load_spec
-from vehicle_agent.control import pixel_bearing
+from vehicle_agent.core.control import pixel_bearing
 
 CAMERA = Pinhole()  # 640x480, 60° across
 ROBOT = RobotState(2.0, 3.0, 0.0, 0.0, 0.0)  # facing east, the arena's long way

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from app.protocol.events import AnyEvent, TwistSent
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.control import Pose
+from vehicle_agent.core.control import Pose
 from vehicle_agent.events import EventLog
 from vehicle_agent.robotlink import SimLink
 from vehicle_agent.video import FixedPath, SyntheticVideo

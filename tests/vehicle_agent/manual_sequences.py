@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 from app.protocol.control import DEADMAN_S
-from vehicle_agent.control import Profile
-from vehicle_agent.manual import ManualDrive
+from vehicle_agent.core.control import Profile
+from vehicle_agent.core.manual import ManualDrive
 
 # (kind, t, args): "mode" (mode, operator), "drive" (seq, linear, angular), "tick" ().
 Event = tuple[str, float, list[Any]]

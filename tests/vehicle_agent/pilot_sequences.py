@@ -20,8 +20,8 @@ from app.protocol import channels
 from app.protocol import events as ev
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS
-from vehicle_agent.control import Pose
-from vehicle_agent.pilot import Pilot
+from vehicle_agent.core.control import Pose
+from vehicle_agent.core.pilot import Pilot
 
 Step = tuple[str, float, list[Any]]
 

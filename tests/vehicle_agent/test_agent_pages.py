@@ -34,7 +34,7 @@ from app.relay.service import RelayService
 from app.server.serve import RunningServer
 from tests.helpers.waiting import eventually
 from vehicle_agent.agent import Agent, AgentConfig
-from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.core.control import pixel_to_terrain
 from vehicle_agent.events import EventLog
 from vehicle_agent.robotlink import SimLink
 from vehicle_agent.signaling import LoginRefused

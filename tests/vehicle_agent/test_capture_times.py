@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from app.protocol import channels
 from app.protocol.channels import AUTOPILOT_STATE_CHANNEL, FrameTimes
-from vehicle_agent.capture_times import CaptureTimes
+from vehicle_agent.core.capture_times import CaptureTimes
 
 
 def feed(times: CaptureTimes, frames: range, fps: float = 30.0) -> list[FrameTimes]:

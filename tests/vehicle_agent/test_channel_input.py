@@ -10,7 +10,7 @@ import pytest
 
 from app.protocol.events import GoalApplied
 from tests.helpers.agent import H, Vehicle, W
-from vehicle_agent.control import PROFILES, Controller, Goal, Pose, angular_command
+from vehicle_agent.core.control import PROFILES, Controller, Goal, Pose, angular_command
 
 
 @pytest.fixture(scope="module", params=sorted(PROFILES))

@@ -11,7 +11,7 @@ from app.protocol.control import for_robot, with_standoff
 from app.protocol.robot import PRESETS
 from app.turtlesim.sim import Pose as SimPose
 from app.turtlesim.sim import TurtleSim
-from vehicle_agent.control import (
+from vehicle_agent.core.control import (
     PROFILES,
     TERRAIN_CENTRE,
     Controller,

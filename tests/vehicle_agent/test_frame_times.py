@@ -1,8 +1,9 @@
-"""The pilot remembers when its camera took its recent frames (vehicle_agent/frame_times.py)."""
+"""The pilot remembers when its camera took its recent frames
+(vehicle_agent/core/frame_times.py)."""
 
 from __future__ import annotations
 
-from vehicle_agent.frame_times import FrameTimes
+from vehicle_agent.core.frame_times import FrameTimes
 
 
 def test_a_frames_capture_time_is_kept_for_the_last_120_frames() -> None:

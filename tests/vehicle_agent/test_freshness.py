@@ -13,7 +13,7 @@ from app.protocol.channels import (
 )
 from tests.vehicle_agent.freshness_sequences import SEQUENCES
 from tests.vehicle_agent.freshness_sequences import WALL_MS as SHARED_WALL_MS
-from vehicle_agent.freshness import FreshnessRule, GoalGate
+from vehicle_agent.core.freshness import FreshnessRule, GoalGate
 
 RULE = FreshnessRule(max_age_s=0.5, window_s=5.0)
 CLOCK_SKEW_S = 1234.5  # the sender's clock is this far behind the vehicle's

@@ -1,4 +1,4 @@
-"""The robot's limits (vehicle_agent/limits.py, inside the pilot): every command clamped to the
+"""The robot's limits (vehicle_agent/core/limits.py, inside the pilot): every command clamped to the
 top speeds and ramped within the accelerations, a stop at once. Stated with the TurtleBot3
 Burger's numbers: 0.22 m/s, 2.84 rad/s, 2.5 m/s², 3.2 rad/s²."""
 
@@ -14,9 +14,9 @@ from app.protocol import events as ev
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS, Limits
 from tests.vehicle_agent.pilot_sequences import goal
-from vehicle_agent.control import Pose, Twist
-from vehicle_agent.limits import Limiter
-from vehicle_agent.pilot import Pilot
+from vehicle_agent.core.control import Pose, Twist
+from vehicle_agent.core.limits import Limiter
+from vehicle_agent.core.pilot import Pilot
 
 BURGER = PRESETS["turtlebot3"]
 TICK_S = 0.05

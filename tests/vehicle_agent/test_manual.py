@@ -1,6 +1,6 @@
 """The manual override at the vehicle: the mode, drive commands and the dead-man, with the time
-given by the test (vehicle_agent/manual.py), and the agent's handling of the relay's ``mode`` and
-``drive``."""
+given by the test (vehicle_agent/core/manual.py), and the agent's handling of the relay's
+``mode`` and ``drive``."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from app.protocol.control import DEADMAN_S
 from app.protocol.events import GoalDropped
 from tests.helpers.agent import Vehicle
-from vehicle_agent.control import PROFILES, ZERO_TWIST, Twist
-from vehicle_agent.manual import ManualDrive
+from vehicle_agent.core.control import PROFILES, ZERO_TWIST, Twist
+from vehicle_agent.core.manual import ManualDrive
 
 from .manual_sequences import SEQUENCES, run
 

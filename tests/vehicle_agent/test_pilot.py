@@ -1,4 +1,4 @@
-"""The vehicle's pilot (vehicle_agent/pilot.py): its rules, stated with their numbers, and the
+"""The vehicle's pilot (vehicle_agent/core/pilot.py): its rules, stated with their numbers, and the
 shared sequences that pilot.js must answer alike (e2e/test_pilot_js.py)."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS, TURTLESIM
 from tests.vehicle_agent import pilot_sequences
 from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal
-from vehicle_agent.control import Goal, Pose, Profile, pixel_bearing, target_range
-from vehicle_agent.pilot import Pilot
+from vehicle_agent.core.control import Goal, Pose, Profile, pixel_bearing, target_range
+from vehicle_agent.core.pilot import Pilot
 
 DEFAULT = PROFILES["default"]
 CENTRE = Pose(TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0)

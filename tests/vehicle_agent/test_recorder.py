@@ -27,7 +27,7 @@ from app.recording import EVENT_CHANNELS, IMAGE_SCHEMA, IMAGE_TOPIC
 from tests.helpers.agent import Vehicle
 from vehicle_agent import cli as agent_cli
 from vehicle_agent import recorder
-from vehicle_agent.control import PROFILES
+from vehicle_agent.core.control import PROFILES
 from vehicle_agent.events import EventLog
 from vehicle_agent.recorder import FlightRecorder, RecordSettings
 from vehicle_agent.video import SyntheticVideo

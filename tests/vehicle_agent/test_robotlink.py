@@ -13,7 +13,7 @@ from app.protocol.ros import RosFlavour
 from app.server.config import Settings
 from app.server.serve import RunningServer
 from tests.helpers.sockets import rosbridge_url
-from vehicle_agent.control import Pose
+from vehicle_agent.core.control import Pose
 from vehicle_agent.robotlink import RobotLink, RobotLinkError, RosbridgeLink, SimLink
 from vehicle_agent.rosbridge_client import RosbridgeClient
 

@@ -40,7 +40,7 @@ from app.tools.bench.stats import (
     heading_error_deg_median,
     heading_track,
 )
-from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.core.control import pixel_to_terrain
 
 log = logging.getLogger(__name__)
 

@@ -38,7 +38,7 @@ from app.tools.bench.stats import (
     heading_track,
     standoff_errors,
 )
-from vehicle_agent.control import pixel_to_terrain
+from vehicle_agent.core.control import pixel_to_terrain
 
 log = logging.getLogger(__name__)
 

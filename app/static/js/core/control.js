@@ -1,5 +1,5 @@
 // The control laws and the controller that paces them (docs/architecture.md, "Vehicle control"):
-// a port of vehicle_agent/control.py so the browser vehicle and the Python agent behave alike,
+// a port of vehicle_agent/core/control.py so the browser vehicle and the Python agent behave alike,
 // checked against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js)
 // drives it. Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not
 // written here: they come from app/protocol/control.py through the page's embedded config
@@ -187,7 +187,7 @@ export class ControlLaw {
 
   /**
    * The control law `profile.law` names, as a function (goal, pose, profile) -> {linear,
-   * angular}: the laws of vehicle_agent/control.py's LAWS. A new law is a method here, an
+   * angular}: the laws of vehicle_agent/core/control.py's LAWS. A new law is a method here, an
    * entry below and its Python twin.
    */
   lawOf(profile) {

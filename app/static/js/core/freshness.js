@@ -1,4 +1,4 @@
-// Latest-wins for goals on the lossy channel: the same rule as vehicle_agent/freshness.py.
+// Latest-wins for goals on the lossy channel: the same rule as vehicle_agent/core/freshness.py.
 // A goal is applied when its seq is newer than every goal applied before and it is not stale.
 // Stale, without synchronised clocks: offset = receive time - goal.t; the smallest offset over
 // the last `windowS` stands for the path's base delay; a goal more than `maxAgeS` above that

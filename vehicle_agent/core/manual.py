@@ -2,7 +2,7 @@
 
 The rules are those of docs/architecture.md, "Who holds the wheel".
 
-Sans-I/O, like :mod:`vehicle_agent.control`: a :class:`ManualDrive` is told the mode the relay
+Sans-I/O, like :mod:`vehicle_agent.core.control`: a :class:`ManualDrive` is told the mode the relay
 set, each drive command and the clock (the time given with each), and answers with the
 :class:`Twist` to publish, if any. While manual, goals are the caller's to ignore
 (:attr:`ManualDrive.manual`; the pilot drops them) and only drive commands move the turtle,
@@ -15,7 +15,7 @@ against it (tests/vehicle_agent/manual_sequences.py, e2e/test_manual_js.py).
 from __future__ import annotations
 
 from app.protocol.channels import Mode
-from vehicle_agent.control import ZERO_TWIST, Profile, Twist
+from vehicle_agent.core.control import ZERO_TWIST, Profile, Twist
 
 
 def _unit(value: float) -> float:

@@ -4,12 +4,12 @@ A :class:`Pilot` is fed goals, stop commands, mode changes, drive commands, pose
 and clock ticks, each with the time it happened (seconds, the vehicle's monotonic clock), and
 answers with the event records of what it did (:mod:`app.protocol.events`), in order; each
 :class:`~app.protocol.events.TwistSent` among them is a Twist to publish now. It composes the
-twins: the manual gate (:class:`~vehicle_agent.manual.ManualDrive`: while an operator holds the
+twins: the manual gate (:class:`~vehicle_agent.core.manual.ManualDrive`: while an operator holds the
 wheel, goals are dropped with ``why="manual"`` and drive commands steer, until the dead-man),
-then the freshness gate (:class:`~vehicle_agent.freshness.GoalGate`: latest wins, stale goals
-dropped), then the controller (:class:`~vehicle_agent.control.Controller`, with the control law
+then the freshness gate (:class:`~vehicle_agent.core.freshness.GoalGate`: latest wins, stale goals
+dropped), then the controller (:class:`~vehicle_agent.core.control.Controller`, with the control law
 its profile names); every Twist, the operator's too, then passes the robot's limiter
-(:class:`~vehicle_agent.limits.Limiter`: clamped to its top speeds, ramped within its
+(:class:`~vehicle_agent.core.limits.Limiter`: clamped to its top speeds, ramped within its
 accelerations, a stop at once). A lost link, a mode change and a stop command halt the turtle.
 The searching profiles record when a search for a lost target starts
 (:class:`~app.protocol.events.SearchStarted`, and which way it turns) and how it ends
@@ -42,11 +42,11 @@ from app.protocol.events import (
     TwistSent,
 )
 from app.protocol.robot import TURTLESIM, Robot
-from vehicle_agent.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
-from vehicle_agent.frame_times import FrameTimes
-from vehicle_agent.freshness import FreshnessRule, GoalGate
-from vehicle_agent.limits import Limiter
-from vehicle_agent.manual import ManualDrive
+from vehicle_agent.core.control import ControlLaw, Controller, Goal, Pose, Profile, Twist
+from vehicle_agent.core.frame_times import FrameTimes
+from vehicle_agent.core.freshness import FreshnessRule, GoalGate
+from vehicle_agent.core.limits import Limiter
+from vehicle_agent.core.manual import ManualDrive
 
 
 class Pilot:

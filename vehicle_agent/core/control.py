@@ -2,7 +2,7 @@
 
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks, each with the time, and
 answers with the :class:`Twist` to publish, if any; the vehicle's pilot
-(:mod:`vehicle_agent.pilot`) drives it. The law it applies is the one its profile names
+(:mod:`vehicle_agent.core.pilot`) drives it. The law it applies is the one its profile names
 (:data:`LAWS`). The browser vehicle page's ``control.js`` is a port of this module, checked
 against it on a grid (``e2e/test_control_js.py``); the numbers both use live in
 :mod:`app.protocol.control`.

@@ -2,7 +2,7 @@
 
 A goal names the frame the relay found its target in; a camera the vehicle carries had the
 heading of that moment, so the onboard law takes the goal's bearing from the heading then. The
-pilot (:meth:`vehicle_agent.pilot.Pilot.frame`) keeps one of these, fed with the video source's
+pilot (:meth:`vehicle_agent.core.pilot.Pilot.frame`) keeps one of these, fed with the video source's
 :class:`~app.protocol.events.FrameSent` times on its own clock. The browser's twin is
 ``app/static/js/core/frame-times.js``; both run the pilot's shared sequences
 (tests/vehicle_agent/pilot_sequences.py), and tests/vehicle_agent/test_frame_times.py states

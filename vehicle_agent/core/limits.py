@@ -3,7 +3,7 @@ accelerations (the robot description's :class:`~app.protocol.robot.Limits`).
 
 Sans-I/O, like the rest of the pilot: a :class:`Limiter` is given each command with the time
 (seconds, the pilot's clock) and answers with the Twist to publish now, and on the clock with
-the next step of a ramp still under way. The pilot (:mod:`vehicle_agent.pilot`) passes every
+the next step of a ramp still under way. The pilot (:mod:`vehicle_agent.core.pilot`) passes every
 Twist it publishes through it, autopilot and operator alike. The browser's twin is
 ``app/static/js/core/limits.js``; both run the pilot's shared sequences
 (tests/vehicle_agent/pilot_sequences.py), and tests/vehicle_agent/test_limits.py states the rules.
@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 
 from app.protocol.robot import Limits
-from vehicle_agent.control import Twist
+from vehicle_agent.core.control import Twist
 
 
 def is_stop(twist: Twist) -> bool:
