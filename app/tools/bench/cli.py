@@ -135,8 +135,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--frames",
         type=positive_integer,
         metavar="N",
-        help=f"with --opencv-builds: count N frames (default {FULL['frames']:g}, --quick"
-        f" {QUICK['frames']:g})",
+        help="time OpenCV.js against Python (--opencv-builds: each build) on N frames after the"
+        f" warm-up (--opencv-builds: default {FULL['frames']:g}, --quick {QUICK['frames']:g};"
+        " the stack's bench: 3 fewer)",
+    )
+    parser.add_argument(
+        "--presses",
+        type=positive_integer,
+        metavar="N",
+        help="the stack's bench: press the operator's arrow key N times, instead of the default"
+        " count, to measure the manual override",
     )
     parser.add_argument(
         "--warmup",
@@ -194,8 +202,12 @@ def run(args: argparse.Namespace) -> int:
     if args.baseline and not args.relay_cost:
         log.error("--baseline goes with --relay-cost")
         return 2
-    if args.frames is not None and not args.opencv_builds:
-        log.error("--frames goes with --opencv-builds")
+    others = (args.field, args.fleet, args.recorder, args.foxglove, args.relay_cost, args.faces)
+    if args.frames is not None and any((*others, args.camera, args.onboard)):
+        log.error("--frames goes with --opencv-builds or the stack's own bench")
+        return 2
+    if args.presses is not None and any((*others, args.camera, args.onboard, args.opencv_builds)):
+        log.error("--presses goes with the stack's own bench")
         return 2
     if args.warmup is not None and not args.opencv_builds:
         log.error("--warmup goes with --opencv-builds")
@@ -358,6 +370,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv += ["--frames", str(args.frames)]
     if args.warmup is not None:
         argv += ["--warmup", str(args.warmup)]
+    if args.presses is not None:
+        argv += ["--presses", str(args.presses)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
     log.info("re-running inside a private network namespace")
     sys.stdout.flush()
@@ -570,6 +584,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     from app.chromium import launch_options
     from app.server.serve import start_in_thread
     from app.tools.bench import lock, override
+    from app.tools.bench.jsnative import WARMUP_FRAMES
 
     plan = dict(QUICK if args.quick else FULL)
     if args.seconds is not None:
@@ -594,10 +609,13 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                         browser, server.url, plan["lock_s"], args.fps, Path(tmp)
                     )
                 with tempfile.TemporaryDirectory(prefix="autopilot-bench-override-") as tmp:
-                    override_run = await override.run(browser, server.url, args.fps, Path(tmp))
+                    override_run = await override.run(
+                        browser, server.url, args.fps, Path(tmp), args.presses
+                    )
                     override_found = override.figures(*override_run)
                 # After the stack is down, so that neither side shares its core with the video.
-                await _compare_detection(browser, server.url, runs, int(plan["frames"]))
+                frames = args.frames + WARMUP_FRAMES if args.frames else int(plan["frames"])
+                await _compare_detection(browser, server.url, runs, frames)
                 browser_version = browser.version
             finally:
                 await browser.close()
@@ -732,6 +750,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--frames {args.frames}")
     if args.warmup is not None:
         parts.append(f"--warmup {args.warmup}")
+    if args.presses is not None:
+        parts.append(f"--presses {args.presses}")
     if args.soak:
         parts.append(f"--soak {args.soak:g}")
     if args.seconds is not None:

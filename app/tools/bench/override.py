@@ -2,7 +2,8 @@
 (docs/architecture.md, "Who holds the wheel").
 
 The stack runs under the default profile with the agent as the vehicle; once goals flow the
-client page takes the wheel and the bench presses ArrowLeft as a person would, ``TRIALS`` times.
+client page takes the wheel and the bench presses ArrowLeft as a person would, ``TRIALS`` times
+(or as many as ``autopilot bench --presses`` asks).
 Override latency: the moment the bench hands the key event to the client page → the agent's
 first manual Twist after it (its ``twist`` event, published to the turtle's ``cmd_vel``); both
 on this machine's monotonic clock. Dead-man: with the key held, the client page's script is
@@ -40,10 +41,10 @@ GRANTED_TIMEOUT_S = 15.0
 
 
 async def run(
-    browser: Any, server_url: str, fps: float, workdir: Path
+    browser: Any, server_url: str, fps: float, workdir: Path, trials: int | None = None
 ) -> tuple[ProfileRun, list[float], Path]:
-    """Bring the stack up, take the wheel, press the keys; the run, the press times and the
-    agent's event log."""
+    """Bring the stack up, take the wheel, press the keys (``trials`` times, else ``TRIALS``);
+    the run, the press times and the agent's event log."""
     presses: list[float] = []
 
     async def drive(relay: Page, client: Page) -> None:
@@ -54,7 +55,7 @@ async def run(
             GRANTED_TIMEOUT_S,
             "the relay did not give the client the wheel",
         )
-        for _ in range(TRIALS):
+        for _ in range(trials or TRIALS):
             presses.append(time.monotonic())
             await client.keyboard.down("ArrowLeft")
             await asyncio.sleep(HOLD_S)

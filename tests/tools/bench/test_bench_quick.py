@@ -8,6 +8,7 @@ person looks at were written.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import shutil
 import subprocess
@@ -16,23 +17,19 @@ from pathlib import Path
 
 import pytest
 
-from app.tools.bench import override as override_bench
+from app.cli import main
 from app.tools.bench.results import FIGURE_KEYS
 
-pytestmark = [
-    pytest.mark.bench,
-    pytest.mark.slow,
-    pytest.mark.browser,
-    # Over the suite's 300 s: about 100 s alone, it shares 2 cores with the whole suite.
-    pytest.mark.timeout(600),
-]
-
-# Each profile and the target lock measured for 8 s instead of --quick's 22-30 s, at 5 frames/s
-# instead of 30: every figure still comes from a real run (the face's sweep shortened to fit, so
-# the window holds its glides and both leaps; the lock and the thesis profile still see 40 and 5
-# snapshots), for a third of the time (the run cost 77 CPU-seconds at 10 frames/s, 65 at 5).
-FPS = 5
-SHORT = ("--seconds", "8", "--fps", str(FPS))
+# The bench's own options for a short run, so that this test checks the bench's code (every
+# figure measured, the report and plots written) and the arithmetic is checked in-process on
+# hand-made runs (test_bench_report.py, test_bench_stats.py). Each profile and the target lock
+# measured for 8 s instead of --quick's 22-30 s (the relay's memory needs a sample after its 5 s
+# baseline), at 5 frames/s instead of 30: every figure still comes from a real run (the face's
+# sweep shortened to fit, so the window holds its glides and both leaps; the lock and the thesis
+# profile still see 40 and 5 snapshots); OpenCV.js against Python on 2 frames, the override on 3
+# key presses.
+FPS, FRAMES, PRESSES = 5, 2, 3
+SHORT = ("--seconds", "8", "--fps", str(FPS), "--frames", str(FRAMES), "--presses", str(PRESSES))
 
 PLOTS = (
     "processing_delay.png",
@@ -65,6 +62,11 @@ def check_plausible(figures: dict[str, object], profile: str) -> None:
     assert 0 <= values["recall_after_jump_pct"] <= 100
 
 
+@pytest.mark.bench
+@pytest.mark.slow
+@pytest.mark.browser
+# Over the suite's 300 s: about 100 s alone, it shares 2 cores with the whole suite.
+@pytest.mark.timeout(600)
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Debian's chromium")
 def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -> None:
     out = tmp_path / "report"
@@ -97,15 +99,38 @@ def test_quick_bench_measures_everything_and_writes_the_report(tmp_path: Path) -
     # most of them past it: the report says how many were answered); the dead-man fired by itself
     # while the client was silent (else the figure is missing), never before its 0.3 s.
     override = printed["details"]["override"]
-    assert override["presses"] == override_bench.TRIALS >= override["answered"] >= 1, override
+    assert override["presses"] == PRESSES >= override["answered"] >= 1, override
     assert 0 < printed["override_ms_p50"] <= printed["override_ms_p95"] < 1000
     assert 0.29 <= printed["deadman_stop_s"] and math.isfinite(printed["deadman_stop_s"])
 
+    # OpenCV.js against Python on exactly the frames asked for, after the warm-up.
+    for profile in ("default", "thesis"):
+        assert printed["details"][profile]["js_detect_ms"]["n"] == FRAMES, profile
     run = printed["run"]
     assert run["default_s"] == 8 and run["fps"] == FPS and "sweep shortened to 8 s" in run["note"]
+    assert f"--frames {FRAMES} --presses {PRESSES}" in run["command"]
     assert json.loads((out / "results.json").read_text()) == printed
     report = (out / "report.md").read_text()
     assert "683 ms" in report and "## Manual override" in report
     for name in PLOTS:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
         assert f"({name})" in report
+
+
+@pytest.mark.parametrize(
+    ("argv", "refusal"),
+    [
+        (["--camera", "--presses", "3"], "--presses goes with the stack's own bench"),
+        (["--opencv-builds", "--presses", "3"], "--presses goes with the stack's own bench"),
+        (
+            ["--faces", "--frames", "2"],
+            "--frames goes with --opencv-builds or the stack's own bench",
+        ),
+    ],
+)
+def test_short_run_options_elsewhere_are_refused(
+    argv: list[str], refusal: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    # In the test process: the refusal comes before any bench starts, and never starts another.
+    assert main(["bench", *argv]) == 2
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR] == [refusal]
