@@ -2,10 +2,10 @@
 // (latest wins) turned into velocity commands for the robot `?robot=` names (turtlesim's
 // /turtle1/cmd_vel by default; config.robot, from app/protocol/robot.py) through roslib.js,
 // pose telemetry back to the relay on the same channel; `stop` on the reliable `autopilot`
-// channel. What to do with
-// goals, stops, mode changes, drive commands, poses and the clock is the pilot's to decide
-// (core/pilot.js, the twin of the agent's vehicle_agent/core/pilot.py): this page feeds it, with the
-// time, and acts on its records: publishes their Twists, counts and shows them.
+// channel. What to do with goals, stops, mode changes, drive commands, poses and the clock is
+// the pilot's to decide (core/pilot.js, the twin of the agent's vehicle_agent/core/pilot.py):
+// this page feeds it, with the time, and acts on its records: publishes their Twists, counts and
+// shows them.
 import { ControlLaw } from '../core/control.js';
 import { Pilot } from '../core/pilot.js';
 import { RelayLink, sendJson, serveChannel } from '../net/peer.js';
