@@ -10,7 +10,7 @@ from playwright.sync_api import Browser, Page
 from app.protocol.page import page_protocol, to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
-from tests.vehicle_agent.freshness_sequences import SEQUENCES, WALL_MS
+from tests.vehicle_agent.core.freshness_sequences import SEQUENCES, WALL_MS
 from vehicle_agent.core.freshness import FreshnessRule, GoalGate
 
 pytestmark = [pytest.mark.browser]

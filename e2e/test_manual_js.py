@@ -14,7 +14,7 @@ from app.protocol.control import control_config
 from app.protocol.page import to_json
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
-from tests.vehicle_agent.manual_sequences import SEQUENCES, run
+from tests.vehicle_agent.core.manual_sequences import SEQUENCES, run
 from vehicle_agent.core.control import PROFILES
 
 pytestmark = [pytest.mark.browser]

@@ -1,8 +1,9 @@
 """The browser vehicle's pilot (app/static/js/core/pilot.js) answers as the agent's does
-(vehicle_agent/core/pilot.py): the shared sequences of tests/vehicle_agent/pilot_sequences.py
+(vehicle_agent/core/pilot.py): the shared sequences of tests/vehicle_agent/core/pilot_sequences.py
 give the same event records (the agent's event-log lines, field for field), the same wake-ups and
 modes. pilot.js is built as the vehicle page builds it, from the numbers its config carries; the
-rules themselves are stated in tests/vehicle_agent/test_pilot.py, and one of them again here."""
+rules themselves are stated in tests/vehicle_agent/core/test_pilot.py, and one of them again
+here."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from app.protocol.page import page_protocol, robot_config, to_json
 from app.protocol.robot import PRESETS
 from app.server.serve import RunningServer
 from e2e.helpers import module_page
-from tests.vehicle_agent.pilot_sequences import ROBOTS, SEQUENCES, goal, run
+from tests.vehicle_agent.core.pilot_sequences import ROBOTS, SEQUENCES, goal, run
 
 pytestmark = [pytest.mark.browser]
 

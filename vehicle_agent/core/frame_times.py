@@ -5,8 +5,8 @@ heading of that moment, so the onboard law takes the goal's bearing from the hea
 pilot (:meth:`vehicle_agent.core.pilot.Pilot.frame`) keeps one of these, fed with the video source's
 :class:`~app.protocol.events.FrameSent` times on its own clock. The browser's twin is
 ``app/static/js/core/frame-times.js``; both run the pilot's shared sequences
-(tests/vehicle_agent/pilot_sequences.py), and tests/vehicle_agent/test_frame_times.py states
-the rule.
+(tests/vehicle_agent/core/pilot_sequences.py), and
+tests/vehicle_agent/core/test_frame_times.py states the rule.
 """
 
 from __future__ import annotations

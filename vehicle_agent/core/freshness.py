@@ -17,7 +17,7 @@ per second), or a ``t`` more than ``GOAL_MAX_CLOCK_SKEW_S`` ahead of this side's
 would otherwise hold back every real goal after it: a huge ``seq`` makes them all ``old``, an early
 ``t`` makes them all look late. A refused goal changes nothing in the gate. The page's
 ``freshness.js`` applies the same rule; both run the shared sequences of
-``tests/vehicle_agent/freshness_sequences.py``.
+``tests/vehicle_agent/core/freshness_sequences.py``.
 """
 
 from __future__ import annotations

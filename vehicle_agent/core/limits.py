@@ -6,7 +6,8 @@ Sans-I/O, like the rest of the pilot: a :class:`Limiter` is given each command w
 the next step of a ramp still under way. The pilot (:mod:`vehicle_agent.core.pilot`) passes every
 Twist it publishes through it, autopilot and operator alike. The browser's twin is
 ``app/static/js/core/limits.js``; both run the pilot's shared sequences
-(tests/vehicle_agent/pilot_sequences.py), and tests/vehicle_agent/test_limits.py states the rules.
+(tests/vehicle_agent/core/pilot_sequences.py), and tests/vehicle_agent/core/test_limits.py
+states the rules.
 
 The rules:
 

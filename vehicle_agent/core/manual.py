@@ -9,7 +9,7 @@ set, each drive command and the clock (the time given with each), and answers wi
 scaled to the profile's manual speeds. A vehicle that moves on a drive command and hears none for
 the dead-man time (``DEADMAN_S`` in :mod:`app.protocol.control`, given to the constructor) stops
 (one zero Twist). The browser vehicle page's ``core/manual.js`` is a port of this module, checked
-against it (tests/vehicle_agent/manual_sequences.py, e2e/test_manual_js.py).
+against it (tests/vehicle_agent/core/manual_sequences.py, e2e/test_manual_js.py).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ The adapters only move bytes: ``vehicle_agent/agent.py`` (aiortc, rosbridge or t
 simulator, the event log) and the browser vehicle page (``app/static/js/pages/vehicle.js``)
 feed their pilot and act on its answers. The page's pilot is this module's twin,
 ``app/static/js/core/pilot.js``, and both run the shared sequences of
-``tests/vehicle_agent/pilot_sequences.py`` (``tests/vehicle_agent/test_pilot.py`` here,
+``tests/vehicle_agent/core/pilot_sequences.py`` (``tests/vehicle_agent/core/test_pilot.py`` here,
 ``e2e/test_pilot_js.py`` in Chromium), which also state the rules themselves.
 """
 

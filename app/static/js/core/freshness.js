@@ -6,7 +6,7 @@
 // the link can have reached since the last goal applied (`seqBurst` plus `seqRateHz` per
 // second), or a t more than `maxSkewS` ahead of this side's wall clock; a refused goal changes
 // nothing. The numbers come from the page config (one source: Python); both twins run the shared
-// sequences of tests/vehicle_agent/freshness_sequences.py.
+// sequences of tests/vehicle_agent/core/freshness_sequences.py.
 
 export class GoalGate {
   /**

@@ -1,7 +1,7 @@
 // Every command within the robot's limits: clamped to its top speeds, ramped within its
 // accelerations. A port of vehicle_agent/core/limits.py (the rules are stated there, and tested in
-// tests/vehicle_agent/test_limits.py); both run the pilot's shared sequences
-// (tests/vehicle_agent/pilot_sequences.py, e2e/test_pilot_js.py). The limits are the robot
+// tests/vehicle_agent/core/test_limits.py); both run the pilot's shared sequences
+// (tests/vehicle_agent/core/pilot_sequences.py, e2e/test_pilot_js.py). The limits are the robot
 // description's (app/protocol/robot.py), through the page's embedded config (`config.robot`);
 // a null there is "no limit".
 //

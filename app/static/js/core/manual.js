@@ -1,6 +1,6 @@
 // The operator's wheel at the vehicle: mode, drive commands and the dead-man (docs/architecture.md,
 // "Who holds the wheel"). A port of vehicle_agent/core/manual.py, checked against it on shared
-// sequences (tests/vehicle_agent/manual_sequences.py, e2e/test_manual_js.py); its numbers, the
+// sequences (tests/vehicle_agent/core/manual_sequences.py, e2e/test_manual_js.py); its numbers, the
 // dead-man time among them, come from app/protocol/control.py through the page's embedded config
 // (`config.control`).
 import { ZERO_TWIST } from './control.js';

@@ -1,6 +1,6 @@
 // The vehicle's pilot: what a vehicle does with what its relay tells it, without any I/O. A port
 // of vehicle_agent/core/pilot.py; both run the shared sequences of
-// tests/vehicle_agent/pilot_sequences.py (tests/vehicle_agent/test_pilot.py in Python,
+// tests/vehicle_agent/core/pilot_sequences.py (tests/vehicle_agent/core/test_pilot.py in Python,
 // e2e/test_pilot_js.py here), which also state the rules themselves.
 //
 // It is fed goals, stop commands, mode changes, drive commands, poses, link resets and clock

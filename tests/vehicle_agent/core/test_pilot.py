@@ -14,8 +14,8 @@ from app.protocol import channels
 from app.protocol import events as ev
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS, TURTLESIM
-from tests.vehicle_agent import pilot_sequences
-from tests.vehicle_agent.pilot_sequences import SEQUENCES, goal
+from tests.vehicle_agent.core import pilot_sequences
+from tests.vehicle_agent.core.pilot_sequences import SEQUENCES, goal
 from vehicle_agent.core.control import Goal, Pose, Profile, pixel_bearing, target_range
 from vehicle_agent.core.pilot import Pilot
 

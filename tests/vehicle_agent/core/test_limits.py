@@ -13,7 +13,7 @@ from app.protocol import channels
 from app.protocol import events as ev
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
 from app.protocol.robot import PRESETS, Limits
-from tests.vehicle_agent.pilot_sequences import goal
+from tests.vehicle_agent.core.pilot_sequences import goal
 from vehicle_agent.core.control import Pose, Twist
 from vehicle_agent.core.limits import Limiter
 from vehicle_agent.core.pilot import Pilot

@@ -11,8 +11,8 @@ from app.protocol.channels import (
     GOAL_SEQ_BURST,
     GOAL_SEQ_RATE_HZ,
 )
-from tests.vehicle_agent.freshness_sequences import SEQUENCES
-from tests.vehicle_agent.freshness_sequences import WALL_MS as SHARED_WALL_MS
+from tests.vehicle_agent.core.freshness_sequences import SEQUENCES
+from tests.vehicle_agent.core.freshness_sequences import WALL_MS as SHARED_WALL_MS
 from vehicle_agent.core.freshness import FreshnessRule, GoalGate
 
 RULE = FreshnessRule(max_age_s=0.5, window_s=5.0)

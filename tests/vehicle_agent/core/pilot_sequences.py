@@ -1,6 +1,6 @@
 """Scripted input sequences for the vehicle's pilot, run by the Python :class:`Pilot` here
-(tests/vehicle_agent/test_pilot.py) and by ``pilot.js`` in Chromium (e2e/test_pilot_js.py): both
-must answer every input with the same event records, and the same wake-up for the next tick.
+(tests/vehicle_agent/core/test_pilot.py) and by ``pilot.js`` in Chromium (e2e/test_pilot_js.py):
+both must answer every input with the same event records, and the same wake-up for the next tick.
 
 A step is ``(kind, t, args)``, ``t`` the vehicle's clock in seconds: ``frame`` (the number of a
 frame the vehicle's own camera took at ``t``), ``goal`` (the goal message as the relay sends it),
