@@ -9,10 +9,9 @@ import pytest
 from app.protocol.control import DEADMAN_S
 from app.protocol.events import GoalDropped
 from tests.helpers.agent import Vehicle
+from tests.vehicle_agent.core.manual_sequences import SEQUENCES, run
 from vehicle_agent.core.control import PROFILES, ZERO_TWIST, Twist
 from vehicle_agent.core.manual import ManualDrive
-
-from .manual_sequences import SEQUENCES, run
 
 DEFAULT = PROFILES["default"]
 FULL = [DEFAULT.manual_linear, 0.0]
