@@ -24,6 +24,9 @@ let keyFrameAskedAt = -Infinity;
 self.onrtctransform = ({ transformer }) => {
   // One vehicle at a time: a new receiver's transform is the vehicle that now holds the seat.
   vehicle = transformer;
+  // A vehicle that came back (a reload) is a new stream: the clients' decoders need its key frame,
+  // whatever was asked of the vehicle before.
+  keyFrameAskedAt = -Infinity;
   pump(transformer);
 };
 
@@ -49,10 +52,17 @@ self.onmessage = ({ data }) => {
 async function pump(transformer) {
   const reader = transformer.readable.getReader();
   const writer = transformer.writable.getWriter();
+  let first = true;
   for (;;) {
     const { value: frame, done } = await reader.read();
     if (done) return;
-    if (transformer === vehicle) forward(frame);
+    if (transformer === vehicle) {
+      // The transform may start after the stream's opening key frame went by: without a key
+      // frame the clients' decoders show nothing until they ask for one themselves.
+      if (first && frame.type !== 'key') askKeyFrame();
+      forward(frame);
+    }
+    first = false;
     await writer.write(frame);
   }
 }
