@@ -22,9 +22,10 @@ pytestmark = [pytest.mark.e2e, pytest.mark.browser, pytest.mark.slow]
 
 SECRET = "token-renewal-e2e-test-secret"
 ROOM = "renewing"
-# Long enough for a page to load and log in with the token minted just before, short enough
-# that the pages outlive several of them in a test.
-LIFETIME_S = 10.0
+# Long enough for a page to load and log in with the token minted just before, on a machine
+# loaded by the rest of the suite (a page took over 10 s there), short enough that the pages
+# outlive several of them in a test.
+LIFETIME_S = 20.0
 # Each page renews after half of its token's time: this many renewals outlive 3 lifetimes.
 RENEWALS = 6
 
