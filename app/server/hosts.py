@@ -21,6 +21,7 @@ from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app.server import tls
+from app.server.origins import refuse
 
 log = logging.getLogger(__name__)
 
@@ -85,21 +86,7 @@ class HostGuard:
         self._log(name or host)
         if self.on_refused is not None:
             self.on_refused()
-        if scope["type"] == "websocket":
-            await send({"type": "websocket.close", "code": 1008, "reason": "host not allowed"})
-            return
-        body = b'{"detail":"host not allowed"}'
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 400,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        await refuse(scope, send, 400, "host not allowed")
 
     def _log(self, name: str) -> None:
         if name in self._logged or len(self._logged) >= MAX_LOGGED_NAMES:

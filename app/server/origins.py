@@ -10,6 +10,7 @@ site could drive, so they are judged by their token alone.
 from __future__ import annotations
 
 import enum
+import json
 import logging
 from collections.abc import Callable, Iterable
 from urllib.parse import urlsplit
@@ -127,18 +128,24 @@ class OriginGuard:
 
     @staticmethod
     async def _refuse(scope: Scope, send: Send) -> None:
-        if scope["type"] == "websocket":
-            await send({"type": "websocket.close", "code": 1008, "reason": "origin not allowed"})
-            return
-        body = b'{"detail":"origin not allowed"}'
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 403,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        await refuse(scope, send, 403, "origin not allowed")
+
+
+async def refuse(scope: Scope, send: Send, status: int, reason: str) -> None:
+    """Answer a request this server will not serve: a WebSocket closes with 1008 and ``reason``,
+    an HTTP request gets ``status`` with ``{"detail": reason}``."""
+    if scope["type"] == "websocket":
+        await send({"type": "websocket.close", "code": 1008, "reason": reason})
+        return
+    body = json.dumps({"detail": reason}, separators=(",", ":")).encode()
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [
+                (b"content-type", b"application/json"),
+                (b"content-length", str(len(body)).encode()),
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": body})
