@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import sys
 from collections.abc import AsyncIterator
 from typing import Any, Final
@@ -20,6 +21,8 @@ from typing import Any, Final
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+# The reading viewer process's niceness.
+VIEWER_NICENESS: Final = 10
 # The subprotocols a Foxglove client offers the SDK's server.
 SUBPROTOCOLS: Final[Any] = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 
@@ -119,4 +122,6 @@ def _answer(text: str) -> None:
 
 
 if __name__ == "__main__":
+    # A real viewer runs on another machine: below the agent here, where the cores are shared.
+    os.setpriority(os.PRIO_PROCESS, 0, VIEWER_NICENESS)
     asyncio.run(_serve(sys.argv[1], int(sys.argv[2])))

@@ -1,7 +1,7 @@
 """``autopilot bench --foxglove`` as a user runs it: every phase measured in every round (goal →
-Twist, the listeners' work after the Twist, the loop's CPU in the Foxglove view), images encoded
-only while a viewer asks for them, the change against the same round's no-viewer phase, the load
-and the date in the report. Timings are the report's business, never asserted here."""
+Twist, the listeners' time with a goal's record, the loop's CPU in the Foxglove view), images
+encoded only while a viewer asks for them, the change against the same round's no-viewer phase,
+the load and the date in the report. Timings are the report's business, never asserted here."""
 
 from __future__ import annotations
 
