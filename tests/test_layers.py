@@ -1,6 +1,7 @@
 """The layers of docs/architecture.md ("Layers") hold in the code: every Python package and module
-of the project stands in one row of the layer diagram and imports nothing from a row above its
-own, and every JavaScript module of the role pages imports only what the layer table's
+of the project stands in one row of the layer diagram, every name of the diagram is one of them,
+and none imports from a row above its own or from another package beside it on its row; every
+JavaScript module of the role pages imports only what the layer table's
 "imports" column lets its folder import. The rows are read from the document itself, so a row
 added, moved or dropped there is checked here at once."""
 
@@ -69,15 +70,17 @@ def project_modules() -> dict[str, Path]:
     return found
 
 
+def placed(module: str, rows: list[list[str]]) -> str | None:
+    """The diagram's name that holds ``module``: the module or package itself, or the longest
+    name of a package it is in."""
+    names = [n for row in rows for n in row if module == n or module.startswith(n + ".")]
+    return max(names, key=len, default=None)
+
+
 def row_of(module: str, rows: list[list[str]]) -> int | None:
     """The index of the row that holds ``module`` (or the package it is in)."""
-    best: tuple[int, int] | None = None
-    for index, row in enumerate(rows):
-        for name in row:
-            if module == name or module.startswith(name + "."):
-                if best is None or len(name) > best[1]:
-                    best = (index, len(name))
-    return None if best is None else best[0]
+    name = placed(module, rows)
+    return None if name is None else next(i for i, row in enumerate(rows) if name in row)
 
 
 def imports_of(path: Path) -> set[str]:
@@ -103,6 +106,27 @@ def test_every_python_module_stands_in_a_row_of_the_diagram() -> None:
     rows = python_rows()
     unplaced = sorted(m for m in project_modules() if m not in PACKAGES and row_of(m, rows) is None)
     assert unplaced == [], f"not in the diagram of docs/architecture.md: {unplaced}"
+
+
+def test_every_name_of_the_diagram_is_a_module_or_package_of_the_project() -> None:
+    modules = project_modules()
+    missing = [name for row in python_rows() for name in row if name not in modules]
+    assert missing == [], f"the diagram of docs/architecture.md names what is gone: {missing}"
+
+
+def test_the_packages_of_a_row_stand_side_by_side() -> None:
+    """A row's packages import none of each other: the row above them is the one that uses
+    both."""
+    rows = python_rows()
+    sideways = []
+    for module, path in sorted(project_modules().items()):
+        own = row_of(module, rows)
+        if own is None:
+            continue
+        for imported in imports_of(path):
+            if row_of(imported, rows) == own and placed(imported, rows) != placed(module, rows):
+                sideways.append(f"{module} imports {imported}, beside it on row {own}")
+    assert sideways == []
 
 
 def test_no_python_module_imports_from_a_row_above_its_own() -> None:
