@@ -73,13 +73,6 @@ AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autop
 EXPIRED = 'token expired: send {"op": "auth", "token": "<a fresh token>"} before it does'
 
 
-def bearer_token(headers: Mapping[str, str]) -> str | None:
-    """The token of an ``Authorization: Bearer <token>`` header, or None."""
-    value = headers.get("authorization", "")
-    scheme, _, token = value.partition(" ")
-    return token.strip() or None if scheme.lower() == "bearer" else None
-
-
 @dataclass(frozen=True)
 class Decision:
     """What to do with one frame: pass it on, reply, close (code and reason) or a mix."""

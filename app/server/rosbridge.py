@@ -38,10 +38,11 @@ from app.protocol.jsonedge import oversize
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.protocol.signaling import Name
+from app.protocol.tokens import bearer_token
 from app.rosbridge.protocol import Frame, Hub, Publish, Refused, RosbridgeSession, parse_frame
 from app.rosbridge.protocol import status as rosbridge_status
 from app.rosbridge.simulated import Camera, SimulatedRobot
-from app.server.access import RosbridgeGate, bearer_claims, bearer_token
+from app.server.access import RosbridgeGate, bearer_claims
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import (
