@@ -195,3 +195,43 @@ def test_each_js_module_imports_only_what_its_folder_may(module: str) -> None:
         and not any(imported == a or (a.endswith("/") and imported.startswith(a)) for a in allowed)
     ]
     assert wrong == [], f"{module} ({folder}) may import {allowed}, not {wrong}"
+
+
+EXPORT = re.compile(
+    r"^export\s+(?:async\s+)?(?:function\*?|class|const|let)\s+([A-Za-z_$][\w$]*)"
+    r"|^export\s*\{([^}]*)\}",
+    re.M,
+)
+# What the relay's worker loads by name from its spec (``import(`./operations/${module}`)``):
+# the operation interface every module there offers (docs/operations.md).
+OPERATION_INTERFACE = ("worker/operations/", "create")
+
+
+def js_exports(text: str) -> list[str]:
+    """The names a module exports (``export function f``, ``export { a as b } from ...``)."""
+    names = []
+    for declared, listed in EXPORT.findall(text):
+        names += (
+            [declared] if declared else [n.split(" as ")[-1].strip() for n in listed.split(",")]
+        )
+    return [n for n in names if n]
+
+
+def test_every_js_export_is_used_by_another_page_module() -> None:
+    """An export is a module's interface to the pages. One that only a test reaches would be an
+    interface for the tests alone: they go through the public one instead."""
+    modules = {p.relative_to(JS).as_posix(): p for p in JS.rglob("*.js")}
+    importers: dict[str, list[str]] = {}
+    for module, path in modules.items():
+        for imported in js_imports(path):
+            importers.setdefault(imported, []).append(modules[module].read_text())
+    unused = [
+        f"{module}: {name}"
+        for module, path in sorted(modules.items())
+        for name in js_exports(path.read_text())
+        if (module.startswith(OPERATION_INTERFACE[0]), name) != (True, OPERATION_INTERFACE[1])
+        and not any(
+            re.search(rf"\b{re.escape(name)}\b", text) for text in importers.get(module, [])
+        )
+    ]
+    assert unused == []
