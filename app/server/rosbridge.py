@@ -14,8 +14,8 @@ the default room). A room's tokens reach only its robot.
 Every tick each robot steps and each connection's writer is woken; a writer that is free then
 takes its session's publications (the latest of each subscription), so the tick costs the same
 whatever the clients subscribe to, and a client that does not read is sent nothing and slows no
-one. The tick is the simulation's own (turtlesim's 16 ms): the simulators advance that much per
-step, so pacing the loop any other way would only change the robots' speed. A robot's camera is
+one. The tick is the simulation's own: its robots advance that much per step, so pacing the loop
+any other way would only change their speed. A robot's camera is
 filmed at its own pace by a task of its own, rendered in a worker thread (one for every room, so
 the renders of many rooms queue rather than take every core), and only while someone subscribes:
 the tick never waits for a render.
@@ -54,7 +54,7 @@ from app.server.websocket import (
     refuse_if_full,
     serve,
 )
-from app.simulators import SimulatorName, simulation
+from app.simulators import DEFAULT_SIMULATOR, SimulatorName, simulation
 
 log = logging.getLogger(__name__)
 
@@ -104,7 +104,7 @@ class Simulator:
         policy: SocketPolicy,
         max_sessions: int = 64,
         ros: RosFlavour = DEFAULT_FLAVOUR,
-        robot: SimulatorName = "turtlesim",
+        robot: SimulatorName = DEFAULT_SIMULATOR,
         max_rooms: int = MAX_ROOMS,
     ) -> None:
         self.simulation = simulation(robot)

@@ -9,7 +9,7 @@
 
 /** The step from the last frame of one stream to the first of the next: a frame at 30/s on the
  * 90 kHz video clock. */
-export const STREAM_STEP = 3000;
+const STREAM_STEP = 3000;
 
 export class ContinuousTimestamps {
   #stream = null; // the stream whose frames come now (any value compared with ===)
