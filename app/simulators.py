@@ -21,6 +21,13 @@ SIMULATORS: Final[dict[SimulatorName, Callable[[], Simulation]]] = {
     "turtlesim": TurtleSimulation,
     "diffdrive": DiffDriveSimulation,
 }
+# What each is, for ``--robot``'s help.
+SIMULATOR_HELP: Final[dict[SimulatorName, str]] = {
+    "turtlesim": "turtlesim's turtle, one for the whole server",
+    "diffdrive": "a differential-drive robot with a camera in a walled arena, one per room",
+}
+# The robot a server simulates when it is not told which.
+DEFAULT_SIMULATOR: Final[SimulatorName] = "turtlesim"
 
 
 def simulation(name: SimulatorName) -> Simulation:

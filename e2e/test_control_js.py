@@ -36,6 +36,16 @@ ONBOARD = for_robot(control.PROFILES["onboard"], PRESETS["diffdrive"])
 PROFILES = {**control.PROFILES, "onboard": ONBOARD, "roverFollow": ROVER_FOLLOW}
 
 
+def command(js: dict[str, float]) -> tuple[float, float, float]:
+    """What control.js's law asks for: its speeds and the share of the top speed allowed."""
+    return js["linear"], js["angular"], js["topShare"]
+
+
+def wanted(twist: control.Twist) -> tuple[float, float, float]:
+    """What control.py's law asks for, as :func:`command` reads control.js's."""
+    return twist.linear_x, twist.angular_z, twist.top_share
+
+
 @pytest.fixture
 def page(server: RunningServer, browser: Browser) -> Iterator[Page]:
     opened = browser.new_page()
@@ -78,13 +88,13 @@ def test_steering_and_commands_match_the_python_agent(page: Page) -> None:
         pose = control.Pose(p["x"], p["y"], p["theta"])
         tx, ty = control.pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
         assert got["terrain"]["x"] == pytest.approx(tx) and got["terrain"]["y"] == pytest.approx(ty)
-        linear, angular = control.follow_command(tx, ty, pose, control.PROFILES["follow"])
-        assert got["follow"]["linear"] == pytest.approx(linear, abs=1e-12), case
-        assert got["follow"]["angular"] == pytest.approx(angular, abs=1e-12), case
-        rover = control.follow_command(tx, ty, pose, ROVER_FOLLOW)
-        assert [got["roverFollow"]["linear"], got["roverFollow"]["angular"]] == pytest.approx(
-            list(rover), abs=1e-12
-        ), case
+        for name, profile in (
+            ("follow", control.PROFILES["follow"]),
+            ("roverFollow", ROVER_FOLLOW),
+        ):
+            assert command(got[name]) == pytest.approx(
+                wanted(control.follow_command(tx, ty, pose, profile)), abs=1e-12
+            ), (case, name)
         assert got["ahead"] == pytest.approx(control.wall_clearance(pose, True), abs=1e-12)
         assert got["behind"] == pytest.approx(control.wall_clearance(pose, False), abs=1e-12)
         error = control.steering_error(goal, pose)
@@ -156,7 +166,11 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
                const twist = kind === 'goal' ? c.goal(arg, t) : kind === 'pose' ? c.pose(arg, t)
                  : kind === 'tick' ? c.tick(t) : c.stop();
                const until = c.untilTimeout(t);
-               return [twist === null ? null : [twist.linear, twist.angular, twist.seq], until];
+               return [
+                 twist === null ? null
+                   : [twist.linear, twist.angular, twist.topShare ?? 1, twist.seq],
+                 until,
+               ];
              });
            }""",
         [profile, events],
@@ -187,14 +201,15 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
             twist = controller.tick(t)
         else:
             twist = controller.stop()
-        expected.append(None if twist is None else [twist.linear_x, twist.angular_z, twist.seq])
+        expected.append(None if twist is None else [*wanted(twist), twist.seq])
         untils.append(controller.until_timeout(t))
     published = [e for e in expected if e is not None]
     assert any(e[1] != 0 for e in published), "the script never drove the turtle"
-    assert any(e[:2] == [0.0, 0.0] and e[2] is None for e in published), "never stopped"
+    assert any(e[:2] == [0.0, 0.0] and e[3] is None for e in published), "never stopped"
     if profile in ("follow", "onboard"):
         assert any(e[0] != 0 for e in published), f"{profile} never drove forward or back"
-        assert any(e[2] is None and e[1] != 0 for e in published), f"{profile} never searched"
+        assert any(e[3] is None and e[1] != 0 for e in published), f"{profile} never searched"
+        assert any(0 < e[2] < 1 for e in published), f"{profile} never drove off-axis"
     assert len(js) == len(expected)
     # Both sides agree on when the goal timeout falls due (the ticker wakes up for it).
     assert [until for _, until in js] == pytest.approx(untils, abs=1e-12)
@@ -203,7 +218,7 @@ def test_controller_timeline_matches_the_python_agent(page: Page, profile: str) 
             assert got is None
         else:
             assert got is not None
-            assert got[:2] == pytest.approx(want[:2], abs=1e-12) and got[2] == want[2]
+            assert got[:3] == pytest.approx(want[:3], abs=1e-12) and got[3] == want[3]
 
 
 def test_the_onboard_law_matches_the_python_agent(page: Page) -> None:
@@ -245,6 +260,5 @@ def test_the_onboard_law_matches_the_python_agent(page: Page) -> None:
         if goal.box_h is not None:
             expected_range = control.target_range(goal.box_h, 0.24, goal.w, profile.hfov)
             assert got["range"] == pytest.approx(expected_range, abs=1e-12), case
-        linear, angular = control.onboard_law(goal, control.Pose(**p), profile)
-        assert got["command"]["linear"] == pytest.approx(linear, abs=1e-12), case
-        assert got["command"]["angular"] == pytest.approx(angular, abs=1e-12), case
+        expected = wanted(control.onboard_law(goal, control.Pose(**p), profile))
+        assert command(got["command"]) == pytest.approx(expected, abs=1e-12), case

@@ -51,10 +51,26 @@ def commands(page: Page, offsets: list[tuple[float, float]]) -> list[tuple[float
     return [(linear, angular) for linear, angular in got]
 
 
+# The command the console sends while the arrow keys `held` are down (pressed in that order),
+# from the page's own keyboard events.
+KEYS_JS = """(held) => {
+  const sent = [];
+  const input = new drive.DriveInput({
+    repeatS: 60,
+    send: (c) => sent.push([c.linear, c.angular]),
+    gamepads: () => [],
+  });
+  input.setEnabled(true);
+  for (const key of held) dispatchEvent(new KeyboardEvent('keydown', { key }));
+  const command = sent.at(-1);
+  input.setEnabled(false); // and the keys let go
+  return command;
+}"""
+
+
 def keys(page: Page, held: list[str]) -> tuple[float, float]:
-    got: list[float] = page.evaluate(
-        "(held) => { const c = drive.keyCommand(held); return [c.linear, c.angular]; }", held
-    )
+    """(linear, angular) the console sends while the arrow keys ``held`` are down."""
+    got: list[float] = page.evaluate(KEYS_JS, held)
     return got[0], got[1]
 
 

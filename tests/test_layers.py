@@ -1,6 +1,7 @@
 """The layers of docs/architecture.md ("Layers") hold in the code: every Python package and module
-of the project stands in one row of the layer diagram and imports nothing from a row above its
-own, and every JavaScript module of the role pages imports only what the layer table's
+of the project stands in one row of the layer diagram, every name of the diagram is one of them,
+and none imports from a row above its own or from another package beside it on its row; every
+JavaScript module of the role pages imports only what the layer table's
 "imports" column lets its folder import. The rows are read from the document itself, so a row
 added, moved or dropped there is checked here at once."""
 
@@ -69,15 +70,17 @@ def project_modules() -> dict[str, Path]:
     return found
 
 
+def placed(module: str, rows: list[list[str]]) -> str | None:
+    """The diagram's name that holds ``module``: the module or package itself, or the longest
+    name of a package it is in."""
+    names = [n for row in rows for n in row if module == n or module.startswith(n + ".")]
+    return max(names, key=len, default=None)
+
+
 def row_of(module: str, rows: list[list[str]]) -> int | None:
     """The index of the row that holds ``module`` (or the package it is in)."""
-    best: tuple[int, int] | None = None
-    for index, row in enumerate(rows):
-        for name in row:
-            if module == name or module.startswith(name + "."):
-                if best is None or len(name) > best[1]:
-                    best = (index, len(name))
-    return None if best is None else best[0]
+    name = placed(module, rows)
+    return None if name is None else next(i for i, row in enumerate(rows) if name in row)
 
 
 def imports_of(path: Path) -> set[str]:
@@ -103,6 +106,27 @@ def test_every_python_module_stands_in_a_row_of_the_diagram() -> None:
     rows = python_rows()
     unplaced = sorted(m for m in project_modules() if m not in PACKAGES and row_of(m, rows) is None)
     assert unplaced == [], f"not in the diagram of docs/architecture.md: {unplaced}"
+
+
+def test_every_name_of_the_diagram_is_a_module_or_package_of_the_project() -> None:
+    modules = project_modules()
+    missing = [name for row in python_rows() for name in row if name not in modules]
+    assert missing == [], f"the diagram of docs/architecture.md names what is gone: {missing}"
+
+
+def test_the_packages_of_a_row_stand_side_by_side() -> None:
+    """A row's packages import none of each other: the row above them is the one that uses
+    both."""
+    rows = python_rows()
+    sideways = []
+    for module, path in sorted(project_modules().items()):
+        own = row_of(module, rows)
+        if own is None:
+            continue
+        for imported in imports_of(path):
+            if row_of(imported, rows) == own and placed(imported, rows) != placed(module, rows):
+                sideways.append(f"{module} imports {imported}, beside it on row {own}")
+    assert sideways == []
 
 
 def test_no_python_module_imports_from_a_row_above_its_own() -> None:
@@ -171,3 +195,43 @@ def test_each_js_module_imports_only_what_its_folder_may(module: str) -> None:
         and not any(imported == a or (a.endswith("/") and imported.startswith(a)) for a in allowed)
     ]
     assert wrong == [], f"{module} ({folder}) may import {allowed}, not {wrong}"
+
+
+EXPORT = re.compile(
+    r"^export\s+(?:async\s+)?(?:function\*?|class|const|let)\s+([A-Za-z_$][\w$]*)"
+    r"|^export\s*\{([^}]*)\}",
+    re.M,
+)
+# What the relay's worker loads by name from its spec (``import(`./operations/${module}`)``):
+# the operation interface every module there offers (docs/operations.md).
+OPERATION_INTERFACE = ("worker/operations/", "create")
+
+
+def js_exports(text: str) -> list[str]:
+    """The names a module exports (``export function f``, ``export { a as b } from ...``)."""
+    names = []
+    for declared, listed in EXPORT.findall(text):
+        names += (
+            [declared] if declared else [n.split(" as ")[-1].strip() for n in listed.split(",")]
+        )
+    return [n for n in names if n]
+
+
+def test_every_js_export_is_used_by_another_page_module() -> None:
+    """An export is a module's interface to the pages. One that only a test reaches would be an
+    interface for the tests alone: they go through the public one instead."""
+    modules = {p.relative_to(JS).as_posix(): p for p in JS.rglob("*.js")}
+    importers: dict[str, list[str]] = {}
+    for module, path in modules.items():
+        for imported in js_imports(path):
+            importers.setdefault(imported, []).append(modules[module].read_text())
+    unused = [
+        f"{module}: {name}"
+        for module, path in sorted(modules.items())
+        for name in js_exports(path.read_text())
+        if (module.startswith(OPERATION_INTERFACE[0]), name) != (True, OPERATION_INTERFACE[1])
+        and not any(
+            re.search(rf"\b{re.escape(name)}\b", text) for text in importers.get(module, [])
+        )
+    ]
+    assert unused == []

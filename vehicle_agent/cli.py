@@ -212,7 +212,7 @@ async def _main(args: argparse.Namespace) -> int:
     live = None
     viewer = None
     try:
-        live = foxglove.start(args, robot, secret_set=bool(os.environ.get(SECRET_ENV)))
+        live = foxglove.start(args, robot, os.environ.get(SECRET_ENV) or None, args.room)
         video = await _open_video(args, events, client)
         link: RobotLink = SimLink() if client is None else RosbridgeLink(client, args.ros, robot)
         config = AgentConfig(

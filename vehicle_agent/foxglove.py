@@ -27,8 +27,10 @@ flight recorder alike (``vehicle_agent/recorder.py`` writes the same topics and 
 
 Safety: the server advertises no capability, so a viewer can publish nothing and call nothing: it
 cannot move the robot. It binds to 127.0.0.1 unless a host is given. The SDK checks no token, so
-with ``AUTOPILOT_SECRET`` set (the server asks for tokens) it refuses any other address
-(:func:`exposure_error`): reach it through an SSH tunnel then. A viewer that stops reading loses
+with ``AUTOPILOT_SECRET`` set (the server asks for tokens) and another host, the SDK's server
+listens on 127.0.0.1 behind a TLS front that asks each viewer for a token of the vehicle's room
+(:mod:`vehicle_agent.foxglove_gate`), and without TLS files the agent refuses to start
+(:func:`exposure_error`). A viewer that stops reading loses
 the oldest of its :data:`BACKLOG` queued messages (the SDK's rule), never the loop's time: logging
 a message only queues it for the SDK's own threads.
 """
@@ -60,8 +62,10 @@ from foxglove import messages as fm
 from app import recording
 from app.arguments import port
 from app.protocol import events as ev
+from app.protocol import tokens
 from app.protocol.robot import Robot
 from vehicle_agent.core.frame_times import FrameTimes
+from vehicle_agent.foxglove_gate import FoxgloveGate, server_tls
 from vehicle_agent.recorder import ExtraChannel, FlightRecorder, encode_jpeg, frame_tag
 
 log = logging.getLogger(__name__)
@@ -203,15 +207,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def exposure_error(where: Address, secret_set: bool, tls: bool) -> str | None:
     """Why the Foxglove server must not start at ``where``, or None. The server asks for tokens
-    (``secret_set``), and the SDK checks none: only this machine may watch then."""
-    if where.loopback or not secret_set:
+    (``secret_set``): a viewer on the network then shows one too, and only over TLS, where the
+    token and the camera do not cross the network in clear."""
+    if where.loopback or not secret_set or tls:
         return None
-    how = "wss:// (TLS) alone" if tls else "it"
     return (
-        f"--foxglove {where.host}:{where.port}: AUTOPILOT_SECRET is set, and the Foxglove server "
-        f"cannot check a token, so {how} would show the camera to anyone who reaches the "
-        f"address; serve it on 127.0.0.1 and reach it through an SSH tunnel (docs/foxglove.md)"
+        f"--foxglove {where.host}:{where.port}: AUTOPILOT_SECRET is set, so a viewer on the "
+        f"network must show a token, over TLS: give --foxglove-certfile PEM and "
+        f"--foxglove-keyfile PEM (or serve on 127.0.0.1 and reach it through an SSH tunnel; "
+        f"docs/foxglove.md)"
     )
+
+
+def url(scheme: str, host: str, port: int) -> str:
+    """``scheme://host:port`` (an IPv6 host in brackets)."""
+    return f"{scheme}://[{host}]:{port}" if ":" in host else f"{scheme}://{host}:{port}"
 
 
 def wall_ns(t: float) -> int:
@@ -486,7 +496,11 @@ class FoxgloveLive:
             )
         except RuntimeError as exc:  # the SDK's bind and TLS failures
             raise OSError(f"cannot serve Foxglove on {where.host}:{where.port}: {exc}") from exc
-        self.url = f"{'wss' if tls else 'ws'}://{where.host}:{self.server.port}"
+        # The SDK's server's own address; the view's (:attr:`url`) unless a gate is in front.
+        self.server_url = url("wss" if tls else "ws", where.host, self.server.port)
+        self.url = self.server_url
+        # The token gate in front, when viewers come from the network (:meth:`put_behind`).
+        self.gate: FoxgloveGate | None = None
         self.jpeg_quality = jpeg_quality
         self.images = 0
         # CPU seconds the agent's loop spent here (thread-time deltas around this view's work):
@@ -567,8 +581,16 @@ class FoxgloveLive:
             self._image.log(image, log_time=stamp)
             self.images += 1
 
+    def put_behind(self, gate: FoxgloveGate, host: str) -> None:
+        """Serve viewers through ``gate`` (listening on ``host``) from now on: its URL is the
+        view's, and :meth:`close` closes it first."""
+        self.gate = gate
+        self.url = url("wss", host, gate.port) + "/"
+
     def close(self) -> None:
-        """Stop serving and stop the encoder."""
+        """Stop serving (the gate first) and stop the encoder."""
+        if self.gate is not None:
+            self.gate.close()
         with self._wake:
             self._stopping = True
             self._wake.notify()
@@ -576,27 +598,57 @@ class FoxgloveLive:
         self.server.stop()
 
 
-def start(args: argparse.Namespace, robot: Robot, secret_set: bool) -> FoxgloveLive | None:
+def start(
+    args: argparse.Namespace, robot: Robot, secret: str | None, room: str
+) -> FoxgloveLive | None:
     """The server ``--foxglove`` asks for (None without it); OSError when it must not or cannot
-    start (:func:`exposure_error`, unreadable TLS files, a port taken)."""
+    start (:func:`exposure_error`, unreadable TLS files, a port taken). With ``secret`` (the
+    server's, ``AUTOPILOT_SECRET``) and a host other than this machine, the SDK's server listens
+    on 127.0.0.1 behind a token gate for ``room`` (:mod:`vehicle_agent.foxglove_gate`)."""
     where: Address | None = args.foxglove
     if where is None:
         return None
     certfile, keyfile = args.foxglove_certfile, args.foxglove_keyfile
     if (certfile is None) != (keyfile is None):
         raise OSError("--foxglove-certfile and --foxglove-keyfile go together")
-    tls = None if certfile is None else (certfile.read_bytes(), keyfile.read_bytes())
-    refused = exposure_error(where, secret_set, tls is not None)
+    refused = exposure_error(where, bool(secret), certfile is not None)
     if refused is not None:
         raise OSError(refused)
+    if secret and not where.loopback:
+        return _start_gated(where, robot, secret, room, certfile, keyfile)
+    tls = None if certfile is None else (certfile.read_bytes(), keyfile.read_bytes())
     live = FoxgloveLive(where, robot, tls)
     if where.loopback:
         log.info("Foxglove: %s (this machine only; --foxglove HOST:PORT serves others)", live.url)
     else:
         log.warning(
-            "Foxglove: %s, open to anyone who reaches it (no token check; see docs/foxglove.md)",
+            "Foxglove: %s, open to anyone who reaches it (no AUTOPILOT_SECRET, so no token is"
+            " asked; see docs/foxglove.md)",
             live.url,
         )
+    return live
+
+
+def _start_gated(
+    where: Address, robot: Robot, secret: str, room: str, certfile: Path, keyfile: Path
+) -> FoxgloveLive:
+    try:
+        tokens.check_secret(secret)
+    except ValueError as exc:
+        raise OSError(f"{tokens.SECRET_ENV}: {exc}") from exc
+    tls = server_tls(certfile, keyfile)
+    live = FoxgloveLive(Address(DEFAULT_HOST, 0), robot)
+    try:
+        gate = FoxgloveGate(where.host, where.port, live.url, tls, secret, room)
+    except OSError:
+        live.close()
+        raise
+    live.put_behind(gate, where.host)
+    log.warning(
+        "Foxglove: %s?token=TOKEN, for viewers with a token of room %r (autopilot token --role"
+        " client --room %s); the SDK's server listens on %s behind it",
+        live.url, room, room, live.server_url,
+    )  # fmt: skip
     return live
 
 

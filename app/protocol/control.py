@@ -73,9 +73,9 @@ class Profile:
     # client sets another; None: the spec's default.
     operation: str | None = None
     # --- follow only -------------------------------------------------------------------------
-    # Forward speed per metre beyond the standoff, and its limit (m/s).
+    # Forward speed per metre beyond the standoff (1/s); no profile caps it: the robot's top
+    # speed does, in the pilot's limiter.
     linear_gain: float = 0.0
-    max_linear: float = 0.0
     # The distance kept from the target point.
     standoff_m: float = 0.0
     # Clearance from a wall at which forward (or backward) travel towards it has stopped; the
@@ -148,7 +148,6 @@ PROFILES: dict[str, Profile] = {
         # Searching stops after this long without any goal: the relay may be gone.
         goal_timeout_s=10.0,
         linear_gain=3.0,
-        max_linear=4.0,
         standoff_m=1.0,
         wall_margin_m=0.5,
         wall_gain=1.0,
@@ -168,7 +167,6 @@ PROFILES: dict[str, Profile] = {
         deadband=0.02,
         # A walker at 0.6 m/s is trailed 0.6 / 2.5 m beyond the standoff.
         linear_gain=2.5,
-        max_linear=1.0,
         standoff_m=1.2,
         slow_bearing=0.45,
         # A few goals' worth: the rate is still the walker's of the moment.
@@ -213,7 +211,7 @@ def for_robot(profile: Profile, robot: Robot) -> Profile:
     speed (so the stick spans the robot's range rather than saturating early), the follow law
     knows of walls on a turtlesim only, and the onboard law sees through the robot's camera
     (its field of view turns a pixel into a bearing; no camera, no bearing). Every command is
-    clamped to the limits as well, by the pilot's limiter."""
+    held to the limits by the pilot's limiter, the only place they clamp one."""
     limits = robot.limits
     camera = robot.camera
     return replace(

@@ -24,9 +24,10 @@ import hmac
 import json
 import math
 import re
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Final, Literal, get_args
+from urllib.parse import parse_qs, urlsplit
 
 from app.protocol.rooms import Role as Role  # re-exported: tokens.Role
 
@@ -168,6 +169,24 @@ def verify(
             "wrong role", f"token is for {claims.role!r}, this needs {' or '.join(roles)}"
         )
     return claims
+
+
+def bearer_token(headers: Mapping[str, str]) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` header, or None."""
+    value = headers.get("authorization", "")
+    scheme, _, token = value.partition(" ")
+    return token.strip() or None if scheme.lower() == "bearer" else None
+
+
+def request_token(target: str, headers: Mapping[str, str]) -> str | None:
+    """The token a WebSocket handshake offers: its ``Authorization: Bearer`` header's, else the
+    ``token`` of its request target's query (``/?token=T``: a browser's WebSocket cannot send a
+    header); None without either."""
+    found = bearer_token(headers)
+    if found is not None:
+        return found
+    values = parse_qs(urlsplit(target).query).get("token")
+    return values[0] if values else None
 
 
 def _claims(body: str, signature: str) -> Claims:

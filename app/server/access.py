@@ -12,9 +12,9 @@ connection ends when its token expires (status error, close 1008 "token expired"
 What each role may do is an allow-list, :data:`ROSBRIDGE_RIGHTS`: a vehicle token drives; a
 relay or client token only reads -- it may subscribe and call rosapi's reading services, and
 nothing that publishes, changes the simulator or sets a parameter. Which robot a token reaches
-is the server's: turtlesim is one simulator for every room; the differential-drive robots are
-one per room, and the adapter binds a connection to its token's room (:meth:`RosbridgeGate.bind`),
-after which only a token of that room renews it. With no secret configured (development) every
+is the server's: one robot for every room, or one per room, when the adapter binds a connection
+to its token's room (:meth:`RosbridgeGate.bind`), after which only a token of that room renews
+it. With no secret configured (development) every
 connection is let through.
 """
 
@@ -71,13 +71,6 @@ ROSBRIDGE_RIGHTS: Final[Mapping[TokenRole, Rights]] = {
 }
 AUTH_HINT = 'authenticate first: send {"op": "auth", "token": "<token from autopilot token>"}'
 EXPIRED = 'token expired: send {"op": "auth", "token": "<a fresh token>"} before it does'
-
-
-def bearer_token(headers: Mapping[str, str]) -> str | None:
-    """The token of an ``Authorization: Bearer <token>`` header, or None."""
-    value = headers.get("authorization", "")
-    scheme, _, token = value.partition(" ")
-    return token.strip() or None if scheme.lower() == "bearer" else None
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from app.protocol.tokens import check_secret
 from app.resources import OPERATIONS_SPEC
 from app.server.origins import normalise
 from app.server.turn import TurnSettings
-from app.simulators import SimulatorName
+from app.simulators import DEFAULT_SIMULATOR, SimulatorName
 
 __all__ = ["IceServer", "Settings", "describe_settings_error"]
 
@@ -76,7 +76,7 @@ class Settings(TurnSettings, BaseSettings):
     allowed_hosts: list[str] = Field(default_factory=list)
     operations_spec: Path = OPERATIONS_SPEC
     ros: RosFlavour = DEFAULT_FLAVOUR
-    robot: SimulatorName = "turtlesim"
+    robot: SimulatorName = DEFAULT_SIMULATOR
     # When set (redis://host:port/db), instances sharing it form one signaling service
     # (app.server.fleet); unset, the hub runs embedded in this one process.
     redis_url: str | None = None

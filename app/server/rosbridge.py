@@ -14,8 +14,8 @@ the default room). A room's tokens reach only its robot.
 Every tick each robot steps and each connection's writer is woken; a writer that is free then
 takes its session's publications (the latest of each subscription), so the tick costs the same
 whatever the clients subscribe to, and a client that does not read is sent nothing and slows no
-one. The tick is the simulation's own (turtlesim's 16 ms): the simulators advance that much per
-step, so pacing the loop any other way would only change the robots' speed. A robot's camera is
+one. The tick is the simulation's own: its robots advance that much per step, so pacing the loop
+any other way would only change their speed. A robot's camera is
 filmed at its own pace by a task of its own, rendered in a worker thread (one for every room, so
 the renders of many rooms queue rather than take every core), and only while someone subscribes:
 the tick never waits for a render.
@@ -38,10 +38,11 @@ from app.protocol.jsonedge import oversize
 from app.protocol.rooms import DEFAULT_ROOM
 from app.protocol.ros import DEFAULT_FLAVOUR, RosFlavour
 from app.protocol.signaling import Name
+from app.protocol.tokens import bearer_token
 from app.rosbridge.protocol import Frame, Hub, Publish, Refused, RosbridgeSession, parse_frame
 from app.rosbridge.protocol import status as rosbridge_status
 from app.rosbridge.simulated import Camera, SimulatedRobot
-from app.server.access import RosbridgeGate, bearer_claims, bearer_token
+from app.server.access import RosbridgeGate, bearer_claims
 from app.server.config import Settings
 from app.server.metrics import ServerMetrics
 from app.server.websocket import (
@@ -53,7 +54,7 @@ from app.server.websocket import (
     refuse_if_full,
     serve,
 )
-from app.simulators import SimulatorName, simulation
+from app.simulators import DEFAULT_SIMULATOR, SimulatorName, simulation
 
 log = logging.getLogger(__name__)
 
@@ -103,7 +104,7 @@ class Simulator:
         policy: SocketPolicy,
         max_sessions: int = 64,
         ros: RosFlavour = DEFAULT_FLAVOUR,
-        robot: SimulatorName = "turtlesim",
+        robot: SimulatorName = DEFAULT_SIMULATOR,
         max_rooms: int = MAX_ROOMS,
     ) -> None:
         self.simulation = simulation(robot)

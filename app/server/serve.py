@@ -27,7 +27,7 @@ from app.server import tls
 from app.server.config import Settings, describe_settings_error
 from app.server.hosts import ANY_ADDRESS
 from app.server.metrics import ServerMetrics
-from app.simulators import SIMULATOR_NAMES
+from app.simulators import DEFAULT_SIMULATOR, SIMULATOR_HELP, SIMULATOR_NAMES
 from app.vision.spec import SpecError
 
 log = logging.getLogger(__name__)
@@ -53,9 +53,9 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robot",
         choices=SIMULATOR_NAMES,
-        help="the simulated robot: turtlesim's turtle, one for the whole server, or diffdrive, a"
-        " differential-drive robot with a camera in a walled arena, one per room"
-        " (default: AUTOPILOT_ROBOT or turtlesim)",
+        help="the simulated robot: "
+        + ", or ".join(f"{name}, {what}" for name, what in SIMULATOR_HELP.items())
+        + f" (default: AUTOPILOT_ROBOT or {DEFAULT_SIMULATOR})",
     )
 
 

@@ -148,3 +148,22 @@ def test_a_signature_is_accepted_in_its_one_canonical_encoding_only() -> None:
         with pytest.raises(TokenError) as refused:
             tokens.verify(SECRET, f"{body}.{other}", now=now)
         assert refused.value.reason in ("malformed", "bad signature"), other
+
+
+@pytest.mark.parametrize(
+    ("target", "headers", "expected"),
+    [
+        ("/?token=abc.def", {}, "abc.def"),
+        ("/?room=x&token=abc.def", {}, "abc.def"),
+        ("/", {"authorization": "Bearer abc.def"}, "abc.def"),
+        # The header wins over the query.
+        ("/?token=q.q", {"authorization": "Bearer h.h"}, "h.h"),
+        ("/", {"authorization": "Basic abc"}, None),
+        ("/?token=", {}, None),
+        ("/", {}, None),
+    ],
+)
+def test_a_handshake_offers_its_token_in_a_bearer_header_or_the_query(
+    target: str, headers: dict[str, str], expected: str | None
+) -> None:
+    assert tokens.request_token(target, headers) == expected

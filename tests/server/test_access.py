@@ -8,6 +8,7 @@ import pytest
 
 from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
+from app.protocol.tokens import bearer_token
 from app.rosbridge.protocol import Operation, Refused, parse_frame
 from app.rosbridge.rosapi import ROSAPI_READS
 from app.server.access import (
@@ -15,7 +16,6 @@ from app.server.access import (
     Decision,
     RosbridgeGate,
     bearer_claims,
-    bearer_token,
 )
 
 SECRET = "rosbridge-gate-test-secret"

@@ -7,7 +7,10 @@
 //
 // It ends when every topic in `topics` has a message and `twists` Twists were compared with
 // their goals, or at the timeout. `flood`: subscribe and unsubscribe every channel that many
-// times first, as a hostile viewer might.
+// times first, as a hostile viewer might. `ca`: a PEM file to trust for a wss:// URL (a token
+// rides in the URL's query: wss://host:port/?token=T, as Foxglove passes it).
+import { readFileSync } from 'node:fs';
+
 import wsProtocol from '@foxglove/ws-protocol';
 import WebSocket from 'ws';
 
@@ -30,14 +33,19 @@ const goals = new Map(); // seq -> {x, w}
 const twists = new Map(); // seq -> angular.z
 let serverInfo = null;
 
-const ws = new WebSocket(options.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, 'foxglove.sdk.v1']);
+const tls = options.ca === undefined ? {} : { ca: readFileSync(options.ca) };
+const ws = new WebSocket(
+  options.url,
+  [FoxgloveClient.SUPPORTED_SUBPROTOCOL, 'foxglove.sdk.v1'],
+  tls,
+);
 const client = new FoxgloveClient({ ws });
 
 client.on('serverInfo', (info) => {
   serverInfo = info;
 });
 client.on('error', (error) => finish(`client error: ${error}`));
-client.on('close', () => finish('closed by the server'));
+client.on('close', (event) => finish(`closed by the server: ${event.code} ${event.reason}`));
 client.on('advertise', (advertised) => {
   for (const channel of advertised) {
     const schemaBytes =

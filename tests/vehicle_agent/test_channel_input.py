@@ -1,5 +1,6 @@
-"""Hostile data-channel input to the agent's real handler: refused with a reason,
-never a command. No WebRTC needed: the handler is called the way the data channel calls it."""
+"""Data-channel input to the agent's real handler: goals, and the relay's ``mode`` and ``drive``
+(the manual override), hostile input refused with a reason, never a command. No WebRTC needed:
+the handler is called the way the data channel calls it."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from app.protocol.events import GoalApplied
+from app.protocol.events import AnyEvent, GoalApplied, GoalDropped
 from tests.helpers.agent import H, Vehicle, W
 from vehicle_agent.core.control import PROFILES, Controller, Goal, Pose, angular_command
 
@@ -66,3 +67,66 @@ def test_a_nan_goal_in_the_controller_holds_still_in_both_profiles() -> None:
         assert twist is not None and math.isfinite(twist.angular_z), profile.name
         assert twist.angular_z == 0.0
         assert math.isfinite(angular_command(math.pi, profile))
+
+
+MANUAL_GOAL = (
+    '{"type": "goal", "seq": %d, "op": "face", "x": 10, "y": 100, "w": 320, "h": 240, "t": 0}'
+)
+
+
+def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
+    vehicle = Vehicle("default")
+    agent = vehicle.agent
+    assert agent.handle_channel_message(MANUAL_GOAL % 1, "relay") is None
+    assert vehicle.twists()[-1].angular != 0  # the autopilot steers
+    take = '{"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over by ann"}'
+    assert agent.handle_channel_message(take, "relay") is None
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
+    before = len(vehicle.twists())
+    assert agent.handle_channel_message(MANUAL_GOAL % 2, "relay") is None
+    assert len(vehicle.twists()) == before
+    assert vehicle.events[-1] == GoalDropped(
+        seq=2, frame=None, why="manual", t=vehicle.events[-1].t
+    )
+    drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
+    assert agent.handle_channel_message(drive, "relay") is None
+    assert vehicle.twists()[-1].angular == PROFILES["default"].manual_angular
+    # Hostile drive commands are refused with a reason and never move the turtle.
+    for bad in (
+        '{"type": "drive", "seq": 2, "linear": 2, "angular": 0}',
+        '{"type": "drive", "seq": 0, "linear": 0, "angular": 0}',
+        '{"type": "drive", "seq": 2, "linear": NaN, "angular": 0}',
+        '{"type": "mode", "mode": "turbo"}',
+    ):
+        reply = agent.handle_channel_message(bad, "relay")
+        assert reply is not None and reply.type == "error" and reply.reason, bad
+    assert vehicle.twists()[-1].angular == PROFILES["default"].manual_angular
+    back = '{"type": "mode", "mode": "auto"}'
+    assert agent.handle_channel_message(back, "relay") is None
+    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
+    assert agent.handle_channel_message(MANUAL_GOAL % 3, "relay") is None
+    assert vehicle.twists()[-1].angular != 0  # goals steer again
+
+
+def test_a_goals_twist_is_published_before_any_listener_hears_of_the_goal(
+    vehicle: Vehicle, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The event log's listeners (the recorder, the Foxglove view) run on the agent's loop:
+    whatever they do with a goal's record, its Twist is on its way to the robot already."""
+    published: list[tuple[float, float]] = []
+    monkeypatch.setattr(vehicle.turtle, "publish", lambda *twist: published.append(twist))
+    heard: list[int] = []
+
+    def listener(event: AnyEvent) -> None:
+        if isinstance(event, GoalApplied):
+            heard.append(len(published))
+
+    vehicle.agent.events.listeners.append(listener)
+    try:
+        assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None
+    finally:
+        vehicle.agent.events.listeners.remove(listener)
+    # One goal, one Twist toward it, published before the goal's record was heard.
+    [twist] = vehicle.twists()
+    assert published == [(twist.linear, twist.angular)]
+    assert heard == [1]

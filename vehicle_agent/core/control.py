@@ -3,9 +3,11 @@
 Sans-I/O: a :class:`Controller` is fed goals, poses and clock ticks, each with the time, and
 answers with the :class:`Twist` to publish, if any; the vehicle's pilot
 (:mod:`vehicle_agent.core.pilot`) drives it. The law it applies is the one its profile names
-(:data:`LAWS`). The browser vehicle page's ``control.js`` is a port of this module, checked
-against it on a grid (``e2e/test_control_js.py``); the numbers both use live in
-:mod:`app.protocol.control`.
+(:data:`LAWS`). A law asks for the speeds it wants; the robot's top speed holds them in the
+pilot's limiter alone (:mod:`vehicle_agent.core.limits`), to the share of it a law that drives
+as much as it faces its target allows (:attr:`Twist.top_share`). The browser vehicle page's
+``control.js`` is a port of this module, checked against it on a grid
+(``e2e/test_control_js.py``); the numbers both use live in :mod:`app.protocol.control`.
 
 Coordinate conventions: image pixels have their origin at the top-left corner with y growing
 downward; the turtlesim terrain has its origin at the bottom-left corner with y growing upward.
@@ -98,12 +100,19 @@ class Goal:
 
 @dataclass(frozen=True)
 class Twist:
-    """A velocity command; ``seq``/``frame`` name the goal it came from (None for a stop)."""
+    """A velocity command; ``seq``/``frame`` name the goal it came from (None for a stop).
+
+    ``top_share`` is the share of the robot's top speed ``linear_x`` may reach: a law that
+    drives only as much as it faces its target says how much it does, and the pilot's limiter
+    (:mod:`vehicle_agent.core.limits`), which alone knows the robot's top speed, clamps to that
+    share of it. 1 for every other command.
+    """
 
     linear_x: float
     angular_z: float
     seq: int | None = None
     frame: int | None = None
+    top_share: float = 1.0
 
     @property
     def is_zero(self) -> bool:
@@ -163,10 +172,10 @@ def wall_clearance(pose: Pose, forward: bool) -> float:
     return max(0.0, clearance)
 
 
-def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[float, float]:
-    """(linear, angular) that take the turtle to ``profile.standoff_m`` from terrain point
-    (``tx``, ``ty``): turn towards it, drive as much as it faces it, slow near walls (when the
-    profile knows of them: a turtlesim's)."""
+def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> Twist:
+    """The command that takes the turtle to ``profile.standoff_m`` from terrain point (``tx``,
+    ``ty``): turn towards it, drive as much as it faces it, slow near walls (when the profile
+    knows of them: a turtlesim's)."""
     margin = profile.wall_margin_m
     if profile.walls:
         # A target at the edge of the frame would lead the turtle into the wall; aim inside.
@@ -174,35 +183,34 @@ def follow_command(tx: float, ty: float, pose: Pose, profile: Profile) -> tuple[
         ty = _clamp(ty, margin, WORLD_SIZE - margin)
     error = _heading_error(tx, ty, pose)
     if error is None:
-        return 0.0, 0.0
+        return ZERO_TWIST
     angular = angular_command(error, profile)
     distance = math.hypot(tx - pose.x, ty - pose.y)
-    linear = profile.linear_gain * (distance - profile.standoff_m)
-    linear = _clamp(linear, -profile.max_linear, profile.max_linear)
     # Only the part of the heading that points at the target is worth driving along; facing
-    # away, the turtle turns first.
-    linear *= max(0.0, math.cos(error))
+    # away, the turtle turns first. The share holds for the robot's top speed too.
+    facing = max(0.0, math.cos(error))
+    linear = profile.linear_gain * (distance - profile.standoff_m) * facing
     if not profile.walls:
-        return linear, angular
+        return Twist(linear, angular, top_share=facing)
     # The speed allowed shrinks with the clearance ahead (behind, when backing off) and is zero
     # at the wall margin: the turtle never drives into a wall, and can always turn away.
     allowed = max(0.0, profile.wall_gain * (wall_clearance(pose, linear >= 0) - margin))
-    return _clamp(linear, -allowed, allowed), angular
+    return Twist(_clamp(linear, -allowed, allowed), angular, top_share=facing)
 
 
-def rotate_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+def rotate_law(goal: Goal, pose: Pose, profile: Profile) -> Twist:
     """The rotate law: turn in place to face the goal's terrain point."""
     error = steering_error(goal, pose)
     # No defined heading: hold still rather than keep the last turn going.
-    return 0.0, 0.0 if error is None else angular_command(error, profile)
+    return Twist(0.0, 0.0 if error is None else angular_command(error, profile))
 
 
-def follow_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+def follow_law(goal: Goal, pose: Pose, profile: Profile) -> Twist:
     """The follow law: drive to the profile's standoff from the goal's terrain point."""
     tx, ty = pixel_to_terrain(goal.x, goal.y, goal.w, goal.h)
     # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
     if not all(map(math.isfinite, (tx, ty, pose.x, pose.y, pose.theta))):
-        return 0.0, 0.0
+        return ZERO_TWIST
     return follow_command(tx, ty, pose, profile)
 
 
@@ -224,7 +232,7 @@ def target_range(box_h: float, height_m: float, w: float, hfov: float) -> float:
     return _focal_px(w, hfov) * height_m / box_h
 
 
-def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> Twist:
     """The onboard law: turn the target's bearing toward zero, and drive to the standoff from
     it as much as the vehicle faces it.
 
@@ -237,28 +245,30 @@ def onboard_law(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]
     a box or a real height the vehicle only turns.
     """
     if profile.hfov <= 0:
-        return 0.0, 0.0
+        return ZERO_TWIST
     bearing = pixel_bearing(goal.x, goal.w, profile.hfov) + goal.drift * goal.age
     if goal.heading is not None:
         bearing = wrap_angle(bearing - wrap_angle(pose.theta - goal.heading))
     # A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
     if not math.isfinite(bearing):
-        return 0.0, 0.0
+        return ZERO_TWIST
     angular = angular_command(bearing, profile)
     if goal.drift != 0.0:
         angular = _clamp(angular + goal.drift, -profile.max_angular, profile.max_angular)
     if goal.box_h is None or goal.target_height_m is None:
-        return 0.0, angular
+        return Twist(0.0, angular)
     distance = target_range(goal.box_h, goal.target_height_m, goal.w, profile.hfov)
-    linear = profile.linear_gain * (distance - profile.standoff_m)
-    linear = _clamp(linear, -profile.max_linear, profile.max_linear)
     # Full speed facing the target, none at ``slow_bearing`` off it: turn first, then drive.
-    linear *= max(0.0, 1.0 - abs(bearing) / profile.slow_bearing)
-    return linear, angular
+    # The share holds for the robot's top speed too.
+    facing = max(0.0, 1.0 - abs(bearing) / profile.slow_bearing)
+    linear = profile.linear_gain * (distance - profile.standoff_m) * facing
+    return Twist(linear, angular, top_share=facing)
 
 
-# A control law: the (linear, angular) command that steers from ``pose`` toward ``goal``.
-ControlLaw = Callable[[Goal, Pose, Profile], tuple[float, float]]
+# A control law: the command that steers from ``pose`` toward ``goal``, at the speeds the law
+# wants (the pilot's limiter holds them to the robot's); its ``seq`` and ``frame`` are the
+# controller's to set.
+ControlLaw = Callable[[Goal, Pose, Profile], Twist]
 # The laws a profile can name (``Profile.law``); a new law is a function and an entry here (and
 # its twin in control.js).
 LAWS: dict[Law, ControlLaw] = {"rotate": rotate_law, "follow": follow_law, "onboard": onboard_law}
@@ -445,9 +455,9 @@ class Controller:
             if self._search_since is None:
                 self._search_since = now
             return Twist(0.0, self._last_side * profile.search_angular)
-        linear, angular = self.law(replace(goal, age=now - self._captured), pose, profile)
+        command = self.law(replace(goal, age=now - self._captured), pose, profile)
         # Where the goal put the target, not where the turns since have left the estimate: a
         # vehicle that turned past a target that left by the right must still search right.
-        if answers_goal and angular != 0.0:
-            self._last_side = 1.0 if angular > 0 else -1.0
-        return Twist(linear, angular, seq=goal.seq, frame=goal.frame)
+        if answers_goal and command.angular_z != 0.0:
+            self._last_side = 1.0 if command.angular_z > 0 else -1.0
+        return replace(command, seq=goal.seq, frame=goal.frame)

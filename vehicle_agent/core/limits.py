@@ -11,7 +11,10 @@ states the rules.
 
 The rules:
 
-* Each component is clamped to ``±max_linear`` and ``±max_angular``.
+* linear.x is clamped to ``±max_linear`` times the command's ``top_share`` (1 but where a law
+  drives only as much as it faces its target, and says how much), angular.z to
+  ``±max_angular``. This is the one place a robot's top speed holds a command: the laws ask for
+  the speeds they want.
 * Between two published Twists ``dt`` apart, linear.x changes by at most ``linear_accel·dt``
   and angular.z by at most ``angular_accel·dt``, ``dt`` counted at most one pilot tick: a robot
   that stood still for a minute may not jump to full speed. A command the ramp cannot reach at
@@ -74,8 +77,10 @@ class Limiter:
             self._current = self._target = twist
             self._at = now
             return twist
+        # A share of 0 reaches nothing, even of a robot without a top speed (inf · 0 is NaN).
+        top = self.limits.max_linear * twist.top_share if twist.top_share > 0 else 0.0
         self._target = Twist(
-            _clamp(twist.linear_x, self.limits.max_linear),
+            _clamp(twist.linear_x, top),
             _clamp(twist.angular_z, self.limits.max_angular),
             twist.seq,
             twist.frame,

@@ -23,8 +23,7 @@ from fastapi.responses import HTMLResponse
 from pydantic import BaseModel
 
 from app.protocol import tokens
-from app.protocol.tokens import TokenError
-from app.server.access import bearer_token
+from app.protocol.tokens import TokenError, bearer_token
 from app.server.fleet import keys
 from app.server.pages import templates
 from app.signaling.hub import Hub

@@ -95,10 +95,13 @@ async def run(
                         "increase_pct": _increase_pct(off, on),
                     }
                 )
+        means: dict[str, float] = {}  # each mode's cores, unrounded: the increase comes from them
         for name, mode in modes.items():
             if not mode.events:
                 continue
             agent = statistics.fmean(mode.cores) if mode.cores else None
+            if agent is not None:
+                means[name] = agent
             figures[name] = {
                 "agent_cores": None if agent is None else round(agent, 4),
                 "glass_to_command_ms": _rounded(mode.glass_ms),
@@ -108,11 +111,8 @@ async def run(
                 files = sorted(folder.glob("*.mcap"))
                 figures[name]["mcap_bytes"] = sum(f.stat().st_size for f in files)
                 figures[name] |= _recorder_share(mode.events, agent)
-    plain, recording = figures.get("plain"), figures.get("recording")
-    if plain and recording and plain["agent_cores"] and recording["agent_cores"] is not None:
-        figures["agent_cpu_increase_pct"] = _increase_pct(
-            plain["agent_cores"], recording["agent_cores"]
-        )
+    if means.get("plain") and "recording" in means:
+        figures["agent_cpu_increase_pct"] = _increase_pct(means["plain"], means["recording"])
     return figures
 
 

@@ -57,9 +57,13 @@ def test_quick_field_bench_on_one_condition(tmp_path: Path) -> None:
         assert 0 < row["connect_ms"] < 120_000
         p50, p95 = row["glass_to_command_ms_p50"], row["glass_to_command_ms_p95"]
         assert 0 < p50 <= p95 < 60_000
-        assert 0 < row["goals_per_s"] <= FPS + 1  # at most a goal per frame
+        # At most a goal per frame, and a frame presented once: in a 1 s phase, the goals and
+        # frames of those captured just before it (still in flight when it starts) count too,
+        # up to the frames of a glass-to-command p95 before it.
+        in_flight = FPS * row["glass_to_command_ms_p95"] / 1000
+        assert 0 < row["goals_per_s"] <= (FPS * SECONDS + in_flight + 1) / SECONDS
         assert 0 <= row["heading_error_deg_median"] <= 180
-        assert 0 < row["client_video_fps"] <= FPS + 1
+        assert 0 < row["client_video_fps"] <= (FPS * SECONDS + in_flight + 1) / SECONDS
         # Capture at the vehicle to presentation at the client: one machine's clock.
         p50, p95 = row["client_glass_to_glass_ms_p50"], row["client_glass_to_glass_ms_p95"]
         assert 0 < p50 <= p95 < 60_000

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from app.protocol.control import for_robot, with_standoff
-from app.protocol.robot import PRESETS
+from app.protocol.robot import PRESETS, TURTLESIM
 from app.turtlesim.sim import Pose as SimPose
 from app.turtlesim.sim import TurtleSim
 from vehicle_agent.core.control import (
@@ -23,6 +23,7 @@ from vehicle_agent.core.control import (
     wall_clearance,
     wrap_angle,
 )
+from vehicle_agent.core.limits import Limiter
 
 CENTRE = Pose(TERRAIN_CENTRE, TERRAIN_CENTRE, 0.0)
 
@@ -263,14 +264,17 @@ def terrain_goal(tx: float, ty: float, seq: int = 0) -> Goal:
 
 
 def drive(control: Controller, sim: TurtleSim, clock: FakeClock, seconds: float) -> None:
-    """Run the simulator and the controller together, one turtlesim tick at a time."""
+    """Run the simulator and the controller together, one turtlesim tick at a time, each
+    command held to a turtlesim's top speeds as the pilot holds it (the laws ask for more)."""
+    limiter = Limiter(TURTLESIM.limits, TurtleSim.TICK_S)
     for _ in range(round(seconds / TurtleSim.TICK_S)):
         clock.now += TurtleSim.TICK_S
         sim.step()
         p = sim.pose("turtle1")
         twist = control.pose(Pose(p.x, p.y, p.theta), clock.now) or control.tick(clock.now)
         if twist is not None:
-            sim.cmd_vel("turtle1", twist.linear_x, twist.angular_z)
+            sent = limiter.command(twist, clock.now)
+            sim.cmd_vel("turtle1", sent.linear_x, sent.angular_z)
 
 
 def chase(
@@ -345,20 +349,21 @@ def test_follow_slows_near_a_wall() -> None:
     profile = PROFILES["follow"]
 
     def speed(pose: Pose, target: tuple[float, float]) -> float:
+        """The speed published: the law's, within a turtlesim's top speed."""
         clock = FakeClock()
         control = Controller(profile)
         control.pose(pose, clock.now)
         twist = control.goal(terrain_goal(*target), clock.now)
         assert twist is not None
-        return twist.linear_x
+        return Limiter(TURTLESIM.limits, TurtleSim.TICK_S).command(twist, clock.now).linear_x
 
-    # The same 3 m to go, facing the target: in the open the turtle drives at full speed,
-    # towards a target at the wall it is already slowing down.
+    # The same 3 m to go, facing the target: in the open the turtle drives at full speed (4 m/s,
+    # a turtlesim's top), towards a target at the wall it is already slowing down.
     open_speed = speed(Pose(3.0, 5.5, 0.0), (6.0, 5.5))
     wall_target = (TurtleSim.WORLD_SIZE, 5.5)
     inside = TurtleSim.WORLD_SIZE - profile.wall_margin_m  # the target is kept this far in
     wall_speed = speed(Pose(inside - 3.0, 5.5, 0.0), wall_target)
-    assert open_speed == pytest.approx(profile.max_linear)
+    assert open_speed == 4.0
     assert 0.0 < wall_speed < open_speed
     # Backing off from a target that came too close, with a wall behind: slower and slower,
     # and not at all inside the wall margin.
@@ -374,17 +379,19 @@ def test_follow_knows_of_walls_on_a_turtlesim_only() -> None:
     turtlesim = for_robot(PROFILES["follow"], PRESETS["turtlesim"])
     rover = for_robot(PROFILES["follow"], PRESETS["diffdrive"])
     assert turtlesim.walls and not rover.walls
+    # The law asks for 3.0 m/s per metre beyond the 1 m standoff, facing it the whole of the top
+    # speed (the pilot's limiter holds it to the robot's).
     pose = Pose(TurtleSim.WORLD_SIZE - 3.0, 5.5, 0.0)
-    near_wall, _ = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, turtlesim)
-    anywhere, _ = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, rover)
-    assert 0.0 < near_wall < anywhere == pytest.approx(PROFILES["follow"].max_linear)
+    near_wall = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, turtlesim)
+    anywhere = follow_command(TurtleSim.WORLD_SIZE, 5.5, pose, rover)
+    assert (anywhere.linear_x, anywhere.angular_z, anywhere.top_share) == (6.0, 0.0, 1.0)
+    assert 0.0 < near_wall.linear_x < anywhere.linear_x
     # A point beyond what would be the terrain's edge, straight ahead: a robot heads for it;
     # a turtlesim aims at the point kept inside its terrain, and so turns.
     outside = Pose(TurtleSim.WORLD_SIZE + 2.0, -1.0, math.pi / 2)
-    assert follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, rover) == pytest.approx(
-        (PROFILES["follow"].max_linear, 0.0)
-    )
-    assert follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, turtlesim)[1] > 0.5
+    ahead = follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, rover)
+    assert (ahead.linear_x, ahead.angular_z) == pytest.approx((3.0 * (5.0 - 1.0), 0.0))
+    assert follow_command(TurtleSim.WORLD_SIZE + 2.0, 4.0, outside, turtlesim).angular_z > 0.5
 
 
 def test_follow_searches_in_place_when_the_target_is_lost() -> None:

@@ -4,7 +4,9 @@ Burger's numbers: 0.22 m/s, 2.84 rad/s, 2.5 m/s², 3.2 rad/s²."""
 
 from __future__ import annotations
 
+import math
 import random
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -184,3 +186,29 @@ def test_unlimited_accelerations_take_the_command_exactly() -> None:
     # No rounding on the way: 0.1 + (0.3 - 0.1) would be 0.30000000000000004.
     assert limiter.command(Twist(0.3, 4.9, seq=2), 0.0) == Twist(0.3, 4.9, seq=2)
     assert limiter.command(Twist(9.0, -9.0, seq=3), 1.0) == Twist(4.0, -5.0, seq=3)
+
+
+def test_a_command_reaches_only_the_share_of_the_top_speed_it_names() -> None:
+    limiter = Limiter(Limits(0.22, 2.84, math.inf, math.inf), TICK_S)
+    # Half the Burger's top speed, ahead and back; below it, what was asked; without a share,
+    # the whole of it.
+    assert limiter.command(Twist(5.0, 0.0, seq=1, top_share=0.5), 0.0).linear_x == 0.11
+    assert limiter.command(Twist(-5.0, 0.0, seq=2, top_share=0.5), 0.1).linear_x == -0.11
+    assert limiter.command(Twist(0.05, 0.0, seq=3, top_share=0.5), 0.2).linear_x == 0.05
+    assert limiter.command(Twist(5.0, 0.0, seq=4), 0.3).linear_x == 0.22
+    # No share of no top speed is still nothing (not the NaN of inf · 0).
+    unlimited = Limiter(Limits(math.inf, math.inf, math.inf, math.inf), TICK_S)
+    assert unlimited.command(Twist(5.0, 1.0, seq=5, top_share=0.0), 0.0) == Twist(0.0, 1.0, seq=5)
+
+
+def test_the_follow_law_off_to_one_side_gets_that_share_of_the_robots_top_speed() -> None:
+    """The law drives as much as it faces its target: 60° off, half the Burger's top speed,
+    however fast the distance asks it to go (3 m/s here: 3 (m/s)/m, 2 m beyond the standoff)."""
+    burger = replace(BURGER, limits=replace(BURGER.limits, linear_accel=math.inf))
+    pilot = Pilot(PROFILES["follow"], robot=burger)
+    pilot.pose(CENTRE, 0.0)
+    tx = TERRAIN_CENTRE + 3.0 * math.cos(math.pi / 3)
+    ty = TERRAIN_CENTRE + 3.0 * math.sin(math.pi / 3)
+    message = goal(1, 0.0, x=tx * 320 / TERRAIN_CENTRE, y=480 - ty * 240 / TERRAIN_CENTRE)[2][0]
+    (sent,) = twists(pilot.goal(channels.Goal.model_validate(message), 0.0))
+    assert sent.linear == pytest.approx(0.22 * 0.5, abs=1e-12)

@@ -13,10 +13,10 @@ import pytest
 from app.protocol import channels
 from app.protocol import events as ev
 from app.protocol.control import PROFILES, TERRAIN_CENTRE
-from app.protocol.robot import PRESETS, TURTLESIM
+from app.protocol.robot import PRESETS
 from tests.vehicle_agent.core import pilot_sequences
 from tests.vehicle_agent.core.pilot_sequences import SEQUENCES, goal
-from vehicle_agent.core.control import Goal, Pose, Profile, pixel_bearing, target_range
+from vehicle_agent.core.control import Goal, Pose, Profile, Twist, pixel_bearing, target_range
 from vehicle_agent.core.pilot import Pilot
 
 DEFAULT = PROFILES["default"]
@@ -192,9 +192,9 @@ def test_the_next_tick_comes_when_a_stop_falls_due() -> None:
 def test_a_control_law_plugs_in() -> None:
     calls: list[tuple[Goal, Pose]] = []
 
-    def creep(goal: Goal, pose: Pose, profile: Profile) -> tuple[float, float]:
+    def creep(goal: Goal, pose: Pose, profile: Profile) -> Twist:
         calls.append((goal, pose))
-        return 0.25, -0.5
+        return Twist(0.25, -0.5)
 
     pilot = Pilot(DEFAULT, law=creep)
     pilot.pose(CENTRE, 0.0)
@@ -222,8 +222,12 @@ def test_the_shared_sequences_give_records_the_event_log_reads_back(
 # --- the onboard law: a camera the vehicle carries --------------------------------------------
 
 # The diffdrive robot's camera: 60° across a 640-pixel frame, so f = 320 / tan 30° = 554.26 px.
-# The law alone: the diffdrive robot's camera on a robot with turtlesim's wide limits (no ramp).
-CAMERA_ONLY = replace(PRESETS["diffdrive"], limits=TURTLESIM.limits)
+# The law and the top speeds alone: the diffdrive robot (its camera, 1 m/s and 3 rad/s) without
+# its ramp.
+DIFFDRIVE = PRESETS["diffdrive"]
+CAMERA_ONLY = replace(
+    DIFFDRIVE, limits=replace(DIFFDRIVE.limits, linear_accel=math.inf, angular_accel=math.inf)
+)
 ODOM = Pose(1.0, 3.0, 0.0)
 FOCAL_PX = 320 / math.tan(math.radians(30))
 
@@ -329,7 +333,7 @@ def test_the_standoff_is_held_far_drives_near_backs_off() -> None:
     # standoff, not 0.6 m.
     a_little_far = _command(onboard(), face(1, 0.0, x=320.0, range_m=1.4), 0.0)
     assert a_little_far.linear == pytest.approx(0.5, abs=1e-6)
-    # Bounded both ways, at 1 m/s.
+    # Bounded both ways by the robot's top speed, 1 m/s (the law asks for 2.5 · (20 − 1.2) m/s).
     assert _command(onboard(), face(1, 0.0, x=320.0, range_m=20.0), 0.0).linear == 1.0
     assert _command(onboard(), face(1, 0.0, x=320.0, range_m=0.2), 0.0).linear == -1.0
 

@@ -6,8 +6,8 @@
 // so both compute the same integers from the same doubles.
 
 /** Numbers per anchor in the regressors output: box (dx, dy, w, h), then 6 keypoints (x, y). */
-export const COORDS = 16;
-export const KEYPOINTS = 6;
+const COORDS = 16;
+const KEYPOINTS = 6;
 
 const round = (v) => Math.floor(v + 0.5);
 
@@ -78,18 +78,18 @@ export function around(box, margin, width, height) {
 }
 
 /** The score of a logit, clipped to ±100 as MediaPipe clips it. */
-export function sigmoid(logit) {
+function sigmoid(logit) {
   const clipped = Math.min(100.0, Math.max(-100.0, logit));
   return 1.0 / (1.0 + Math.exp(-clipped));
 }
 
 /** An input-pixel point back in frame pixels. */
-export function toPoint(fit, x, y) {
+function toPoint(fit, x, y) {
   return [fit.region[0] + x / fit.scale, fit.region[1] + y / fit.scale];
 }
 
 /** An input-pixel box back in frame pixels, rounded. */
-export function toFrame(fit, x, y, w, h) {
+function toFrame(fit, x, y, w, h) {
   const [fx, fy] = toPoint(fit, x, y);
   return [round(fx), round(fy), round(w / fit.scale), round(h / fit.scale)];
 }
@@ -118,7 +118,7 @@ export function decode(scores, raw, centres, fit, threshold) {
 }
 
 /** Intersection over union of two boxes (0 when either is empty). */
-export function iou(a, b) {
+function iou(a, b) {
   const ix = Math.max(0, Math.min(a[0] + a[2], b[0] + b[2]) - Math.max(a[0], b[0]));
   const iy = Math.max(0, Math.min(a[1] + a[3], b[1] + b[3]) - Math.max(a[1], b[1]));
   const inter = ix * iy;

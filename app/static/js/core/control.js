@@ -3,7 +3,9 @@
 // checked against it on a grid (e2e/test_control_js.py); the vehicle's pilot (core/pilot.js)
 // drives it. Its numbers (terrain, gains, standoff, wall margin, timeouts, profile names) are not
 // written here: they come from app/protocol/control.py through the page's embedded config
-// (`config.control`).
+// (`config.control`). A law asks for the speeds it wants; the robot's top speed holds them in the
+// pilot's limiter alone (core/limits.js), to the share of it a law that drives as much as it
+// faces its target allows (`topShare`).
 //
 // Image pixels have their origin top-left with y growing downward; the turtlesim terrain has
 // its origin bottom-left with y growing upward. A goal pixel is flipped vertically when mapped
@@ -28,6 +30,15 @@ function clamp(value, low, high) {
 // The focal length in pixels of a camera `hfov` radians across a frame `w` wide.
 function focalPx(w, hfov) {
   return w / 2 / Math.tan(hfov / 2);
+}
+
+/**
+ * What a law asks for: its speeds, and the share of the robot's top speed `linear` may reach
+ * (`topShare`: a law that drives only as much as it faces its target says how much). The speeds
+ * are the law's wish; the pilot's limiter (core/limits.js) alone holds them to the robot's.
+ */
+function command(linear, angular, topShare = 1) {
+  return { linear, angular, topShare };
 }
 
 // JSON has no infinity: the config sends null for "no limit" / "never".
@@ -98,8 +109,9 @@ export class ControlLaw {
   }
 
   /**
-   * {linear, angular} that take the turtle to `profile.standoffM` from terrain point (tx, ty):
-   * turn towards it, drive as much as it faces it, slow near walls (when `profile.walls`).
+   * The command {linear, angular, topShare} that takes the turtle to `profile.standoffM` from
+   * terrain point (tx, ty): turn towards it, drive as much as it faces it, slow near walls (when
+   * `profile.walls`).
    */
   followCommand(tx, ty, pose, profile) {
     const margin = profile.wallMarginM;
@@ -108,30 +120,27 @@ export class ControlLaw {
     const x = profile.walls ? clamp(tx, margin, this.worldSize - margin) : tx;
     const y = profile.walls ? clamp(ty, margin, this.worldSize - margin) : ty;
     const error = this.#headingError(x, y, pose);
-    if (error === null) return { linear: 0, angular: 0 };
+    if (error === null) return command(0, 0);
     const angular = this.angularCommand(error, profile);
     const distance = Math.hypot(x - pose.x, y - pose.y);
-    let linear = clamp(
-      profile.linearGain * (distance - profile.standoffM),
-      -profile.maxLinear,
-      profile.maxLinear,
-    );
-    // Only the part of the heading that points at the target is worth driving along.
-    linear *= Math.max(0, Math.cos(error));
-    if (!profile.walls) return { linear, angular };
+    // Only the part of the heading that points at the target is worth driving along; facing
+    // away, the turtle turns first. The share holds for the robot's top speed too.
+    const facing = Math.max(0, Math.cos(error));
+    const linear = profile.linearGain * (distance - profile.standoffM) * facing;
+    if (!profile.walls) return command(linear, angular, facing);
     // Slower with less clearance ahead (behind, when backing off); zero at the wall margin.
     const allowed = Math.max(
       0,
       profile.wallGain * (this.wallClearance(pose, linear >= 0) - margin),
     );
-    return { linear: clamp(linear, -allowed, allowed), angular };
+    return command(clamp(linear, -allowed, allowed), angular, facing);
   }
 
   /** The rotate law: turn in place to face the goal's terrain point. */
   rotate(goal, pose, profile) {
     const error = this.steeringError(goal, pose);
     // No defined heading: hold still rather than keep the last turn going.
-    return { linear: 0, angular: error === null ? 0 : this.angularCommand(error, profile) };
+    return command(0, error === null ? 0 : this.angularCommand(error, profile));
   }
 
   /** The follow law: drive to the profile's standoff from the goal's terrain point. */
@@ -164,31 +173,27 @@ export class ControlLaw {
    * vehicle only turns.
    */
   onboard(goal, pose, profile) {
-    if (!(profile.hfov > 0)) return { linear: 0, angular: 0 };
+    if (!(profile.hfov > 0)) return command(0, 0);
     const drift = goal.drift ?? 0;
     let bearing = this.pixelBearing(goal.x, goal.w, profile.hfov) + drift * (goal.age ?? 0);
     if (goal.heading !== null && goal.heading !== undefined)
       bearing = wrapAngle(bearing - wrapAngle(pose.theta - goal.heading));
     // A non-finite goal or pose has no direction: hold still (NaN would pass every clamp).
-    if (!Number.isFinite(bearing)) return { linear: 0, angular: 0 };
+    if (!Number.isFinite(bearing)) return command(0, 0);
     let angular = this.angularCommand(bearing, profile);
     if (drift !== 0) angular = clamp(angular + drift, -profile.maxAngular, profile.maxAngular);
-    if (goal.boxH == null || goal.targetHeightM == null) return { linear: 0, angular };
+    if (goal.boxH == null || goal.targetHeightM == null) return command(0, angular);
     const distance = this.targetRange(goal.boxH, goal.targetHeightM, goal.w, profile.hfov);
-    let linear = clamp(
-      profile.linearGain * (distance - profile.standoffM),
-      -profile.maxLinear,
-      profile.maxLinear,
-    );
-    // Full speed facing the target, none at `slowBearing` off it: turn first, then drive.
-    linear *= Math.max(0, 1 - Math.abs(bearing) / profile.slowBearing);
-    return { linear, angular };
+    // Full speed facing the target, none at `slowBearing` off it: turn first, then drive. The
+    // share holds for the robot's top speed too.
+    const facing = Math.max(0, 1 - Math.abs(bearing) / profile.slowBearing);
+    return command(profile.linearGain * (distance - profile.standoffM) * facing, angular, facing);
   }
 
   /**
    * The control law `profile.law` names, as a function (goal, pose, profile) -> {linear,
-   * angular}: the laws of vehicle_agent/core/control.py's LAWS. A new law is a method here, an
-   * entry below and its Python twin.
+   * angular, topShare}: the laws of vehicle_agent/core/control.py's LAWS. A new law is a method
+   * here, an entry below and its Python twin.
    */
   lawOf(profile) {
     const laws = { rotate: this.rotate, follow: this.follow, onboard: this.onboard };
@@ -202,9 +207,9 @@ export const ZERO_TWIST = Object.freeze({ linear: 0, angular: 0, seq: null, fram
 
 /**
  * Turns goals into Twists with one profile and the law it names (or `law`, a function
- * (goal, pose, profile) -> {linear, angular}). Call `goal` for each goal, `pose` for each pose
- * update and `tick` every few tens of milliseconds, each with the time now (seconds, one
- * clock); each returns the Twist to publish now, or null. Closed-loop profiles answer a new
+ * (goal, pose, profile) -> {linear, angular, topShare?}). Call `goal` for each goal, `pose` for
+ * each pose update and `tick` every few tens of milliseconds, each with the time now (seconds,
+ * one clock); each returns the Twist to publish now, or null. Closed-loop profiles answer a new
  * goal at once (rate-capped by `minIntervalS`) and pose updates every `periodS`; the thesis
  * profile publishes on its own clock. After a goal timeout or `stop` exactly one zero Twist
  * comes back, then nothing until the next goal. The searching profiles (follow, onboard) stop
@@ -377,10 +382,10 @@ export class Controller {
       if (this.#searchSince === null) this.#searchSince = now;
       return { linear: 0, angular: this.#lastSide * profile.searchAngular, seq: null, frame: null };
     }
-    const { linear, angular } = this.law({ ...goal, age: now - this.#captured }, pose, profile);
+    const wanted = this.law({ ...goal, age: now - this.#captured }, pose, profile);
     // Where the goal put the target, not where the turns since have left the estimate: a vehicle
     // that turned past a target that left by the right must still search right.
-    if (answersGoal && angular !== 0) this.#lastSide = angular > 0 ? 1 : -1;
-    return { linear, angular, seq: goal.seq ?? null, frame: goal.frame ?? null };
+    if (answersGoal && wanted.angular !== 0) this.#lastSide = wanted.angular > 0 ? 1 : -1;
+    return { ...wanted, seq: goal.seq ?? null, frame: goal.frame ?? null };
   }
 }

@@ -1,9 +1,10 @@
-// Every command within the robot's limits: clamped to its top speeds, ramped within its
-// accelerations. A port of vehicle_agent/core/limits.py (the rules are stated there, and tested in
-// tests/vehicle_agent/core/test_limits.py); both run the pilot's shared sequences
-// (tests/vehicle_agent/core/pilot_sequences.py, e2e/test_pilot_js.py). The limits are the robot
-// description's (app/protocol/robot.py), through the page's embedded config (`config.robot`);
-// a null there is "no limit".
+// Every command within the robot's limits: clamped to its top speeds (the one place they hold a
+// command: the laws ask for the speeds they want, and for linear the share of the top speed they
+// allow), ramped within its accelerations. A port of vehicle_agent/core/limits.py (the rules are
+// stated there, and tested in tests/vehicle_agent/core/test_limits.py); both run the pilot's
+// shared sequences (tests/vehicle_agent/core/pilot_sequences.py, e2e/test_pilot_js.py). The
+// limits are the robot description's (app/protocol/robot.py), through the page's embedded config
+// (`config.robot`); a null there is "no limit".
 //
 // A stop (a zero Twist that answers no goal: stop, goal timeout, dead-man, lost link, mode
 // change, released stick) is published at once, never ramped: the robot's base controller
@@ -51,15 +52,20 @@ export class Limiter {
     );
   }
 
-  /** The Twist to publish now for the command `twist` ({linear, angular, seq, frame}). */
+  /**
+   * The Twist to publish now for the command `twist` ({linear, angular, seq, frame, topShare?}:
+   * linear is held to that share of the top speed, 1 when it names none).
+   */
   command(twist, now) {
     if (isStop(twist)) {
       this.#current = this.#target = twist;
       this.#at = now;
       return twist;
     }
+    // A share of 0 reaches nothing, even of a robot without a top speed (Infinity · 0 is NaN).
+    const share = twist.topShare ?? 1;
     this.#target = {
-      linear: clamp(twist.linear, this.limits.maxLinear),
+      linear: clamp(twist.linear, share > 0 ? this.limits.maxLinear * share : 0),
       angular: clamp(twist.angular, this.limits.maxAngular),
       seq: twist.seq,
       frame: twist.frame,

@@ -10,7 +10,7 @@
 import { largest } from './tracking-window.js';
 
 /** Whether pixel (x, y) is inside box [x, y, w, h], edges included. */
-export function contains([bx, by, bw, bh], x, y) {
+function contains([bx, by, bw, bh], x, y) {
   return bx <= x && x <= bx + bw && by <= y && y <= by + bh;
 }
 
@@ -18,7 +18,7 @@ export function contains([bx, by, bw, bh], x, y) {
  * How far pixel (x, y) is from box [x, y, w, h] in the box's own size: the larger of the
  * horizontal gap over its width and the vertical gap over its height (0 inside, edges included).
  */
-export function gap([bx, by, bw, bh], x, y) {
+function gap([bx, by, bw, bh], x, y) {
   const dx = Math.max(bx - x, 0, x - (bx + bw));
   const dy = Math.max(by - y, 0, y - (by + bh));
   return Math.max(dx / bw, dy / bh);
@@ -28,7 +28,7 @@ export function gap([bx, by, bw, bh], x, y) {
  * The box clicked at (x, y): the smallest containing it (first of equal areas); else the box it
  * is nearest to in that box's own size (gap, first of equal gaps), when at most `near`; or null.
  */
-export function pick(x, y, boxes, near) {
+function pick(x, y, boxes, near) {
   let best = null;
   for (const b of boxes) {
     if (contains(b, x, y) && (best === null || b[2] * b[3] < best[2] * best[3])) best = b;
@@ -58,7 +58,7 @@ export function lockable(boxes, candidates) {
  * `height` frame's shorter side centred on (x, y), moved inside the frame, as [x, y, w, h]; null
  * for a click outside the frame.
  */
-export function clickWindow(x, y, width, height, share) {
+function clickWindow(x, y, width, height, share) {
   if (!(x >= 0 && x <= width && y >= 0 && y <= height)) return null;
   const side = Math.floor(share * Math.min(width, height));
   const x0 = Math.min(Math.max(0, Math.floor(x - side / 2)), width - side);
@@ -67,7 +67,7 @@ export function clickWindow(x, y, width, height, share) {
 }
 
 /** Intersection over union of two boxes. */
-export function overlap(a, b) {
+function overlap(a, b) {
   const w = Math.min(a[0] + a[2], b[0] + b[2]) - Math.max(a[0], b[0]);
   const h = Math.min(a[1] + a[3], b[1] + b[3]) - Math.max(a[1], b[1]);
   if (w <= 0 || h <= 0) return 0;
@@ -85,7 +85,7 @@ function similar(box, locked, maxScale) {
  * size, the one that overlaps it most; when none overlaps, the nearest centre within `rule.reach`
  * times its longer side, unless `anywhere`. Ties go to the first box, as in lock.py.
  */
-export function associate(locked, boxes, anywhere, rule) {
+function associate(locked, boxes, anywhere, rule) {
   const candidates = boxes.filter((b) => similar(b, locked, rule.maxScale));
   let best = null;
   let bestOverlap = 0;
@@ -241,7 +241,7 @@ export function lookRect([x, y, w, h], width, height) {
 }
 
 /** How alike two looks (normalised histograms) are: their Bhattacharyya coefficient. */
-export function likeness(a, b) {
+function likeness(a, b) {
   if (a.length !== b.length) throw new Error('looks of different sizes');
   let sum = 0;
   for (let i = 0; i < a.length; i += 1) sum += Math.sqrt(a[i] * b[i]);
@@ -250,7 +250,7 @@ export function likeness(a, b) {
 
 /** The box of any size most like the target (`alike(box)`), when at least `rule.minLikeness`
  * alike; the first of equal likeness. */
-export function recognise(boxes, alike, rule) {
+function recognise(boxes, alike, rule) {
   let best = null;
   let bestLikeness = rule.minLikeness;
   for (const b of boxes) {

@@ -20,7 +20,7 @@ const ANGULAR_AXIS = 0; // left stick, left is −1
 const ZERO = Object.freeze({ linear: 0, angular: 0 });
 
 /** The command of the arrow keys held (opposite keys cancel). */
-export function keyCommand(held) {
+function keyCommand(held) {
   let linear = 0;
   let angular = 0;
   for (const key of held) {

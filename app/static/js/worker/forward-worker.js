@@ -11,6 +11,7 @@
 //   {type: 'removeSink', name}
 //   {type: 'keyFrame'}  ask the vehicle for a key frame (a client joined, or lost one)
 import { passesThrough } from '../core/payload-types.js';
+import { ContinuousTimestamps } from '../core/rtp-timestamps.js';
 
 // The vehicle is asked for a key frame at most this often: a key frame is several times the
 // size of a delta frame, and several clients asking at once need only one.
@@ -20,6 +21,7 @@ const sinks = new Map(); // client name -> {writer, codecs, passing: boolean | n
 let vehicleCodecs = [];
 let vehicle = null; // the RTCRtpScriptTransformer of the served vehicle's video
 let keyFrameAskedAt = -Infinity;
+const timestamps = new ContinuousTimestamps(); // one timeline across vehicles for the clients
 
 self.onrtctransform = ({ transformer }) => {
   // One vehicle at a time: a new receiver's transform is the vehicle that now holds the seat.
@@ -60,15 +62,19 @@ async function pump(transformer) {
       // The transform may start after the stream's opening key frame went by: without a key
       // frame the clients' decoders show nothing until they ask for one themselves.
       if (first && frame.type !== 'key') askKeyFrame();
-      forward(frame);
+      forward(frame, transformer);
     }
     first = false;
     await writer.write(frame);
   }
 }
 
-function forward(frame) {
-  const { payloadType } = frame.getMetadata();
+function forward(frame, stream) {
+  const metadata = frame.getMetadata();
+  const { payloadType } = metadata;
+  const rtpTimestamp = timestamps.next(stream, metadata.rtpTimestamp);
+  const options =
+    rtpTimestamp === metadata.rtpTimestamp ? {} : { metadata: { ...metadata, rtpTimestamp } };
   for (const [name, sink] of sinks) {
     const passing = passesThrough(payloadType, vehicleCodecs, sink.codecs);
     if (passing !== sink.passing) {
@@ -77,7 +83,7 @@ function forward(frame) {
     }
     // A copy per client: writing a frame hands it over. A sink whose connection closed refuses
     // it, and goes with its client.
-    if (passing) sink.writer.write(new RTCEncodedVideoFrame(frame)).catch(() => {});
+    if (passing) sink.writer.write(new RTCEncodedVideoFrame(frame, options)).catch(() => {});
   }
 }
 

@@ -10,7 +10,7 @@
 import { searchRegion, searchSizes, sourceRect } from '../../core/tracking-window.js';
 
 /** Size of the detection image, or null when the frame is used as it is (see _reduction). */
-export function reduction(width, height, detectWidth) {
+function reduction(width, height, detectWidth) {
   if (detectWidth == null || width <= detectWidth) return null;
   return { width: detectWidth, height: Math.floor((height * detectWidth) / width + 0.5) };
 }

@@ -1,14 +1,12 @@
 """The manual override at the vehicle: the mode, drive commands and the dead-man, with the time
-given by the test (vehicle_agent/core/manual.py), and the agent's handling of the relay's
-``mode`` and ``drive``."""
+given by the test (vehicle_agent/core/manual.py; the agent's handling of the relay's ``mode``
+and ``drive``: tests/vehicle_agent/test_channel_input.py)."""
 
 from __future__ import annotations
 
 import pytest
 
 from app.protocol.control import DEADMAN_S
-from app.protocol.events import GoalDropped
-from tests.helpers.agent import Vehicle
 from tests.vehicle_agent.core.manual_sequences import SEQUENCES, run
 from vehicle_agent.core.control import PROFILES, ZERO_TWIST, Twist
 from vehicle_agent.core.manual import ManualDrive
@@ -89,40 +87,3 @@ def test_a_new_link_is_back_in_auto() -> None:
     drive.reset_link()
     assert not drive.manual and drive.operator is None
     assert drive.drive(1, 1.0, 0.0, 0.0) is None
-
-
-GOAL = '{"type": "goal", "seq": %d, "op": "face", "x": 10, "y": 100, "w": 320, "h": 240, "t": 0}'
-
-
-def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
-    vehicle = Vehicle("default")
-    agent = vehicle.agent
-    assert agent.handle_channel_message(GOAL % 1, "relay") is None
-    assert vehicle.twists()[-1].angular != 0  # the autopilot steers
-    take = '{"type": "mode", "mode": "manual", "operator": "ann", "reason": "taken over by ann"}'
-    assert agent.handle_channel_message(take, "relay") is None
-    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
-    before = len(vehicle.twists())
-    assert agent.handle_channel_message(GOAL % 2, "relay") is None
-    assert len(vehicle.twists()) == before
-    assert vehicle.events[-1] == GoalDropped(
-        seq=2, frame=None, why="manual", t=vehicle.events[-1].t
-    )
-    drive = '{"type": "drive", "seq": 1, "linear": 0, "angular": 1}'
-    assert agent.handle_channel_message(drive, "relay") is None
-    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
-    # Hostile drive commands are refused with a reason and never move the turtle.
-    for bad in (
-        '{"type": "drive", "seq": 2, "linear": 2, "angular": 0}',
-        '{"type": "drive", "seq": 0, "linear": 0, "angular": 0}',
-        '{"type": "drive", "seq": 2, "linear": NaN, "angular": 0}',
-        '{"type": "mode", "mode": "turbo"}',
-    ):
-        reply = agent.handle_channel_message(bad, "relay")
-        assert reply is not None and reply.type == "error" and reply.reason, bad
-    assert vehicle.twists()[-1].angular == DEFAULT.manual_angular
-    back = '{"type": "mode", "mode": "auto"}'
-    assert agent.handle_channel_message(back, "relay") is None
-    assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
-    assert agent.handle_channel_message(GOAL % 3, "relay") is None
-    assert vehicle.twists()[-1].angular != 0  # goals steer again
