@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from app.arguments import non_negative_integer, positive_integer, positive_number
 from app.protocol.control import PROFILES
+from app.protocol.opencv import OPENCV_BUILDS, RELAY_OPENCV_BUILD
 from app.protocol.video import VIDEO_FPS
 from app.resources import APP_DIR
 from app.tools.bench import report
@@ -180,8 +181,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--ops",
         metavar="OP[,OP...]",
-        help="with --onboard: the operations to follow the walker with, one walk each, side by"
-        " side in one report (default: face_small, and face_dnn when the relay offers it)",
+        help="the operations to measure, side by side in one report: with --onboard, one walk"
+        " each (default: face_small, and face_dnn when the relay offers it); with --relay-cost,"
+        " one room each (default: the spec's default operation); with --opencv-builds, each on"
+        " every frame (default: every operation that tracks)",
+    )
+    parser.add_argument(
+        "--opencv",
+        metavar="BUILD[,BUILD...]",
+        help="with --relay-cost: the OpenCV.js builds the relay loads, one room each per"
+        f" operation ({', '.join(OPENCV_BUILDS)}; default: the one it loads unless told,"
+        f" {RELAY_OPENCV_BUILD})",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("bench-report"), help="report directory (bench-report/)"
@@ -215,15 +225,36 @@ def run(args: argparse.Namespace) -> int:
     if args.photos is not None and not args.faces:
         log.error("--photos goes with --faces")
         return 2
-    if args.ops is not None and not args.onboard:
-        log.error("--ops goes with --onboard")
+    if args.ops is not None and not (args.onboard or args.relay_cost or args.opencv_builds):
+        log.error("--ops goes with --onboard, --relay-cost or --opencv-builds")
         return 2
-    if args.onboard:
-        try:
+    if args.opencv is not None and not args.relay_cost:
+        log.error("--opencv goes with --relay-cost")
+        return 2
+    try:
+        if args.onboard:
             args.ops = ",".join(_onboard_ops(args.ops))
-        except ValueError as exc:
-            log.error("%s", exc)
-            return 2
+        elif args.relay_cost:
+            args.ops = ",".join(_named(args.ops, _offered(), _offered()[:1]))
+            args.opencv = ",".join(
+                _named(
+                    args.opencv,
+                    list(OPENCV_BUILDS),
+                    [RELAY_OPENCV_BUILD],
+                    "--opencv",
+                    "vendored",
+                    "build",
+                )
+            )
+        elif args.opencv_builds:
+            from app.tools.bench.opencv_builds import tracking_ops
+
+            args.ops = ",".join(
+                _named(args.ops, tracking_ops(), tracking_ops(), among="that tracks")
+            )
+    except ValueError as exc:
+        log.error("%s", exc)
+        return 2
     if args.fleet:
         from app.tools.bench import fleet  # only the fleet bench needs Redis
 
@@ -359,11 +390,11 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
     if args.recorder:
         argv += ["--recorder", "--rounds", str(args.rounds)]
     if args.relay_cost:
-        argv.append("--relay-cost")
+        argv += ["--relay-cost", "--ops", args.ops, "--opencv", args.opencv]
     if args.baseline:
         argv += ["--baseline", "--rounds", str(args.rounds)]
     if args.opencv_builds:
-        argv.append("--opencv-builds")
+        argv += ["--opencv-builds", "--ops", args.ops]
     if args.onboard:
         argv += ["--onboard", "--ops", args.ops]
     if args.frames is not None:
@@ -382,21 +413,41 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
 def _onboard_ops(asked: str | None) -> list[str]:
     """The operations ``--ops`` names (comma-separated), each one the relay offers; by default
     those of :data:`onboard.COMPARED` it offers. ValueError names an unknown one."""
-    from app.resources import OPERATIONS_SPEC
     from app.tools.bench.onboard import COMPARED
+
+    offered = _offered()
+    return _named(asked, offered, [op for op in COMPARED if op in offered])
+
+
+def _offered() -> list[str]:
+    """The ids of the operations the relay offers, the spec's default first."""
+    from app.resources import OPERATIONS_SPEC
     from app.vision.spec import load_spec
 
-    offered = [op.id for op in load_spec(OPERATIONS_SPEC).operations]
+    spec = load_spec(OPERATIONS_SPEC)
+    return [spec.default] + [op.id for op in spec.operations if op.id != spec.default]
+
+
+def _named(
+    asked: str | None,
+    known: list[str],
+    default: list[str],
+    option: str = "--ops",
+    among: str = "the relay offers",
+    noun: str = "operation",
+) -> list[str]:
+    """What ``option`` names (comma-separated, each once, in order), each one of ``known``;
+    ``default`` when not given. ValueError names an unknown one."""
     if asked is None:
-        return [op for op in COMPARED if op in offered]
-    ops = [op.strip() for op in asked.split(",") if op.strip()]
-    unknown = [op for op in ops if op not in offered]
-    if unknown or not ops:
+        return default
+    names = [name.strip() for name in asked.split(",") if name.strip()]
+    unknown = [name for name in names if name not in known]
+    if unknown or not names:
         raise ValueError(
-            f"--ops {asked!r}: {', '.join(unknown) or 'no operation'} is not one the relay offers"
-            f" ({', '.join(offered)})"
+            f"{option} {asked!r}: {', '.join(unknown) or 'no ' + noun} is not one {among}"
+            f" ({', '.join(known)})"
         )
-    return list(dict.fromkeys(ops))
+    return list(dict.fromkeys(names))
 
 
 async def _onboard(args: argparse.Namespace) -> int:
@@ -500,14 +551,22 @@ async def _relay_cost(args: argparse.Namespace) -> int:
     from app.tools.bench import relaycost
 
     seconds = args.seconds or (RELAY_COST_QUICK_S if args.quick else RELAY_COST_FULL_S)
-    # With --baseline: the forward as the relay does it and the fallback, in alternation.
+    # With --baseline: the forward as the relay does it and the fallback, in alternation; within
+    # each, every build and every operation in turn, so that a machine whose speed drifts
+    # biases none of them.
     forwards = list(relaycost.FORWARDS) * args.rounds if args.baseline else ["as is"]
+    rooms = [
+        relaycost.Room(op, build, forward)
+        for forward in forwards
+        for build in args.opencv.split(",")
+        for op in args.ops.split(",")
+    ]
     provenance = _provenance(args)
     runs = []
     server = start_in_thread()
     try:
         async with async_playwright() as playwright:
-            for forward in forwards:
+            for room in rooms:
                 # The relay alone in a Chromium of its own: all its threads are the relay's.
                 relay = await playwright.chromium.launch(
                     **launch_options(extra_args=[relaycost.MARKER])
@@ -515,7 +574,7 @@ async def _relay_cost(args: argparse.Namespace) -> int:
                 client = await playwright.chromium.launch(**launch_options())
                 try:
                     runs.append(
-                        await relaycost.run(relay, client, server.url, seconds, args.fps, forward)
+                        await relaycost.run(relay, client, server.url, seconds, args.fps, room)
                     )
                 finally:
                     await relay.close()
@@ -548,7 +607,7 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
             browser = await playwright.chromium.launch(**launch_options())
             try:
                 times = await opencv_builds.compare_builds(
-                    browser, server.url, frames, warmup=warmup
+                    browser, server.url, frames, warmup=warmup, ops=args.ops.split(",")
                 )
                 browser_version = browser.version
             finally:
@@ -739,13 +798,13 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--field")
         parts += [f"--condition {name}" for name in args.condition or ()]
     if args.relay_cost:
-        parts.append("--relay-cost")
+        parts.append(f"--relay-cost --ops {args.ops} --opencv {args.opencv}")
     if args.baseline:
         parts.append(f"--baseline --rounds {args.rounds}")
     if args.onboard:
         parts.append(f"--onboard --ops {args.ops}")
     if args.opencv_builds:
-        parts.append("--opencv-builds")
+        parts.append(f"--opencv-builds --ops {args.ops}")
     if args.faces:
         parts.append("--faces")
     if args.photos is not None:

@@ -47,7 +47,7 @@ LOAD_JS = "(b64) => { window.benchFrame = new Uint8ClampedArray(window.fromBase6
 ANALYZE_JS = """async ([width, height, opId, profile, around]) => {
   const data = window.benchFrame;
   const r = await window.analyzer.analyze({ width, height, data }, opId, { profile, around });
-  return { ms: r.ms, boxes: r.boxes };
+  return { ms: r.ms, boxes: r.boxes, scores: r.scores ?? [] };
 }"""
 
 

@@ -68,7 +68,7 @@ from app.tools.bench.onboard_stats import (
     standoff_errors_m,
 )
 from app.tools.bench.results import Target
-from app.tools.bench.stack import StackError, StackOptions, run_profile, wait_for
+from app.tools.bench.stack import StackError, StackOptions, run_profile, set_operation, wait_for
 from app.tools.bench.stats import PoseSample, glass_to_command_ms, summarize
 
 if TYPE_CHECKING:
@@ -85,7 +85,6 @@ QUICK_S, FULL_S = 35.0, 90.0
 # (docs/simulated-arena.md); `face_small` finds it at 4 m. The DNN face operation is compared
 # with it, when the relay offers it (``--ops`` chooses).
 COMPARED: Final = ("face_small", "face_dnn")
-SWITCH_TIMEOUT_S: Final = 30.0
 ARENA_POLL_S: Final = 0.1
 RELOCK_POLL_S: Final = 0.5
 RELOCK_CLICK_TIMEOUT_S: Final = 2.0
@@ -193,7 +192,7 @@ async def run(
 
     async def lock_the_walker(relay: Page, client: Page) -> None:
         pollers.append(asyncio.create_task(poll_arena(server_url, room, clock, stop)))
-        await _set_operation(relay, client, operation)
+        await set_operation(relay, client, operation)
         await _lock_on_the_target(relay, client)
         relocker.append(asyncio.create_task(_keep_locked(client, clock, stop_relocking, relocks)))
 
@@ -293,19 +292,6 @@ def walker_pixel(pose: dict[str, float], place: tuple[float, float]) -> tuple[fl
     ahead = math.hypot(dx, dy) * math.cos(bearing)
     up = FACE_CENTRE_HEIGHT_M - CAMERA_HEIGHT_M
     return width / 2 - focal * math.tan(bearing), height / 2 - focal * up / ahead
-
-
-async def _set_operation(relay: Page, client: Page, operation: str) -> None:
-    """Switch the relay to ``operation`` from the client, as a person would, and wait for its
-    goals."""
-    await client.get_by_test_id("operation").select_option(operation)
-    await client.get_by_role("button", name="Set Operation").click()
-    await wait_for(
-        relay,
-        f"() => window.autopilotStatus.lastGoal?.op === {json.dumps(operation)}",
-        SWITCH_TIMEOUT_S,
-        f"no goal from {operation} after Set Operation",
-    )
 
 
 async def _lock_on_the_target(relay: Page, client: Page) -> None:

@@ -1,17 +1,21 @@
-"""``autopilot bench --opencv-builds``: the cascades on each OpenCV.js build, side by side.
+"""``autopilot bench --opencv-builds``: the tracking operations on each OpenCV.js build, side by
+side.
 
 One parity page per build (``?opencv=``) in one Chromium. Each frame of the agent's synthetic
-scene is analysed by every cascade operation with the default profile on each build in turn (a
-full scan, then the window around the largest box, as detect-then-track does between full scans)
-and by Python, so that the machine's drift falls on every side alike; each is timed a few times
-and the fastest kept (:mod:`app.tools.bench.jsnative`).
+scene is analysed by every operation that tracks (the cascades and the DNN face; ``--ops`` names
+fewer) with the default profile on each build in turn (a full scan, then the window around the
+largest box, as detect-then-track does between full scans) and by Python, so that the machine's
+drift falls on every side alike; each is timed a few times and the fastest kept
+(:mod:`app.tools.bench.jsnative`).
 
 What decides is the relay's own work: it scans the frame in full once every ``full_scan_every``
 snapshots and the window in between, and in full on every snapshot while it has nothing to
 follow. Each frame's cost on each build is weighted so, and the figure is the median of the
-per-frame ratios between the builds. :func:`choose` turns the figures into the build the relay
-should load; ``RELAY_OPENCV_BUILD`` (``app/protocol/opencv.py``) is the one it does load, and the
-bench fails when the two differ.
+per-frame ratios between the builds. :func:`verdict` says which build does an operation's work
+better, or that they are level; :func:`choose` turns the verdicts into the build the relay should
+load (one worker loads one build, for every operation it may be switched to);
+``RELAY_OPENCV_BUILD`` (``app/protocol/opencv.py``) is the one it does load, and the bench fails
+when the two differ.
 
 The figures, the decision and the report's text are pure (:func:`op_figures`, :func:`choose`,
 :func:`report_text`); :func:`compare_builds` is the browser side.
@@ -24,7 +28,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 import cv2
 import numpy as np
@@ -40,18 +44,26 @@ from app.tools.bench.jsnative import (
     Rgba,
     parity_page,
 )
+from app.tools.parity import IOU_THRESHOLD, SCORE_TOLERANCE, boxes_agree
 from app.vision import window
-from app.vision.reference import detect
-from app.vision.spec import CascadeOperation, load_spec
+from app.vision.reference import Detection, detect
+from app.vision.spec import CascadeOperation, DnnOperation, load_spec
+
+# The operations that detect, then track: a full scan now and then, a window in between.
+Tracking = CascadeOperation | DnnOperation
 
 PROFILE: Final = "default"
-# The SIMD build is worth loading when it takes at most this share of the official build's time
-# for the relay's work: a self-built, patched file is a cost of its own, and a smaller gain is
-# within what two runs of one build differ by on a shared machine.
+# A build does an operation's work better when it takes at most this share of the other's time
+# (the median of the per-frame ratios): a self-built, patched file is a cost of its own, and a
+# smaller gain is within what two runs of one build differ by on a shared machine.
 SPEEDUP_RATIO: Final = 0.9
-# ... and when it is faster on at least three frames in four (the upper quartile of the
-# per-frame ratios below 1), so that a few lucky frames cannot carry the median.
+# ... and when it is faster on at least three frames in four (the per-frame ratios' upper
+# quartile below 1, or for the official build their lower quartile above 1), so that a few lucky
+# frames cannot carry the median.
 FASTER_QUANTILE: Final = 75.0
+SLOWER_QUANTILE: Final = 25.0
+
+Verdict = Literal["simd", "official", "level"]
 
 
 @dataclass
@@ -77,7 +89,7 @@ class FrameTimes:
 
 @dataclass
 class OpTimes:
-    """Every counted frame of one cascade operation."""
+    """Every counted frame of one tracking operation."""
 
     op: str
     full_scan_every: int
@@ -89,11 +101,12 @@ def _quantile(values: list[float], q: float, digits: int) -> float | None:
 
 
 def _compare(first: list[float], second: list[float]) -> dict[str, float | int | None]:
-    """p50 of each side, and the median and upper quartile of the per-frame ratios."""
+    """The median and quartiles of the per-frame ratios."""
     ratios = [a / b for a, b in zip(first, second, strict=True) if b > 0]
     return {
         "frames": len(ratios),
         "ratio": _quantile(ratios, 50.0, 3),
+        "ratio_q1": _quantile(ratios, SLOWER_QUANTILE, 3),
         "ratio_q3": _quantile(ratios, FASTER_QUANTILE, 3),
     }
 
@@ -125,36 +138,53 @@ def op_figures(times: OpTimes) -> dict[str, Any]:
     return out
 
 
+def verdict(op: dict[str, Any]) -> tuple[Verdict, str]:
+    """Which build does one operation's relay work better (:func:`op_figures`), and why: SIMD
+    when it agreed with Python wherever the official build did and took at most
+    ``SPEEDUP_RATIO`` of the time (median per-frame ratio) while faster on three frames in four;
+    the official build when SIMD agreed less often, or took at least 1 / ``SPEEDUP_RATIO`` of its
+    time while slower on three frames in four; else level."""
+    simd, official = OPENCV_BUILDS
+    if op["agrees"][simd] < op["agrees"][official]:
+        return official, (
+            f"{op['op']}: the SIMD build's boxes were Python's on {op['agrees'][simd]} of"
+            f" {op['frames']} frames, the official build's on {op['agrees'][official]}"
+        )
+    ratio, q1, q3 = (op["relay"].get(key) for key in ("ratio", "ratio_q1", "ratio_q3"))
+    shown = f"{op['op']} {ratio} (p25 {q1}, p75 {q3})"
+    if ratio is None or q1 is None or q3 is None:
+        return "level", f"{op['op']}: not timed"
+    if ratio <= SPEEDUP_RATIO and q3 < 1.0:
+        return simd, shown
+    if ratio >= 1 / SPEEDUP_RATIO and q1 > 1.0:
+        return official, shown
+    return "level", shown
+
+
 def choose(ops: list[dict[str, Any]]) -> tuple[OpenCvBuild, str]:
-    """The build the relay should load, from :func:`op_figures` of every cascade operation, and
-    why: SIMD when, on every operation, it agreed with Python wherever the official build did
-    and did the relay's work in at most ``SPEEDUP_RATIO`` of the time (median per-frame ratio)
-    while faster on three frames in four; else the official build."""
+    """The build the relay should load, from :func:`op_figures` of the operations measured, and
+    why. One worker loads one build, and the client may switch it to any operation: SIMD when it
+    does some operation's work better (:func:`verdict`) and none worse; else the official build,
+    from npm as published, without a patch of ours."""
     simd, official = OPENCV_BUILDS
     if not ops:
         return official, "nothing was measured"
-    for op in ops:
-        if op["agrees"][simd] < op["agrees"][official]:
-            return official, (
-                f"{op['op']}: the SIMD build's boxes were Python's on {op['agrees'][simd]} of"
-                f" {op['frames']} frames, the official build's on {op['agrees'][official]}"
-            )
-    slow = [op for op in ops if not _speeds_up(op["relay"])]
-    if slow:
-        named = ", ".join(
-            f"{op['op']} {op['relay']['ratio']} (p75 {op['relay']['ratio_q3']})" for op in slow
-        )
+    found = [verdict(op) for op in ops]
+    worse = [why for better, why in found if better == official]
+    if worse:
+        return official, "SIMD does worse on " + "; ".join(worse)
+    faster = [why for better, why in found if better == simd]
+    level = [why for better, why in found if better == "level"]
+    if not faster:
         return official, (
-            f"no speed-up of the relay's work: SIMD / official {named}, per frame; SIMD needs a"
-            f" median ≤ {SPEEDUP_RATIO:g} and a p75 < 1 on every operation"
+            f"no speed-up of the relay's work: SIMD / official {', '.join(level)}, per frame;"
+            f" SIMD needs a median ≤ {SPEEDUP_RATIO:g} and a p75 < 1 on some operation"
         )
-    named = ", ".join(f"{op['op']} {op['relay']['ratio']}" for op in ops)
-    return simd, f"faster at the relay's work and as often right: SIMD / official {named}"
-
-
-def _speeds_up(relay: dict[str, Any]) -> bool:
-    ratio, q3 = relay["ratio"], relay["ratio_q3"]
-    return ratio is not None and q3 is not None and ratio <= SPEEDUP_RATIO and q3 < 1.0
+    return simd, (
+        f"SIMD / official per frame, faster on {', '.join(faster)}"
+        + (f"; level on {', '.join(level)}" if level else "")
+        + "; no operation slower and every one as often right"
+    )
 
 
 def report_text(found: dict[str, Any]) -> str:
@@ -162,7 +192,7 @@ def report_text(found: dict[str, Any]) -> str:
     :func:`op_figures`), ``choice`` and ``reason`` (:func:`choose`) and ``relay_loads``."""
     simd, official = OPENCV_BUILDS
     lines = [
-        "# The cascades on each OpenCV.js build",
+        "# The tracking operations on each OpenCV.js build",
         "",
         f"`{found['command']}` ({found['started']}; {found['machine']}; Chromium"
         f" {found['chromium']}; load average {found['load_average'][0]} before,"
@@ -190,7 +220,14 @@ def report_text(found: dict[str, Any]) -> str:
     )
     lines += [
         "",
-        f"Frames whose full-scan boxes were exactly Python's ({simd} / {official}): {agreement}.",
+        f"Frames whose full-scan boxes were Python's ({simd} / {official}; the DNN's at IoU ≥"
+        f" {IOU_THRESHOLD:g} with scores within {SCORE_TOLERANCE:g}, the others' exactly):"
+        f" {agreement}.",
+        "",
+        "The better build per operation (median ≤ "
+        f"{SPEEDUP_RATIO:g} and faster on three frames in four): "
+        + ", ".join(f"{op['op']} {verdict(op)[0]}" for op in found["ops"])
+        + ".",
         "",
         f"**Measured choice: {found['choice']}** — {found['reason']}.",
         "",
@@ -220,18 +257,31 @@ def decide(found: dict[str, Any]) -> dict[str, Any]:
     return found | {"choice": choice, "reason": reason, "relay_loads": RELAY_OPENCV_BUILD}
 
 
+def tracking_ops(settings: Settings | None = None) -> list[str]:
+    """The operations that detect, then track (the cascades and the DNN), in spec order: those
+    the bench measures unless told fewer."""
+    spec = load_spec((settings or Settings()).operations_spec)
+    return [op.id for op in spec.operations if isinstance(op, Tracking)]
+
+
 async def compare_builds(
     browser: Browser,
     base_url: str,
     frames: list[Rgba],
     settings: Settings | None = None,
     warmup: int = WARMUP_FRAMES,
+    ops: list[str] | None = None,
 ) -> list[OpTimes]:
-    """Every cascade operation on every build and in Python, frame by frame (module docstring);
-    the first ``warmup`` frames are not counted."""
+    """The tracking operations ``ops`` (by default :func:`tracking_ops`) on every build and in
+    Python, frame by frame (module docstring); the first ``warmup`` frames are not counted."""
     spec = load_spec((settings or Settings()).operations_spec)
-    cascades = [op for op in spec.operations if isinstance(op, CascadeOperation)]
-    found = [OpTimes(op.id, op.params_for(PROFILE).full_scan_every) for op in cascades]
+    measured: list[Tracking] = []
+    for op_id in ops or tracking_ops(settings):
+        op = spec.op(op_id)
+        if not isinstance(op, Tracking):
+            raise ValueError(f"{op_id!r} does not track: it has no window to time")
+        measured.append(op)
+    found = [OpTimes(op.id, op.params_for(PROFILE).full_scan_every) for op in measured]
     pages: dict[OpenCvBuild, Page] = {}
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
@@ -244,7 +294,7 @@ async def compare_builds(
             encoded = base64.b64encode(rgba.tobytes()).decode("ascii")
             for page in pages.values():
                 await page.evaluate(LOAD_JS, encoded)
-            for op, times in zip(cascades, found, strict=True):
+            for op, times in zip(measured, found, strict=True):
                 frame = await _time_frame(pages, op, rgba)
                 if i >= warmup:
                     times.frames.append(frame)
@@ -255,20 +305,20 @@ async def compare_builds(
             await page.close()
 
 
-async def _time_frame(
-    pages: dict[OpenCvBuild, Page], op: CascadeOperation, rgba: Rgba
-) -> FrameTimes:
+async def _time_frame(pages: dict[OpenCvBuild, Page], op: Tracking, rgba: Rgba) -> FrameTimes:
     height, width = rgba.shape[:2]
     full: dict[OpenCvBuild, list[float]] = {b: [] for b in pages}
     windowed: dict[OpenCvBuild, list[float]] = {b: [] for b in pages}
     boxes: dict[OpenCvBuild, list[window.Box]] = {}
+    scores: dict[OpenCvBuild, list[float]] = {}
     python_ms: list[float] = []
     for _ in range(REPEATS):
         for build, page in pages.items():
             args: list[Any] = [width, height, op.id, PROFILE, None]
             js = await page.evaluate(ANALYZE_JS, args)
             full[build].append(float(js["ms"]))
-            boxes[build] = sorted((x, y, w, h) for x, y, w, h in js["boxes"])
+            boxes[build] = [(x, y, w, h) for x, y, w, h in js["boxes"]]
+            scores[build] = [float(score) for score in js["scores"]]
             around = window.largest(boxes[build])
             if around is not None:
                 js = await page.evaluate(ANALYZE_JS, [*args[:-1], around])
@@ -276,10 +326,17 @@ async def _time_frame(
         started = time.perf_counter()
         native = detect(op, rgba, PROFILE)
         python_ms.append((time.perf_counter() - started) * 1000.0)
-    expected = sorted(tuple(b) for b in native.boxes)
     return FrameTimes(
         full_ms={b: min(t) for b, t in full.items()},
         window_ms={b: min(t) if t else None for b, t in windowed.items()},
         python_ms=min(python_ms),
-        agrees={b: boxes[b] == expected for b in pages},
+        agrees={b: agrees_with_python(boxes[b], scores[b], native) for b in pages},
     )
+
+
+def agrees_with_python(boxes: list[window.Box], scores: list[float], native: Detection) -> bool:
+    """A build's full scan against Python's: a scored operation's (the DNN's) as parity judges
+    it, a cascade's box for box."""
+    if native.scores:
+        return boxes_agree(boxes, native.boxes, scores, native.scores)
+    return sorted(boxes) == sorted(native.boxes)

@@ -29,15 +29,16 @@ import json
 import os
 import statistics
 import tempfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from playwright.async_api import Browser, CDPSession, Page
 
+from app.protocol.opencv import OpenCvBuild
 from app.tools.bench.cpu import PROC, ThreadCpu, thread_cpu
-from app.tools.bench.stack import StackOptions, run_profile
+from app.tools.bench.stack import StackError, StackOptions, run_profile, set_operation
 from app.tools.bench.stats import Summary, summarize
 
 # On the relay's Chromium alone (Chromium hands no unknown switch to its children, and ignores
@@ -51,6 +52,10 @@ NO_ENCODED_TRANSFORMS = "delete window.RTCRtpScriptTransform;"
 # the vehicle's usual frame rate.
 TARGET_CORES_PER_ROOM = 0.18
 TARGET_FPS = 30
+# Another operation's room may cost the relay at most this many times the cores of a room that
+# runs the default face cascade (REFERENCE_OP) on the same build, with the same forward.
+REFERENCE_OP = "face"
+TARGET_OVER_REFERENCE = 1.5
 # The forwards ``--baseline`` alternates: as the relay does it, and the fallback.
 FORWARDS = {"as is": "", "re-encode": NO_ENCODED_TRANSFORMS}
 
@@ -97,7 +102,7 @@ _TIMERS_JS = """(seen) => {
 
 STAGES = (
     "vision worker: pixel copy and RGBA conversion",
-    "vision worker: cascade (detect)",
+    "vision worker: detection (cascade or DNN)",
     "video encode (forward to the client)",
     "video decode (vehicle's video)",
     "page main thread (JS, frame reading, DOM)",
@@ -206,17 +211,27 @@ async def _main_thread(cdp: CDPSession) -> dict[str, float]:
     return {m["name"]: float(m["value"]) for m in metrics}
 
 
+@dataclass(frozen=True)
+class Room:
+    """What one measured room runs: the relay's operation, its OpenCV.js build and its forward
+    (a key of :data:`FORWARDS`)."""
+
+    op: str
+    opencv: OpenCvBuild
+    forward: str = "as is"
+
+
 async def run(
     browser: Browser,
     client_browser: Browser,
     server_url: str,
     seconds: float,
     fps: float,
-    forward: str = "as is",
+    room: Room,
 ) -> dict[str, Any]:
-    """Measure one room for ``seconds`` with the relay forwarding as ``forward`` says (a key
-    of :data:`FORWARDS`); ``browser`` must have been launched with :data:`MARKER` and hold
-    nothing else."""
+    """Measure one room for ``seconds``, its relay running as ``room`` says (the operation set
+    from the client once goals flow, as a person would); ``browser`` must have been launched
+    with :data:`MARKER` and hold nothing else."""
     root = find_marked_browser()
     state: dict[str, Any] = {}
 
@@ -228,7 +243,12 @@ async def run(
             (await relay.evaluate(_TIMERS_JS, 0))["snapshots"],
         )
 
-    async def prepare(relay: Page, _client: Page) -> None:
+    async def prepare(relay: Page, client: Page) -> None:
+        loaded = await relay.evaluate("() => window.autopilotStatus.opencvBuild")
+        if loaded != room.opencv:
+            raise StackError(f"the relay loaded the {loaded} OpenCV.js, not the {room.opencv}")
+        if await relay.evaluate("() => window.autopilotStatus.op") != room.op:
+            await set_operation(relay, client, room.op)
         state["cdp"] = await relay.context.new_cdp_session(relay)
         await state["cdp"].send("Performance.enable")
         state["before"] = await sample(relay)
@@ -244,12 +264,12 @@ async def run(
         measured = await run_profile(
             browser,
             server_url,
-            StackOptions("default", seconds, fps=fps, name="relay-cost"),
+            StackOptions("default", seconds, fps=fps, name="relay-cost", opencv=room.opencv),
             Path(tmp),
             prepare=prepare,
             client_browser=client_browser,
             finish=finish,
-            relay_init_script=PROBE + FORWARDS[forward],
+            relay_init_script=PROBE + FORWARDS[room.forward],
         )
     found = figures(
         state,
@@ -259,7 +279,7 @@ async def run(
         measured.window,
         fps,
     )
-    found["forward"] = state["forwards"].get("client")
+    found |= {"op": room.op, "opencv": room.opencv, "forward": state["forwards"].get("client")}
     client_glass = summarize(measured.client_glass)
     found["client_glass_to_glass_ms"] = (
         None
@@ -338,13 +358,14 @@ def write_report(
     out: Path, runs: Sequence[dict[str, Any]], provenance: Mapping[str, str] | None = None
 ) -> Path:
     """``relay-cost.md`` and ``relay-cost.json`` in ``out``: the runs side by side, in the order
-    they ran (the JSON holds one run's figures, or ``{"runs": [...]}`` for several), under
-    ``provenance``'s date, machine and command when given."""
+    they ran (the JSON holds one run's figures, or ``{"runs": [...]}`` for several), each named
+    by its operation, OpenCV.js build and forward, under ``provenance``'s date, machine and
+    command when given."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "relay-cost.json").write_text(json.dumps(report_object(runs), indent=2) + "\n")
     first = runs[0]
     loads = ", ".join(str(found["load_average"]) for found in runs)
-    head = "| stage | " + " | ".join(f"{found['forward']} (cores)" for found in runs) + " |"
+    head = "| stage | " + " | ".join(f"{_label(found)} (cores)" for found in runs) + " |"
     rule = "|---|" + "---:|" * len(runs)
     judged = first["fps"] == TARGET_FPS
     target = f"≤ {TARGET_CORES_PER_ROOM:g} cores per room at {TARGET_FPS} fps"
@@ -363,6 +384,11 @@ def write_report(
             "",
         ]
     lines += [
+        f"*Extrapolated*: for a machine too busy to decode and analyse every frame, the vision"
+        f" worker's CPU per snapshot analysed times {first['fps']:g}, plus the rest of the"
+        f" relay's CPU per frame decoded times {first['fps']:g} (one worker gives at most one"
+        " core: above it, frames go unanalysed).",
+        "",
         f"Target: the relay's Chromium in all {target}"
         + ("." if judged else f" (not judged: this run's {first['fps']:g} fps)."),
         "",
@@ -381,20 +407,102 @@ def write_report(
         totals = [found["relay_cores"]["total"] for found in runs]
         within = ["yes" if total <= TARGET_CORES_PER_ROOM else "no" for total in totals]
         lines.append(_row(f"within {target}", within))
+    lines.append(
+        _row(
+            f"extrapolated to every frame at {first['fps']:g} fps",
+            [_cores(_extrapolated(found)) for found in runs],
+        )
+    )
+    over = [over_reference(found, runs) for found in runs]
+    if any(ratio is not None for ratio in over):
+        over_every = [over_reference(found, runs, _extrapolated) for found in runs]
+        same = f"÷ {REFERENCE_OP}'s (same build and forward, mean of its runs)"
+        lines += [
+            _row(f"{same}, measured", [_times(ratio) for ratio in over]),
+            _row(f"{same}, extrapolated", [_times(ratio) for ratio in over_every]),
+        ]
+        if judged:
+            lines.append(
+                _row(
+                    f"within ≤ {TARGET_OVER_REFERENCE:g}× {REFERENCE_OP}'s cores, measured",
+                    [_within(ratio) for ratio in over],
+                )
+            )
     lines += [
         "",
-        "| figure | " + " | ".join(str(found["forward"]) for found in runs) + " |",
+        "| figure | " + " | ".join(_label(found) for found in runs) + " |",
         rule,
     ]
     figures_of = [_figure_rows(found) for found in runs]
     lines += [_row(name, [rows[name] for rows in figures_of]) for name in figures_of[0]]
     for found in runs:
-        lines += ["", f"Busiest threads, {found['forward']} (cores):", ""]
+        lines += ["", f"Busiest threads, {_label(found)} (cores):", ""]
         lines += ["| process | thread | cores |", "|---|---|---:|"]
         lines += [f"| {t['process']} | {t['thread']} | {t['cores']} |" for t in found["threads"]]
     path = out / "relay-cost.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def over_reference(
+    found: Mapping[str, Any],
+    runs: Sequence[Mapping[str, Any]],
+    cores: Callable[[Mapping[str, Any]], float | None] = lambda run: run["relay_cores"]["total"],
+) -> float | None:
+    """``found``'s ``cores`` (by default as measured) over the mean of the :data:`REFERENCE_OP`
+    runs' on the same build with the same forward; None when none ran."""
+    mine = cores(found)
+    same = [
+        cores(other)
+        for other in runs
+        if other["op"] == REFERENCE_OP
+        and (other["opencv"], other["forward"]) == (found["opencv"], found["forward"])
+    ]
+    known = [value for value in same if value is not None]
+    if mine is None or not known or statistics.fmean(known) <= 0:
+        return None
+    return float(mine / statistics.fmean(known))
+
+
+def _extrapolated(found: Mapping[str, Any]) -> float | None:
+    at_every = at_every_frame(found)
+    return None if at_every is None else at_every["total"]
+
+
+def _times(ratio: float | None) -> str:
+    return "–" if ratio is None else f"{ratio:.2f}×"
+
+
+def _cores(cores: float | None) -> str:
+    return "–" if cores is None else f"{cores:.3f}"
+
+
+def _within(ratio: float | None) -> str:
+    if ratio is None:
+        return "–"
+    return "yes" if ratio <= TARGET_OVER_REFERENCE else "no"
+
+
+def at_every_frame(found: Mapping[str, Any]) -> dict[str, float] | None:
+    """What the room would cost with every frame of ``fps`` decoded and analysed, from a run on
+    a machine too busy to deliver them: the vision worker's cores per snapshot analysed times
+    ``fps``, and the rest of the relay's per frame decoded times ``fps``; with the worker's CPU
+    per snapshot (ms). None when the run analysed or decoded nothing."""
+    cores, fps = found["relay_cores"], found["fps"]
+    snapshots_per_s = found["per_snapshot_ms"]["snapshots"] / found["seconds"]
+    decoded_per_s = found["codecs"]["frames_decoded_per_s"]
+    if snapshots_per_s <= 0 or decoded_per_s <= 0:
+        return None
+    worker = cores[STAGES[0]] + cores[STAGES[1]]
+    return {
+        "worker_cpu_ms_per_snapshot": round(1000 * worker / snapshots_per_s, 2),
+        "total": round(worker * fps / snapshots_per_s + (cores["total"] - worker) * fps
+                       / decoded_per_s, 3),
+    }  # fmt: skip
+
+
+def _label(found: Mapping[str, Any]) -> str:
+    return f"{found['op']} ({found['opencv']}), {found['forward']}"
 
 
 def report_object(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -421,6 +529,9 @@ def _figure_rows(found: dict[str, Any]) -> dict[str, str]:
         "glass-to-command p50 / p95 (ms)": _pair(found["glass_to_command_ms"]),
         "client glass-to-glass p50 / p95 (ms)": _pair(found["client_glass_to_glass_ms"]),
         "goals per second": str(found["goals_per_s"]),
+        "snapshots analysed per second": str(round(snap["snapshots"] / found["seconds"], 1)),
+        "vision worker's CPU per snapshot analysed (ms)": str(
+            (at_every_frame(found) or {}).get("worker_cpu_ms_per_snapshot", "–")),
     }  # fmt: skip
 
 

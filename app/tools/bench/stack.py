@@ -10,6 +10,7 @@ vehicle's from its event log. Agent events and this process share one clock
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import signal
 import sys
@@ -26,6 +27,7 @@ from playwright.async_api import TimeoutError as PlaywrightTimeout
 
 from app.protocol.control import PROFILES
 from app.protocol.events import FrameSent, GoalApplied, PoseReport, TwistSent
+from app.protocol.opencv import OpenCvBuild
 from app.protocol.urls import page_url
 from app.protocol.video import VIDEO_FPS, VIDEO_SIZE
 from app.recording import read_event_log
@@ -46,6 +48,8 @@ log = logging.getLogger(__name__)
 ANALYZER_TIMEOUT_S = 180.0
 CONNECT_TIMEOUT_S = 120.0
 FIRST_GOAL_TIMEOUT_S = 90.0
+# A switched operation's first goal (the DNN's first full scan is seconds on a loaded machine).
+SWITCH_TIMEOUT_S = 30.0
 AGENT_EXIT_TIMEOUT_S = 15.0
 SETTLE_S = 1.0
 POLL_S = 2.0
@@ -99,6 +103,8 @@ class StackOptions:
     name: str | None = None
     # More options for the agent (the flight recorder's, say).
     agent_args: tuple[str, ...] = ()
+    # The OpenCV.js build the relay page loads (its ?opencv=); None: the one it loads unless told.
+    opencv: OpenCvBuild | None = None
 
 
 class StackError(RuntimeError):
@@ -131,11 +137,10 @@ async def run_profile(
     async with AsyncExitStack() as stack:
         relay = await _open_page(stack, browser, "relay", relay_init_script)
         # Unattended, as `autopilot relay` opens it: no preview for nobody to watch.
-        await relay.goto(
-            page_url(
-                server_url, "relay", room, name="relay", auto=1, profile=options.profile, preview=0
-            )
-        )
+        query: dict[str, str | int] = {"name": "relay", "auto": 1, "profile": options.profile}
+        if options.opencv is not None:
+            query["opencv"] = options.opencv
+        await relay.goto(page_url(server_url, "relay", room, **query, preview=0))
         await wait_for(
             relay,
             "() => window.autopilotStatus?.analyzerReady === true",
@@ -248,6 +253,19 @@ async def _open_page(
     page.on("console", on_console)
     page.on("pageerror", lambda error: log.error("%s page error: %s", role, error))
     return page
+
+
+async def set_operation(relay: Page, client: Page, operation: str) -> None:
+    """Switch the relay to ``operation`` from the client, as a person would, and wait for its
+    goals."""
+    await client.get_by_test_id("operation").select_option(operation)
+    await client.get_by_role("button", name="Set Operation").click()
+    await wait_for(
+        relay,
+        f"() => window.autopilotStatus.lastGoal?.op === {json.dumps(operation)}",
+        SWITCH_TIMEOUT_S,
+        f"no goal from {operation} after Set Operation",
+    )
 
 
 async def wait_for(page: Page, condition: str, timeout_s: float, failure: str) -> None:

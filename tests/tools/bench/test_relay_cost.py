@@ -3,6 +3,7 @@ bench as a user runs it (its figures' sizes are the report's business, never ass
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -11,8 +12,16 @@ from typing import Any
 
 import pytest
 
+from app.protocol.opencv import OPENCV_BUILDS, RELAY_OPENCV_BUILD
+from app.tools.bench import cli
 from app.tools.bench.cpu import ThreadCpu
-from app.tools.bench.relaycost import STAGES, breakdown, thread_cores, write_report
+from app.tools.bench.relaycost import (
+    STAGES,
+    at_every_frame,
+    breakdown,
+    thread_cores,
+    write_report,
+)
 
 
 def _thread(process: str, name: str, tid: int, cpu_s: float, pid: int = 10) -> ThreadCpu:
@@ -79,6 +88,10 @@ def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: 
     argv = [sys.executable, "-m", "app.cli", "bench", "--relay-cost", "--json"]
     # One second measured at 10 frames/s: the bench's code, not its figures (the breakdown's
     # arithmetic is checked above on hand-made threads; the report's below on hand-made runs).
+    # Another operation than the default, set from the client, on the build the relay does not
+    # load unless told.
+    (other,) = [build for build in OPENCV_BUILDS if build != RELAY_OPENCV_BUILD]
+    argv += ["--ops", "face_small", "--opencv", other]
     argv += ["--seconds", "1", "--fps", "10", "--out", str(tmp_path)]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -97,16 +110,23 @@ def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: 
     assert found["codecs"]["forward"] != []
     assert found["codecs"]["frames_encoded_per_s"] == 0
     assert found["per_snapshot_ms"]["snapshots"] > 0
+    assert (found["op"], found["opencv"]) == ("face_small", other)
     glass = found["client_glass_to_glass_ms"]
     assert 0 < glass["p50"] <= glass["p95"], glass
     report = (tmp_path / "relay-cost.md").read_text()
     assert "the relay's Chromium in all" in report and "DedicatedWorker" in report
+    assert f"--relay-cost --ops face_small --opencv {other} --seconds 1 --fps 10" in report
+    assert f"| face_small ({other}), pass-through (cores) |" in report
     assert json.loads((tmp_path / "relay-cost.json").read_text()) == found
 
 
-def _found(forward: str, total: float) -> dict[str, Any]:
+def _found(
+    forward: str, total: float, op: str = "face", opencv: str = "official"
+) -> dict[str, Any]:
     """A run's figures as ``relaycost.run`` returns them, every stage ``total`` / 10 cores."""
     return {
+        "op": op,
+        "opencv": opencv,
         "fps": 30,
         "seconds": 20.0,
         "load_average": 1.5,
@@ -132,7 +152,10 @@ def _found(forward: str, total: float) -> dict[str, Any]:
 def test_runs_are_reported_side_by_side_in_the_order_they_ran(tmp_path: Path) -> None:
     runs = [_found("pass-through", 0.2), _found("re-encode", 0.3), _found("pass-through", 0.21)]
     text = write_report(tmp_path, runs).read_text()
-    assert "| stage | pass-through (cores) | re-encode (cores) | pass-through (cores) |" in text
+    assert (
+        "| stage | face (official), pass-through (cores) | face (official), re-encode (cores)"
+        " | face (official), pass-through (cores) |" in text
+    )
     assert "| **the relay's Chromium in all** | **0.200** | **0.300** | **0.210** |" in text
     assert "| client glass-to-glass p50 / p95 (ms) | 40.0 / 70 | 55.0 / 70 | 40.0 / 70 |" in text
     # At 30 fps each run is judged against the issue's 0.18 cores per room.
@@ -141,6 +164,43 @@ def test_runs_are_reported_side_by_side_in_the_order_they_ran(tmp_path: Path) ->
     # One run alone keeps its figures at the top of the JSON.
     write_report(tmp_path, runs[:1])
     assert json.loads((tmp_path / "relay-cost.json").read_text()) == runs[0]
+
+
+def test_each_operation_is_set_against_face_on_the_same_build_and_forward(
+    tmp_path: Path,
+) -> None:
+    runs = [
+        _found("pass-through", 0.2),
+        _found("pass-through", 0.5, "face_dnn"),
+        _found("pass-through", 0.3, opencv="simd"),
+        _found("pass-through", 0.4, "face_dnn", "simd"),
+        _found("pass-through", 0.2, opencv="simd"),
+        _found("re-encode", 0.6, "face_dnn", "simd"),
+    ]
+    text = write_report(tmp_path, runs).read_text()
+    # face_dnn on SIMD over the mean of face's two SIMD runs; no face ran with the re-encode.
+    ratios = "| 1.00× | 2.50× | 1.20× | 1.60× | 0.80× | – |"
+    assert f"| ÷ face's (same build and forward, mean of its runs), measured {ratios}" in text
+    # Every run analysed and decoded alike: extrapolated, they stand as they were measured.
+    assert f"| ÷ face's (same build and forward, mean of its runs), extrapolated {ratios}" in text
+    assert "| within ≤ 1.5× face's cores, measured | yes | no | yes | no | yes | – |" in text
+    # Without a face run there is nothing to set the others against.
+    text = write_report(tmp_path, runs[-1:]).read_text()
+    assert "face's cores" not in text
+
+
+def test_a_room_starved_of_frames_is_extrapolated_to_every_frame(tmp_path: Path) -> None:
+    found = _found("pass-through", 0.3)
+    # Half the frames decoded and analysed: 300 snapshots in 20 s at 30 fps.
+    found["per_snapshot_ms"]["snapshots"] = 300
+    found["codecs"]["frames_decoded_per_s"] = 15.0
+    # The worker (two stages of 0.03 cores) per snapshot, the rest (0.24) per frame decoded.
+    assert at_every_frame(found) == {"worker_cpu_ms_per_snapshot": 4.0, "total": 0.6}
+    text = write_report(tmp_path, [found]).read_text()
+    assert "| extrapolated to every frame at 30 fps | 0.600 |" in text
+    assert "| vision worker's CPU per snapshot analysed (ms) | 4.0 |" in text
+    found["per_snapshot_ms"]["snapshots"] = 0
+    assert at_every_frame(found) is None
 
 
 def test_the_report_says_when_where_and_how_it_was_measured(tmp_path: Path) -> None:
@@ -169,3 +229,18 @@ def test_baseline_alone_is_refused() -> None:
     done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 2, done.stderr[-2000:]
     assert "--baseline goes with --relay-cost" in done.stderr
+
+
+def test_ops_and_builds_name_ones_the_relay_has(caplog: pytest.LogCaptureFixture) -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--verbose", action="store_true")
+    cli.add_arguments(parser)
+    assert cli.run(parser.parse_args(["--relay-cost", "--opencv", "official,sse"])) == 2
+    assert "--opencv 'official,sse': sse is not one vendored (simd, official)" in caplog.text
+    assert cli.run(parser.parse_args(["--relay-cost", "--ops", "face,faces"])) == 2
+    assert "--ops 'face,faces': faces is not one the relay offers" in caplog.text
+    # --opencv goes with the relay's cost only; --ops with the benches that measure operations.
+    assert cli.run(parser.parse_args(["--recorder", "--opencv", "simd"])) == 2
+    assert "--opencv goes with --relay-cost" in caplog.text
+    assert cli.run(parser.parse_args(["--recorder", "--ops", "face"])) == 2
+    assert "--ops goes with --onboard, --relay-cost or --opencv-builds" in caplog.text
