@@ -261,10 +261,15 @@ class Agent:
             self._act(self.pilot.tick(time.monotonic()))
 
     def _act(self, done: list[PilotEvent]) -> None:
-        """Carry out what the pilot did: publish its Twists, log its records, in order."""
+        """Carry out what the pilot did: publish its Twists, then log its records in order."""
+        # The robot first: the records' listeners (the recorder, the Foxglove view, the metrics)
+        # run here, on the loop, and a goal's record comes before its Twist's: their work must
+        # not delay the Twist.
         for event in done:
             if isinstance(event, ev.TwistSent):
                 self.robot_link.publish(event.linear, event.angular)
+        for event in done:
+            if isinstance(event, ev.TwistSent):
                 if event.linear == event.angular == 0.0 and event.seq is None:
                     log.info("robot stopped")
             elif isinstance(event, ev.SearchStarted):

@@ -9,7 +9,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from app.protocol.events import GoalApplied, GoalDropped
+from app.protocol.events import AnyEvent, GoalApplied, GoalDropped
 from tests.helpers.agent import H, Vehicle, W
 from vehicle_agent.core.control import PROFILES, Controller, Goal, Pose, angular_command
 
@@ -106,3 +106,27 @@ def test_the_agent_ignores_goals_while_manual_and_drives_on_commands() -> None:
     assert (vehicle.twists()[-1].linear, vehicle.twists()[-1].angular) == (0.0, 0.0)
     assert agent.handle_channel_message(MANUAL_GOAL % 3, "relay") is None
     assert vehicle.twists()[-1].angular != 0  # goals steer again
+
+
+def test_a_goals_twist_is_published_before_any_listener_hears_of_the_goal(
+    vehicle: Vehicle, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The event log's listeners (the recorder, the Foxglove view) run on the agent's loop:
+    whatever they do with a goal's record, its Twist is on its way to the robot already."""
+    published: list[tuple[float, float]] = []
+    monkeypatch.setattr(vehicle.turtle, "publish", lambda *twist: published.append(twist))
+    heard: list[int] = []
+
+    def listener(event: AnyEvent) -> None:
+        if isinstance(event, GoalApplied):
+            heard.append(len(published))
+
+    vehicle.agent.events.listeners.append(listener)
+    try:
+        assert vehicle.agent.handle_channel_message(GOAL % "10", "relay") is None
+    finally:
+        vehicle.agent.events.listeners.remove(listener)
+    # One goal, one Twist toward it, published before the goal's record was heard.
+    [twist] = vehicle.twists()
+    assert published == [(twist.linear, twist.angular)]
+    assert heard == [1]

@@ -26,7 +26,8 @@ from app.protocol import events as ev
 from app.protocol.robot import PRESETS
 from app.recording import EVENT_CHANNELS
 from app.server.serve import RunningServer
-from app.tools.bench.foxglove import PilotedAgent, stuck_viewer
+from app.tools.bench.foxglove import PilotedAgent
+from app.tools.bench.foxglove_viewer import stuck_viewer
 from tests.helpers.recordings import record
 from tests.helpers.waiting import eventually
 from vehicle_agent import foxglove

@@ -25,7 +25,8 @@ from app.protocol import tokens
 from app.protocol.close_codes import CloseCode
 from app.server import tls
 from app.server.serve import RunningServer
-from app.tools.bench.foxglove import SUBPROTOCOLS, PilotedAgent
+from app.tools.bench.foxglove import PilotedAgent
+from app.tools.bench.foxglove_viewer import SUBPROTOCOLS
 from tests.helpers.waiting import eventually
 from tests.vehicle_agent.test_foxglove import ROBOT, check_view, view
 from vehicle_agent import cli as agent_cli

@@ -45,7 +45,7 @@ QUICK = {"default_s": 25.0, "thesis_s": 30.0, "follow_s": 25.0, "lock_s": 22.0, 
 # The follow run spans three cycles of the synthetic face's path (20 s each).
 # bench --recorder: seconds per run (with and without recording).
 RECORDER_QUICK_S, RECORDER_FULL_S = 15.0, 60.0
-# bench --foxglove: seconds in all (both phases, every round).
+# bench --foxglove: seconds measured in all (every phase of every round).
 FOXGLOVE_QUICK_S, FOXGLOVE_FULL_S = 18.0, 60.0
 # bench --relay-cost: seconds measured.
 RELAY_COST_QUICK_S, RELAY_COST_FULL_S = 20.0, 60.0
@@ -102,8 +102,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--foxglove",
         action="store_true",
-        help="measure instead whether a Foxglove viewer that never reads slows the agent: goal"
-        " → Twist without and with one, alternating in one run (foxglove.md)",
+        help="measure instead whether Foxglove viewers slow the agent: goal → Twist with no"
+        " viewer, one reading and one that never reads, in rounds of one run (foxglove.md)",
     )
     parser.add_argument(
         "--relay-cost",
@@ -469,22 +469,26 @@ async def _recorder(args: argparse.Namespace) -> int:
 
 
 async def _foxglove(args: argparse.Namespace) -> int:
-    """A Foxglove viewer that never reads, and goal → Twist: print the figures, write
-    foxglove.md; 1 if not measured."""
+    """Foxglove viewers and goal → Twist: print the figures, write foxglove.md; 1 if not
+    measured."""
     from app.server.serve import start_in_thread
     from app.tools.bench import foxglove
 
     seconds = args.seconds or (FOXGLOVE_QUICK_S if args.quick else FOXGLOVE_FULL_S)
     server = start_in_thread()
     try:
-        figures = await foxglove.run(server.url, seconds, args.fps)
+        rounds = foxglove.QUICK_ROUNDS if args.quick else foxglove.ROUNDS
+        figures = await foxglove.run(server.url, seconds, args.fps, rounds)
     finally:
         server.stop()
     path = foxglove.write_report(args.out, figures)
     log.info("Foxglove report: %s", path)
     if args.json:
         sys.stdout.write(json.dumps(figures, allow_nan=False) + "\n")
-    return 0 if "p50_increase_pct" in figures else 1
+    measured = all(
+        figures[phase]["p50_change_pct"] is not None for phase in ("viewer", "stuck viewer")
+    )
+    return 0 if measured else 1
 
 
 async def _relay_cost(args: argparse.Namespace) -> int:

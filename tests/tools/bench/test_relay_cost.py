@@ -84,9 +84,12 @@ def test_the_relay_cost_bench_measures_one_room_and_writes_its_report(tmp_path: 
     assert done.returncode == 0, done.stderr[-3000:]
     found = json.loads(done.stdout.splitlines()[-1])
     cores = found["relay_cores"]
-    # The relay's Chromium worked (the worker and the codecs above all), on two cores at most.
+    # The relay's Chromium worked, on two cores at most. Each stage is a share of it: threads'
+    # CPU time is counted in 10 ms ticks, so over one second on a starved machine a stage may
+    # count none (seen for the detection or the decode at a load average of 40); that they ran
+    # shows in the snapshots and the frames decoded below.
     assert 0 < cores["total"] < 2, cores
-    assert cores[STAGES[1]] > 0 and cores[STAGES[3]] > 0, cores
+    assert all(0 <= cores[stage] <= cores["total"] for stage in STAGES), cores
     assert any(t["thread"].startswith("DedicatedWorker") for t in found["threads"])
     assert found["codecs"]["frames_decoded_per_s"] > 0
     # The relay's Chromium passes the vehicle's frames through: it encodes none for the client.
