@@ -263,10 +263,11 @@ async def test_thesis_profile_end_to_end(server: RunningServer, module_browser: 
         # Snapshots every 1.5 s; analysis time varies, so the goals' spacing jitters around it,
         # and on a loaded machine a late snapshot's goal is followed by an early one: one long
         # gap and one short (0.29 s once, after a first snapshot late by 1.2 s, which also
-        # shortened the mean over the span). The median gap is the snapshot period (30 per s
-        # would be the default profile's).
+        # shortened the mean over the span). The median gap is about the snapshot period: over
+        # half of it, on a machine that made it 1.19 s once ([0.57, 1.18, 1.73, 1.21]), where the
+        # default profile's 30 per s would be 0.03 s.
         gaps = [b - a for a, b in zip(goals, goals[1:], strict=False)]
-        assert statistics.median(gaps) > 1.2, gaps
+        assert statistics.median(gaps) > 1.5 / 2, gaps
 
 
 def terrain_distance(s: Scene, pixel: tuple[float, float]) -> float:
