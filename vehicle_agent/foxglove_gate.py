@@ -172,6 +172,9 @@ class FoxgloveGate:
             self._secret, self._room, tokens.request_token(request.path, request.headers),
             self._clock(),
         )  # fmt: skip
+        # A viewer that goes before its handler starts leaves nothing behind (no connection
+        # open upstream).
+        connection.connection_lost_waiter.add_done_callback(lambda _: self._forget(connection))
         if isinstance(verdict, str):
             # Opened, then closed with the reason: a client shows a close reason, and an HTTP
             # refusal's body it would not.
@@ -196,8 +199,6 @@ class FoxgloveGate:
             log.warning("Foxglove gate: cannot reach the vehicle's Foxglove server: %s", exc)
             return connection.respond(502, "the vehicle's Foxglove server is not answering\n")
         self._decided[connection] = _Admitted(verdict, upstream)
-        # A viewer that goes before its handler starts leaves no connection open upstream.
-        connection.connection_lost_waiter.add_done_callback(lambda _: self._forget(connection))
         return None
 
     def _forget(self, connection: ServerConnection) -> None:
@@ -216,7 +217,9 @@ class FoxgloveGate:
         return next((p for p in offered if p in SUBPROTOCOLS), None)
 
     async def _handle(self, viewer: ServerConnection) -> None:
-        decided = self._decided.pop(viewer)
+        decided = self._decided.pop(viewer, None)
+        if decided is None:  # gone already (:meth:`_forget`)
+            return
         if isinstance(decided, str):
             self.refused += 1
             log.info("Foxglove gate: refused %s: %s", viewer.remote_address, decided)
