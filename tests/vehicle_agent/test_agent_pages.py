@@ -184,14 +184,21 @@ async def test_agent_is_piloted_by_the_real_relay_page(
         tracks = await s.client.evaluate("() => window.autopilotStatus.videoTracks")
         with contextlib.suppress(PlaywrightError):  # the crash itself fails the navigation
             await s.relay.page.goto("chrome://crash", timeout=5000)
-        killed = asyncio.get_running_loop().time()
         await eventually(
             lambda: (t := s.last_twist()) is not None and t.seq is None,
             5,
             "a zero Twist after the relay died",
         )
-        # Within the goal timeout (0.7 s), with room for a loaded machine.
-        assert asyncio.get_running_loop().time() - killed < 1.5
+        # Stopped within the goal timeout of the last goal it applied (0.7 s; sooner where it
+        # saw the link close first), on the agent's own clock, with 0.8 s for the agent's loop
+        # on a machine the suite keeps busy (the 0.7 s itself is the core's contract test,
+        # test_pilot.py::test_the_goal_timeout_stops_within_0_75_s_of_the_last_goal).
+        stop = s.last_twist()
+        assert stop is not None
+        last_goal = next(
+            e for e in reversed(s.events) if isinstance(e, GoalApplied) and e.t <= stop.t
+        )
+        assert stop.t - last_goal.t <= 0.7 + 0.8, (last_goal, stop)
         settled = s.heading_deg()
         await asyncio.sleep(1.0)
         assert s.heading_deg() == pytest.approx(settled, abs=0.01)
