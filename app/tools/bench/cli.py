@@ -155,6 +155,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         " caches settle (default: the bench's warm-up, see docs/bench/)",
     )
     parser.add_argument(
+        "--repeats",
+        type=positive_integer,
+        metavar="N",
+        help="with --opencv-builds: time each frame N times on each side and keep the fastest"
+        " (default: the bench's, see docs/bench/)",
+    )
+    parser.add_argument(
         "--faces",
         action="store_true",
         help="measure face recall instead: the shared face set's photos at 24-192 px, upright and"
@@ -221,6 +228,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.warmup is not None and not args.opencv_builds:
         log.error("--warmup goes with --opencv-builds")
+        return 2
+    if args.repeats is not None and not args.opencv_builds:
+        log.error("--repeats goes with --opencv-builds")
         return 2
     if args.photos is not None and not args.faces:
         log.error("--photos goes with --faces")
@@ -401,6 +411,8 @@ def _reexec_in_netns(args: argparse.Namespace) -> None:
         argv += ["--frames", str(args.frames)]
     if args.warmup is not None:
         argv += ["--warmup", str(args.warmup)]
+    if args.repeats is not None:
+        argv += ["--repeats", str(args.repeats)]
     if args.presses is not None:
         argv += ["--presses", str(args.presses)]
     argv += ["--out", str(args.out.resolve()), "--fps", str(args.fps)]
@@ -598,6 +610,7 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
 
     counted = args.frames or int((QUICK if args.quick else FULL)["frames"])
     warmup = jsnative.WARMUP_FRAMES if args.warmup is None else args.warmup
+    repeats = args.repeats or jsnative.REPEATS
     frames = jsnative.synthetic_frames(counted + warmup)
     started = datetime.datetime.now(datetime.UTC)
     load_before = os.getloadavg()[0]
@@ -607,7 +620,12 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
             browser = await playwright.chromium.launch(**launch_options())
             try:
                 times = await opencv_builds.compare_builds(
-                    browser, server.url, frames, warmup=warmup, ops=args.ops.split(",")
+                    browser,
+                    server.url,
+                    frames,
+                    warmup=warmup,
+                    ops=args.ops.split(","),
+                    repeats=repeats,
                 )
                 browser_version = browser.version
             finally:
@@ -622,6 +640,7 @@ async def _opencv_builds(args: argparse.Namespace) -> int:
             "chromium": browser_version,
             "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
             "frames": counted,
+            "repeats": repeats,
             "ops": [opencv_builds.op_figures(t) for t in times],
         }
     )
@@ -813,6 +832,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append(f"--frames {args.frames}")
     if args.warmup is not None:
         parts.append(f"--warmup {args.warmup}")
+    if args.repeats is not None:
+        parts.append(f"--repeats {args.repeats}")
     if args.presses is not None:
         parts.append(f"--presses {args.presses}")
     if args.soak:

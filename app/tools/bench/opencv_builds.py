@@ -198,10 +198,11 @@ def report_text(found: dict[str, Any]) -> str:
         f" {found['chromium']}; load average {found['load_average'][0]} before,"
         f" {found['load_average'][1]} after). {found['frames']} frames of the agent's synthetic"
         f" scene ({WARMUP_FRAMES} more first, not counted), 640×480, the {PROFILE} profile's"
-        f" parameters; on each frame every build and Python in turn, the fastest of {REPEATS}"
-        " runs each. Detection ms, p50 over the frames; the ratios are per frame, SIMD /"
-        " official: their median and upper quartile. *relay* is the time per snapshot as the"
-        " relay spends it: one full scan in `full_scan_every` and the window search in between,"
+        f" parameters; on each frame every build and Python in turn, the fastest of"
+        f" {found['repeats']} run(s) each. Detection ms, p50 over the frames; the ratios are per"
+        " frame, SIMD / official: their median and upper quartile. *relay* is the time per"
+        " snapshot as the relay spends it: one full scan in `full_scan_every` and the window"
+        " search in between,"
         " a full scan each time while nothing is found.",
         "",
         f"| operation | scan | frames | {simd} | {official} | ratio p50 | ratio p75 | Python |",
@@ -271,9 +272,11 @@ async def compare_builds(
     settings: Settings | None = None,
     warmup: int = WARMUP_FRAMES,
     ops: list[str] | None = None,
+    repeats: int = REPEATS,
 ) -> list[OpTimes]:
     """The tracking operations ``ops`` (by default :func:`tracking_ops`) on every build and in
-    Python, frame by frame (module docstring); the first ``warmup`` frames are not counted."""
+    Python, frame by frame (module docstring), each timed ``repeats`` times and the fastest
+    kept; the first ``warmup`` frames are not counted."""
     spec = load_spec((settings or Settings()).operations_spec)
     measured: list[Tracking] = []
     for op_id in ops or tracking_ops(settings):
@@ -295,7 +298,7 @@ async def compare_builds(
             for page in pages.values():
                 await page.evaluate(LOAD_JS, encoded)
             for op, times in zip(measured, found, strict=True):
-                frame = await _time_frame(pages, op, rgba)
+                frame = await _time_frame(pages, op, rgba, repeats)
                 if i >= warmup:
                     times.frames.append(frame)
         return found
@@ -305,14 +308,16 @@ async def compare_builds(
             await page.close()
 
 
-async def _time_frame(pages: dict[OpenCvBuild, Page], op: Tracking, rgba: Rgba) -> FrameTimes:
+async def _time_frame(
+    pages: dict[OpenCvBuild, Page], op: Tracking, rgba: Rgba, repeats: int
+) -> FrameTimes:
     height, width = rgba.shape[:2]
     full: dict[OpenCvBuild, list[float]] = {b: [] for b in pages}
     windowed: dict[OpenCvBuild, list[float]] = {b: [] for b in pages}
     boxes: dict[OpenCvBuild, list[window.Box]] = {}
     scores: dict[OpenCvBuild, list[float]] = {}
     python_ms: list[float] = []
-    for _ in range(REPEATS):
+    for _ in range(repeats):
         for build, page in pages.items():
             args: list[Any] = [width, height, op.id, PROFILE, None]
             js = await page.evaluate(ANALYZE_JS, args)

@@ -1,7 +1,7 @@
-"""``autopilot bench --opencv-builds`` as a user runs it, on one frame and no warm-up: both
-builds and Python timed on a cascade and the DNN face, the report written, and the exit status
-saying whether the build the relay loads is the measured choice (which build wins is the
-report's business, never asserted). The figures' arithmetic, the choice and the report's text
+"""``autopilot bench --opencv-builds`` as a user runs it, on one frame timed once and no
+warm-up: both builds and Python timed on a cascade and the DNN face, the report written, and the
+exit status saying whether the build the relay loads is the measured choice (which build wins is
+the report's business, never asserted). The figures' arithmetic, the choice and the report's text
 are checked against hand-made runs in test_opencv_builds.py."""
 
 from __future__ import annotations
@@ -26,13 +26,15 @@ pytestmark = [
 
 def test_the_builds_bench_times_each_build_and_writes_its_report(tmp_path: Path) -> None:
     argv = [sys.executable, "-m", "app.cli", "bench", "--opencv-builds", "--json"]
-    argv += ["--ops", "face,face_dnn", "--frames", "1", "--warmup", "0", "--out", str(tmp_path)]
+    argv += ["--ops", "face,face_dnn", "--frames", "1", "--warmup", "0", "--repeats", "1"]
+    argv += ["--out", str(tmp_path)]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=180)
     assert done.stdout, done.stderr[-3000:]
     found = json.loads(done.stdout.splitlines()[-1])
     assert found["relay_loads"] == RELAY_OPENCV_BUILD
     assert found["choice"] in OPENCV_BUILDS
-    assert "--ops face,face_dnn --frames 1 --warmup 0" in found["command"]
+    assert "--ops face,face_dnn --frames 1 --warmup 0 --repeats 1" in found["command"]
+    assert found["repeats"] == 1
     # 1 when the measurement chooses another build than the relay loads.
     assert done.returncode == (0 if found["choice"] == RELAY_OPENCV_BUILD else 1), done.stderr
     assert [op["op"] for op in found["ops"]] == ["face", "face_dnn"]

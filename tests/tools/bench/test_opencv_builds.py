@@ -130,6 +130,7 @@ def run(ops: list[dict[str, Any]]) -> dict[str, Any]:
         "chromium": "1",
         "load_average": [1.0, 2.0],
         "frames": 2,
+        "repeats": 3,
         "ops": ops,
     }
 
@@ -142,6 +143,7 @@ def test_the_report_shows_each_scan_the_choice_and_what_the_relay_loads() -> Non
     text = report_text(found)
     assert "| face | full | 2 | 20.0 | 40.0 | 0.5 | 0.5 | 10.0 |" in text
     assert "| face | window | 2 | 2.0 | 4.0 | 0.5 | 0.5 |  |" in text
+    assert "the fastest of 3 run(s) each" in text
     assert "**Measured choice: simd**" in text
     assert (
         "The better build per operation (median ≤ 0.9 and faster on three frames in four):"
@@ -167,7 +169,7 @@ def test_a_dnn_scan_agrees_with_python_as_parity_judges_it_a_cascade_box_for_box
     assert not agrees_with_python([(1, 2, 3, 4), (5, 6, 7, 9)], [], cascade)
 
 
-def test_warmup_goes_with_the_builds_bench_only(caplog: pytest.LogCaptureFixture) -> None:
+def test_warmup_and_repeats_go_with_the_builds_bench_only(caplog: pytest.LogCaptureFixture) -> None:
     # --warmup shortens the builds bench's uncounted frames; on another bench it means nothing
     # and must not start that bench with it ignored.
     parser = argparse.ArgumentParser()
@@ -175,6 +177,8 @@ def test_warmup_goes_with_the_builds_bench_only(caplog: pytest.LogCaptureFixture
     cli.add_arguments(parser)
     assert cli.run(parser.parse_args(["--recorder", "--warmup", "0"])) == 2
     assert "--warmup goes with --opencv-builds" in caplog.text
+    assert cli.run(parser.parse_args(["--recorder", "--repeats", "1"])) == 2
+    assert "--repeats goes with --opencv-builds" in caplog.text
     with pytest.raises(SystemExit):
         parser.parse_args(["--opencv-builds", "--warmup", "-1"])
 
