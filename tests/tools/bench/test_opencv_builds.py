@@ -3,13 +3,12 @@ choice of build and the report (``autopilot bench --opencv-builds``)."""
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
 import pytest
 
+from app.cli import main
 from app.protocol.opencv import RELAY_OPENCV_BUILD
-from app.tools.bench import cli
 from app.tools.bench.opencv_builds import (
     FrameTimes,
     OpTimes,
@@ -172,21 +171,15 @@ def test_a_dnn_scan_agrees_with_python_as_parity_judges_it_a_cascade_box_for_box
 def test_warmup_and_repeats_go_with_the_builds_bench_only(caplog: pytest.LogCaptureFixture) -> None:
     # --warmup shortens the builds bench's uncounted frames; on another bench it means nothing
     # and must not start that bench with it ignored.
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--verbose", action="store_true")
-    cli.add_arguments(parser)
-    assert cli.run(parser.parse_args(["--recorder", "--warmup", "0"])) == 2
+    assert main(["bench", "--recorder", "--warmup", "0"]) == 2
     assert "--warmup goes with --opencv-builds" in caplog.text
-    assert cli.run(parser.parse_args(["--recorder", "--repeats", "1"])) == 2
+    assert main(["bench", "--recorder", "--repeats", "1"]) == 2
     assert "--repeats goes with --opencv-builds" in caplog.text
     with pytest.raises(SystemExit):
-        parser.parse_args(["--opencv-builds", "--warmup", "-1"])
+        main(["bench", "--opencv-builds", "--warmup", "-1"])
 
 
 def test_the_builds_bench_measures_operations_that_track(caplog: pytest.LogCaptureFixture) -> None:
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--verbose", action="store_true")
-    cli.add_arguments(parser)
-    assert cli.run(parser.parse_args(["--opencv-builds", "--ops", "face,fire"])) == 2
+    assert main(["bench", "--opencv-builds", "--ops", "face,fire"]) == 2
     assert "fire is not one that tracks (face, face_small, face_dnn, body)" in caplog.text
     assert tracking_ops() == ["face", "face_small", "face_dnn", "body"]

@@ -3,7 +3,6 @@ bench as a user runs it (its figures' sizes are the report's business, never ass
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -12,8 +11,8 @@ from typing import Any
 
 import pytest
 
+from app.cli import main
 from app.protocol.opencv import OPENCV_BUILDS, RELAY_OPENCV_BUILD
-from app.tools.bench import cli
 from app.tools.bench.cpu import ThreadCpu
 from app.tools.bench.relaycost import (
     STAGES,
@@ -232,15 +231,12 @@ def test_baseline_alone_is_refused() -> None:
 
 
 def test_ops_and_builds_name_ones_the_relay_has(caplog: pytest.LogCaptureFixture) -> None:
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--verbose", action="store_true")
-    cli.add_arguments(parser)
-    assert cli.run(parser.parse_args(["--relay-cost", "--opencv", "official,sse"])) == 2
+    assert main(["bench", "--relay-cost", "--opencv", "official,sse"]) == 2
     assert "--opencv 'official,sse': sse is not one vendored (simd, official)" in caplog.text
-    assert cli.run(parser.parse_args(["--relay-cost", "--ops", "face,faces"])) == 2
+    assert main(["bench", "--relay-cost", "--ops", "face,faces"]) == 2
     assert "--ops 'face,faces': faces is not one the relay offers" in caplog.text
     # --opencv goes with the relay's cost only; --ops with the benches that measure operations.
-    assert cli.run(parser.parse_args(["--recorder", "--opencv", "simd"])) == 2
+    assert main(["bench", "--recorder", "--opencv", "simd"]) == 2
     assert "--opencv goes with --relay-cost" in caplog.text
-    assert cli.run(parser.parse_args(["--recorder", "--ops", "face"])) == 2
+    assert main(["bench", "--recorder", "--ops", "face"]) == 2
     assert "--ops goes with --onboard, --relay-cost or --opencv-builds" in caplog.text
